@@ -1,0 +1,3 @@
+"""The `sit2stand` command (placeholder)."""
+def main() -> int:
+    return 0

@@ -1,0 +1,108 @@
+"""Force-plate and foot-sensor algebra: moving wrenches between points, centre of pressure (COP), plate geometry.
+
+Conventions: all vectors in the lab frame (REP-103: x forward, y left, z up), forces [N], moments [N m], points [m].
+Arrays may carry a leading sample axis: ``force_n`` of shape (3,) or (K, 3).
+
+The COP of a wrench (F, M_p) given about a point p, on a plane through p with unit normal n, is the point on the
+plane about which the moment has no component in the plane:
+
+    r = (n x M_p) / (n . F),    COP = p + r,    free moment  tau = n . (M_p - r x F)
+
+(for n = z this is the familiar x = -M_y / F_z, y = M_x / F_z).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+DEFAULT_COP_THRESHOLD_N = 20.0
+"""Normal force below which a plate counts as unloaded and its COP as undefined (Vicon Nexus' default)."""
+
+
+def shift_moment(moment_nm: np.ndarray, force_n: np.ndarray, from_point_m: np.ndarray,
+                 to_point_m: np.ndarray) -> np.ndarray:
+    """Moment about ``to_point_m`` of a wrench whose moment about ``from_point_m`` is ``moment_nm``.
+
+    M_to = M_from + (from - to) x F.
+    """
+    arm = np.asarray(from_point_m, float) - np.asarray(to_point_m, float)
+    return np.asarray(moment_nm, float) + np.cross(arm, np.asarray(force_n, float))
+
+
+def plate_surface(corners_m: np.ndarray, up: np.ndarray = np.array([0.0, 0.0, 1.0])) -> tuple[np.ndarray, np.ndarray]:
+    """Centre [m] and unit normal (pointing along ``up``) of a plate's top surface from its 4 corners (4, 3)."""
+    corners = np.asarray(corners_m, float)
+    if corners.shape != (4, 3):
+        raise ValueError(f"plate corners must have shape (4, 3), got {corners.shape}")
+    centre = corners.mean(axis=0)
+    normal = np.cross(corners[2] - corners[0], corners[3] - corners[1])
+    norm = np.linalg.norm(normal)
+    if norm < 1e-12:
+        raise ValueError(f"plate corners are degenerate (collinear or repeated): {corners.tolist()}")
+    normal /= norm
+    if normal @ np.asarray(up, float) < 0:
+        normal = -normal
+    return centre, normal
+
+
+def center_of_pressure(force_n: np.ndarray, moment_nm: np.ndarray, point_m: np.ndarray, normal: np.ndarray,
+                       threshold_n: float = DEFAULT_COP_THRESHOLD_N) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """COP [m], validity and free moment [N m] of wrenches given about ``point_m`` on a plane with ``normal``.
+
+    Args:
+        force_n: (3,) or (K, 3) reaction force on the body.
+        moment_nm: same shape, moment about ``point_m``.
+        point_m: (3,) a point of the contact plane (e.g. the plate's surface centre).
+        normal: (3,) unit normal of the plane, pointing up (into the body).
+        threshold_n: minimum normal force for a valid COP.
+
+    Returns:
+        cop_m (…, 3) with NaN where invalid; valid (…,) bool; free_moment_nm (…,) about the normal, NaN where invalid.
+    """
+    force = np.atleast_2d(np.asarray(force_n, float))
+    moment = np.atleast_2d(np.asarray(moment_nm, float))
+    n = np.asarray(normal, float)
+    fn = force @ n
+    valid = np.isfinite(fn) & (fn > threshold_n) & np.all(np.isfinite(moment), axis=1)
+    r = np.full_like(force, np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r[valid] = np.cross(n, moment[valid]) / fn[valid, None]
+    cop = np.asarray(point_m, float) + r
+    tau = np.full(len(force), np.nan)
+    tau[valid] = np.einsum("ij,j->i", moment[valid] - np.cross(r[valid], force[valid]), n)
+    if np.ndim(force_n) == 1:
+        return cop[0], valid[0], tau[0]
+    return cop, valid, tau
+
+
+def combined_cop(forces_n: list[np.ndarray], moments_origin_nm: list[np.ndarray], height_m: float = 0.0,
+                 threshold_n: float = DEFAULT_COP_THRESHOLD_N) -> tuple[np.ndarray, np.ndarray]:
+    """COP of several plates together, on the horizontal plane z = ``height_m``.
+
+    Moments must be about the lab origin (as in sit2stand_msgs/ForcePlateSample), so they simply add.
+    Returns (cop_m, valid) with the shapes of :func:`center_of_pressure`.
+    """
+    force = np.sum([np.asarray(f, float) for f in forces_n], axis=0)
+    moment = np.sum([np.asarray(m, float) for m in moments_origin_nm], axis=0)
+    point = np.array([0.0, 0.0, height_m])
+    moment_at_point = shift_moment(moment, force, np.zeros(3), point)
+    cop, valid, _ = center_of_pressure(force, moment_at_point, point, np.array([0.0, 0.0, 1.0]), threshold_n)
+    return cop, valid
+
+
+def point_in_polygon(points_xy: np.ndarray, polygon_xy: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
+    """True where a 2-D point lies inside a convex polygon (vertices in order), at least ``margin_m`` from its edges.
+
+    Args:
+        points_xy: (2,) or (K, 2).
+        polygon_xy: (V, 2) vertices of a convex polygon, clockwise or counter-clockwise.
+    """
+    pts = np.atleast_2d(np.asarray(points_xy, float))
+    poly = np.asarray(polygon_xy, float)
+    edges = np.roll(poly, -1, axis=0) - poly
+    sign = np.sign(np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1]))
+    rel = pts[:, None, :] - poly[None, :, :]
+    cross = edges[None, :, 0] * rel[:, :, 1] - edges[None, :, 1] * rel[:, :, 0]
+    dist = sign * cross / np.linalg.norm(edges, axis=1)[None, :]
+    inside = np.all(dist >= margin_m, axis=1) & np.all(np.isfinite(pts), axis=1)
+    return inside[0] if np.ndim(points_xy) == 1 else inside

@@ -1,0 +1,103 @@
+"""Build our bag messages (rosbags objects) from arrays, and read arrays back out of them.
+
+Topic names and types used across sit2stand are defined here so that the importer, the synthesiser, the nodes and
+the analysis agree on them.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .typestore import typestore
+
+MARKERS_TOPIC = "/mocap/markers"
+MODEL_POINTS_TOPIC = "/mocap/model_points"
+REFERENCE_COM_TOPIC = "/mocap/reference_com"
+FORCE_PLATE_PREFIX = "/force_plate/"
+MOCAP_TYPE = "sit2stand_msgs/msg/MocapFrame"
+PLATE_TYPE = "sit2stand_msgs/msg/ForcePlateSample"
+COM_TYPE = "sit2stand_msgs/msg/CenterOfMass"
+LAB_FRAME = "lab"
+
+
+def plate_topic(name: str) -> str:
+    """Topic of the force plate called ``name`` (e.g. ``/force_plate/feet``)."""
+    return FORCE_PLATE_PREFIX + name
+
+
+def stamp(t_ns: int) -> Any:
+    """builtin_interfaces/Time of an integer time in ns."""
+    t = typestore().types["builtin_interfaces/msg/Time"]
+    t_ns = int(t_ns)
+    return t(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)
+
+
+def header(t_ns: int, frame_id: str = LAB_FRAME) -> Any:
+    return typestore().types["std_msgs/msg/Header"](stamp=stamp(t_ns), frame_id=frame_id)
+
+
+def stamp_ns(msg_header: Any) -> int:
+    """ns of a message header's stamp (rosbags or rclpy object)."""
+    return int(msg_header.stamp.sec) * 1_000_000_000 + int(msg_header.stamp.nanosec)
+
+
+def _point(x: float, y: float, z: float) -> Any:
+    return typestore().types["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=float(z))
+
+
+def _vector(v: np.ndarray) -> Any:
+    return typestore().types["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+
+def mocap_frame(t_ns: int, names: list[str], positions_m: np.ndarray, valid: np.ndarray,
+                residuals_m: np.ndarray | None = None, frame_id: str = LAB_FRAME) -> Any:
+    """A sit2stand_msgs/MocapFrame; invalid markers get NaN positions whatever ``positions_m`` holds."""
+    pos = np.asarray(positions_m, float)
+    ok = np.asarray(valid, bool)
+    res = np.full(len(names), np.nan, np.float32) if residuals_m is None else np.asarray(residuals_m, np.float32)
+    nan = float("nan")
+    pts = [_point(*p) if v else _point(nan, nan, nan) for p, v in zip(pos, ok)]
+    return typestore().types[MOCAP_TYPE](header=header(t_ns, frame_id), marker_names=list(names), positions=pts,
+                                         valid=ok.copy(), residuals_m=res.copy())
+
+
+def mocap_arrays(msg: Any) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """(names, positions (M, 3) [m] with NaN where invalid, valid (M,)) of a MocapFrame."""
+    pos = np.array([[p.x, p.y, p.z] for p in msg.positions], float).reshape(-1, 3)
+    valid = np.asarray(msg.valid, bool)
+    pos[~valid] = np.nan
+    return list(msg.marker_names), pos, valid
+
+
+def force_plate_sample(t_ns: int, plate_name: str, force_n: np.ndarray, moment_origin_nm: np.ndarray,
+                       cop_m: np.ndarray, cop_valid: bool, free_moment_nm: float,
+                       frame_id: str = LAB_FRAME) -> Any:
+    """A sit2stand_msgs/ForcePlateSample (moment about the lab origin)."""
+    s = typestore().types
+    wrench = s["geometry_msgs/msg/Wrench"](force=_vector(force_n), torque=_vector(moment_origin_nm))
+    nan = float("nan")
+    cop = _point(*cop_m) if cop_valid else _point(nan, nan, nan)
+    return s[PLATE_TYPE](header=header(t_ns, frame_id), plate_name=plate_name, wrench=wrench, cop=cop,
+                         cop_valid=bool(cop_valid), free_moment_z=float(free_moment_nm) if cop_valid else nan)
+
+
+def plate_arrays(msgs: list[Any]) -> dict[str, np.ndarray]:
+    """Stack ForcePlateSamples: force (K, 3) [N], moment (K, 3) [N m] about the lab origin, cop (K, 3), cop_valid."""
+    force = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z] for m in msgs], float).reshape(-1, 3)
+    moment = np.array([[m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z] for m in msgs],
+                      float).reshape(-1, 3)
+    cop = np.array([[m.cop.x, m.cop.y, m.cop.z] for m in msgs], float).reshape(-1, 3)
+    valid = np.array([m.cop_valid for m in msgs], bool)
+    return {"force_n": force, "moment_nm": moment, "cop_m": cop, "cop_valid": valid}
+
+
+def center_of_mass(t_ns: int, position_m: np.ndarray, velocity_mps: np.ndarray, acceleration_mps2: np.ndarray,
+                   source: str, valid: bool = True, marker_rms_m: float = float("nan"),
+                   cop_error_m: float = float("nan"), n_markers: int = 0, frame_id: str = LAB_FRAME) -> Any:
+    """A sit2stand_msgs/CenterOfMass."""
+    s = typestore().types
+    return s[COM_TYPE](header=header(t_ns, frame_id), position=_point(*position_m), velocity=_vector(velocity_mps),
+                       acceleration=_vector(acceleration_mps2), source=source, valid=bool(valid),
+                       marker_rms_m=float(marker_rms_m), cop_error_m=float(cop_error_m), n_markers=int(n_markers))
