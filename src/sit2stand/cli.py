@@ -1,3 +1,158 @@
-"""The `sit2stand` command (placeholder)."""
-def main() -> int:
+"""The `sit2stand` command: one entry point for the offline tools and for starting nodes and graphs.
+
+    sit2stand import-c3d FILE.c3d --out bags/NAME [--chair-plate I] [--feet-plate J] [--forward +X --up +Z]
+    sit2stand bag info DIR
+    sit2stand bag recover DIR [--out DIR2]
+    sit2stand launch GRAPH.yaml [NAME:=VALUE ...] [--timeout S]
+    sit2stand replay DIR [--rate R] [--loop] [--topics T ...]      (runs the replayer node)
+    sit2stand record --out DIR [--topics T ...] [--regex RE]       (runs the recorder node)
+
+Errors are printed as one line naming the file, topic or field, with exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def _import_c3d(args: argparse.Namespace) -> int:
+    from .io.bag import bag_info
+    from .io.c3d import read_c3d, write_trial_bag
+
+    zero = "auto" if args.zero_frames == "auto" else None if args.zero_frames == "off" else \
+        tuple(int(v) for v in args.zero_frames.split(":"))
+    trial = read_c3d(args.file, chair_plate=args.chair_plate, feet_plate=args.feet_plate, forward=args.forward,
+                     up=args.up, cop_threshold_n=args.cop_threshold, markers_only=args.markers_only, zero_frames=zero)
+    print(f"{trial.path}: {len(trial.markers.names)} markers at {trial.markers.rate_hz:g} Hz, "
+          f"{len(trial.plates)} of {trial.all_plate_count} plates used; lab axes: {trial.axes.reason}")
+    if trial.skipped_labels:
+        print(f"  not published as markers (model outputs, unlabelled): {len(trial.skipped_labels)}")
+    counts = write_trial_bag(trial, args.out)
+    print(f"wrote {args.out}: " + ", ".join(f"{t} ({n})" for t, n in counts.items()))
+    if args.verbose:
+        print(bag_info(args.out))
     return 0
+
+
+def _bag_info(args: argparse.Namespace) -> int:
+    from .io.bag import BagReader, bag_info
+
+    print(bag_info(args.dir))
+    with BagReader(args.dir) as bag:
+        for key, value in sorted(bag.custom_data.items()):
+            print(f"{key}: {value}")
+    return 0
+
+
+def _bag_recover(args: argparse.Namespace) -> int:
+    from .io.bag import recover_bag
+
+    print(recover_bag(args.dir, args.out))
+    return 0
+
+
+def _launch(args: argparse.Namespace) -> int:
+    from .launch import Launcher, load_graph, parse_overrides
+
+    graph = load_graph(args.graph, parse_overrides(args.overrides))
+    return Launcher(graph, grace_s=args.grace).run(timeout_s=args.timeout)
+
+
+def _ros_params(pairs: list[tuple[str, object]]) -> list[str]:
+    out = ["--ros-args"]
+    for key, value in pairs:
+        if value is None:
+            continue
+        if isinstance(value, bool):
+            value = "true" if value else "false"
+        elif isinstance(value, list):
+            value = "[" + ",".join(f"'{v}'" for v in value) + "]"
+        out += ["-p", f"{key}:={value}"]
+    return out
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from .nodes.replayer import main as replayer_main
+
+    return replayer_main(["replayer"] + _ros_params([
+        ("bag", str(args.dir)), ("rate", float(args.rate)), ("loop", args.loop), ("topics", args.topics or None),
+        ("at_end", "idle" if args.idle else "exit"), ("wait_for_subscribers", args.wait_for_subscribers)]))
+
+
+def _record(args: argparse.Namespace) -> int:
+    from .nodes.recorder import main as recorder_main
+
+    return recorder_main(["recorder"] + _ros_params([
+        ("output", str(args.out)), ("topics", args.topics or None), ("regex", args.regex or None),
+        ("use_sim_time", args.use_sim_time)]))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="sit2stand", description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("import-c3d", help="C3D markers and force plates -> bag (SI units, REP-103 lab frame)")
+    p.add_argument("file", type=Path)
+    p.add_argument("--out", type=Path, required=True, help="bag directory to create")
+    p.add_argument("--chair-plate", type=int, help="0-based index of the plate under the chair")
+    p.add_argument("--feet-plate", type=int, help="0-based index of the plate under the feet")
+    p.add_argument("--forward", help="file axis that is lab x (forward), e.g. +Y; detected if omitted")
+    p.add_argument("--up", help="file axis that is lab z (up), e.g. +Z; detected if omitted")
+    p.add_argument("--cop-threshold", type=float, default=20.0, help="normal force [N] below which COP is invalid")
+    p.add_argument("--zero-frames", default="auto",
+                   help="plate baseline: auto (FORCE_PLATFORM:ZERO), off, or FIRST:LAST 1-based point frames")
+    p.add_argument("--markers-only", action="store_true", help="accept a file without force plates")
+    p.add_argument("-v", "--verbose", action="store_true", help="print the bag summary afterwards")
+    p.set_defaults(func=_import_c3d)
+
+    bag = sub.add_parser("bag", help="bag tools").add_subparsers(dest="bag_command", required=True)
+    p = bag.add_parser("info", help="topics, types, counts, rates and duration")
+    p.add_argument("dir", type=Path)
+    p.set_defaults(func=_bag_info)
+    p = bag.add_parser("recover", help="rebuild a bag whose recorder was killed (truncated .mcap, no metadata)")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--out", type=Path, help="write the rebuilt bag here instead of in place")
+    p.set_defaults(func=_bag_recover)
+
+    p = sub.add_parser("launch", help="start a graph of nodes from a YAML graph file")
+    p.add_argument("graph", type=Path)
+    p.add_argument("overrides", nargs="*", help="NAME:=VALUE for the graph's arguments")
+    p.add_argument("--timeout", type=float, help="stop the graph after this many seconds")
+    p.add_argument("--grace", type=float, default=10.0, help="seconds between SIGINT and SIGTERM at shutdown")
+    p.set_defaults(func=_launch)
+
+    p = sub.add_parser("replay", help="play a bag onto topics (the replayer node)")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--rate", type=float, default=1.0, help="0.1..50 x real time, 0 = as fast as subscribers take")
+    p.add_argument("--loop", action="store_true")
+    p.add_argument("--idle", action="store_true", help="stay alive at the end instead of exiting")
+    p.add_argument("--topics", nargs="*")
+    p.add_argument("--wait-for-subscribers", type=int, default=0)
+    p.set_defaults(func=_replay)
+
+    p = sub.add_parser("record", help="record topics into a bag (the recorder node)")
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--topics", nargs="*")
+    p.add_argument("--regex")
+    p.add_argument("--use-sim-time", action="store_true")
+    p.set_defaults(func=_record)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    from .io.bag import BagError
+    from .io.c3d import C3DError
+    from .launch import LaunchError
+
+    try:
+        return int(args.func(args) or 0)
+    except (BagError, C3DError, LaunchError, FileNotFoundError) as err:
+        print(f"sit2stand {args.command}: error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

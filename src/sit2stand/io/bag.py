@@ -231,7 +231,7 @@ class BagReader:
 
     @property
     def custom_data(self) -> dict[str, str]:
-        return dict(self._reader.metadata.get("custom_data") or {})
+        return dict(getattr(self._reader.storage.metadata, "custom", None) or {})
 
     def topics(self) -> dict[str, TopicInfo]:
         """Topic name -> :class:`TopicInfo` with counts from the metadata (first/last times not filled)."""

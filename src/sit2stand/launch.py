@@ -1,0 +1,292 @@
+"""`sit2stand launch GRAPH.yaml`: start a graph of ROS 2 node processes (ros2 launch is not on PyPI).
+
+A graph file::
+
+    name: roundtrip
+    arguments:                       # defaults of $(var NAME); override with NAME:=VALUE on the command line
+      bag: ../bags/natural
+      out: ../bags/generated/copy
+    nodes:
+      - name: recorder
+        executable: recorder         # a sit2stand node (run as python -m sit2stand.nodes.<executable>) or a program on PATH
+        parameters:                  # ROS parameter YAML files (relative to the graph file) and/or inline maps
+          - params/recorder.yaml
+          - {output: $(var out)}
+        remappings: {/in: /out}
+        arguments: []                # extra command-line arguments before --ros-args
+        env: {ROS_LOG_DIR: /tmp}
+        delay_s: 0.0                 # start this long after the graph
+        on_exit: ignore              # or "shutdown": when this node ends, stop the whole graph
+      - name: replayer
+        executable: replayer
+        parameters: [{bag: $(var bag), wait_for_subscribers: 1}]
+        on_exit: shutdown
+
+Substitutions: ``$(var NAME)``, ``$(env NAME)`` / ``$(env NAME default)``, ``$(dirname)`` (the graph file's folder).
+
+Each node's output is printed line by line with a ``[name]`` prefix. SIGINT/SIGTERM to the launcher are forwarded
+as SIGINT to every node; nodes still alive after ``grace_s`` get SIGTERM, then SIGKILL. Every child gets
+PR_SET_PDEATHSIG, so even a launcher killed with SIGKILL leaves no orphan process.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+OUR_NODES = {"replayer", "recorder"}
+SUBST = re.compile(r"\$\((var|env|dirname)(?:\s+([^)\s]+))?(?:\s+([^)]*))?\)")
+
+
+class LaunchError(ValueError):
+    """A graph file that cannot be launched; the message names the file and the field."""
+
+
+@dataclass
+class NodeSpec:
+    """One process of a graph."""
+
+    name: str
+    command: list[str]
+    env: dict[str, str] = field(default_factory=dict)
+    delay_s: float = 0.0
+    shutdown_on_exit: bool = False
+
+
+@dataclass
+class Graph:
+    name: str
+    nodes: list[NodeSpec]
+    tmpdir: Path | None = None
+
+
+def _substitute(value, variables: dict[str, str], graph_dir: Path, where: str):
+    if isinstance(value, str):
+        def repl(m: re.Match) -> str:
+            kind, name, default = m.group(1), m.group(2), m.group(3)
+            if kind == "dirname":
+                return str(graph_dir)
+            if kind == "env":
+                if name in os.environ:
+                    return os.environ[name]
+                if default is not None:
+                    return default
+                raise LaunchError(f"{where}: environment variable {name} is not set")
+            if name not in variables:
+                raise LaunchError(f"{where}: $(var {name}) has no value: give {name}:=VALUE or add it to 'arguments'")
+            return str(variables[name])
+        new = SUBST.sub(repl, value)
+        if new != value and SUBST.fullmatch(value):
+            try:
+                return yaml.safe_load(new)  # a whole-value substitution keeps its YAML type (numbers, bools)
+            except yaml.YAMLError:
+                return new
+        return new
+    if isinstance(value, list):
+        return [_substitute(v, variables, graph_dir, where) for v in value]
+    if isinstance(value, dict):
+        return {k: _substitute(v, variables, graph_dir, where) for k, v in value.items()}
+    return value
+
+
+def load_graph(path: str | Path, overrides: dict[str, str] | None = None) -> Graph:
+    """Parse a graph file into :class:`Graph` (commands resolved, inline parameters written to a temp folder)."""
+    path = Path(path)
+    if not path.is_file():
+        raise LaunchError(f"{path}: no such graph file")
+    try:
+        doc = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as err:
+        raise LaunchError(f"{path}: not valid YAML: {err}") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("nodes"), list) or not doc["nodes"]:
+        raise LaunchError(f"{path}: needs a non-empty 'nodes' list")
+    graph_dir = path.resolve().parent
+    variables = {str(k): str(v) for k, v in (doc.get("arguments") or {}).items()}
+    variables.update(overrides or {})
+    unknown = set(overrides or {}) - set(doc.get("arguments") or {})
+    if unknown:
+        raise LaunchError(f"{path}: unknown argument(s) {', '.join(sorted(unknown))}; "
+                          f"it takes {', '.join(sorted(doc.get('arguments') or {})) or 'none'}")
+    tmpdir = Path(tempfile.mkdtemp(prefix="sit2stand-launch-"))
+    nodes, names = [], set()
+    for i, raw in enumerate(doc["nodes"]):
+        where = f"{path}: nodes[{i}]"
+        if not isinstance(raw, dict) or "name" not in raw:
+            raise LaunchError(f"{where}: each node needs a 'name'")
+        spec = _substitute(raw, variables, graph_dir, where)
+        name = str(spec["name"])
+        if name in names:
+            raise LaunchError(f"{where}: duplicate node name {name!r}")
+        names.add(name)
+        nodes.append(_node_spec(spec, name, where, graph_dir, tmpdir))
+    return Graph(str(doc.get("name", path.stem)), nodes, tmpdir)
+
+
+def _node_spec(spec: dict, name: str, where: str, graph_dir: Path, tmpdir: Path) -> NodeSpec:
+    exe = spec.get("executable")
+    if exe is None:
+        raise LaunchError(f"{where} ({name}): needs 'executable'")
+    if exe in OUR_NODES:
+        command = [sys.executable, "-m", f"sit2stand.nodes.{exe}"]
+    else:
+        found = shutil.which(str(exe)) or shutil.which(str(exe), path=str(Path(sys.executable).parent))
+        if found is None:
+            raise LaunchError(f"{where} ({name}): executable {exe!r} is neither a sit2stand node "
+                              f"({', '.join(sorted(OUR_NODES))}) nor on PATH")
+        command = [found]
+    command += [str(a) for a in spec.get("arguments", []) or []]
+    command += ["--ros-args", "-r", f"__node:={name}"]
+    for j, entry in enumerate(spec.get("parameters", []) or []):
+        if isinstance(entry, str):
+            file = Path(entry) if Path(entry).is_absolute() else graph_dir / entry
+            if not file.is_file():
+                raise LaunchError(f"{where} ({name}): parameter file {file} does not exist")
+            command += ["--params-file", str(file)]
+        elif isinstance(entry, dict):
+            file = tmpdir / f"{name}_{j}.yaml"
+            file.write_text(yaml.safe_dump({"/**": {"ros__parameters": entry}}))
+            command += ["--params-file", str(file)]
+        else:
+            raise LaunchError(f"{where} ({name}): parameters[{j}] must be a file name or a map")
+    for src, dst in (spec.get("remappings") or {}).items():
+        command += ["-r", f"{src}:={dst}"]
+    on_exit = spec.get("on_exit", "ignore")
+    if on_exit not in ("ignore", "shutdown"):
+        raise LaunchError(f"{where} ({name}): on_exit must be 'ignore' or 'shutdown', not {on_exit!r}")
+    env = {str(k): str(v) for k, v in (spec.get("env") or {}).items()}
+    return NodeSpec(name, command, env, float(spec.get("delay_s", 0.0)), on_exit == "shutdown")
+
+
+def _set_parent_death_signal() -> None:
+    """In the child: get SIGTERM when the launcher dies, however it dies (Linux prctl PR_SET_PDEATHSIG)."""
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGTERM, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+    except OSError:
+        pass
+
+
+class Launcher:
+    """Runs a :class:`Graph` until its nodes end, a shutdown node exits, a signal, or ``timeout_s``."""
+
+    def __init__(self, graph: Graph, grace_s: float = 10.0, out=None) -> None:
+        self.graph = graph
+        self.grace_s = grace_s
+        self.out = out or sys.stdout
+        self.procs: dict[str, subprocess.Popen] = {}
+        self._stop = threading.Event()
+        self._print_lock = threading.Lock()
+        self._readers: list[threading.Thread] = []
+        self.width = max(len(n.name) for n in graph.nodes)
+
+    def _emit(self, name: str, line: str) -> None:
+        with self._print_lock:
+            self.out.write(f"[{name:<{self.width}}] {line}")
+            if not line.endswith("\n"):
+                self.out.write("\n")
+            self.out.flush()
+
+    def _pump(self, name: str, stream) -> None:
+        for raw in iter(stream.readline, b""):
+            self._emit(name, raw.decode(errors="replace"))
+        stream.close()
+
+    def _start(self, spec: NodeSpec) -> None:
+        env = dict(os.environ)
+        env.update({"PYTHONUNBUFFERED": "1", "RCUTILS_COLORIZED_OUTPUT": "0", "RCUTILS_LOGGING_BUFFERED_STREAM": "0"})
+        env.update(spec.env)
+        proc = subprocess.Popen(spec.command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                env=env, start_new_session=True, preexec_fn=_set_parent_death_signal)
+        self.procs[spec.name] = proc
+        reader = threading.Thread(target=self._pump, args=(spec.name, proc.stdout), daemon=True)
+        reader.start()
+        self._readers.append(reader)
+        self._emit("launch", f"started {spec.name} (pid {proc.pid})")
+
+    def request_stop(self, *_args) -> None:
+        self._stop.set()
+
+    def run(self, timeout_s: float | None = None) -> int:
+        """Start the graph and supervise it; returns 0 when every node ended cleanly, else 1."""
+        old = {s: signal.signal(s, self.request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+        t0 = time.monotonic()
+        pending = sorted(self.graph.nodes, key=lambda n: n.delay_s)
+        failed: list[str] = []
+        try:
+            while not self._stop.is_set():
+                now = time.monotonic() - t0
+                while pending and pending[0].delay_s <= now:
+                    self._start(pending.pop(0))
+                for spec in self.graph.nodes:
+                    proc = self.procs.get(spec.name)
+                    if proc is None or proc.returncode is not None or proc.poll() is None:
+                        continue
+                    self._emit("launch", f"{spec.name} exited with code {proc.returncode}")
+                    if proc.returncode != 0:
+                        failed.append(spec.name)
+                    if spec.shutdown_on_exit or proc.returncode != 0:
+                        self._emit("launch", f"stopping the graph ({spec.name} ended)")
+                        self._stop.set()
+                if not pending and all(p.poll() is not None for p in self.procs.values()):
+                    break
+                if timeout_s is not None and now > timeout_s:
+                    self._emit("launch", f"timeout after {timeout_s:g} s: stopping the graph")
+                    break
+                time.sleep(0.05)
+        finally:
+            failed += self._shutdown()
+            for s, handler in old.items():
+                signal.signal(s, handler)
+            for reader in self._readers:
+                reader.join(timeout=2.0)
+            if self.graph.tmpdir is not None:
+                shutil.rmtree(self.graph.tmpdir, ignore_errors=True)
+        return 1 if failed else 0
+
+    def _shutdown(self) -> list[str]:
+        """SIGINT everything alive, then SIGTERM, then SIGKILL; returns the names of nodes that exited badly."""
+        alive = {n: p for n, p in self.procs.items() if p.poll() is None}
+        bad = []
+        for sig, wait in ((signal.SIGINT, self.grace_s), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+            if not alive:
+                break
+            for name, proc in alive.items():
+                if sig != signal.SIGINT:
+                    self._emit("launch", f"sending {signal.Signals(sig).name} to {name}")
+                try:
+                    proc.send_signal(sig)
+                except ProcessLookupError:
+                    pass
+            deadline = time.monotonic() + wait
+            while time.monotonic() < deadline and any(p.poll() is None for p in alive.values()):
+                time.sleep(0.05)
+            for name, proc in list(alive.items()):
+                if proc.poll() is not None:
+                    self._emit("launch", f"{name} exited with code {proc.returncode}")
+                    if proc.returncode not in (0, -signal.SIGINT) or sig != signal.SIGINT:
+                        bad.append(name)
+                    del alive[name]
+        return bad
+
+
+def parse_overrides(items: list[str]) -> dict[str, str]:
+    """``NAME:=VALUE`` command-line arguments to a dict."""
+    out = {}
+    for item in items:
+        if ":=" not in item:
+            raise LaunchError(f"argument {item!r} is not NAME:=VALUE")
+        key, value = item.split(":=", 1)
+        out[key] = value
+    return out

@@ -1,0 +1,120 @@
+"""Recorder node: records topics into a rosbag2 MCAP bag with raw (undeserialized) subscriptions.
+
+Parameters:
+    output (str)                 bag directory to create (must not exist); default ``bags/generated/rec_<time>``.
+    topics (str[], [])           record these topics (also when they appear later) ...
+    regex (str, "")              ... and/or every topic whose name matches this regular expression;
+                                 with neither, every topic is recorded.
+    exclude (str)                regex of topics never recorded; default ``^/rosout$|^/parameter_events$``.
+    include_clock (bool, false)  also record /clock.
+    discovery_period_s (0.5)     how often to look for new topics.
+    flush_period_s (0.5)         how often the open chunk is written out: a recorder killed with SIGKILL loses at
+                                 most this much (rebuild the bag with ``sit2stand bag recover DIR``).
+    use_sim_time (bool)          standard: stamp messages with /clock time instead of the wall clock.
+
+Subscriptions take the QoS of the topic's publishers (reliable only if all are, as rosbag2 does), and that QoS is
+stored in the bag. SIGINT or SIGTERM closes the bag cleanly (summary and metadata.yaml written).
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+
+from rclpy.node import Node
+
+from ..io.bag import BagError, BagWriter
+from .runtime import NodeError, declare, message_class, node_main, qos_matching_publishers, qos_to_bag
+
+DEFAULT_EXCLUDE = r"^/rosout$|^/parameter_events$"
+
+
+class Recorder(Node):
+    """Records topics into a bag (see the module docstring)."""
+
+    def __init__(self) -> None:
+        super().__init__("recorder")
+        out = declare(self, "output", "", "bag directory to create") or \
+            f"bags/generated/rec_{time.strftime('%Y%m%d_%H%M%S')}"
+        self.topics = set(declare(self, "topics", [], "topics to record (also when they appear later)"))
+        regex = declare(self, "regex", "", "record topics matching this regular expression")
+        exclude = declare(self, "exclude", DEFAULT_EXCLUDE, "never record topics matching this")
+        self.include_clock = declare(self, "include_clock", False, "also record /clock")
+        discovery_period = declare(self, "discovery_period_s", 0.5, "topic discovery period [s]")
+        flush_period = declare(self, "flush_period_s", 0.5, "chunk flush period [s]: most a SIGKILL loses")
+        try:
+            self.regex = re.compile(regex) if regex else None
+            self.exclude = re.compile(exclude) if exclude else None
+        except re.error as err:
+            raise NodeError(f"parameter regex/exclude is not a regular expression: {err}") from None
+        self.record_all = not self.topics and self.regex is None
+        try:
+            self.writer = BagWriter(Path(out), custom_data={"recorded_by": "sit2stand recorder"})
+        except BagError as err:
+            raise NodeError(str(err)) from None
+        self.output = Path(out)
+        self.subs = {}
+        self.skipped: set[str] = set()
+        self.finished = False
+        self.exit_code = 0
+        self._closed = False
+        self.create_timer(discovery_period, self._discover)
+        self.create_timer(flush_period, self.writer.flush)
+        self.create_timer(5.0, self._log_counts)
+        what = ["all topics"] if self.record_all else ([", ".join(sorted(self.topics))] if self.topics else []) + \
+            ([f"topics matching /{regex}/"] if regex else [])
+        self.get_logger().info(f"recording to {self.output} ({' and '.join(what)})")
+        self._discover()
+
+    def _wanted(self, topic: str) -> bool:
+        if topic == "/clock" and not self.include_clock:
+            return False
+        if self.exclude is not None and self.exclude.search(topic) and topic not in self.topics:
+            return False
+        return self.record_all or topic in self.topics or bool(self.regex and self.regex.search(topic))
+
+    def _discover(self) -> None:
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self.subs or topic in self.skipped or not self._wanted(topic):
+                continue
+            if not self.get_publishers_info_by_topic(topic):
+                continue  # only subscribers so far: wait for a publisher to learn its QoS
+            msgtype = types[0]
+            if len(types) > 1:
+                self.get_logger().warning(f"{topic} has several types {types}; recording {msgtype}")
+            try:
+                cls = message_class(msgtype)
+                qos = qos_matching_publishers(self, topic)
+                self.writer.add_topic(topic, msgtype, [qos_to_bag(qos)])
+            except (NodeError, BagError) as err:
+                self.get_logger().warning(f"not recording {topic}: {err}")
+                self.skipped.add(topic)
+                continue
+            self.subs[topic] = self.create_subscription(
+                cls, topic, lambda data, t=topic: self._on_message(t, data), qos, raw=True)
+            self.get_logger().info(f"subscribed to {topic} ({msgtype}, "
+                                   f"{'reliable' if qos.reliability == 1 else 'best effort'})")
+
+    def _on_message(self, topic: str, data: bytes) -> None:
+        self.writer.write_raw(topic, self.get_clock().now().nanoseconds, data)
+
+    def _log_counts(self) -> None:
+        counts = ", ".join(f"{t}: {n}" for t, n in sorted(self.writer.counts.items()))
+        self.get_logger().info(f"recorded {sum(self.writer.counts.values())} messages ({counts})")
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        for sub in self.subs.values():
+            self.destroy_subscription(sub)
+        self.writer.close()
+        total = sum(self.writer.counts.values())
+        print(f"[recorder] closed {self.output}: {total} messages on {len(self.writer.counts)} topics", flush=True)
+
+
+main = node_main(Recorder)
+
+if __name__ == "__main__":
+    raise SystemExit(main())

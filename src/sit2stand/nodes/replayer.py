@@ -1,0 +1,237 @@
+"""Replayer node: plays a bag's topics with their recorded timing, publishing /clock.
+
+Parameters:
+    bag (str, required)          rosbag2 directory to play.
+    rate (float, 1.0)            0.1..50 x real time; 0 = as fast as the subscribers take it (reliable topics are
+                                 flow-controlled by waiting for every subscriber's acknowledgement). Settable live.
+    topics (str[], all)          only these topics.
+    loop (bool, false)           start again at the end.
+    at_end ("exit" | "idle")     what to do when done: leave (exit code 0) or keep the node alive.
+    start_paused (bool, false)   wait for ~/pause(false) before playing.
+    publish_clock (bool, true)   publish rosgraph_msgs/Clock on /clock at clock_rate_hz of bag time.
+    clock_rate_hz (float, 100)
+    wait_for_subscribers (int, 0)  before playing, wait until every topic has this many subscribers ...
+    wait_timeout_s (float, 10)   ... or this long (then play anyway, with a warning).
+    delay_s (float, 0)           extra wait before the first message.
+    skip_unknown_types (bool, false)  skip topics whose type has no Python class here, instead of failing.
+
+Services: ~/pause (std_srvs/SetBool: true pauses, false resumes).
+Topics out: every bag topic (raw CDR, recorded QoS), /clock, ~/progress (diagnostic_msgs/DiagnosticStatus, 2 Hz).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rcl_interfaces.msg import SetParametersResult
+from rosgraph_msgs.msg import Clock
+from std_srvs.srv import SetBool
+
+from ..io.bag import BagError, BagReader
+from ..replay import PlaybackClock, check_rate
+from .runtime import NodeError, declare, message_class, node_main, qos_from_bag
+
+ACK_BATCH = 200          # unpaced mode: wait for acknowledgements every this many messages
+ACK_TIMEOUT_S = 10.0
+
+
+class Replayer(Node):
+    """Plays a bag onto topics (see the module docstring)."""
+
+    def __init__(self) -> None:
+        super().__init__("replayer")
+        self.bag_path = declare(self, "bag", None, "rosbag2 directory to play")
+        rate = declare(self, "rate", 1.0, "0.1..50 x real time; 0 = as fast as the subscribers take it")
+        self.topics_param = declare(self, "topics", [], "topics to play (default: all)")
+        self.loop = declare(self, "loop", False, "start again at the end")
+        self.at_end = declare(self, "at_end", "exit", "exit | idle")
+        self.publish_clock = declare(self, "publish_clock", True, "publish /clock")
+        self.clock_period_ns = int(1e9 / max(1e-3, declare(self, "clock_rate_hz", 100.0, "/clock rate [Hz]")))
+        self.wait_for_subscribers = declare(self, "wait_for_subscribers", 0, "subscribers per topic to wait for")
+        self.wait_timeout_s = declare(self, "wait_timeout_s", 10.0, "longest wait for subscribers [s]")
+        self.delay_s = declare(self, "delay_s", 0.0, "wait before the first message [s]")
+        start_paused = declare(self, "start_paused", False, "wait for ~/pause false before playing")
+        skip_unknown = declare(self, "skip_unknown_types", False, "skip topics without a Python message class")
+        if not self.bag_path:
+            raise NodeError("parameter 'bag' is required (a rosbag2 directory)")
+        if self.at_end not in ("exit", "idle"):
+            raise NodeError(f"parameter 'at_end' must be 'exit' or 'idle', not {self.at_end!r}")
+        try:
+            rate = check_rate(rate)
+            self.reader = BagReader(self.bag_path)
+        except (ValueError, BagError) as err:
+            raise NodeError(str(err)) from None
+
+        bag_topics = self.reader.topics()
+        wanted = self.topics_param or sorted(bag_topics)
+        missing = [t for t in wanted if t not in bag_topics]
+        if missing:
+            raise NodeError(f"{self.bag_path}: no topic {', '.join(missing)} (it has {', '.join(sorted(bag_topics))})")
+        self.pubs = {}
+        for topic in wanted:
+            msgtype = bag_topics[topic].msgtype
+            try:
+                cls = message_class(msgtype)
+            except NodeError as err:
+                if skip_unknown:
+                    self.get_logger().warning(f"skipping {topic}: {err}")
+                    continue
+                raise NodeError(f"{self.bag_path}: topic {topic}: {err}") from None
+            self.pubs[topic] = self.create_publisher(cls, topic, qos_from_bag(self.reader.qos(topic)))
+        if not self.pubs:
+            raise NodeError(f"{self.bag_path}: nothing to play")
+        self.total = sum(bag_topics[t].count for t in self.pubs)
+        self.clock_pub = self.create_publisher(
+            Clock, "/clock", QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
+                                        durability=DurabilityPolicy.VOLATILE)) if self.publish_clock else None
+        self.progress_pub = self.create_publisher(DiagnosticStatus, "~/progress", 10)
+        self.create_service(SetBool, "~/pause", self._on_pause)
+        self.add_on_set_parameters_callback(self._on_parameters)
+
+        self.clock = PlaybackClock(self.reader.start_ns, rate)
+        if start_paused:
+            self.clock.pause()
+        self.sent = 0
+        self.loops_done = 0
+        self.finished = False
+        self.exit_code = 0
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._last_progress = 0.0
+        self._last_log = time.monotonic()
+        self.get_logger().info(
+            f"playing {self.bag_path}: {len(self.pubs)} topics, {self.total} messages, "
+            f"{self.reader.duration_s:.2f} s at {'max' if rate == 0 else f'{rate:g}x'}"
+            f"{' (paused)' if start_paused else ''}")
+        self._thread = threading.Thread(target=self._play, name="playback", daemon=True)
+        self._thread.start()
+
+    # --- controls --------------------------------------------------------------------------------------------
+    def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
+        if request.data:
+            self.clock.pause()
+        else:
+            self.clock.resume()
+        self._wake.set()
+        response.success = True
+        response.message = "paused" if self.clock.paused else "playing"
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        for param in params:
+            if param.name == "rate":
+                try:
+                    self.clock.set_rate(param.value)
+                except ValueError as err:
+                    return SetParametersResult(successful=False, reason=str(err))
+                self._wake.set()
+        return SetParametersResult(successful=True)
+
+    # --- playback thread ---------------------------------------------------------------------------------------
+    def _wait_for_subscribers(self) -> None:
+        if self.wait_for_subscribers <= 0:
+            return
+        deadline = time.monotonic() + self.wait_timeout_s
+        while not self._stop.is_set():
+            short = [t for t, pub in self.pubs.items() if pub.get_subscription_count() < self.wait_for_subscribers]
+            if not short:
+                return
+            if time.monotonic() > deadline:
+                self.get_logger().warning(f"playing without {self.wait_for_subscribers} subscriber(s) on "
+                                          f"{', '.join(short)} after {self.wait_timeout_s:g} s")
+                return
+            time.sleep(0.02)
+
+    def _wait_acked(self) -> None:
+        for topic, pub in self.pubs.items():
+            if pub.qos_profile.reliability == ReliabilityPolicy.RELIABLE and pub.get_subscription_count():
+                if not pub.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S)):
+                    self.get_logger().warning(f"{topic}: subscribers did not acknowledge within {ACK_TIMEOUT_S} s")
+
+    def _play(self) -> None:
+        try:
+            self._wait_for_subscribers()
+            if self.delay_s > 0:
+                time.sleep(self.delay_s)
+            last_clock_ns = None
+            while not self._stop.is_set():
+                self.clock.restart(self.reader.start_ns)
+                since_ack = 0
+                for msg in self.reader.messages(list(self.pubs)):
+                    while not self._stop.is_set():
+                        wait = self.clock.due_in_s(msg.timestamp_ns)
+                        if wait <= 0:
+                            break
+                        self._wake.wait(min(wait, 0.05))
+                        self._wake.clear()
+                        self._report()
+                    if self._stop.is_set():
+                        return
+                    if self.clock_pub is not None and (last_clock_ns is None or msg.timestamp_ns < last_clock_ns
+                                                       or msg.timestamp_ns - last_clock_ns >= self.clock_period_ns):
+                        clock = Clock()
+                        clock.clock.sec, clock.clock.nanosec = divmod(msg.timestamp_ns, 1_000_000_000)
+                        self.clock_pub.publish(clock)
+                        last_clock_ns = msg.timestamp_ns
+                    self.pubs[msg.topic].publish(msg.data)
+                    self.clock.played(msg.timestamp_ns)
+                    self.sent += 1
+                    since_ack += 1
+                    if self.clock.rate == 0.0 and since_ack >= ACK_BATCH:
+                        self._wait_acked()
+                        since_ack = 0
+                    self._report()
+                self.loops_done += 1
+                if not self.loop:
+                    break
+            self._wait_acked()
+            self._report(force=True)
+            self.get_logger().info(f"done: {self.sent} messages published")
+        except BagError as err:
+            self.get_logger().error(str(err))
+            self.exit_code = 1
+        except Exception as err:  # noqa: BLE001 - a dying playback thread must not leave the node hanging
+            if not self._stop.is_set():
+                self.get_logger().error(f"playback failed: {err!r}")
+                self.exit_code = 1
+        finally:
+            if self.at_end == "exit" or self.exit_code:
+                self.finished = True
+
+    def _report(self, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now - self._last_progress < 0.5:
+            return
+        self._last_progress = now
+        bag_t = min(max(0, self.clock.bag_now_ns() - self.reader.start_ns) * 1e-9, self.reader.duration_s)
+        frac = (self.sent - self.loops_done * self.total if self.loop else self.sent) / max(1, self.total)
+        frac = min(1.0, max(0.0, frac))
+        status = DiagnosticStatus(level=DiagnosticStatus.OK, name=self.get_fully_qualified_name(),
+                                  message="paused" if self.clock.paused else "playing", hardware_id=self.bag_path)
+        status.values = [KeyValue(key=k, value=v) for k, v in (
+            ("fraction", f"{frac:.4f}"), ("bag_time_s", f"{bag_t:.3f}"), ("duration_s", f"{self.reader.duration_s:.3f}"),
+            ("messages_sent", str(self.sent)), ("loops_done", str(self.loops_done)), ("rate", f"{self.clock.rate:g}"))]
+        self.progress_pub.publish(status)
+        if force or now - self._last_log >= 2.0:
+            self._last_log = now
+            self.get_logger().info(f"{100 * frac:5.1f}%  bag time {bag_t:.2f}/{self.reader.duration_s:.2f} s, "
+                                   f"{self.sent} messages{' (paused)' if self.clock.paused else ''}")
+
+    def close(self) -> None:
+        self._stop.set()
+        self._wake.set()
+        self._thread.join(timeout=2.0)
+        self.reader.close()
+
+
+main = node_main(Replayer)
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,162 @@
+"""What every sit2stand node shares: start-up/shut-down, message classes by name, QoS conversions.
+
+A node module defines a ``rclpy.node.Node`` subclass and ``main = node_main(ThatNode)``; it then runs as a
+console script (``replayer --ros-args -p bag:=...``), as ``python -m sit2stand.nodes.replayer``, from
+``sit2stand launch`` and, on a full ROS install, from ``ros2 run sit2stand replayer``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from collections.abc import Callable
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+
+class NodeError(RuntimeError):
+    """A node cannot start or go on; the message names the parameter, file or topic at fault."""
+
+
+def message_class(msgtype: str):
+    """The Python class of ``pkg/msg/Type`` (or ``pkg/srv/Type``), e.g. sensor_msgs.msg.JointState.
+
+    Raises:
+        NodeError: no such module or type here.
+    """
+    parts = msgtype.split("/")
+    if len(parts) == 2:
+        parts = [parts[0], "msg", parts[1]]
+    if len(parts) != 3:
+        raise NodeError(f"{msgtype!r} is not a message type name (pkg/msg/Type)")
+    pkg, kind, name = parts
+    try:
+        module = importlib.import_module(f"{pkg}.{kind}")
+        return getattr(module, name)
+    except (ImportError, AttributeError) as err:
+        raise NodeError(f"message type {msgtype} has no Python class here ({err}); build or install the "
+                        f"package that defines it") from None
+
+
+def declare(node: Node, name: str, default, description: str = ""):
+    """Declare a parameter and return its value, typed like ``default`` (ints are accepted for floats).
+
+    ``default`` None means a required string; an empty list means a string array.
+    """
+    from rcl_interfaces.msg import ParameterDescriptor
+    from rclpy.parameter import Parameter
+
+    if isinstance(default, list) and not default:
+        value = node.declare_parameter(name, Parameter.Type.STRING_ARRAY,
+                                       ParameterDescriptor(description=description)).value
+        return list(value or [])
+    descriptor = ParameterDescriptor(description=description, dynamic_typing=True)
+    value = node.declare_parameter(name, "" if default is None else default, descriptor).value
+    try:
+        if isinstance(default, bool):
+            if isinstance(value, str):
+                return value.strip().lower() in ("1", "true", "yes", "on")
+            return bool(value)
+        if isinstance(default, float):
+            return float(value)
+        if isinstance(default, int):
+            return int(value)
+    except (TypeError, ValueError):
+        raise NodeError(f"parameter {name!r}: {value!r} is not a {type(default).__name__}") from None
+    if isinstance(default, list):
+        return list(value or [])
+    return value
+
+
+def qos_to_bag(profile: QoSProfile):
+    """rosbags Qos (for bag metadata) of an rclpy QoSProfile."""
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+    def t(d) -> QosTime:
+        ns = d.nanoseconds
+        if ns <= 0 or ns >= 0x7FFFFFFF * 10**9:
+            return QosTime(sec=0x7FFFFFFF, nsec=0xFFFFFFFF)
+        return QosTime(sec=ns // 10**9, nsec=ns % 10**9)
+
+    return Qos(
+        history=QosHistory(int(profile.history)),
+        depth=int(profile.depth),
+        reliability=QosReliability(int(profile.reliability)),
+        durability=QosDurability(int(profile.durability)),
+        deadline=t(profile.deadline),
+        lifespan=t(profile.lifespan),
+        liveliness=QosLiveliness(int(profile.liveliness)),
+        liveliness_lease_duration=t(profile.liveliness_lease_duration),
+        avoid_ros_namespace_conventions=bool(profile.avoid_ros_namespace_conventions),
+    )
+
+
+def qos_from_bag(profiles, depth: int = 1000) -> QoSProfile:
+    """An rclpy QoSProfile to replay a topic with the reliability/durability it was recorded with."""
+    reliable, transient = True, False
+    if profiles:
+        reliable = all(int(getattr(p.reliability, "value", p.reliability)) != 2 for p in profiles)  # 2: best effort
+        transient = all(int(getattr(p.durability, "value", p.durability)) == 1 for p in profiles)
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)
+
+
+def qos_matching_publishers(node: Node, topic: str, depth: int = 1000) -> QoSProfile:
+    """A subscription QoS that connects to every current publisher of ``topic`` (as rosbag2 record does):
+    reliable only if all publishers are reliable, transient-local only if all are."""
+    infos = node.get_publishers_info_by_topic(topic)
+    reliable = bool(infos) and all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
+    transient = bool(infos) and all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE if reliable or not infos else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)
+
+
+def node_main(factory: Callable[[], Node]) -> Callable[[list[str] | None], int]:
+    """Make a console-script ``main`` that runs one node until it finishes, SIGINT or SIGTERM.
+
+    The node may define ``finished`` (bool attribute: leave the spin loop), ``exit_code`` (int) and
+    ``close()`` (called once on the way out, before the node is destroyed, also after a signal).
+    """
+
+    def main(argv: list[str] | None = None) -> int:
+        rclpy.init(args=sys.argv if argv is None else argv)
+        node = None
+        code = 0
+        try:
+            node = factory()
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+            while rclpy.ok() and not getattr(node, "finished", False):
+                try:
+                    executor.spin_once(timeout_sec=0.1)
+                except Exception:  # noqa: BLE001 - a signal may invalidate the context mid-wait (RCLError)
+                    if rclpy.ok():
+                        raise
+                    break
+            code = int(getattr(node, "exit_code", 0))
+        except (KeyboardInterrupt, ExternalShutdownException):
+            code = int(getattr(node, "exit_code", 0)) if node is not None else 0
+        except NodeError as err:
+            print(f"[{getattr(node, 'get_name', lambda: 'node')()}] error: {err}", file=sys.stderr, flush=True)
+            code = 2
+        finally:
+            if node is not None:
+                closer = getattr(node, "close", None)
+                if closer is not None:
+                    try:
+                        closer()
+                    except Exception as err:  # noqa: BLE001 - report, still shut down
+                        print(f"[{node.get_name()}] error while closing: {err}", file=sys.stderr, flush=True)
+                        code = code or 1
+                node.destroy_node()
+            rclpy.try_shutdown()
+        return code
+
+    return main

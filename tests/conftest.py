@@ -1,0 +1,106 @@
+"""Shared fixtures: real lab recordings from ../shared, a private ROS domain per test, node processes."""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+REAL = (ROOT / ".." / "shared" / "data" / "real").resolve()
+GRAPHS = ROOT / "ros_ws" / "graphs"
+
+
+def real_file(name: str) -> Path:
+    """A file of ../shared/data/real (never copied into the project); skips the test where it is absent."""
+    path = REAL / name
+    if not path.is_file():
+        pytest.skip(f"real recording {path} is not available on this machine")
+    return path
+
+
+@pytest.fixture
+def ros_env(monkeypatch) -> dict[str, str]:
+    """Environment for node processes: a ROS domain of this test's own, discovery on localhost only."""
+    domain = str(random.Random(os.getpid() * 7919 + time.time_ns()).randint(1, 100))
+    env = dict(os.environ)
+    env.update({"ROS_DOMAIN_ID": domain, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+                "PYTHONUNBUFFERED": "1", "RCUTILS_COLORIZED_OUTPUT": "0"})
+    monkeypatch.setenv("ROS_DOMAIN_ID", domain)
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    return env
+
+
+class NodeProcess:
+    """A node (or the sit2stand CLI) in its own process; output goes to a log file in the test's tmp dir."""
+
+    def __init__(self, args: list[str], env: dict[str, str], log: Path) -> None:
+        self.log_path = log
+        self._log = open(log, "wb")
+        self.proc = subprocess.Popen([sys.executable, "-m", *args], env=env, stdout=self._log,
+                                     stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+
+    def wait(self, timeout: float = 60.0) -> int:
+        try:
+            return self.proc.wait(timeout=timeout)
+        finally:
+            self._log.flush()
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 20.0) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+        return self.wait(timeout)
+
+    @property
+    def output(self) -> str:
+        self._log.flush()
+        return self.log_path.read_text(errors="replace")
+
+    def wait_for_output(self, text: str, timeout: float = 20.0) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in self.output:
+                return True
+            if self.proc.poll() is not None:
+                return text in self.output
+            time.sleep(0.05)
+        return False
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(10)
+        self._log.close()
+
+
+@pytest.fixture
+def run_node(tmp_path, ros_env):
+    """Start ``python -m MODULE ARGS...`` processes; every one still alive at the end of the test is killed."""
+    started: list[NodeProcess] = []
+
+    def start(*args: str, log_name: str | None = None) -> NodeProcess:
+        name = log_name or args[0].split(".")[-1]
+        node = NodeProcess(list(args), ros_env, tmp_path / f"{name}-{len(started)}.log")
+        started.append(node)
+        return node
+
+    yield start
+    for node in started:
+        node.kill()
+
+
+@pytest.fixture(scope="session")
+def sts_bag(tmp_path_factory) -> Path:
+    """../shared/data/real/sts_child_vicon_01.c3d imported into a bag (once per session)."""
+    from sit2stand.io.c3d import read_c3d, write_trial_bag
+
+    src = real_file("sts_child_vicon_01.c3d")
+    out = tmp_path_factory.mktemp("imported") / "sts_child"
+    write_trial_bag(read_c3d(src, feet_plate=2), out)
+    return out
