@@ -11,6 +11,7 @@ setup(
     name="sit2stand",
     version="0.1.0",
     packages=find_packages(include=["sit2stand", "sit2stand.*"]),
+    package_data={"sit2stand.nodes": ["*.xml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/sit2stand"]),
         ("share/sit2stand", ["package.xml"]),

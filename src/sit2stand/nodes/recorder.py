@@ -99,6 +99,15 @@ class Recorder(Node):
     def _on_message(self, topic: str, data: bytes) -> None:
         self.writer.write_raw(topic, self.get_clock().now().nanoseconds, data)
 
+    def drain(self) -> bool:
+        """After SIGINT/SIGTERM: keep taking messages until none arrived for 0.3 s (DDS may hold acknowledged,
+        not yet taken samples; a publisher that just finished expects them on disk)."""
+        now = time.monotonic()
+        total = sum(self.writer.counts.values())
+        if total != getattr(self, "_drain_total", None):
+            self._drain_total, self._drain_since = total, now
+        return now - self._drain_since < 0.3
+
     def _log_counts(self) -> None:
         counts = ", ".join(f"{t}: {n}" for t, n in sorted(self.writer.counts.items()))
         self.get_logger().info(f"recorded {sum(self.writer.counts.values())} messages ({counts})")

@@ -8,12 +8,15 @@ console script (``replayer --ros-args -p bag:=...``), as ``python -m sit2stand.n
 from __future__ import annotations
 
 import importlib
+import signal
 import sys
+import time
 from collections.abc import Callable
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 
@@ -106,14 +109,17 @@ def qos_from_bag(profiles, depth: int = 1000) -> QoSProfile:
         durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)
 
 
-def qos_matching_publishers(node: Node, topic: str, depth: int = 1000) -> QoSProfile:
+def qos_matching_publishers(node: Node, topic: str, keep_all: bool = True, depth: int = 1000) -> QoSProfile:
     """A subscription QoS that connects to every current publisher of ``topic`` (as rosbag2 record does):
-    reliable only if all publishers are reliable, transient-local only if all are."""
+    reliable only if all publishers are reliable, transient-local only if all are.
+
+    ``keep_all`` (a recorder's choice): a reliable reader never drops a sample it has acknowledged; when the
+    application falls behind it stops acknowledging, which is what lets a flow-controlled publisher slow down."""
     infos = node.get_publishers_info_by_topic(topic)
     reliable = bool(infos) and all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
     transient = bool(infos) and all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
     return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=depth,
+        history=HistoryPolicy.KEEP_ALL if keep_all else HistoryPolicy.KEEP_LAST, depth=depth,
         reliability=ReliabilityPolicy.RELIABLE if reliable or not infos else ReliabilityPolicy.BEST_EFFORT,
         durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)
 
@@ -121,25 +127,37 @@ def qos_matching_publishers(node: Node, topic: str, depth: int = 1000) -> QoSPro
 def node_main(factory: Callable[[], Node]) -> Callable[[list[str] | None], int]:
     """Make a console-script ``main`` that runs one node until it finishes, SIGINT or SIGTERM.
 
-    The node may define ``finished`` (bool attribute: leave the spin loop), ``exit_code`` (int) and
-    ``close()`` (called once on the way out, before the node is destroyed, also after a signal).
+    The node may define:
+      ``finished`` (bool attribute): leave the spin loop; ``exit_code`` (int);
+      ``drain()`` -> bool: called repeatedly after a signal while it returns True (keep spinning to take what
+      DDS has already delivered), at most ``drain_timeout_s`` (attribute, default 5 s);
+      ``close()``: called once on the way out, before the node is destroyed.
+    A second signal during the drain stops at once.
     """
 
     def main(argv: list[str] | None = None) -> int:
-        rclpy.init(args=sys.argv if argv is None else argv)
+        rclpy.init(args=sys.argv if argv is None else argv, signal_handler_options=SignalHandlerOptions.NO)
+        signals = {"count": 0}
+
+        def on_signal(signum, _frame):
+            signals["count"] += 1
+            if signals["count"] > 1:
+                raise KeyboardInterrupt
+
+        previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
         node = None
         code = 0
         try:
             node = factory()
             executor = SingleThreadedExecutor()
             executor.add_node(node)
-            while rclpy.ok() and not getattr(node, "finished", False):
-                try:
-                    executor.spin_once(timeout_sec=0.1)
-                except Exception:  # noqa: BLE001 - a signal may invalidate the context mid-wait (RCLError)
-                    if rclpy.ok():
-                        raise
-                    break
+            while rclpy.ok() and not getattr(node, "finished", False) and not signals["count"]:
+                executor.spin_once(timeout_sec=0.1)
+            drain = getattr(node, "drain", None)
+            if signals["count"] and drain is not None:
+                deadline = time.monotonic() + float(getattr(node, "drain_timeout_s", 5.0))
+                while rclpy.ok() and time.monotonic() < deadline and drain():
+                    executor.spin_once(timeout_sec=0.05)
             code = int(getattr(node, "exit_code", 0))
         except (KeyboardInterrupt, ExternalShutdownException):
             code = int(getattr(node, "exit_code", 0)) if node is not None else 0
@@ -147,6 +165,8 @@ def node_main(factory: Callable[[], Node]) -> Callable[[list[str] | None], int]:
             print(f"[{getattr(node, 'get_name', lambda: 'node')()}] error: {err}", file=sys.stderr, flush=True)
             code = 2
         finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
             if node is not None:
                 closer = getattr(node, "close", None)
                 if closer is not None:

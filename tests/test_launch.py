@@ -1,0 +1,153 @@
+"""sit2stand.launch: graph files, substitutions, and supervising real processes (signals, prefixes, orphans)."""
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+import yaml
+
+from sit2stand.launch import LaunchError, load_graph, parse_overrides
+
+CHILD = textwrap.dedent("""\
+    #!{python}
+    import os, signal, sys, time
+    name = sys.argv[1]
+    open(os.path.join({tmp!r}, name + ".pid"), "w").write(str(os.getpid()))
+    def on_int(*_):
+        print(name, "got SIGINT", flush=True)
+        sys.exit(0)
+    signal.signal(signal.SIGINT, on_int)
+    if {ignore_int!r}:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    print(name, "args", " ".join(sys.argv[2:]), flush=True)
+    time.sleep(float(os.environ.get("LIFETIME", "60")))
+    print(name, "done", flush=True)
+    """)
+
+
+def child_script(tmp_path, ignore_int=False):
+    path = tmp_path / ("stubborn.py" if ignore_int else "child.py")
+    path.write_text(CHILD.format(python=sys.executable, tmp=str(tmp_path), ignore_int=ignore_int))
+    path.chmod(0o755)
+    return path
+
+
+def graph_file(tmp_path, nodes, arguments=None):
+    path = tmp_path / "graph.yaml"
+    path.write_text(yaml.safe_dump({"name": "t", "arguments": arguments or {}, "nodes": nodes}))
+    return path
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    with open(f"/proc/{pid}/stat") as f:  # a zombie is dead for our purpose
+        return f.read().split()[2] != "Z"
+
+
+def test_substitutions_and_parameters(tmp_path):
+    (tmp_path / "p.yaml").write_text("/**:\n  ros__parameters:\n    a: 1\n")
+    path = graph_file(tmp_path, [{"name": "n1", "executable": "recorder",
+                                  "parameters": ["p.yaml", {"output": "$(var out)", "rate": "$(var rate)"}],
+                                  "remappings": {"/a": "/b"}, "env": {"X": "$(env HOME)"}}],
+                      arguments={"out": "default", "rate": "2.5"})
+    graph = load_graph(path, {"out": "/tmp/o"})
+    (node,) = graph.nodes
+    assert node.command[1:3] == ["-m", "sit2stand.nodes.recorder"]
+    assert ["-r", "__node:=n1"] == node.command[4:6]
+    assert str(tmp_path / "p.yaml") in node.command and "/a:=/b" in node.command
+    inline = yaml.safe_load(open(node.command[node.command.index("--params-file", 7) + 1]))
+    assert inline == {"/**": {"ros__parameters": {"output": "/tmp/o", "rate": 2.5}}}  # typed substitution
+    assert node.env["X"] == os.environ["HOME"]
+
+
+@pytest.mark.parametrize("nodes, overrides, message", [
+    ([{"name": "a", "executable": "recorder", "parameters": [{"x": "$(var missing)"}]}], {}, r"\$\(var missing\)"),
+    ([{"name": "a", "executable": "no-such-program-xyz"}], {}, "neither a sit2stand node"),
+    ([{"name": "a", "executable": "recorder"}, {"name": "a", "executable": "replayer"}], {}, "duplicate node name"),
+    ([{"name": "a", "executable": "recorder", "parameters": ["nope.yaml"]}], {}, "does not exist"),
+    ([{"name": "a", "executable": "recorder"}], {"typo": "1"}, "unknown argument"),
+    ([{"name": "a", "executable": "recorder", "on_exit": "explode"}], {}, "on_exit"),
+])
+def test_bad_graphs_name_the_problem(tmp_path, nodes, overrides, message):
+    with pytest.raises(LaunchError, match=message) as err:
+        load_graph(graph_file(tmp_path, nodes), overrides)
+    assert "graph.yaml" in str(err.value)
+
+
+def test_overrides_syntax():
+    assert parse_overrides(["a:=1", "b:=x:=y"]) == {"a": "1", "b": "x:=y"}
+    with pytest.raises(LaunchError):
+        parse_overrides(["a=1"])
+
+
+def run_launch(tmp_path, nodes, *extra):
+    path = graph_file(tmp_path, nodes)
+    return subprocess.Popen([sys.executable, "-m", "sit2stand.cli", "launch", str(path), *extra],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def wait_for_pids(tmp_path, names, timeout=10.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        files = [tmp_path / f"{n}.pid" for n in names]
+        if all(f.exists() and f.read_text() for f in files):
+            return [int(f.read_text()) for f in files]
+        time.sleep(0.05)
+    raise AssertionError(f"children {names} did not start")
+
+
+def test_sigint_is_forwarded_and_output_prefixed(tmp_path):
+    script = child_script(tmp_path)
+    proc = run_launch(tmp_path, [{"name": "alpha", "executable": str(script), "arguments": ["alpha"]},
+                                 {"name": "beta", "executable": str(script), "arguments": ["beta"]}])
+    pids = wait_for_pids(tmp_path, ["alpha", "beta"])
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=30)
+    assert proc.returncode == 0, out
+    assert "[alpha] alpha got SIGINT" in out and "[beta ] beta got SIGINT" in out
+    assert "[alpha] alpha args --ros-args -r __node:=alpha" in out
+    assert not any(alive(p) for p in pids)
+
+
+def test_stubborn_node_gets_sigterm_after_grace(tmp_path):
+    script = child_script(tmp_path, ignore_int=True)
+    proc = run_launch(tmp_path, [{"name": "stub", "executable": str(script), "arguments": ["stub"]}],
+                      "--grace", "0.5")
+    (pid,) = wait_for_pids(tmp_path, ["stub"])
+    proc.send_signal(signal.SIGTERM)
+    out, _ = proc.communicate(timeout=30)
+    assert "sending SIGTERM to stub" in out
+    assert proc.returncode == 1  # a node that had to be terminated counts as a failure
+    assert not alive(pid)
+
+
+def test_shutdown_node_ends_the_graph(tmp_path):
+    script = child_script(tmp_path)
+    nodes = [{"name": "short", "executable": str(script), "arguments": ["short"], "env": {"LIFETIME": "0.5"},
+              "on_exit": "shutdown"},
+             {"name": "long", "executable": str(script), "arguments": ["long"]}]
+    proc = run_launch(tmp_path, nodes)
+    out, _ = proc.communicate(timeout=30)
+    assert proc.returncode == 0, out
+    assert "stopping the graph (short ended)" in out and "[long ] long got SIGINT" in out
+
+
+def test_no_orphans_when_the_launcher_is_killed(tmp_path):
+    script = child_script(tmp_path)
+    proc = run_launch(tmp_path, [{"name": "a", "executable": str(script), "arguments": ["a"]},
+                                 {"name": "b", "executable": str(script), "arguments": ["b"]}])
+    pids = wait_for_pids(tmp_path, ["a", "b"])
+    proc.kill()
+    proc.wait(10)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(alive(p) for p in pids):
+        time.sleep(0.05)
+    assert not any(alive(p) for p in pids), "children outlived a SIGKILLed launcher"
