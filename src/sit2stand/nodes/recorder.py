@@ -33,6 +33,8 @@ DEFAULT_EXCLUDE = r"^/rosout$|^/parameter_events$"
 class Recorder(Node):
     """Records topics into a bag (see the module docstring)."""
 
+    executor_kind = "events"  # callbacks only, no publishing threads: the fast executor is safe here
+
     def __init__(self) -> None:
         super().__init__("recorder")
         out = declare(self, "output", "", "bag directory to create") or \

@@ -110,6 +110,7 @@ class Replayer(Node):
         self._stop = threading.Event()
         self._wake = threading.Event()
         self._last_progress = 0.0
+        self._t_first: float | None = None
         self._last_log = time.monotonic()
         self.get_logger().info(
             f"playing {self.bag_path}: {len(self.pubs)} topics, {self.total} messages, "
@@ -187,6 +188,8 @@ class Replayer(Node):
                         self.clock_pub.publish(clock)
                         last_clock_ns = msg.timestamp_ns
                     self.pubs[msg.topic].publish(msg.data)
+                    if self._t_first is None:
+                        self._t_first = time.monotonic()
                     self.clock.played(msg.timestamp_ns)
                     self.sent += 1
                     since_ack += 1
@@ -199,7 +202,9 @@ class Replayer(Node):
                     break
             self._wait_acked()
             self._report(force=True)
-            self.get_logger().info(f"done: {self.sent} messages published")
+            elapsed = time.monotonic() - self._t_first if self._t_first is not None else 0.0
+            self.get_logger().info(f"done: {self.sent} messages published in {elapsed:.3f} s "
+                                   f"({self.sent / elapsed if elapsed > 0 else 0.0:.0f} msg/s)")
         except BagError as err:
             self.get_logger().error(str(err))
             self.exit_code = 1
