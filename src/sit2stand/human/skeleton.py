@@ -1,0 +1,339 @@
+"""Full-body human skeleton with de Leva inertia and the Vicon Plug-in-Gait marker set, as a Pinocchio model.
+
+Bodies (16): pelvis (floating base, origin at the mid-hip point), torso, head, upper_arm/forearm/hand, thigh/shank/
+foot/toes on each side (suffix ``_l``/``_r``). 38 degrees of freedom: free-flyer 6, lumbar 3, neck 3, shoulders 3,
+elbows 1, wrists 2, hips 3, knees 1, ankles 2 (flexion, inversion), toes 1. Multi-axis joints are chains of
+revolute joints named ``<joint>_<axis>`` (``hip_l_y``: flexion/extension about y, then ``_x``, then ``_z``).
+
+Frames follow REP-103 at the zero configuration (standing upright, arms hanging, feet flat, facing +x): x forward,
+y left, z up in every body. Each angle is a right-handed rotation about its axis, so about y: trunk flexion
+(``lumbar_y``), knee flexion and ankle plantarflexion are positive; hip and shoulder flexion and elbow flexion are
+negative.
+
+Subjects are described by stature, body mass, sex, optional per-segment length factors (``lengths``), optional
+per-segment mass factors (``masses``, renormalised to the body mass) and optional extra rigid point masses
+(:class:`ExtraMass`, e.g. a backpack), which the synthesiser uses to hide a mass distribution unlike the average.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from .anthropometry import TOE_MASS_FRACTION, ankle_height_m, check_subject, segment_inertias
+
+SIDES = ("l", "r")
+SEGMENTS = ["pelvis", "torso", "head"] + [f"{s}_{side}" for side in SIDES for s in
+                                         ("upper_arm", "forearm", "hand", "thigh", "shank", "foot", "toes")]
+LENGTH_GROUPS = ("pelvis", "torso", "head", "upper_arm", "forearm", "hand", "thigh", "shank", "foot")
+"""Segment groups whose length can be scaled (left and right together)."""
+ALIASES = {"trunk": "torso", "back": "torso", "abdomen": "torso"}
+REFERENCE_STATURE_M = 1.75
+"""Marker offsets below are given for this stature [m] and scale with the subject's."""
+
+PLUG_IN_GAIT = ["LFHD", "RFHD", "LBHD", "RBHD", "C7", "T10", "CLAV", "STRN", "RBAK", "LSHO", "RSHO", "LELB", "RELB",
+                "LWRA", "LWRB", "RWRA", "RWRB", "LFIN", "RFIN", "LASI", "RASI", "LPSI", "RPSI", "LTHI", "RTHI",
+                "LKNE", "RKNE", "LTIB", "RTIB", "LANK", "RANK", "LHEE", "RHEE", "LTOE", "RTOE"]
+
+
+@dataclass(frozen=True)
+class ExtraMass:
+    """A rigid point mass fixed to a segment: ``mass_kg`` at ``offset_m`` from the segment's COM (segment axes)."""
+
+    segment: str
+    mass_kg: float
+    offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @staticmethod
+    def parse(text: str) -> ExtraMass:
+        """``SEGMENT:KG[:x,y,z]`` as on the command line, e.g. ``trunk:8`` or ``torso:6:-0.15,0,0.1``."""
+        parts = text.split(":")
+        if len(parts) not in (2, 3):
+            raise ValueError(f"extra mass {text!r} is not SEGMENT:KG[:x,y,z]")
+        segment = ALIASES.get(parts[0], parts[0])
+        if segment not in SEGMENTS:
+            raise ValueError(f"extra mass {text!r}: unknown segment {parts[0]!r} (one of {', '.join(SEGMENTS)})")
+        try:
+            mass = float(parts[1])
+            offset = tuple(float(v) for v in parts[2].split(",")) if len(parts) == 3 else (0.0, 0.0, 0.0)
+        except ValueError:
+            raise ValueError(f"extra mass {text!r}: mass and offset must be numbers") from None
+        if mass <= 0 or len(offset) != 3:
+            raise ValueError(f"extra mass {text!r}: needs a positive mass and three offset values")
+        return ExtraMass(segment, mass, offset)
+
+
+@dataclass
+class Subject:
+    """Who the skeleton describes. ``lengths``/``masses``: factors per length group / per segment (default 1)."""
+
+    height_m: float = 1.75
+    mass_kg: float = 75.0
+    sex: str = "male"
+    lengths: dict[str, float] = field(default_factory=dict)
+    masses: dict[str, float] = field(default_factory=dict)
+    extra: list[ExtraMass] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        check_subject(self.height_m, self.mass_kg, self.sex)
+        for name in self.lengths:
+            if name not in LENGTH_GROUPS:
+                raise ValueError(f"length factor for unknown group {name!r} (one of {', '.join(LENGTH_GROUPS)})")
+        for name in self.masses:
+            if name not in SEGMENTS:
+                raise ValueError(f"mass factor for unknown segment {name!r}")
+
+
+@dataclass
+class HumanModel:
+    """A built skeleton: the Pinocchio model plus the names needed to use it."""
+
+    subject: Subject
+    model: pin.Model
+    marker_names: list[str]
+    marker_frames: dict[str, int]
+    segment_joint: dict[str, int]          # segment -> joint id its inertia hangs on
+    segment_mass: dict[str, float]         # [kg], extra masses included
+    segment_com: dict[str, np.ndarray]     # COM in the joint frame [m], extra masses included
+    geometry: dict[str, dict]              # segment -> {"from": xyz, "to": xyz, "radius": m} for drawing
+
+    @property
+    def total_mass(self) -> float:
+        return float(sum(self.segment_mass.values()))
+
+    def joint_names(self) -> list[str]:
+        """Names of the 32 non-root joints, in configuration order (q[7:])."""
+        return list(self.model.names[2:])
+
+
+def _rev(axis: str) -> pin.JointModel:
+    return {"x": pin.JointModelRX(), "y": pin.JointModelRY(), "z": pin.JointModelRZ()}[axis]
+
+
+def _limits(name: str) -> tuple[float, float]:
+    """Anatomical range of motion [rad] of a joint axis (sign convention in the module docstring)."""
+    table = {
+        "lumbar_y": (-0.6, 1.3), "lumbar_x": (-0.5, 0.5), "lumbar_z": (-0.6, 0.6),
+        "neck_y": (-1.0, 1.0), "neck_x": (-0.7, 0.7), "neck_z": (-1.2, 1.2),
+        "shoulder_y": (-3.0, 1.0), "shoulder_x": (-1.0, 3.0), "shoulder_z": (-1.5, 1.5),
+        "elbow_y": (-2.6, 0.05), "wrist_y": (-1.2, 1.2), "wrist_x": (-0.6, 0.6),
+        "hip_y": (-2.4, 0.6), "hip_x": (-0.6, 0.8), "hip_z": (-0.8, 0.8),
+        "knee_y": (-0.1, 2.6), "ankle_y": (-0.8, 0.9), "ankle_x": (-0.5, 0.5), "toe_y": (-1.0, 0.6),
+    }
+    base = name.rsplit("_", 2)
+    key = f"{base[0]}_{base[-1]}" if len(base) == 3 else name
+    lo, hi = table[key]
+    if name.endswith("_r_x") or name.endswith("_r_z"):  # mirror abduction/rotation on the right side
+        lo, hi = -hi, -lo
+    return lo, hi
+
+
+def build_human(subject: Subject | None = None) -> HumanModel:
+    """Build the skeleton of ``subject`` (default: a 1.75 m, 75 kg average male)."""
+    subject = subject or Subject()
+    H, sex = subject.height_m, subject.sex
+    seg = segment_inertias(H, subject.mass_kg, sex)
+    s = H / REFERENCE_STATURE_M
+    L = {g: subject.lengths.get(g, 1.0) for g in LENGTH_GROUPS}
+    h_ankle = ankle_height_m(H, sex) * L["foot"]
+
+    # segment masses with factors, renormalised to the body mass (extra masses come on top)
+    base_mass = {"pelvis": seg["pelvis"].mass_kg, "torso": seg["torso"].mass_kg, "head": seg["head"].mass_kg}
+    for side in SIDES:
+        for name in ("upper_arm", "forearm", "hand", "thigh", "shank"):
+            base_mass[f"{name}_{side}"] = seg[name].mass_kg
+        base_mass[f"foot_{side}"] = seg["foot"].mass_kg * (1 - TOE_MASS_FRACTION)
+        base_mass[f"toes_{side}"] = seg["foot"].mass_kg * TOE_MASS_FRACTION
+    factored = {k: v * subject.masses.get(k, 1.0) for k, v in base_mass.items()}
+    norm = subject.mass_kg / sum(factored.values())
+    mass = {k: v * norm for k, v in factored.items()}
+
+    def inertia_of(group: str, name: str) -> np.ndarray:
+        """Principal inertia scaled with mass and length^2 (about COM), foot/toes lying along x."""
+        ref = seg[group]
+        i = np.array(ref.inertia_kgm2) * mass[name] / (ref.mass_kg * (TOE_MASS_FRACTION if group == "toes" else 1))
+        i *= L.get(group, 1.0) ** 2
+        return i
+
+    model = pin.Model()
+    model.name = "human"
+    segment_joint: dict[str, int] = {}
+    segment_com: dict[str, np.ndarray] = {}
+    geometry: dict[str, dict] = {}
+    markers: dict[str, tuple[int, np.ndarray]] = {}
+
+    def add_chain(parent: int, joint: str, axes: str, origin) -> int:
+        jid = parent
+        for k, axis in enumerate(axes):
+            name = f"{joint}_{axis}"
+            lo, hi = _limits(name)
+            placement = pin.SE3(np.eye(3), np.asarray(origin, float) if k == 0 else np.zeros(3))
+            jid = model.addJoint(jid, _rev(axis), placement, name, np.array([200.0]), np.array([20.0]),
+                                 np.array([lo]), np.array([hi]))
+        return jid
+
+    def attach(jid: int, name: str, com, inertia_diag, from_xyz, to_xyz, radius) -> None:
+        com = np.asarray(com, float)
+        m = mass[name]
+        inertia = pin.Inertia(m, com, np.diag(inertia_diag))
+        for extra in subject.extra:
+            if extra.segment == name:
+                inertia = inertia + pin.Inertia(extra.mass_kg, com + np.asarray(extra.offset_m), np.zeros((3, 3)))
+        model.appendBodyToJoint(jid, inertia, pin.SE3.Identity())
+        model.addFrame(pin.Frame(name, jid, pin.SE3.Identity(), pin.FrameType.BODY))
+        segment_joint[name] = jid
+        segment_com[name] = inertia.lever.copy()
+        mass[name] = inertia.mass
+        geometry[name] = {"from": np.asarray(from_xyz, float), "to": np.asarray(to_xyz, float), "radius": radius}
+
+    def marker(jid: int, name: str, xyz_at_ref) -> None:
+        markers[name] = (jid, np.asarray(xyz_at_ref, float))
+
+    mm = 1e-3 * s  # marker/landmark offsets in mm at the reference stature
+
+    # pelvis: floating base at the mid-hip point
+    root = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "pelvis")
+    l_pel = seg["pelvis"].length_m * L["pelvis"]
+    hip_y = 0.048 * H * L["pelvis"]
+    attach(root, "pelvis", [0, 0, seg["pelvis"].com_from_proximal_m * L["pelvis"]], inertia_of("pelvis", "pelvis"),
+           [0, 0, 0], [0, 0, l_pel], 0.085 * s)
+    for name, xyz in {"LASI": (60, 120, 70), "RASI": (60, -120, 70), "LPSI": (-110, 45, 95),
+                      "RPSI": (-110, -45, 95)}.items():
+        marker(root, name, np.array(xyz) * mm * np.array([1, L["pelvis"], L["pelvis"]]))
+
+    # torso and head
+    l_to = seg["torso"].length_m * L["torso"]
+    torso = add_chain(root, "lumbar", "yxz", [0, 0, l_pel])
+    attach(torso, "torso", [0, 0, seg["torso"].com_from_proximal_m * L["torso"]], inertia_of("torso", "torso"),
+           [0, 0, 0], [0, 0, l_to], 0.12 * s)
+    neck_z = l_to
+    for name, xyz in {"C7": (-60, 0, 0), "T10": (-110, 0, -0.5 * l_to / mm), "CLAV": (60, 0, -40),
+                      "STRN": (110, 0, -200), "RBAK": (-100, -80, -160), "LSHO": (0, 175, -25),
+                      "RSHO": (0, -175, -25)}.items():
+        marker(torso, name, np.array([xyz[0] * mm, xyz[1] * mm, neck_z + xyz[2] * mm]))
+    l_head = seg["head"].length_m * L["head"]
+    head = add_chain(torso, "neck", "yxz", [0, 0, l_to])
+    attach(head, "head", [0.01 * s, 0, seg["head"].com_from_proximal_m * L["head"]], inertia_of("head", "head"),
+           [0.01 * s, 0, 0.05 * s], [0.01 * s, 0, l_head - 0.07 * s], 0.085 * s)
+    for name, xyz in {"LFHD": (90, 55, 150), "RFHD": (90, -55, 150), "LBHD": (-75, 55, 140),
+                      "RBHD": (-75, -55, 140)}.items():
+        marker(head, name, np.array(xyz) * mm * np.array([1, 1, L["head"]]))
+
+    for side, sy in (("l", 1.0), ("r", -1.0)):
+        P = side.upper()
+        # arm
+        l_ua, l_fa, l_ha = (seg[g].length_m * L[g] for g in ("upper_arm", "forearm", "hand"))
+        shoulder = add_chain(torso, f"shoulder_{side}", "yxz", [0, sy * 0.095 * H, l_to - 0.04 * H])
+        attach(shoulder, f"upper_arm_{side}", [0, 0, -seg["upper_arm"].com_from_proximal_m * L["upper_arm"]],
+               inertia_of("upper_arm", f"upper_arm_{side}"), [0, 0, 0], [0, 0, -l_ua], 0.045 * s)
+        marker(shoulder, f"{P}ELB", [0, sy * 35 * mm, -l_ua + 10 * mm])
+        elbow = add_chain(shoulder, f"elbow_{side}", "y", [0, 0, -l_ua])
+        attach(elbow, f"forearm_{side}", [0, 0, -seg["forearm"].com_from_proximal_m * L["forearm"]],
+               inertia_of("forearm", f"forearm_{side}"), [0, 0, 0], [0, 0, -l_fa], 0.035 * s)
+        marker(elbow, f"{P}WRA", [30 * mm, 0, -l_fa])
+        marker(elbow, f"{P}WRB", [-30 * mm, 0, -l_fa])
+        wrist = add_chain(elbow, f"wrist_{side}", "yx", [0, 0, -l_fa])
+        attach(wrist, f"hand_{side}", [0, 0, -seg["hand"].com_from_proximal_m * L["hand"]],
+               inertia_of("hand", f"hand_{side}"), [0, 0, 0], [0, 0, -l_ha], 0.03 * s)
+        marker(wrist, f"{P}FIN", [10 * mm, sy * 15 * mm, -l_ha])
+        # leg
+        l_th, l_sh, l_ft = (seg[g].length_m * L[g] for g in ("thigh", "shank", "foot"))
+        hip = add_chain(root, f"hip_{side}", "yxz", [0, sy * hip_y, 0])
+        attach(hip, f"thigh_{side}", [0, 0, -seg["thigh"].com_from_proximal_m * L["thigh"]],
+               inertia_of("thigh", f"thigh_{side}"), [0, 0, 0], [0, 0, -l_th], 0.075 * s)
+        marker(hip, f"{P}THI", [15 * mm, sy * 75 * mm, -0.6 * l_th])
+        marker(hip, f"{P}KNE", [0, sy * 55 * mm, -l_th])
+        knee = add_chain(hip, f"knee_{side}", "y", [0, 0, -l_th])
+        attach(knee, f"shank_{side}", [0, 0, -seg["shank"].com_from_proximal_m * L["shank"]],
+               inertia_of("shank", f"shank_{side}"), [0, 0, 0], [0, 0, -l_sh], 0.055 * s)
+        marker(knee, f"{P}TIB", [15 * mm, sy * 55 * mm, -0.6 * l_sh])
+        marker(knee, f"{P}ANK", [0, sy * 40 * mm, -l_sh])
+        ankle = add_chain(knee, f"ankle_{side}", "yx", [0, 0, -l_sh])
+        heel_x, mtp_x, tip_x = -0.22 * l_ft, 0.52 * l_ft, 0.78 * l_ft
+        # hindfoot COM chosen so that foot + toes (at zero) has de Leva's COM (44.15 % heel -> tip for males)
+        com_total = np.array([heel_x + seg["foot"].com_from_proximal_m * L["foot"], 0, -0.5 * h_ankle])
+        toes_com_rel = np.array([0.5 * (tip_x - mtp_x), 0, 0.0])
+        mtp = np.array([mtp_x, 0, -h_ankle + 0.015 * s])
+        m_f, m_t = mass[f"foot_{side}"], mass[f"toes_{side}"]
+        foot_com = (com_total * (m_f + m_t) - (mtp + toes_com_rel) * m_t) / m_f
+        attach(ankle, f"foot_{side}", foot_com, inertia_of("foot", f"foot_{side}") * (1 - TOE_MASS_FRACTION),
+               [heel_x, 0, -h_ankle + 0.02 * s], [mtp_x, 0, -h_ankle + 0.02 * s], 0.035 * s)
+        marker(ankle, f"{P}HEE", [heel_x - 10 * mm, 0, -h_ankle + 25 * mm])
+        marker(ankle, f"{P}TOE", [mtp_x - 10 * mm, sy * 10 * mm, -h_ankle + 25 * mm])
+        toe = add_chain(ankle, f"toe_{side}", "y", mtp)
+        attach(toe, f"toes_{side}", toes_com_rel, inertia_of("foot", f"foot_{side}") * TOE_MASS_FRACTION,
+               [0, 0, 0.005 * s], [tip_x - mtp_x, 0, 0.005 * s], 0.02 * s)
+
+    marker_frames = {}
+    for name in PLUG_IN_GAIT:
+        jid, xyz = markers[name]
+        marker_frames[name] = model.addFrame(pin.Frame(name, jid, pin.SE3(np.eye(3), xyz), pin.FrameType.OP_FRAME))
+    return HumanModel(subject, model, list(PLUG_IN_GAIT), marker_frames, segment_joint, mass, segment_com, geometry)
+
+
+def standing_configuration(human: HumanModel) -> np.ndarray:
+    """q of upright standing with the soles on the floor (z = 0), at the origin, facing +x."""
+    q = pin.neutral(human.model)
+    data = human.model.createData()
+    pin.framesForwardKinematics(human.model, data, q)
+    heel = data.oMf[human.marker_frames["LHEE"]].translation
+    q[2] = -(heel[2] - 0.025 * human.subject.height_m / REFERENCE_STATURE_M)
+    return q
+
+
+def to_mjcf(human: HumanModel, name: str = "human") -> str:
+    """MJCF of the same skeleton (same masses, COMs, inertias, joints, limits), capsules for drawing and contact,
+    sites at the markers. Loads in MuJoCo with a free root joint."""
+    model = human.model
+    children: dict[int, list[int]] = {}
+    for jid in range(1, model.njoints):
+        children.setdefault(model.parents[jid], []).append(jid)
+    seg_of_joint = {j: s for s, j in human.segment_joint.items()}
+    sites: dict[int, list[tuple[str, np.ndarray]]] = {}
+    for mname, fid in human.marker_frames.items():
+        frame = model.frames[fid]
+        sites.setdefault(frame.parentJoint, []).append((mname, frame.placement.translation))
+
+    def fmt(v) -> str:
+        return " ".join(f"{x:.6g}" for x in np.asarray(v, float).ravel())
+
+    lines = [f'<mujoco model="{name}">', '  <compiler angle="radian" autolimits="true"/>',
+             '  <option timestep="0.001" gravity="0 0 -9.81"/>',
+             '  <default><geom contype="0" conaffinity="0" rgba="0.8 0.6 0.5 1"/>'
+             '<site size="0.008" rgba="0.1 0.4 1 1"/><joint damping="0.5" armature="0.01"/></default>',
+             '  <worldbody>']
+
+    def body(jid: int, indent: str) -> None:
+        joint = model.joints[jid]
+        placement = model.jointPlacements[jid].translation
+        jname = model.names[jid]
+        lines.append(f'{indent}<body name="{seg_of_joint.get(jid, jname + "_link")}" pos="{fmt(placement)}">')
+        if jid == 1:
+            lines.append(f'{indent}  <freejoint name="{jname}"/>')
+        else:
+            axis = {"JointModelRX": "1 0 0", "JointModelRY": "0 1 0", "JointModelRZ": "0 0 1"}[joint.shortname()]
+            lo, hi = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
+            lines.append(f'{indent}  <joint name="{jname}" axis="{axis}" range="{lo:.6g} {hi:.6g}"/>')
+        inertia = model.inertias[jid]
+        if inertia.mass > 0:
+            ixx, iyy, izz = (inertia.inertia[i, i] for i in range(3))
+            lines.append(f'{indent}  <inertial pos="{fmt(inertia.lever)}" mass="{inertia.mass:.6g}" '
+                         f'fullinertia="{ixx:.6g} {iyy:.6g} {izz:.6g} {inertia.inertia[0, 1]:.6g} '
+                         f'{inertia.inertia[0, 2]:.6g} {inertia.inertia[1, 2]:.6g}"/>')
+        else:
+            lines.append(f'{indent}  <inertial pos="0 0 0" mass="1e-6" diaginertia="1e-9 1e-9 1e-9"/>')
+        if jid in seg_of_joint:
+            g = human.geometry[seg_of_joint[jid]]
+            lines.append(f'{indent}  <geom type="capsule" fromto="{fmt(g["from"])} {fmt(g["to"])}" '
+                         f'size="{g["radius"]:.4g}" mass="0"/>')
+        for mname, xyz in sites.get(jid, []):
+            lines.append(f'{indent}  <site name="{mname}" pos="{fmt(xyz)}"/>')
+        for child in children.get(jid, []):
+            body(child, indent + "  ")
+        lines.append(f"{indent}</body>")
+
+    body(1, "    ")
+    lines += ["  </worldbody>", "</mujoco>"]
+    return "\n".join(lines)
