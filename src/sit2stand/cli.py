@@ -1,6 +1,7 @@
 """The `sit2stand` command: one entry point for the offline tools and for starting nodes and graphs.
 
     sit2stand import-c3d FILE.c3d --out bags/NAME [--chair-plate I] [--feet-plate J] [--forward +X --up +Z]
+    sit2stand synth-human --style natural|elderly [--height M --mass KG ...] [--extra-mass SEG:KG[:x,y,z]] --out DIR
     sit2stand bag info DIR
     sit2stand bag recover DIR [--out DIR2]
     sit2stand launch GRAPH.yaml [NAME:=VALUE ...] [--timeout S]
@@ -33,6 +34,25 @@ def _import_c3d(args: argparse.Namespace) -> int:
     print(f"wrote {args.out}: " + ", ".join(f"{t} ({n})" for t, n in counts.items()))
     if args.verbose:
         print(bag_info(args.out))
+    return 0
+
+
+def _synth_human(args: argparse.Namespace) -> int:
+    from .human.skeleton import ExtraMass
+    from .human.synth import SynthConfig, synthesize, write_demonstration_bag
+
+    cfg = SynthConfig(style=args.style, height_m=args.height, mass_kg=args.mass, sex=args.sex,
+                      seat_height_m=args.seat_height, duration_s=args.duration, seed=args.seed,
+                      extra=[ExtraMass.parse(e) for e in args.extra_mass])
+    demo = synthesize(cfg)
+    for warning in demo.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    counts = write_demonstration_bag(demo, args.out)
+    c, i0 = demo.com_m, int(demo.rise_start_s * cfg.plate_rate_hz)
+    print(f"{cfg.style} rise of a {cfg.height_m:g} m, {demo.human.total_mass:.1f} kg {cfg.sex}: seat-off at "
+          f"{demo.seat_off_s - demo.rise_start_s:.2f} s into a {demo.rise_end_s - demo.rise_start_s:.2f} s rise; "
+          f"COM height {c[i0, 2]:.3f} -> min {c[i0:, 2].min():.3f} -> {c[-1, 2]:.3f} m")
+    print(f"wrote {args.out}: " + ", ".join(f"{t} ({n})" for t, n in counts.items()))
     return 0
 
 
@@ -107,6 +127,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="print the bag summary afterwards")
     p.set_defaults(func=_import_c3d)
 
+    p = sub.add_parser("synth-human", help="digital-human sit-to-stand demonstration (markers, plates, true COM)")
+    p.add_argument("--style", choices=["natural", "elderly"], default="natural")
+    p.add_argument("--height", type=float, default=1.75, help="stature [m]")
+    p.add_argument("--mass", type=float, default=75.0, help="body mass [kg] (extra masses come on top)")
+    p.add_argument("--sex", choices=["male", "female"], default="male")
+    p.add_argument("--seat-height", type=float, help="seat height [m] (default 0.26 x stature)")
+    p.add_argument("--duration", type=float, help="rise duration [s] (default: natural 1.6, elderly 3.0)")
+    p.add_argument("--seed", type=int, default=0, help="subject proportions, noise and occlusions")
+    p.add_argument("--extra-mass", action="append", default=[], metavar="SEGMENT:KG[:x,y,z]",
+                   help="hidden rigid mass on a segment, offset from its COM in segment axes (repeatable)")
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=_synth_human)
+
     bag = sub.add_parser("bag", help="bag tools").add_subparsers(dest="bag_command", required=True)
     p = bag.add_parser("info", help="topics, types, counts, rates and duration")
     p.add_argument("dir", type=Path)
@@ -149,7 +182,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         return int(args.func(args) or 0)
-    except (BagError, C3DError, LaunchError, FileNotFoundError) as err:
+    except (BagError, C3DError, LaunchError, FileNotFoundError, ValueError) as err:
         print(f"sit2stand {args.command}: error: {err}", file=sys.stderr)
         return 2
 

@@ -1,0 +1,458 @@
+"""Digital-human sit-to-stand demonstrations: markers and force plates of a known body, with the true COM.
+
+The rise follows the phases described in the sit-to-stand literature (Schenkman et al., Phys. Ther. 1990: flexion
+momentum, momentum transfer at seat-off, extension, stabilisation): the trunk and pelvis flex forward while the hips
+stay on the seat; at seat-off the hips leave the seat and move forward, then up, while the trunk extends back to
+upright. ``natural`` rises in ~1.6 s with ~35 degrees of trunk flexion; ``elderly`` is slower (~3 s) with deeper
+trunk flexion (~55 degrees) before seat-off, so that the COM first drops before it rises (Mistry et al. 2010, Fig. 7).
+
+Kinematics (sagittal, feet flat and fixed, hips on the seat until seat-off) give q(t) at 1 kHz; velocities and
+accelerations by differentiation; whole-body inverse dynamics of the skeleton (Pinocchio, centroidal momentum rate)
+give the total external wrench  F = m (a_com - g),  M_O = c x F + dL_G/dt  (about the lab origin), shared between the
+chair and the feet: before seat-off the chair takes the static share that puts the feet COP at mid-foot, fading to
+zero over the unloading window that ends at seat-off. Markers: forward kinematics at 100 Hz, with a per-trial
+placement error, measurement noise and occlusion gaps. Plates: 1000 Hz with noise, COP from the wrench.
+
+Lab frame: REP-103, origin on the floor midway between the ankles; the chair is behind (x < 0).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from ..io.forceplate import center_of_pressure, point_in_polygon
+from .anthropometry import ankle_height_m
+from .skeleton import LENGTH_GROUPS, REFERENCE_STATURE_M, SEGMENTS, ExtraMass, HumanModel, Subject, build_human
+
+G = 9.81
+STYLES = {
+    # rise duration [s], seat-off as a fraction of it, peak pelvis tilt and lumbar flexion [rad], shank tilt at
+    # the seated start [rad] (feet drawn back), chair unloading window before seat-off [s]
+    "natural": dict(duration=1.6, seat_off=0.40, pelvis_tilt=0.40, lumbar=0.22, shank_tilt=0.22, unload=0.15,
+                    peak_after_seat_off=0.18, cop_forward=0.05),
+    "elderly": dict(duration=3.0, seat_off=0.55, pelvis_tilt=0.55, lumbar=0.42, shank_tilt=0.15, unload=0.35,
+                    peak_after_seat_off=0.03, cop_forward=0.06),
+}
+
+
+@dataclass
+class SynthConfig:
+    """What to synthesise. ``None`` means the style's or the body's default."""
+
+    style: str = "natural"
+    height_m: float = 1.75
+    mass_kg: float = 75.0
+    sex: str = "male"
+    seat_height_m: float | None = None     # default 0.26 x stature
+    duration_s: float | None = None        # rise duration; default from the style
+    seed: int = 0
+    extra: list[ExtraMass] = field(default_factory=list)
+    vary_subject: bool = True               # random segment length (sd 3 %) and mass (sd 8 %) factors
+    sit_before_s: float = 0.8
+    stand_after_s: float = 1.5
+    marker_rate_hz: float = 100.0
+    plate_rate_hz: float = 1000.0
+    marker_noise_m: float = 0.001
+    marker_placement_sd_m: float = 0.004
+    occlusion_gaps: int = 5
+    force_noise_n: float = 1.0
+    moment_noise_nm: float = 0.3
+
+    def __post_init__(self) -> None:
+        if self.style not in STYLES:
+            raise ValueError(f"style must be one of {', '.join(STYLES)}, not {self.style!r}")
+        if self.duration_s is not None and not 0.8 <= self.duration_s <= 8.0:
+            raise ValueError(f"rise duration {self.duration_s:g} s is outside 0.8..8 s")
+        if self.seat_height_m is not None and not 0.18 * self.height_m <= self.seat_height_m <= 0.36 * self.height_m:
+            raise ValueError(f"seat height {self.seat_height_m:g} m is outside 18-36 % of the stature")
+
+
+@dataclass
+class Plate:
+    name: str
+    corners_m: np.ndarray                   # (4, 3), on the floor
+    force_n: np.ndarray                     # (K, 3)
+    moment_origin_nm: np.ndarray            # (K, 3)
+    cop_m: np.ndarray
+    cop_valid: np.ndarray
+    free_moment_nm: np.ndarray
+
+
+@dataclass
+class Demonstration:
+    """A synthesised trial. Times [s] from the trial start; dynamics at the plate rate, markers at the marker rate."""
+
+    config: SynthConfig
+    human: HumanModel                       # the TRUE body (extra masses included)
+    t_s: np.ndarray                         # (K,) plate-rate times
+    q: np.ndarray                           # (K, nq)
+    com_m: np.ndarray                       # (K, 3)
+    com_vel: np.ndarray
+    com_acc: np.ndarray
+    marker_t_s: np.ndarray                  # (N,)
+    marker_names: list[str]
+    markers_m: np.ndarray                   # (N, M, 3), NaN where occluded
+    marker_valid: np.ndarray                # (N, M)
+    plates: list[Plate]
+    seat_off_s: float
+    rise_start_s: float
+    rise_end_s: float
+    seat_height_m: float
+    warnings: list[str] = field(default_factory=list)
+
+
+def _min_jerk(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
+    """0 -> 1 minimum-jerk ramp between t0 and t1 (zero velocity and acceleration at both ends)."""
+    s = np.clip((t - t0) / max(t1 - t0, 1e-9), 0.0, 1.0)
+    return s**3 * (10 - 15 * s + 6 * s**2)
+
+
+def _random_subject(cfg: SynthConfig, rng: np.random.Generator) -> Subject:
+    lengths, masses = {}, {}
+    if cfg.vary_subject:
+        lengths = {g: float(np.clip(rng.normal(1.0, 0.03), 0.92, 1.08)) for g in LENGTH_GROUPS}
+        per_side = {}
+        for seg in SEGMENTS:
+            base = seg[:-2] if seg[-2:] in ("_l", "_r") else seg
+            per_side.setdefault(base, float(np.clip(rng.normal(1.0, 0.08), 0.8, 1.2)))
+            masses[seg] = per_side[base] * float(np.clip(rng.normal(1.0, 0.01), 0.97, 1.03))
+    body_mass = cfg.mass_kg
+    return Subject(cfg.height_m, body_mass, cfg.sex, lengths, masses, list(cfg.extra))
+
+
+def _leg_ik(hip_xz: np.ndarray, ankle_xz: np.ndarray, l_th: float, l_sh: float) -> tuple[np.ndarray, np.ndarray]:
+    """World pitch angles (about +y) of thigh and shank putting the knee in front of the hip-ankle line."""
+    d_vec = ankle_xz - hip_xz
+    d = np.linalg.norm(d_vec, axis=-1)
+    d = np.minimum(d, (l_th + l_sh) * 0.99999)
+    u = d_vec / np.linalg.norm(d_vec, axis=-1, keepdims=True)
+    cos_a = np.clip((l_th**2 + d**2 - l_sh**2) / (2 * l_th * d), -1.0, 1.0)
+    a = np.arccos(cos_a)
+    # rotate u by -a about +y: (x, z) -> (x cos a - z sin a, x sin a + z cos a)
+    th_dir = np.stack([u[:, 0] * np.cos(a) - u[:, 1] * np.sin(a), u[:, 0] * np.sin(a) + u[:, 1] * np.cos(a)], axis=1)
+    knee = hip_xz + l_th * th_dir
+    sh_dir = (ankle_xz - knee) / l_sh
+    pitch = lambda v: np.arctan2(-v[:, 0], -v[:, 1])  # noqa: E731 - R_y(p) (0,0,-1) = (-sin p, -cos p)
+    return pitch(th_dir), pitch(sh_dir)
+
+
+def synthesize(cfg: SynthConfig) -> Demonstration:
+    """Synthesise one sit-to-stand demonstration (see the module docstring)."""
+    rng = np.random.default_rng(cfg.seed)
+    style = STYLES[cfg.style]
+    H = cfg.height_m
+    human = build_human(_random_subject(cfg, rng))
+    model, data = human.model, human.model.createData()
+    subj = human.subject
+    jid = {name: model.joints[model.getJointId(name)].idx_q for name in model.names[2:]}
+
+    # geometry of this body
+    q0 = pin.neutral(model)
+    pin.framesForwardKinematics(model, data, q0)
+    l_th = np.linalg.norm(model.jointPlacements[model.getJointId("knee_l_y")].translation)
+    l_sh = np.linalg.norm(model.jointPlacements[model.getJointId("ankle_l_y")].translation)
+    h_a = ankle_height_m(H, cfg.sex) * subj.lengths.get("foot", 1.0)
+    seat = cfg.seat_height_m if cfg.seat_height_m is not None else 0.26 * H
+    hip_above_seat = 0.055 * H
+    duration = cfg.duration_s or style["duration"]
+
+    # seated start: ankle at x = 0, shank tilted back, thigh from the knee to the hip on the seat
+    beta = style["shank_tilt"]
+    knee0 = np.array([l_sh * np.sin(beta), h_a + l_sh * np.cos(beta)])
+    z_h0 = seat + hip_above_seat
+    dz = z_h0 - knee0[1]
+    if abs(dz) >= l_th:
+        raise ValueError(f"seat height {seat:.3f} m cannot be reached with thigh length {l_th:.3f} m")
+    hip0 = np.array([knee0[0] - np.sqrt(l_th**2 - dz**2), z_h0])
+    hip1 = np.array([0.0, h_a + l_sh + l_th - 0.004])   # standing height, knees almost straight
+
+    # time base
+    dt = 1.0 / cfg.plate_rate_hz
+    t_total = cfg.sit_before_s + duration + cfg.stand_after_s
+    t = np.arange(int(round(t_total / dt)) + 1) * dt
+    t_rise0 = cfg.sit_before_s
+    t_so = t_rise0 + style["seat_off"] * duration
+    t_rise1 = t_rise0 + duration
+    t_peak = t_so + style["peak_after_seat_off"] * duration
+
+    # trunk: seated posterior pelvic tilt -> anterior tilt + lumbar flexion peaking just after seat-off -> upright
+    p_seated = -0.12
+    pel = p_seated + (style["pelvis_tilt"] - p_seated) * _min_jerk(t, t_rise0, t_peak) \
+        - style["pelvis_tilt"] * _min_jerk(t, t_peak, t_rise1)
+    lum = style["lumbar"] * (_min_jerk(t, t_rise0, t_peak) - _min_jerk(t, t_peak + 0.05 * duration, t_rise1))
+    breathing = 0.012 * np.sin(2 * np.pi * 0.25 * t)
+    lum = lum + breathing * (1 - _min_jerk(t, t_rise0, t_rise0 + 0.2))
+    trunk = pel + lum
+    s_rise = np.clip((t - t_rise0) / duration, 0, 1)
+    swing = 0.5 * (1 - np.cos(2 * np.pi * s_rise))   # 0 -> 1 -> 0 with zero slope at both ends
+    hz = hip0[1] + (hip1[1] - hip0[1]) * _min_jerk(t, t_so, t_rise1)   # hips leave the seat at seat-off
+
+    q = np.tile(q0, (len(t), 1))
+    q[:, 2] = hz
+    q[:, 4], q[:, 6] = np.sin(pel / 2), np.cos(pel / 2)   # quaternion (x, y, z, w) of R_y(pelvis pitch)
+    for side in "lr":
+        q[:, jid[f"shoulder_{side}_y"]] = -0.35 * trunk - 0.35 * swing
+        q[:, jid[f"shoulder_{side}_x"]] = (0.12 if side == "l" else -0.12) * (1 + 0.3 * swing)
+        q[:, jid[f"elbow_{side}_y"]] = -0.35 - 0.4 * swing
+    q[:, jid["lumbar_y"]] = lum
+    q[:, jid["neck_y"]] = -0.55 * trunk
+    q[:, jid["neck_z"]] = 0.05 * np.sin(2 * np.pi * 0.4 * t)
+    q[:, jid["lumbar_z"]] = 0.02 * swing
+    ankle_xz = np.array([0.0, h_a])
+
+    def set_hips(rows: np.ndarray | slice, hx: np.ndarray) -> None:
+        """Place the hips at x = hx (z, pelvis pitch already set) and the legs by planar IK, feet flat."""
+        hip = np.stack([hx, q[rows, 2]], axis=1)
+        reach = (l_th + l_sh) * 0.9999
+        d = hip - ankle_xz
+        too_far = np.linalg.norm(d, axis=1) > reach
+        if too_far.any():
+            hip[too_far, 0] = np.sign(d[too_far, 0]) * np.sqrt(np.maximum(reach**2 - d[too_far, 1] ** 2, 0.0))
+        th, sh = _leg_ik(hip, np.zeros_like(hip) + ankle_xz, l_th, l_sh)
+        p = pel[rows]
+        q[rows, 0] = hip[:, 0]
+        for side in "lr":
+            q[rows, jid[f"hip_{side}_y"]] = th - p
+            q[rows, jid[f"knee_{side}_y"]] = sh - th
+            q[rows, jid[f"ankle_{side}_y"]] = -sh
+
+    def com_x(k: int) -> float:
+        return float(pin.centerOfMass(model, data, q[k])[0])
+
+    # before seat-off the pelvis rolls forward over the ischia: the hips move with the pelvic tilt
+    k_so = int(np.searchsorted(t, t_so))
+    pre = slice(0, k_so)
+    set_hips(pre, hip0[0] + hip_above_seat * (np.sin(pel[pre]) - np.sin(p_seated)))
+    xs = np.array([com_x(k) for k in range(k_so - 4, k_so)])   # one-sided 2nd-order differences at k_so - 1
+    x0 = xs[-1]
+    v0 = (3 * xs[-1] - 4 * xs[-2] + xs[-3]) / (2 * dt)
+    a0 = (2 * xs[-1] - 5 * xs[-2] + 4 * xs[-3] - xs[-4]) / dt**2
+
+    # after seat-off the COM follows a designed path to standing over mid-foot; its duration is chosen for the
+    # largest margin of the (point-mass) ZMP inside the feet, and the hips are solved to realise it
+    heel_x = human.geometry["foot_l"]["from"][0]
+    tip_x = model.jointPlacements[model.getJointId("toe_l_y")].translation[0] + human.geometry["toes_l"]["to"][0]
+    x1 = 0.035 * H / REFERENCE_STATURE_M
+    post = np.arange(k_so, len(t))
+    tp = t[post] - t[k_so - 1]   # the quintic starts where x0, v0, a0 were measured
+    z_c = hz[post] + (float(pin.centerOfMass(model, data, q[k_so - 1])[2]) - hz[k_so - 1])
+    az = np.gradient(np.gradient(z_c, dt), dt)
+    best = None
+    for T in np.linspace(0.3, 1.0, 15) * (t_rise1 - t_so):
+        xc, _, ac = _quintic(tp, T, x0, v0, a0, x1)
+        zmp = xc - z_c * ac / (G + az)
+        margin = min(np.min(zmp - heel_x), np.min(tip_x - zmp))
+        if best is None or margin > best[0]:
+            best = (margin, T, xc)
+    _, T_x, xc_target = best
+    hx = q[k_so - 1, 0]
+    for i, k in enumerate(post):
+        for _ in range(4):  # Newton on hip x: d(COM x)/d(hip x) is about 1 (a little less)
+            set_hips(slice(k, k + 1), np.array([hx]))
+            err = com_x(k) - xc_target[i]
+            if abs(err) < 1e-7:
+                break
+            set_hips(slice(k, k + 1), np.array([hx + 1e-4]))
+            slope = (com_x(k) - err - xc_target[i]) / 1e-4
+            hx -= err / max(slope, 0.2)
+        set_hips(slice(k, k + 1), np.array([hx]))
+    _check_limits(human, q)
+
+    # velocities and accelerations by central differences (Pinocchio's tangent space)
+    n = len(t)
+    v = np.zeros((n, model.nv))
+    for k in range(1, n - 1):
+        v[k] = pin.difference(model, q[k - 1], q[k + 1]) / (2 * dt)
+    a = np.zeros_like(v)
+    a[1:-1] = (v[2:] - v[:-2]) / (2 * dt)
+    com = np.zeros((n, 3))
+    vcom = np.zeros((n, 3))
+    acom = np.zeros((n, 3))
+    dL = np.zeros((n, 3))
+    for k in range(n):
+        pin.centerOfMass(model, data, q[k], v[k], a[k])
+        com[k], vcom[k], acom[k] = data.com[0], data.vcom[0], data.acom[0]
+        pin.computeCentroidalMomentumTimeVariation(model, data, q[k], v[k], a[k])
+        dL[k] = data.dhg.angular
+    m_total = human.total_mass
+    force = m_total * (acom + np.array([0.0, 0.0, G]))
+    moment_o = np.cross(com, force) + dL
+
+    # chair / feet sharing before seat-off: the static share that balances the COM between the seat contact and a
+    # feet COP target (mid-foot, moving toward the forefoot as the trunk flexes; ~75-80 % on the chair when
+    # sitting still), fading to zero over the unloading window that ends at seat-off. The chair COP moves within
+    # the buttock-thigh contact (ischia to mid-thigh) to take the trunk's dynamic moment; what it cannot take goes
+    # to the feet.
+    hx = q[:, 0]
+    x_feet = 0.06 * H / REFERENCE_STATURE_M + style["cop_forward"] * H / REFERENCE_STATURE_M * _min_jerk(t, t_rise0, t_so)
+    x_contact = hx - 0.01
+    alpha = np.clip((x_feet - com[:, 0]) / (x_feet - x_contact), 0.05, 0.95)
+    alpha *= 1 - _min_jerk(t, t_so - style["unload"], t_so)
+    f_c = alpha[:, None] * force
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x_seat = (seat * f_c[:, 0] - x_feet * (force[:, 2] - f_c[:, 2]) - moment_o[:, 1]) / f_c[:, 2]
+    x_seat = np.clip(np.nan_to_num(x_seat, nan=0.0), hx - 0.12 * H / REFERENCE_STATURE_M,
+                     hx + 0.2 * H / REFERENCE_STATURE_M)
+    seat_point = np.stack([x_seat, np.zeros(n), np.full(n, seat)], axis=1)
+    f_chair = alpha[:, None] * force
+    m_chair = np.cross(seat_point, f_chair)
+    f_feet, m_feet = force - f_chair, moment_o - m_chair
+
+    # plates: chair plate under the seat, feet plate under the feet, both on the floor
+    scale = H / REFERENCE_STATURE_M
+    chair_plate = _rect(np.array([hip0[0] - 0.08 * scale, 0.0, 0.0]), 0.2 * scale, 0.25 * scale)
+    feet_plate = _rect(np.array([0.07 * scale, 0.0, 0.0]), 0.2 * scale, 0.25 * scale)
+    if chair_plate[:, 0].max() >= feet_plate[:, 0].min():
+        raise ValueError("chair and feet plates overlap; raise the seat or shorten the thighs")
+    noise = lambda shape, sd: rng.normal(0.0, sd, shape)  # noqa: E731
+    plates = []
+    for name, corners, f, m_o in (("chair", chair_plate, f_chair, m_chair), ("feet", feet_plate, f_feet, m_feet)):
+        centre = corners.mean(axis=0)
+        f_meas = f + noise(f.shape, cfg.force_noise_n)
+        m_c = m_o - np.cross(centre, f) + noise(f.shape, cfg.moment_noise_nm)   # sensor noise about its centre
+        m_meas = m_c + np.cross(centre, f_meas)
+        cop, ok, tau = center_of_pressure(f_meas, m_c, centre, np.array([0.0, 0.0, 1.0]))
+        plates.append(Plate(name, corners, f_meas, m_meas, cop, ok, tau))
+
+    warnings = []
+    heel_x = human.geometry["foot_l"]["from"][0]
+    tip_x = model.jointPlacements[model.getJointId("toe_l_y")].translation[0] + human.geometry["toes_l"]["to"][0]
+    feet_support = np.array([[heel_x, -0.15], [tip_x, -0.15], [tip_x, 0.15], [heel_x, 0.15]])
+    loaded = plates[1].cop_valid
+    outside = ~point_in_polygon(plates[1].cop_m[loaded, :2], feet_support)
+    if outside.mean() > 0.01:
+        warnings.append(f"feet COP leaves the feet in {outside.mean():.1%} of loaded samples (motion too fast?)")
+
+    # markers at the marker rate
+    step = int(round(cfg.plate_rate_hz / cfg.marker_rate_hz))
+    idx = np.arange(0, n, step)
+    names = human.marker_names
+    placement = rng.normal(0.0, cfg.marker_placement_sd_m, (len(names), 3))
+    mk = np.zeros((len(idx), len(names), 3))
+    for i, k in enumerate(idx):
+        pin.framesForwardKinematics(model, data, q[k])
+        for j, mname in enumerate(names):
+            mk[i, j] = data.oMf[human.marker_frames[mname]].act(placement[j])
+    mk += rng.normal(0.0, cfg.marker_noise_m, mk.shape)
+    valid = np.ones(mk.shape[:2], bool)
+    candidates = ["LASI", "RASI", "LHEE", "RHEE", "RFIN", "LWRB", "RWRB", "STRN", "LTHI", "RTIB"]
+    for _ in range(cfg.occlusion_gaps):
+        j = names.index(candidates[rng.integers(len(candidates))])
+        length = int(rng.integers(8, 40))
+        start = int(rng.integers(0, len(idx) - length))
+        valid[start:start + length, j] = False
+    mk[~valid] = np.nan
+
+    return Demonstration(cfg, human, t, q, com, vcom, acom, t[idx], names, mk, valid, plates, t_so, t_rise0, t_rise1,
+                         seat, warnings)
+
+
+def _quintic(t: np.ndarray, T: float, x0: float, v0: float, a0: float, x1: float):
+    """Position, velocity, acceleration of the quintic from (x0, v0, a0) at t = 0 to (x1, 0, 0) at t = T; x1 after."""
+    s = np.clip(t, 0.0, T)
+    c = np.array([x0, v0, a0 / 2.0, 0.0, 0.0, 0.0])
+    d = x1 - x0 - v0 * T - a0 * T**2 / 2
+    dv = -v0 - a0 * T
+    da = -a0
+    m = np.array([[T**3, T**4, T**5], [3 * T**2, 4 * T**3, 5 * T**4], [6 * T, 12 * T**2, 20 * T**3]])
+    c[3:] = np.linalg.solve(m, np.array([d, dv, da]))
+    pos = sum(c[i] * s**i for i in range(6))
+    vel = sum(i * c[i] * s ** (i - 1) for i in range(1, 6))
+    acc = sum(i * (i - 1) * c[i] * s ** (i - 2) for i in range(2, 6))
+    return pos, vel, acc
+
+
+def _rect(centre: np.ndarray, half_x: float, half_y: float) -> np.ndarray:
+    c = np.asarray(centre, float)
+    return np.array([[c[0] + half_x, c[1] + half_y, 0.0], [c[0] - half_x, c[1] + half_y, 0.0],
+                     [c[0] - half_x, c[1] - half_y, 0.0], [c[0] + half_x, c[1] - half_y, 0.0]])
+
+
+def _check_limits(human: HumanModel, q: np.ndarray) -> None:
+    lo, hi = human.model.lowerPositionLimit[7:], human.model.upperPositionLimit[7:]
+    bad = np.where((q[:, 7:] < lo - 1e-9) | (q[:, 7:] > hi + 1e-9))
+    if len(bad[0]):
+        j = bad[1][0]
+        raise ValueError(f"synthesised motion leaves the range of joint {human.model.names[int(j) + 2]} "
+                         f"({q[bad[0][0], int(j) + 7]:.3f} rad outside {lo[j]:.2f}..{hi[j]:.2f})")
+
+
+GROUND_TRUTH_COM = "/ground_truth/com"
+GROUND_TRUTH_JOINTS = "/ground_truth/joint_states"
+GROUND_TRUTH_PARAMETERS = "/ground_truth/inertial_parameters"
+START_TIME_S = 100.0
+"""Bag time of the trial's first sample [s] (not 0: ROS nodes on /clock read time 0 as "not set yet")."""
+
+
+def truth_parameters(human: HumanModel) -> tuple[list[str], list[float]]:
+    """Names and values of the true segment masses [kg] and COMs [m, joint frame], extra masses included."""
+    names, values = [], []
+    for seg in SEGMENTS:
+        names.append(f"{seg}.mass")
+        values.append(float(human.segment_mass[seg]))
+        for axis, v in zip("xyz", human.segment_com[seg]):
+            names.append(f"{seg}.com_{axis}")
+            values.append(float(v))
+    for i, extra in enumerate(human.subject.extra):
+        names += [f"extra{i}.{extra.segment}.mass"] + [f"extra{i}.{extra.segment}.offset_{a}" for a in "xyz"]
+        values += [extra.mass_kg, *map(float, extra.offset_m)]
+    return names, values
+
+
+def write_demonstration_bag(demo: Demonstration, out) -> dict[str, int]:
+    """Write a :class:`Demonstration` as a bag: what a lab would record, plus the truth on /ground_truth/*.
+
+    The bag's metadata carries what a lab knows (stature, body mass from a scale, sex, seat height, events); the
+    hidden extra masses appear only on the ground-truth topics, which estimators must not read.
+    """
+    from ..io import messages as M
+    from ..io.bag import BagWriter
+    from ..io.typestore import typestore
+
+    cfg = demo.config
+    store = typestore().types
+    to_ns = lambda ts: int(round((START_TIME_S + ts) * 1e9))  # noqa: E731
+    custom = {
+        "source": "sit2stand synth-human", "style": cfg.style, "seed": str(cfg.seed),
+        "height_m": f"{cfg.height_m:g}", "body_mass_kg": f"{demo.human.total_mass:.3f}", "sex": cfg.sex,
+        "seat_height_m": f"{demo.seat_height_m:.3f}", "plates": "chair, feet",
+        "events": (f"rise_start@{START_TIME_S + demo.rise_start_s:.3f}s; seat_off@{START_TIME_S + demo.seat_off_s:.3f}s;"
+                   f" rise_end@{START_TIME_S + demo.rise_end_s:.3f}s"),
+        "lab_axes": "REP-103 (synthetic): x forward, y left, z up; origin between the ankles",
+    }
+    joint_names = demo.human.joint_names()
+    with BagWriter(out, custom_data=custom) as bag:
+        bag.add_topic(M.MARKERS_TOPIC, M.MOCAP_TYPE)
+        for name in ("chair", "feet"):
+            bag.add_topic(M.plate_topic(name), M.PLATE_TYPE)
+        bag.add_topic(GROUND_TRUTH_COM, M.COM_TYPE)
+        bag.add_topic(GROUND_TRUTH_JOINTS, "sensor_msgs/msg/JointState")
+        bag.add_topic(GROUND_TRUTH_PARAMETERS, "sit2stand_msgs/msg/InertialParameters")
+        names, values = truth_parameters(demo.human)
+        bag.write(GROUND_TRUTH_PARAMETERS, to_ns(0.0), store["sit2stand_msgs/msg/InertialParameters"](
+            header=M.header(to_ns(0.0)), model="human_truth", names=names, values=np.array(values),
+            std_devs=np.zeros(len(values)), yaml_path=""))
+        step = int(round(cfg.plate_rate_hz / cfg.marker_rate_hz))
+        for i, ts in enumerate(demo.marker_t_s):
+            t_ns = to_ns(ts)
+            bag.write(M.MARKERS_TOPIC, t_ns, M.mocap_frame(t_ns, demo.marker_names, demo.markers_m[i],
+                                                           demo.marker_valid[i]))
+            k = i * step
+            bag.write(GROUND_TRUTH_COM, t_ns, M.center_of_mass(t_ns, demo.com_m[k], demo.com_vel[k], demo.com_acc[k],
+                                                               source="ground_truth", n_markers=0))
+            q = demo.q[k]
+            bag.write(GROUND_TRUTH_JOINTS, t_ns, store["sensor_msgs/msg/JointState"](
+                header=M.header(t_ns, "pelvis"), name=["pelvis_x", "pelvis_y", "pelvis_z", "pelvis_qx", "pelvis_qy",
+                                                       "pelvis_qz", "pelvis_qw"] + joint_names,
+                position=q.astype(float), velocity=np.zeros(0), effort=np.zeros(0)))
+        for plate in demo.plates:
+            topic = M.plate_topic(plate.name)
+            for k, ts in enumerate(demo.t_s):
+                t_ns = to_ns(ts)
+                bag.write(topic, t_ns, M.force_plate_sample(t_ns, plate.name, plate.force_n[k],
+                                                            plate.moment_origin_nm[k], plate.cop_m[k],
+                                                            bool(plate.cop_valid[k]), float(plate.free_moment_nm[k])))
+        return dict(bag.counts)
