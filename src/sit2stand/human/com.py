@@ -1,0 +1,488 @@
+"""Human centre-of-mass estimation from markers and force plates, with COP-matched segment-mass scaling.
+
+Pipeline (the paper's section on the human COM, with the scaling done automatically):
+
+1. :class:`MarkerIK` fits the skeleton to each frame's valid markers (damped Gauss-Newton on marker errors, a weak
+   pull toward a reference posture for what the markers do not see, joint limits, warm start).
+2. :func:`calibrate_lengths` scales segment lengths to the markers (nested least squares over a few frames).
+3. :func:`smooth_motion` smooths the fitted motion (Savitzky-Golay, ~8 Hz) and differentiates it; the plate wrench
+   is smoothed the same way, so kinematics and forces share one bandwidth (as inverse dynamics needs).
+4. :func:`mass_scaling_rows` turns each frame into 6 equations linear in the segment masses (and the torso's COM
+   shift): the measured external wrench equals the floating-base rows of the joint-torque regressor
+   Y(q, v, a) pi. :func:`solve_mass_scaling` solves them as constrained least squares: masses within plausible
+   bounds, left = right, summing to the body mass, pulled weakly toward de Leva. Matching the wrench's moment is
+   matching the COP: the model COP from COM and centroidal dynamics then agrees with the measured COP.
+5. COM position, velocity and acceleration follow from the scaled model.
+
+Units SI, lab frame REP-103. Only frames whose whole weight is on the plates enter the scaling (both plates, or
+the feet plate after seat-off when the chair has none).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from ..io.forceplate import center_of_pressure
+from .skeleton import LENGTH_GROUPS, SEGMENTS, HumanModel, Subject, build_human
+
+G = 9.81
+PELVIS_MARKERS = ("LASI", "RASI", "LPSI", "RPSI")
+MIN_MARKERS = 8
+MASS_GROUPS = ["pelvis", "torso", "head", "upper_arm", "forearm", "hand", "thigh", "shank", "foot", "toes"]
+
+
+class TooFewMarkers(ValueError):
+    """The marker set cannot constrain the skeleton; the message lists what is there and what is needed."""
+
+
+@dataclass
+class FrameFit:
+    q: np.ndarray
+    rms_m: float
+    n_markers: int
+    iterations: int
+    ok: bool
+
+
+class MarkerIK:
+    """Per-frame skeleton fit to labelled markers (Plug-in-Gait names; unknown names are ignored).
+
+    Args:
+        human: the skeleton.
+        marker_names: the stream's marker names, in its order.
+        posture_weight: weight of the pull toward ``q_ref`` relative to 1 m^-2 of marker error per marker.
+    """
+
+    def __init__(self, human: HumanModel, marker_names: list[str], posture_weight: float = 1e-3,
+                 q_ref: np.ndarray | None = None) -> None:
+        self.human = human
+        self.model = human.model
+        self.data = self.model.createData()
+        self.stream_index = [i for i, n in enumerate(marker_names) if n in human.marker_frames]
+        self.frames = [human.marker_frames[marker_names[i]] for i in self.stream_index]
+        known = [marker_names[i] for i in self.stream_index]
+        if len(known) < MIN_MARKERS or sum(n in known for n in PELVIS_MARKERS) < 3:
+            raise TooFewMarkers(
+                f"{len(known)} of the stream's {len(marker_names)} markers are Plug-in-Gait markers the skeleton "
+                f"carries ({', '.join(known) or 'none'}); at least {MIN_MARKERS} are needed, including 3 of "
+                f"{', '.join(PELVIS_MARKERS)}")
+        self.used_names = known
+        self.posture_weight = posture_weight
+        self.q_ref = pin.neutral(self.model) if q_ref is None else q_ref.copy()
+        self.lo, self.hi = self.model.lowerPositionLimit.copy(), self.model.upperPositionLimit.copy()
+        self.q: np.ndarray | None = None
+
+    def _marker_positions(self, q: np.ndarray) -> np.ndarray:
+        pin.framesForwardKinematics(self.model, self.data, q)
+        return np.array([self.data.oMf[f].translation for f in self.frames])
+
+    def initial_guess(self, positions: np.ndarray, valid: np.ndarray) -> np.ndarray:
+        """Pelvis pose by a Kabsch fit of the pelvis markers; the rest at the reference posture."""
+        q = self.q_ref.copy()
+        names = self.used_names
+        idx = [k for k, n in enumerate(names) if n in PELVIS_MARKERS and valid[k]]
+        model_pts = self._marker_positions(pin.neutral(self.model))[idx]
+        meas = positions[idx]
+        mc, sc = model_pts.mean(axis=0), meas.mean(axis=0)
+        U, _, Vt = np.linalg.svd((model_pts - mc).T @ (meas - sc))
+        D = np.diag([1, 1, np.sign(np.linalg.det(Vt.T @ U.T))])
+        R = Vt.T @ D @ U.T
+        q[:3] = sc - R @ mc
+        q[3:7] = pin.Quaternion(R).coeffs()
+        return q
+
+    def fit(self, positions_m: np.ndarray, valid: np.ndarray, q0: np.ndarray | None = None,
+            max_iter: int = 12, tol: float = 1e-6) -> FrameFit:
+        """Fit one frame. ``positions_m``/``valid`` are in the stream's marker order (all names, as received)."""
+        pos = np.asarray(positions_m, float)[self.stream_index]
+        ok = np.asarray(valid, bool)[self.stream_index] & np.all(np.isfinite(pos), axis=1)
+        n_ok = int(ok.sum())
+        if n_ok < MIN_MARKERS or sum(ok[k] for k, n in enumerate(self.used_names) if n in PELVIS_MARKERS) < 3:
+            return FrameFit(self.q if self.q is not None else self.q_ref, float("nan"), n_ok, 0, False)
+        q = q0 if q0 is not None else (self.q if self.q is not None else self.initial_guess(pos, ok))
+        q = q.copy()
+        model, data, nv = self.model, self.data, self.model.nv
+        w_post = self.posture_weight
+        it = 0
+        damping = 1e-6
+        for it in range(1, max_iter + 1):
+            pin.computeJointJacobians(model, data, q)
+            pin.updateFramePlacements(model, data)
+            J = np.zeros((3 * n_ok, nv))
+            r = np.zeros(3 * n_ok)
+            row = 0
+            for k, f in enumerate(self.frames):
+                if not ok[k]:
+                    continue
+                J[row:row + 3] = pin.getFrameJacobian(model, data, f, pin.LOCAL_WORLD_ALIGNED)[:3]
+                r[row:row + 3] = data.oMf[f].translation - pos[k]
+                row += 3
+            e_post = pin.difference(model, self.q_ref, q)
+            e_post[:6] = 0.0  # the floating base is free
+            H = J.T @ J + (w_post + damping) * np.eye(nv)
+            grad = J.T @ r + w_post * e_post
+            dq = -np.linalg.solve(H, grad)
+            q = pin.integrate(model, q, dq)
+            q[7:] = np.clip(q[7:], self.lo[7:], self.hi[7:])
+            if np.max(np.abs(dq)) < tol:
+                break
+        err = self._marker_positions(q)[ok] - pos[ok]
+        self.q = q
+        return FrameFit(q, float(np.sqrt(np.mean(np.sum(err**2, axis=1)))), n_ok, it, True)
+
+
+def fit_sequence(ik: MarkerIK, positions: np.ndarray, valid: np.ndarray, progress=None) -> list[FrameFit]:
+    """Fit every frame, warm-started from the previous good one. positions (N, M, 3), valid (N, M)."""
+    fits = []
+    for k in range(len(positions)):
+        first = ik.q is None
+        fit = ik.fit(positions[k], valid[k], max_iter=60 if first else 12)
+        fits.append(fit)
+        if progress is not None:
+            progress(k + 1, len(positions))
+    return fits
+
+
+def calibrate_lengths(subject: Subject, marker_names: list[str], positions: np.ndarray, valid: np.ndarray,
+                      n_frames: int = 10, max_nfev: int = 60) -> tuple[Subject, float, float]:
+    """Segment length factors that best fit the markers, over ``n_frames`` frames spread over the trial.
+
+    Returns (subject with fitted ``lengths``, marker RMS before [m], after [m]). Factors are bounded to 0.8..1.2.
+    """
+    from scipy.optimize import least_squares
+
+    good = [k for k in range(len(positions)) if np.sum(valid[k]) >= MIN_MARKERS + 4]
+    picks = [good[i] for i in np.linspace(0, len(good) - 1, min(n_frames, len(good))).astype(int)]
+    groups = list(LENGTH_GROUPS)
+    warm: dict[int, np.ndarray] = {}
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        subj = Subject(subject.height_m, subject.mass_kg, subject.sex, dict(zip(groups, x)), dict(subject.masses),
+                       list(subject.extra))
+        ik = MarkerIK(build_human(subj), marker_names)
+        out = []
+        for k in picks:
+            fit = ik.fit(positions[k], valid[k], q0=warm.get(k), max_iter=40, tol=1e-9)
+            warm[k] = fit.q
+            ok = np.asarray(valid[k], bool)[ik.stream_index]
+            out.append((ik._marker_positions(fit.q)[ok] - positions[k][ik.stream_index][ok]).ravel())
+        prior = 0.02 * (x - 1.0)  # weak pull to 1: unobserved groups (e.g. arms without arm markers) stay put
+        return np.concatenate(out + [prior])
+
+    x0 = np.array([subject.lengths.get(g, 1.0) for g in groups])
+    r0 = residuals(x0)
+    sol = least_squares(residuals, x0, bounds=(0.8, 1.2), diff_step=1e-3, max_nfev=max_nfev, x_scale=0.05)
+    r1 = residuals(sol.x)
+    n_m = len(r0) - len(groups)
+    rms = lambda r: float(np.sqrt(np.mean(r[:n_m] ** 2) * 3))  # noqa: E731 - per-marker distance RMS
+    fitted = Subject(subject.height_m, subject.mass_kg, subject.sex, dict(zip(groups, map(float, sol.x))),
+                     dict(subject.masses), list(subject.extra))
+    return fitted, rms(r0), rms(r1)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# smoothing and differentiation (the same filter offline and live)
+# ---------------------------------------------------------------------------------------------------------------
+
+def smooth_motion(model: pin.Model, qs: np.ndarray, dt: float, window: int = 31,
+                  order: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Smoothed configurations and their velocities and accelerations (N, nq), (N, nv), (N, nv).
+
+    Savitzky-Golay position, first and second derivative of decoupled coordinates: the floating base's position
+    (world), its rotation vector r about the first frame's orientation (R = R0 exp(r)), and the joint angles. They
+    map to Pinocchio's free-flyer velocity (body frame) as v = R^T p', w = Jr(r) r', with accelerations
+    R^T p'' - w x (R^T p') and Jr r'' + (dJr/dt) r'. Differentiating the fit, not the smoothed samples, keeps the
+    noise of accelerations small (1 mm of marker noise gives ~0.1 m/s^2 at 100 Hz with the defaults; the window
+    keeps ~95 % of a 2 Hz motion's acceleration).
+    """
+    n = len(qs)
+    window = min(window, n - (1 - n % 2))
+    if window <= order:
+        raise ValueError(f"{n} frames are too few to smooth (need more than {order + 1})")
+    R0 = pin.Quaternion(qs[0][3:7]).normalized().matrix()
+    rot = np.array([pin.log3(R0.T @ pin.Quaternion(q[3:7]).normalized().matrix()) for q in qs])
+    x = np.hstack([qs[:, :3], rot, qs[:, 7:]])
+    xs, xd, xdd = (_savgol_series(x, window, order, d) / dt**d for d in (0, 1, 2))
+    q_s = np.zeros_like(qs)
+    v = np.zeros((n, model.nv))
+    a = np.zeros((n, model.nv))
+    for k in range(n):
+        r, rd, rdd = xs[k, 3:6], xd[k, 3:6], xdd[k, 3:6]
+        R = R0 @ pin.exp3(r)
+        q_s[k, :3] = xs[k, :3]
+        q_s[k, 3:7] = pin.Quaternion(R).coeffs()
+        q_s[k, 7:] = xs[k, 6:]
+        Jr = pin.Jexp3(r)
+        h = 1e-4
+        dJr = (pin.Jexp3(r + h * rd) - pin.Jexp3(r - h * rd)) / (2 * h)
+        w = Jr @ rd
+        v_lin = R.T @ xd[k, :3]
+        v[k, :3], v[k, 3:6], v[k, 6:] = v_lin, w, xd[k, 6:]
+        a[k, :3] = R.T @ xdd[k, :3] - np.cross(w, v_lin)
+        a[k, 3:6] = Jr @ rdd + dJr @ rd
+        a[k, 6:] = xdd[k, 6:]
+    return q_s, v, a
+
+
+def _savgol_series(x: np.ndarray, window: int, order: int, deriv: int) -> np.ndarray:
+    """Savitzky-Golay along axis 0 with the polynomial fitted to the nearest window at the edges."""
+    from scipy.signal import savgol_filter
+
+    return savgol_filter(x, window, order, deriv=deriv, axis=0, mode="interp")
+
+
+def plate_wrench_at(times_s: np.ndarray, plates: list[dict], half_width_s: float) -> tuple[np.ndarray, np.ndarray,
+                                                                                          np.ndarray]:
+    """Summed plate force (N, 3) and moment about the origin (N, 3) averaged over +-half_width around each time,
+    and a coverage flag (N,) False where any plate has no sample there (a plate that dropped out)."""
+    n = len(times_s)
+    force, moment = np.zeros((n, 3)), np.zeros((n, 3))
+    covered = np.ones(n, bool)
+    for plate in plates:
+        t = plate["t_s"]
+        lo = np.searchsorted(t, times_s - half_width_s)
+        hi = np.searchsorted(t, times_s + half_width_s, side="right")
+        csum_f = np.vstack([np.zeros(3), np.cumsum(np.nan_to_num(plate["force_n"]), axis=0)])
+        csum_m = np.vstack([np.zeros(3), np.cumsum(np.nan_to_num(plate["moment_nm"]), axis=0)])
+        bad = np.concatenate([[0], np.cumsum(~np.all(np.isfinite(plate["force_n"]), axis=1))])
+        count = hi - lo
+        has = (count > 0) & (bad[hi] - bad[lo] == 0)
+        covered &= has
+        cnt = np.maximum(count, 1)[:, None]
+        force += np.where(has[:, None], (csum_f[hi] - csum_f[lo]) / cnt, 0.0)
+        moment += np.where(has[:, None], (csum_m[hi] - csum_m[lo]) / cnt, 0.0)
+    return force, moment, covered
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# COP-matched mass scaling
+# ---------------------------------------------------------------------------------------------------------------
+
+@dataclass
+class MassScaling:
+    """Segment masses [kg] (left = right), the torso's COM shift [m, torso frame] and the fit's figures."""
+
+    masses: dict[str, float]
+    torso_com_shift_m: np.ndarray
+    prior_masses: dict[str, float]
+    cop_rms_before_m: float = float("nan")
+    cop_rms_after_m: float = float("nan")
+    condition_number: float = float("nan")
+    frames_used: int = 0
+
+    def factors(self) -> dict[str, float]:
+        return {g: self.masses[g] / self.prior_masses[g] for g in self.masses}
+
+
+def _group_of(segment: str) -> str:
+    return segment[:-2] if segment[-2:] in ("_l", "_r") else segment
+
+
+def apply_scaling(human: HumanModel, scaling: MassScaling) -> pin.Model:
+    """A copy of the skeleton's model with the scaled masses (inertias scale with mass) and torso COM shift."""
+    model = human.model.copy()
+    for seg in SEGMENTS:
+        j = human.segment_joint[seg]
+        old = model.inertias[j]
+        k = scaling.masses[_group_of(seg)] / scaling.prior_masses[_group_of(seg)]
+        lever = old.lever.copy() + (scaling.torso_com_shift_m if seg == "torso" else 0.0)
+        model.inertias[j] = pin.Inertia(old.mass * k, lever, old.inertia * k)
+    return model
+
+
+def mass_scaling_rows(human: HumanModel, q: np.ndarray, v: np.ndarray, a: np.ndarray, force_n: np.ndarray,
+                      moment_origin_nm: np.ndarray, data: pin.Data | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Six equations A theta = b of one frame; theta = (group masses [kg] ..., torso m*dx, m*dz [kg m]).
+
+    The measured external wrench (lab axes, about the lab origin) is expressed in the pelvis frame and equated to
+    the floating-base rows of the joint-torque regressor, with each segment's parameters scaled by its mass.
+    """
+    model = human.model
+    data = data or model.createData()
+    Y = pin.computeJointTorqueRegressor(model, data, q, v, a)[:6]     # (6, 10 * (njoints - 1))
+    n_theta = len(MASS_GROUPS) + 2
+    A = np.zeros((6, n_theta))
+    for seg in SEGMENTS:
+        j = human.segment_joint[seg]
+        block = Y[:, 10 * (j - 1): 10 * j]
+        inertia = model.inertias[j]
+        pi_unit = inertia.toDynamicParameters() / inertia.mass
+        A[:, MASS_GROUPS.index(_group_of(seg))] += block @ pi_unit
+        if seg == "torso":
+            A[:, -2] += block[:, 1]   # first moment along torso x
+            A[:, -1] += block[:, 3]   # first moment along torso z
+    oMb = pin.SE3(pin.Quaternion(q[3:7]).normalized().matrix(), q[:3])
+    w = pin.Force(np.asarray(force_n, float), np.asarray(moment_origin_nm, float))
+    b = oMb.actInv(w).vector
+    return A, b
+
+
+def solve_mass_scaling(human: HumanModel, A: np.ndarray, b: np.ndarray, body_mass_kg: float,
+                       bounds: tuple[float, float] = (0.5, 2.0), prior_sd: float = 0.2,
+                       max_torso_shift_m: float = 0.12, force_sd_n: float = 5.0,
+                       moment_sd_nm: float = 2.0) -> MassScaling:
+    """Constrained least squares for the group masses and torso COM shift (rows stacked from many frames)."""
+    from ..optim import constrained_lsq
+
+    prior = {g: 0.0 for g in MASS_GROUPS}
+    count = {g: 0 for g in MASS_GROUPS}
+    for seg in SEGMENTS:
+        g = _group_of(seg)
+        prior[g] += human.model.inertias[human.segment_joint[seg]].mass
+        count[g] += 1
+    per_seg = np.array([prior[g] / count[g] for g in MASS_GROUPS])
+    mult = np.array([count[g] for g in MASS_GROUPS], float)
+    torso_m = per_seg[MASS_GROUPS.index("torso")]
+    # unknowns are per-segment masses of each group (left = right): A's group column is already the sum over
+    # the group's segments of their unit-mass contributions, so it multiplies the per-segment mass as it is
+    A_seg = A
+    x_prior = np.concatenate([per_seg, [0.0, 0.0]])
+    prior_w = np.concatenate([1.0 / (prior_sd * per_seg), [1.0 / (0.05 * torso_m)] * 2])
+    E = np.concatenate([mult, [0.0, 0.0]])[None, :]
+    # the torso COM may move forward/back (a backpack, a belly); its vertical shift trades off against the masses
+    # and stays at zero
+    lb = np.concatenate([bounds[0] * per_seg, [-max_torso_shift_m * torso_m * 2, 0.0]])
+    ub = np.concatenate([bounds[1] * per_seg, [max_torso_shift_m * torso_m * 2, 0.0]])
+    weights = np.tile([1 / force_sd_n] * 3 + [1 / moment_sd_nm] * 3, len(b) // 6)
+    res = constrained_lsq(A_seg, b, weights=weights, E=E, e=np.array([body_mass_kg]), lb=lb, ub=ub,
+                          prior=x_prior, prior_weights=prior_w)
+    masses = {g: float(res.x[i]) * mult[i] for i, g in enumerate(MASS_GROUPS)}
+    m_torso = res.x[MASS_GROUPS.index("torso")]
+    shift = np.array([res.x[-2] / m_torso, 0.0, res.x[-1] / m_torso])
+    return MassScaling(masses, shift, {g: prior[g] for g in MASS_GROUPS}, condition_number=res.condition_number,
+                       frames_used=len(b) // 6)
+
+
+def model_cop(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, a: np.ndarray,
+              floor_z: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """COM, its velocity and acceleration, and the model COP on the floor from the centroidal dynamics:
+    F = m (a_com - g), M_O = c x F + dL_G/dt."""
+    pin.centerOfMass(model, data, q, v, a)
+    com, vcom, acom = data.com[0].copy(), data.vcom[0].copy(), data.acom[0].copy()
+    pin.computeCentroidalMomentumTimeVariation(model, data, q, v, a)
+    mass = data.mass[0]
+    force = mass * (acom + np.array([0.0, 0.0, G]))
+    moment = np.cross(com, force) + data.dhg.angular
+    point = np.array([0.0, 0.0, floor_z])
+    cop, _ok, _tau = center_of_pressure(force, moment - np.cross(point, force), point, np.array([0.0, 0.0, 1.0]),
+                                        threshold_n=1.0)
+    return com, vcom, acom, cop
+
+
+@dataclass
+class ComResult:
+    """Output of :func:`estimate_com` (arrays at the marker rate)."""
+
+    t_s: np.ndarray
+    com_m: np.ndarray
+    com_vel: np.ndarray
+    com_acc: np.ndarray
+    com_unscaled_m: np.ndarray
+    model_cop_m: np.ndarray
+    measured_cop_m: np.ndarray
+    supported: np.ndarray          # frames whose whole weight is on the plates
+    fit_ok: np.ndarray
+    marker_rms_m: np.ndarray
+    n_markers: np.ndarray
+    scaling: MassScaling
+    subject: Subject
+    length_rms_before_m: float
+    length_rms_after_m: float
+    plate_gaps: list[tuple[str, float, float]] = field(default_factory=list)
+    q: np.ndarray | None = None
+
+
+def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.ndarray, valid: np.ndarray,
+                 plates: list[dict], subject: Subject, *, calibrate: bool = True, scale_masses: bool = True,
+                 chair_on_plate: bool = True, window: int = 31, progress=None) -> ComResult:
+    """Offline COM estimation of a whole trial (see the module docstring). ``plates``: dicts with ``name``,
+    ``t_s`` (K,), ``force_n`` (K, 3), ``moment_nm`` (K, 3, about the lab origin)."""
+    dt = float(np.median(np.diff(marker_t_s)))
+    len_before = len_after = float("nan")
+    if calibrate:
+        subject, len_before, len_after = calibrate_lengths(subject, marker_names, positions, valid)
+    human = build_human(subject)
+    ik = MarkerIK(human, marker_names)
+    fits = fit_sequence(ik, positions, valid, progress)
+    ok = np.array([f.ok for f in fits])
+    if ok.sum() < window:
+        raise TooFewMarkers(f"only {ok.sum()} frames could be fitted (need {window}); check the marker set")
+    q_raw = np.array([f.q for f in fits])
+    # bridge skipped frames by interpolating tangent coordinates from the neighbours
+    if not ok.all():
+        ref = q_raw[np.argmax(ok)]
+        x = np.array([pin.difference(human.model, ref, q) for q in q_raw])
+        for j in range(x.shape[1]):
+            x[~ok, j] = np.interp(np.flatnonzero(~ok), np.flatnonzero(ok), x[ok, j])
+        q_raw = np.array([pin.integrate(human.model, ref, xi) for xi in x])
+    qs, vs, as_ = smooth_motion(human.model, q_raw, dt, window)
+
+    force, moment, covered = plate_wrench_at(marker_t_s, plates, dt / 2)
+    w_eff = min(window, len(force) - (1 - len(force) % 2))
+    force = _savgol_series(force, w_eff, 4, 0)     # the same filter as the kinematics: one bandwidth for both
+    moment = _savgol_series(moment, w_eff, 4, 0)
+    gaps = _plate_gaps(marker_t_s, plates, dt)
+    weight = subject.mass_kg * G
+    fz_ok = (force[:, 2] > 0.3 * weight) & (force[:, 2] < 3.0 * weight)
+    if chair_on_plate:
+        supported = covered & fz_ok
+    else:  # the chair is not on a plate: only after the feet first carry (nearly) the whole weight
+        first = np.argmax(force[:, 2] >= 0.9 * weight) if np.any(force[:, 2] >= 0.9 * weight) else len(force)
+        supported = covered & fz_ok & (np.arange(len(force)) >= first)
+    half = window // 2
+    supported[:half] = supported[-half:] = False   # edge frames: the smoother extrapolates there
+
+    data = human.model.createData()
+    measured_cop = np.full((len(qs), 3), np.nan)
+    for k in range(len(qs)):
+        if covered[k]:
+            measured_cop[k], _, _ = center_of_pressure(force[k], moment[k], np.zeros(3), np.array([0, 0, 1.0]),
+                                                       threshold_n=1.0)
+    unscaled = np.array([model_cop(human.model, data, qs[k], vs[k], as_[k]) for k in range(len(qs))], dtype=object)
+    com_unscaled = np.array([u[0] for u in unscaled])
+    cop_unscaled = np.array([u[3] for u in unscaled])
+
+    if scale_masses and supported.sum() >= 10:
+        rows = [mass_scaling_rows(human, qs[k], vs[k], as_[k], force[k], moment[k], data)
+                for k in np.flatnonzero(supported)]
+        scaling = solve_mass_scaling(human, np.vstack([r[0] for r in rows]), np.concatenate([r[1] for r in rows]),
+                                     subject.mass_kg)
+        model = apply_scaling(human, scaling)
+    else:
+        prior = {}
+        for seg in SEGMENTS:
+            prior[_group_of(seg)] = prior.get(_group_of(seg), 0.0) + human.model.inertias[human.segment_joint[seg]].mass
+        scaling = MassScaling(dict(prior), np.zeros(3), dict(prior))
+        model = human.model
+    data = model.createData()
+    out = np.array([model_cop(model, data, qs[k], vs[k], as_[k]) for k in range(len(qs))], dtype=object)
+    com = np.array([o[0] for o in out])
+    cop_model = np.array([o[3] for o in out])
+    sel = supported & np.all(np.isfinite(measured_cop), axis=1)
+    dist = lambda c: float(np.sqrt(np.mean(np.sum((c[sel, :2] - measured_cop[sel, :2]) ** 2, axis=1))))  # noqa
+    scaling.cop_rms_before_m = dist(cop_unscaled) if sel.any() else float("nan")
+    scaling.cop_rms_after_m = dist(cop_model) if sel.any() else float("nan")
+    return ComResult(marker_t_s, com, np.array([o[1] for o in out]), np.array([o[2] for o in out]), com_unscaled,
+                     cop_model, measured_cop, supported, ok, np.array([f.rms_m for f in fits]),
+                     np.array([f.n_markers for f in fits]), scaling, subject, len_before, len_after, gaps, qs)
+
+
+def _plate_gaps(times_s: np.ndarray, plates: list[dict], dt: float) -> list[tuple[str, float, float]]:
+    """(plate, start, end) of each stretch of marker frames with no sample (or NaN samples) of that plate."""
+    gaps = []
+    for plate in plates:
+        _, _, covered = plate_wrench_at(times_s, [plate], dt / 2)
+        k = 0
+        while k < len(covered):
+            if not covered[k]:
+                j = k
+                while j + 1 < len(covered) and not covered[j + 1]:
+                    j += 1
+                gaps.append((plate["name"], float(times_s[k]), float(times_s[j])))
+                k = j + 1
+            else:
+                k += 1
+    return gaps

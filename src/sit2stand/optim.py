@@ -1,0 +1,78 @@
+"""Constrained linear least squares, solved as a dense QP with proxsuite.
+
+    minimise  || W (A x - b) ||^2 + || R (x - x_prior) ||^2
+    subject to  E x = e,   lb <= x <= ub
+
+Used for the human's segment-mass scaling and the robot's inertial identification. Also reports the condition
+number of the scaled, weighted problem, so that callers can refuse an ill-conditioned one with the number in hand.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class LsqResult:
+    x: np.ndarray
+    cost: float
+    condition_number: float
+    active_bounds: int
+    status: str
+
+
+def constrained_lsq(A: np.ndarray, b: np.ndarray, *, weights: np.ndarray | None = None,
+                    E: np.ndarray | None = None, e: np.ndarray | None = None,
+                    lb: np.ndarray | None = None, ub: np.ndarray | None = None,
+                    prior: np.ndarray | None = None, prior_weights: np.ndarray | None = None,
+                    eps_abs: float = 1e-10) -> LsqResult:
+    """Solve the problem in the module docstring. Shapes: A (m, n), b (m,), E (p, n), weights (m,), prior (n,).
+
+    Raises:
+        ValueError: inconsistent shapes, or the QP solver fails (the status is named).
+    """
+    import proxsuite
+
+    A = np.atleast_2d(np.asarray(A, float))
+    b = np.asarray(b, float).ravel()
+    m, n = A.shape
+    if b.shape != (m,):
+        raise ValueError(f"b has shape {b.shape}, expected ({m},)")
+    w = np.ones(m) if weights is None else np.asarray(weights, float)
+    Aw, bw = A * w[:, None], b * w
+    H = Aw.T @ Aw
+    g = -Aw.T @ bw
+    if prior is not None:
+        r = np.ones(n) if prior_weights is None else np.asarray(prior_weights, float)
+        H += np.diag(r**2)
+        g -= r**2 * np.asarray(prior, float)
+    # scale columns so that the QP is well posed numerically
+    scale = np.sqrt(np.maximum(np.diag(H), 1e-300))
+    Hs = H / scale[:, None] / scale[None, :]
+    gs = g / scale
+    cond = float(np.linalg.cond(Hs)) ** 0.5   # condition number of the scaled regressor (sqrt of the normal matrix's)
+    n_eq = 0 if E is None else np.atleast_2d(E).shape[0]
+    Es = None if E is None else np.atleast_2d(np.asarray(E, float)) / scale[None, :]
+    n_in = n if (lb is not None or ub is not None) else 0
+    qp = proxsuite.proxqp.dense.QP(n, n_eq, n_in)
+    qp.settings.eps_abs = eps_abs
+    qp.settings.max_iter = 10_000
+    qp.settings.verbose = False
+    C = np.eye(n) if n_in else None
+    lo = None if not n_in else (np.full(n, -1e20) if lb is None else np.asarray(lb, float) * scale)
+    hi = None if not n_in else (np.full(n, 1e20) if ub is None else np.asarray(ub, float) * scale)
+    qp.init(Hs, gs, Es, None if e is None else np.asarray(e, float), C, lo, hi)
+    qp.solve()
+    status = str(qp.results.info.status).split(".")[-1]
+    if "SOLVED" not in status or "INACCURATE" in status:
+        raise ValueError(f"constrained least squares: QP solver status {status}")
+    x = qp.results.x / scale
+    resid = Aw @ x - bw
+    active = 0
+    if n_in:
+        tol = 1e-7 * (1 + np.abs(x))
+        active = int(np.sum((lb is not None) & (np.abs(x - (lb if lb is not None else x)) < tol)) +
+                     np.sum((ub is not None) & (np.abs(x - (ub if ub is not None else x)) < tol)))
+    return LsqResult(x, float(resid @ resid), cond, active, status)
