@@ -1,6 +1,7 @@
 """The `sit2stand` command: one entry point for the offline tools and for starting nodes and graphs.
 
     sit2stand import-c3d FILE.c3d --out bags/NAME [--chair-plate I] [--feet-plate J] [--forward +X --up +Z]
+    sit2stand human-com BAG --out DIR
     sit2stand synth-human --style natural|elderly [--height M --mass KG ...] [--extra-mass SEG:KG[:x,y,z]] --out DIR
     sit2stand bag info DIR
     sit2stand bag recover DIR [--out DIR2]
@@ -53,6 +54,26 @@ def _synth_human(args: argparse.Namespace) -> int:
           f"{demo.seat_off_s - demo.rise_start_s:.2f} s into a {demo.rise_end_s - demo.rise_start_s:.2f} s rise; "
           f"COM height {c[i0, 2]:.3f} -> min {c[i0:, 2].min():.3f} -> {c[-1, 2]:.3f} m")
     print(f"wrote {args.out}: " + ", ".join(f"{t} ({n})" for t, n in counts.items()))
+    return 0
+
+
+def _human_com(args: argparse.Namespace) -> int:
+    from .human.offline import run
+
+    summary = run(args.bag, args.out, height_m=args.height, mass_kg=args.mass, sex=args.sex,
+                  calibrate=not args.no_calibration, scale=not args.no_scaling)
+    keys = ["com_rms_vs_truth_scaled_mm", "com_rms_vs_truth_unscaled_mm", "cop_rms_unscaled_mm", "cop_rms_scaled_mm",
+            "com_rms_vs_reference_mm", "standing_com_to_cop_mm", "standing_reference_com_to_cop_mm", "marker_rms_mm"]
+    for key in keys:
+        if key in summary:
+            value = summary[key]
+            text = (f"mean {value['mean']:.1f}, max {value['max']:.1f}" if isinstance(value, dict) else f"{value:.1f}")
+            print(f"  {key:<36} {text}")
+    print(f"  mass factors: " + ", ".join(f"{k} {v:.2f}" for k, v in summary["mass_factors"].items()))
+    if summary.get("plate_gaps"):
+        print(f"  force plates dropped out: " + "; ".join(
+            f"{g['plate']} {g['from_s']:.3f}-{g['to_s']:.3f} s" for g in summary["plate_gaps"]))
+    print(f"wrote {args.out}/summary.json, human_com.png and the human_com bag")
     return 0
 
 
@@ -139,6 +160,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="hidden rigid mass on a segment, offset from its COM in segment axes (repeatable)")
     p.add_argument("--out", type=Path, required=True)
     p.set_defaults(func=_synth_human)
+
+    p = sub.add_parser("human-com", help="human COM of a bag: skeleton fit, COP-matched scaling, JSON + PNG")
+    p.add_argument("bag", type=Path)
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--height", type=float, help="stature [m] if the bag's metadata lacks it")
+    p.add_argument("--mass", type=float, help="body mass [kg] if the bag's metadata lacks it")
+    p.add_argument("--sex", choices=["male", "female"])
+    p.add_argument("--no-calibration", action="store_true", help="keep de Leva's segment lengths")
+    p.add_argument("--no-scaling", action="store_true", help="keep de Leva's segment masses")
+    p.set_defaults(func=_human_com)
 
     bag = sub.add_parser("bag", help="bag tools").add_subparsers(dest="bag_command", required=True)
     p = bag.add_parser("info", help="topics, types, counts, rates and duration")

@@ -150,7 +150,7 @@ def calibrate_lengths(subject: Subject, marker_names: list[str], positions: np.n
                       n_frames: int = 10, max_nfev: int = 60) -> tuple[Subject, float, float]:
     """Segment length factors that best fit the markers, over ``n_frames`` frames spread over the trial.
 
-    Returns (subject with fitted ``lengths``, marker RMS before [m], after [m]). Factors are bounded to 0.8..1.2.
+    Returns (subject with fitted ``lengths``, marker RMS before [m], after [m]). Factors are bounded to 0.6..1.6 (children and adults).
     """
     from scipy.optimize import least_squares
 
@@ -174,13 +174,60 @@ def calibrate_lengths(subject: Subject, marker_names: list[str], positions: np.n
 
     x0 = np.array([subject.lengths.get(g, 1.0) for g in groups])
     r0 = residuals(x0)
-    sol = least_squares(residuals, x0, bounds=(0.8, 1.2), diff_step=1e-3, max_nfev=max_nfev, x_scale=0.05)
+    sol = least_squares(residuals, x0, bounds=(0.6, 1.6), diff_step=1e-3, max_nfev=max_nfev, x_scale=0.05)
     r1 = residuals(sol.x)
     n_m = len(r0) - len(groups)
     rms = lambda r: float(np.sqrt(np.mean(r[:n_m] ** 2) * 3))  # noqa: E731 - per-marker distance RMS
     fitted = Subject(subject.height_m, subject.mass_kg, subject.sex, dict(zip(groups, map(float, sol.x))),
                      dict(subject.masses), list(subject.extra))
     return fitted, rms(r0), rms(r1)
+
+
+
+def calibrate_markers(human: HumanModel, marker_names: list[str], positions: np.ndarray, valid: np.ndarray,
+                      iterations: int = 3, max_shift_m: float = 0.06, stride: int = 3) -> tuple[float, float]:
+    """Move each model marker (in its segment frame) by its median fit residual, as a marker placer does.
+
+    Markers are never placed exactly where the model expects (wands, soft tissue, a child's head): after IK over
+    every ``stride``-th frame, each marker's residual is expressed in its segment frame and its median added to the
+    marker's placement (at most ``max_shift_m`` in all). Modifies ``human.model`` in place; returns the marker RMS
+    [m] before and after.
+    """
+    model = human.model
+    original = {n: model.frames[f].placement.translation.copy() for n, f in human.marker_frames.items()}
+    frames = list(range(0, len(positions), stride))
+    rms = []
+    for it in range(iterations + 1):
+        ik = MarkerIK(human, marker_names)
+        per_marker: dict[str, list[np.ndarray]] = {n: [] for n in ik.used_names}
+        errs = []
+        for k in frames:
+            fit = ik.fit(positions[k], valid[k], max_iter=40 if ik.q is None else 15)
+            if not fit.ok:
+                continue
+            pin.framesForwardKinematics(model, ik.data, fit.q)
+            for j, name in enumerate(ik.used_names):
+                meas = positions[k][ik.stream_index[j]]
+                if not valid[k][ik.stream_index[j]] or not np.all(np.isfinite(meas)):
+                    continue
+                oMf = ik.data.oMf[human.marker_frames[name]]
+                per_marker[name].append(oMf.rotation.T @ (meas - oMf.translation))
+                errs.append(np.linalg.norm(meas - oMf.translation))
+        rms.append(float(np.sqrt(np.mean(np.square(errs)))) if errs else float("nan"))
+        if it == iterations:
+            break
+        for name, residuals in per_marker.items():
+            if len(residuals) < 3:
+                continue
+            fid = human.marker_frames[name]
+            placement = model.frames[fid].placement
+            new = placement.translation + np.median(residuals, axis=0)
+            shift = new - original[name]
+            norm = np.linalg.norm(shift)
+            if norm > max_shift_m:
+                new = original[name] + shift * max_shift_m / norm
+            model.frames[fid].placement = pin.SE3(placement.rotation, new)
+    return rms[0], rms[-1]
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -263,7 +310,7 @@ def plate_wrench_at(times_s: np.ndarray, plates: list[dict], half_width_s: float
 
 @dataclass
 class MassScaling:
-    """Segment masses [kg] (left = right), the torso's COM shift [m, torso frame] and the fit's figures."""
+    """Segment masses [kg] (left = right), the torso's COM shift (x, y) [m, torso frame] and the fit's figures."""
 
     masses: dict[str, float]
     torso_com_shift_m: np.ndarray
@@ -295,7 +342,7 @@ def apply_scaling(human: HumanModel, scaling: MassScaling) -> pin.Model:
 
 def mass_scaling_rows(human: HumanModel, q: np.ndarray, v: np.ndarray, a: np.ndarray, force_n: np.ndarray,
                       moment_origin_nm: np.ndarray, data: pin.Data | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Six equations A theta = b of one frame; theta = (group masses [kg] ..., torso m*dx, m*dz [kg m]).
+    """Six equations A theta = b of one frame; theta = (group masses [kg] ..., torso m*dx, m*dy [kg m]).
 
     The measured external wrench (lab axes, about the lab origin) is expressed in the pelvis frame and equated to
     the floating-base rows of the joint-torque regressor, with each segment's parameters scaled by its mass.
@@ -312,19 +359,73 @@ def mass_scaling_rows(human: HumanModel, q: np.ndarray, v: np.ndarray, a: np.nda
         pi_unit = inertia.toDynamicParameters() / inertia.mass
         A[:, MASS_GROUPS.index(_group_of(seg))] += block @ pi_unit
         if seg == "torso":
-            A[:, -2] += block[:, 1]   # first moment along torso x
-            A[:, -1] += block[:, 3]   # first moment along torso z
+            A[:, -2] += block[:, 1]   # first moment along torso x (forward)
+            A[:, -1] += block[:, 2]   # first moment along torso y (left)
     oMb = pin.SE3(pin.Quaternion(q[3:7]).normalized().matrix(), q[:3])
     w = pin.Force(np.asarray(force_n, float), np.asarray(moment_origin_nm, float))
     b = oMb.actInv(w).vector
     return A, b
 
 
+def static_rows(human: HumanModel, q: np.ndarray, cop_xy: np.ndarray, body_mass_kg: float,
+                data: pin.Data | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Two equations (x, y) of a quasi-static frame: the COM lies above the measured COP, M g c = M g COP, in the
+    unknowns of :func:`mass_scaling_rows` (scaled by g to N m, like its moment rows). A tilted or cross-talking
+    plate force cannot bias these, unlike the full dynamic rows."""
+    model = human.model
+    data = data or model.createData()
+    pin.forwardKinematics(model, data, q)
+    A = np.zeros((2, len(MASS_GROUPS) + 2))
+    for seg in SEGMENTS:
+        j = human.segment_joint[seg]
+        c = data.oMi[j].act(model.inertias[j].lever)
+        A[:, MASS_GROUPS.index(_group_of(seg))] += G * c[:2]
+        if seg == "torso":
+            R = data.oMi[j].rotation
+            A[:, -2] += G * R[:2, 0]
+            A[:, -1] += G * R[:2, 1]
+    return A, G * body_mass_kg * np.asarray(cop_xy, float)[:2]
+
+
+def scaling_rows(human: HumanModel, qs: np.ndarray, vs: np.ndarray, as_: np.ndarray, force_n: np.ndarray,
+                 moment_nm: np.ndarray, cop_m: np.ndarray, supported: np.ndarray, body_mass_kg: float,
+                 quasi_static_acc: float = 0.15, quiet_fraction: float = 0.4, force_sd_n: float = 5.0,
+                 moment_sd_nm: float = 2.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows and weights of every supported frame: quasi-static frames give the world vertical-force row and COM
+    over COP; the others the six dynamic rows. Quasi-static: |a_com| below ``quasi_static_acc`` [m/s^2], or among
+    the quietest ``quiet_fraction`` of the supported frames (a short recording may never be quite still)."""
+    data = human.model.createData()
+    idx = np.flatnonzero(supported)
+    acc = np.zeros(len(idx))
+    for i, k in enumerate(idx):
+        pin.centerOfMass(human.model, data, qs[k], vs[k], as_[k])
+        acc[i] = np.linalg.norm(data.acom[0])
+    limit = max(quasi_static_acc, float(np.quantile(acc, quiet_fraction))) if len(acc) else quasi_static_acc
+    A_rows, b_rows, w_rows = [], [], []
+    for k, a_k in zip(idx, acc):
+        A6, b6 = mass_scaling_rows(human, qs[k], vs[k], as_[k], force_n[k], moment_nm[k], data)
+        if a_k <= limit and np.all(np.isfinite(cop_m[k])):
+            R = pin.Quaternion(qs[k][3:7]).normalized().matrix()
+            As, bs = static_rows(human, qs[k], cop_m[k], body_mass_kg, data)
+            A_rows += [(R[2] @ A6[:3])[None, :], As]
+            b_rows += [np.array([R[2] @ b6[:3]]), bs]
+            w_rows += [np.array([1 / force_sd_n]), np.full(2, 1 / moment_sd_nm)]
+        else:
+            A_rows.append(A6)
+            b_rows.append(b6)
+            w_rows.append(np.array([1 / force_sd_n] * 3 + [1 / moment_sd_nm] * 3))
+    return np.vstack(A_rows), np.concatenate(b_rows), np.concatenate(w_rows)
+
+
 def solve_mass_scaling(human: HumanModel, A: np.ndarray, b: np.ndarray, body_mass_kg: float,
                        bounds: tuple[float, float] = (0.5, 2.0), prior_sd: float = 0.2,
                        max_torso_shift_m: float = 0.12, force_sd_n: float = 5.0,
-                       moment_sd_nm: float = 2.0) -> MassScaling:
-    """Constrained least squares for the group masses and torso COM shift (rows stacked from many frames)."""
+                       moment_sd_nm: float = 2.0, weights: np.ndarray | None = None) -> MassScaling:
+    """Constrained least squares for the group masses and torso COM shift (rows stacked from many frames).
+
+    ``weights`` (one per row) default to blocks of six dynamic rows: 1/force_sd_n for forces, 1/moment_sd_nm for
+    moments; :func:`scaling_rows` builds mixed dynamic / quasi-static rows with their weights.
+    """
     from ..optim import constrained_lsq
 
     prior = {g: 0.0 for g in MASS_GROUPS}
@@ -342,18 +443,19 @@ def solve_mass_scaling(human: HumanModel, A: np.ndarray, b: np.ndarray, body_mas
     x_prior = np.concatenate([per_seg, [0.0, 0.0]])
     prior_w = np.concatenate([1.0 / (prior_sd * per_seg), [1.0 / (0.05 * torso_m)] * 2])
     E = np.concatenate([mult, [0.0, 0.0]])[None, :]
-    # the torso COM may move forward/back (a backpack, a belly); its vertical shift trades off against the masses
-    # and stays at zero
-    lb = np.concatenate([bounds[0] * per_seg, [-max_torso_shift_m * torso_m * 2, 0.0]])
-    ub = np.concatenate([bounds[1] * per_seg, [max_torso_shift_m * torso_m * 2, 0.0]])
-    weights = np.tile([1 / force_sd_n] * 3 + [1 / moment_sd_nm] * 3, len(b) // 6)
+    # the torso COM may move forward/back (a backpack, a belly) and sideways (asymmetry, unmarked arms held to one
+    # side); its vertical shift would trade off against the masses and is not estimated
+    lb = np.concatenate([bounds[0] * per_seg, [-max_torso_shift_m * torso_m * 2] * 2])
+    ub = np.concatenate([bounds[1] * per_seg, [max_torso_shift_m * torso_m * 2] * 2])
+    if weights is None:
+        weights = np.tile([1 / force_sd_n] * 3 + [1 / moment_sd_nm] * 3, len(b) // 6)
     res = constrained_lsq(A_seg, b, weights=weights, E=E, e=np.array([body_mass_kg]), lb=lb, ub=ub,
                           prior=x_prior, prior_weights=prior_w)
     masses = {g: float(res.x[i]) * mult[i] for i, g in enumerate(MASS_GROUPS)}
     m_torso = res.x[MASS_GROUPS.index("torso")]
-    shift = np.array([res.x[-2] / m_torso, 0.0, res.x[-1] / m_torso])
+    shift = np.array([res.x[-2] / m_torso, res.x[-1] / m_torso, 0.0])
     return MassScaling(masses, shift, {g: prior[g] for g in MASS_GROUPS}, condition_number=res.condition_number,
-                       frames_used=len(b) // 6)
+                       frames_used=int(np.sum(weights > 0) // 3))
 
 
 def model_cop(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, a: np.ndarray,
@@ -370,6 +472,13 @@ def model_cop(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, a:
     cop, _ok, _tau = center_of_pressure(force, moment - np.cross(point, force), point, np.array([0.0, 0.0, 1.0]),
                                         threshold_n=1.0)
     return com, vcom, acom, cop
+
+
+def _model_series(model: pin.Model, qs: np.ndarray, vs: np.ndarray, as_: np.ndarray):
+    """COM, COM velocity, COM acceleration and model COP (each (N, 3) float) along a motion."""
+    data = model.createData()
+    out = [model_cop(model, data, q, v, a) for q, v, a in zip(qs, vs, as_)]
+    return tuple(np.array([o[i] for o in out], dtype=float) for i in range(4))
 
 
 @dataclass
@@ -393,11 +502,14 @@ class ComResult:
     length_rms_after_m: float
     plate_gaps: list[tuple[str, float, float]] = field(default_factory=list)
     q: np.ndarray | None = None
+    notes: list[str] = field(default_factory=list)
 
 
 def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.ndarray, valid: np.ndarray,
                  plates: list[dict], subject: Subject, *, calibrate: bool = True, scale_masses: bool = True,
-                 chair_on_plate: bool = True, window: int = 31, progress=None) -> ComResult:
+                 chair_on_plate: bool = True, window: int = 31, trust_plate_mass: bool = True,
+                 quasi_static_acc: float = 0.15,
+                 progress=None) -> ComResult:
     """Offline COM estimation of a whole trial (see the module docstring). ``plates``: dicts with ``name``,
     ``t_s`` (K,), ``force_n`` (K, 3), ``moment_nm`` (K, 3, about the lab origin)."""
     dt = float(np.median(np.diff(marker_t_s)))
@@ -405,6 +517,8 @@ def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.
     if calibrate:
         subject, len_before, len_after = calibrate_lengths(subject, marker_names, positions, valid)
     human = build_human(subject)
+    if calibrate:
+        _, len_after = calibrate_markers(human, marker_names, positions, valid)
     ik = MarkerIK(human, marker_names)
     fits = fit_sequence(ik, positions, valid, progress)
     ok = np.array([f.ok for f in fits])
@@ -434,6 +548,18 @@ def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.
         supported = covered & fz_ok & (np.arange(len(force)) >= first)
     half = window // 2
     supported[:half] = supported[-half:] = False   # edge frames: the smoother extrapolates there
+    notes: list[str] = []
+    plate_mass = body_mass_from_plates(force, supported, qs, human, dt)
+    if plate_mass is not None and trust_plate_mass:
+        rel = plate_mass / subject.mass_kg - 1.0
+        if abs(rel) > 0.05:
+            notes.append(f"the plates weigh the subject at {plate_mass:.2f} kg in quiet support, {100 * rel:+.1f} % "
+                         f"from the given {subject.mass_kg:g} kg; using the plates' value")
+            subject = Subject(subject.height_m, plate_mass, subject.sex, dict(subject.lengths), dict(subject.masses),
+                              list(subject.extra))
+            human = build_human(subject)
+            for name, fid in ik.human.marker_frames.items():   # keep the calibrated marker placements
+                human.model.frames[human.marker_frames[name]].placement = ik.human.model.frames[fid].placement
 
     data = human.model.createData()
     measured_cop = np.full((len(qs), 3), np.nan)
@@ -441,15 +567,12 @@ def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.
         if covered[k]:
             measured_cop[k], _, _ = center_of_pressure(force[k], moment[k], np.zeros(3), np.array([0, 0, 1.0]),
                                                        threshold_n=1.0)
-    unscaled = np.array([model_cop(human.model, data, qs[k], vs[k], as_[k]) for k in range(len(qs))], dtype=object)
-    com_unscaled = np.array([u[0] for u in unscaled])
-    cop_unscaled = np.array([u[3] for u in unscaled])
+    com_unscaled, _, _, cop_unscaled = _model_series(human.model, qs, vs, as_)
 
     if scale_masses and supported.sum() >= 10:
-        rows = [mass_scaling_rows(human, qs[k], vs[k], as_[k], force[k], moment[k], data)
-                for k in np.flatnonzero(supported)]
-        scaling = solve_mass_scaling(human, np.vstack([r[0] for r in rows]), np.concatenate([r[1] for r in rows]),
-                                     subject.mass_kg)
+        A_rows, b_rows, w_rows = scaling_rows(human, qs, vs, as_, force, moment, measured_cop, supported,
+                                              subject.mass_kg, quasi_static_acc)
+        scaling = solve_mass_scaling(human, A_rows, b_rows, subject.mass_kg, weights=w_rows)
         model = apply_scaling(human, scaling)
     else:
         prior = {}
@@ -457,17 +580,27 @@ def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.
             prior[_group_of(seg)] = prior.get(_group_of(seg), 0.0) + human.model.inertias[human.segment_joint[seg]].mass
         scaling = MassScaling(dict(prior), np.zeros(3), dict(prior))
         model = human.model
-    data = model.createData()
-    out = np.array([model_cop(model, data, qs[k], vs[k], as_[k]) for k in range(len(qs))], dtype=object)
-    com = np.array([o[0] for o in out])
-    cop_model = np.array([o[3] for o in out])
+    com, vcom, acom, cop_model = _model_series(model, qs, vs, as_)
     sel = supported & np.all(np.isfinite(measured_cop), axis=1)
     dist = lambda c: float(np.sqrt(np.mean(np.sum((c[sel, :2] - measured_cop[sel, :2]) ** 2, axis=1))))  # noqa
     scaling.cop_rms_before_m = dist(cop_unscaled) if sel.any() else float("nan")
     scaling.cop_rms_after_m = dist(cop_model) if sel.any() else float("nan")
-    return ComResult(marker_t_s, com, np.array([o[1] for o in out]), np.array([o[2] for o in out]), com_unscaled,
+    return ComResult(marker_t_s, com, vcom, acom, com_unscaled,
                      cop_model, measured_cop, supported, ok, np.array([f.rms_m for f in fits]),
-                     np.array([f.n_markers for f in fits]), scaling, subject, len_before, len_after, gaps, qs)
+                     np.array([f.n_markers for f in fits]), scaling, subject, len_before, len_after, gaps, qs, notes)
+
+
+def body_mass_from_plates(force_n: np.ndarray, supported: np.ndarray, qs: np.ndarray, human: HumanModel,
+                          dt: float, max_com_acc: float = 0.3) -> float | None:
+    """Body mass [kg] = mean vertical force / g over supported frames where the COM barely accelerates
+    (|a_com| < ``max_com_acc`` m/s^2); None if there are fewer than 10 such frames."""
+    model, data = human.model, human.model.createData()
+    com_z = np.array([pin.centerOfMass(model, data, q)[2] for q in qs])
+    acc = np.abs(np.gradient(np.gradient(com_z, dt), dt))
+    quiet = supported & (acc < max_com_acc)
+    if quiet.sum() < 10:
+        return None
+    return float(np.mean(force_n[quiet, 2]) / G)
 
 
 def _plate_gaps(times_s: np.ndarray, plates: list[dict], dt: float) -> list[tuple[str, float, float]]:

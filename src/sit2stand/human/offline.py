@@ -1,0 +1,261 @@
+"""`sit2stand human-com BAG --out DIR`: the human COM estimator on a whole bag, with evaluation and a figure.
+
+Reads ``/mocap/markers`` and every ``/force_plate/*`` topic, runs :func:`sit2stand.human.com.estimate_com`, and
+writes into DIR: a bag ``human_com`` (``/human/com``, ``/human/model_cop``, ``/human/joint_states``,
+``/human/scaling``), ``summary.json`` and ``human_com.png``. When the bag carries a reference it is evaluated:
+``/ground_truth/com`` (synthetic demonstrations) gives the COM error; ``/mocap/reference_com`` (the capture
+software's own COM, e.g. Vicon's ``CentreOfMass``) gives the distance to it and, in the standing phase, both COMs'
+horizontal distance to the measured COP.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..io import messages as M
+from ..io.bag import BagError, BagReader, BagWriter
+from .com import ComResult, estimate_com
+from .skeleton import Subject
+from .synth import GROUND_TRUTH_COM
+
+HUMAN_COM_TOPIC = "/human/com"
+HUMAN_MODEL_COP_TOPIC = "/human/model_cop"
+HUMAN_JOINTS_TOPIC = "/human/joint_states"
+HUMAN_SCALING_TOPIC = "/human/scaling"
+
+
+@dataclass
+class Trial:
+    """Arrays of one bag: markers at their rate, plates at theirs, what the lab knows of the subject."""
+
+    marker_t_s: np.ndarray
+    marker_names: list[str]
+    positions: np.ndarray
+    valid: np.ndarray
+    plates: list[dict]
+    height_m: float | None
+    mass_kg: float | None
+    sex: str
+    truth: tuple[np.ndarray, np.ndarray] | None          # (t, com)
+    reference: tuple[np.ndarray, np.ndarray, np.ndarray] | None   # (t, com, valid)
+
+
+def read_trial(bag_path: str | Path) -> Trial:
+    """Load markers, plates and metadata of a bag (names the bag and topic on any problem)."""
+    with BagReader(bag_path) as bag:
+        topics = bag.topics()
+        if M.MARKERS_TOPIC not in topics:
+            raise BagError(f"{bag_path}: no {M.MARKERS_TOPIC} topic (it has {', '.join(sorted(topics))})")
+        frames = bag.read(M.MARKERS_TOPIC)
+        names = list(frames[0][1].marker_names)
+        t = np.array([ts for ts, _ in frames]) * 1e-9
+        pos = np.full((len(frames), len(names), 3), np.nan)
+        valid = np.zeros((len(frames), len(names)), bool)
+        for k, (_, msg) in enumerate(frames):
+            fn, fp, fv = M.mocap_arrays(msg)
+            if fn == names:
+                pos[k], valid[k] = fp, fv
+            else:  # a frame with another marker list: map by name
+                for j, n in enumerate(fn):
+                    if n in names:
+                        pos[k, names.index(n)], valid[k, names.index(n)] = fp[j], fv[j]
+        plates = []
+        for topic in sorted(topics):
+            if topic.startswith(M.FORCE_PLATE_PREFIX):
+                msgs = bag.read(topic)
+                arr = M.plate_arrays([m for _, m in msgs])
+                plates.append({"name": topic[len(M.FORCE_PLATE_PREFIX):], "t_s": np.array([ts for ts, _ in msgs]) * 1e-9,
+                               "force_n": arr["force_n"], "moment_nm": arr["moment_nm"]})
+        custom = bag.custom_data
+        truth = reference = None
+        if GROUND_TRUTH_COM in topics:
+            msgs = bag.read(GROUND_TRUTH_COM)
+            truth = (np.array([ts for ts, _ in msgs]) * 1e-9,
+                     np.array([[m.position.x, m.position.y, m.position.z] for _, m in msgs]))
+        if M.REFERENCE_COM_TOPIC in topics:
+            msgs = bag.read(M.REFERENCE_COM_TOPIC)
+            reference = (np.array([ts for ts, _ in msgs]) * 1e-9,
+                         np.array([[m.position.x, m.position.y, m.position.z] for _, m in msgs]),
+                         np.array([m.valid for _, m in msgs]))
+    num = lambda key: float(custom[key]) if key in custom else None  # noqa: E731
+    return Trial(t, names, pos, valid, plates, num("height_m"), num("body_mass_kg"), custom.get("sex", "male"),
+                 truth, reference)
+
+
+def standing_phase(result: ComResult, fraction: float = 0.95) -> np.ndarray:
+    """Frames after the rise: COM height within (1 - fraction) of its final rise, from the last time it got there."""
+    z = result.com_m[:, 2]
+    lo, hi = np.min(z), np.median(z[-max(5, len(z) // 10):])
+    thresh = lo + fraction * (hi - lo)
+    below = np.flatnonzero(z < thresh)
+    start = below[-1] + 1 if len(below) else 0
+    out = np.zeros(len(z), bool)
+    out[start:] = True
+    return out
+
+
+def evaluate(trial: Trial, result: ComResult) -> dict:
+    """Figures of merit: COP fit, and against the truth / the capture software's COM where present."""
+    out: dict = {
+        "frames": int(len(result.t_s)), "frames_fitted": int(result.fit_ok.sum()),
+        "frames_supported": int(result.supported.sum()),
+        "marker_rms_mm": float(np.nanmean(result.marker_rms_m) * 1e3),
+        "length_calibration_rms_mm": [result.length_rms_before_m * 1e3, result.length_rms_after_m * 1e3],
+        "cop_rms_unscaled_mm": result.scaling.cop_rms_before_m * 1e3,
+        "cop_rms_scaled_mm": result.scaling.cop_rms_after_m * 1e3,
+        "cop_within_2cm": bool(result.scaling.cop_rms_after_m <= 0.02),
+        "mass_factors": {k: round(v, 4) for k, v in result.scaling.factors().items()},
+        "torso_com_shift_mm": (result.scaling.torso_com_shift_m * 1e3).round(2).tolist(),
+        "segment_length_factors": {k: round(v, 4) for k, v in result.subject.lengths.items()},
+        "scaling_condition_number": result.scaling.condition_number,
+        "plate_gaps": [{"plate": p, "from_s": a, "to_s": b} for p, a, b in result.plate_gaps],
+        "body_mass_used_kg": result.subject.mass_kg,
+        "notes": result.notes,
+    }
+    if trial.truth is not None:
+        tt, com = trial.truth
+        truth = np.array([np.interp(result.t_s, tt, com[:, i]) for i in range(3)]).T
+        for name, est in (("scaled", result.com_m), ("unscaled", result.com_unscaled_m)):
+            err = est - truth
+            out[f"com_rms_vs_truth_{name}_mm"] = float(np.sqrt(np.mean(np.sum(err**2, axis=1))) * 1e3)
+            out[f"com_rms_vs_truth_{name}_xyz_mm"] = (np.sqrt(np.mean(err**2, axis=0)) * 1e3).round(2).tolist()
+    stand = standing_phase(result) & result.supported & np.all(np.isfinite(result.measured_cop_m), axis=1)
+    if stand.any():
+        d_ours = np.linalg.norm(result.com_m[stand, :2] - result.measured_cop_m[stand, :2], axis=1)
+        out["standing_frames"] = int(stand.sum())
+        out["standing_com_to_cop_mm"] = {"mean": float(d_ours.mean() * 1e3), "max": float(d_ours.max() * 1e3)}
+    if trial.reference is not None:
+        tr, ref, ok = trial.reference
+        refi = np.array([np.interp(result.t_s, tr[ok], ref[ok, i]) for i in range(3)]).T
+        out["com_rms_vs_reference_mm"] = float(np.sqrt(np.mean(np.sum((result.com_m - refi) ** 2, axis=1))) * 1e3)
+        if stand.any():
+            d_ref = np.linalg.norm(refi[stand, :2] - result.measured_cop_m[stand, :2], axis=1)
+            out["standing_reference_com_to_cop_mm"] = {"mean": float(d_ref.mean() * 1e3), "max": float(d_ref.max() * 1e3)}
+    return out
+
+
+def figure(trial: Trial, result: ComResult, png: Path, title: str) -> None:
+    """COM (forward and vertical) and the COPs against time, plus the sagittal COM path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = result.t_s - result.t_s[0]
+    fig, axes = plt.subplots(2, 2, figsize=(12, 7.5))
+    ax = axes[0, 0]
+    ax.plot(t, result.com_m[:, 0], label="COM x, scaled model", lw=2)
+    ax.plot(t, result.com_unscaled_m[:, 0], "--", label="COM x, average model")
+    ax.plot(t, result.measured_cop_m[:, 0], color="0.6", lw=0.8, label="measured COP x (all plates)")
+    ax.plot(t, result.model_cop_m[:, 0], ":", label="model COP x (scaled)")
+    ax = axes[1, 0]
+    ax.plot(t, result.com_m[:, 2], label="COM z, scaled model", lw=2)
+    ax.plot(t, result.com_unscaled_m[:, 2], "--", label="COM z, average model")
+    for key, data, style in (("truth", trial.truth, "k-"), ("capture software", trial.reference, "k-.")):
+        if data is not None:
+            tt = data[0] - result.t_s[0]
+            axes[0, 0].plot(tt, data[1][:, 0], style, lw=1, label=f"COM x, {key}")
+            axes[1, 0].plot(tt, data[1][:, 2], style, lw=1, label=f"COM z, {key}")
+            axes[0, 1].plot(data[1][:, 0], data[1][:, 2], style, lw=1, label=key)
+    axes[0, 1].plot(result.com_m[:, 0], result.com_m[:, 2], lw=2, label="scaled model")
+    axes[0, 1].plot(result.com_unscaled_m[:, 0], result.com_unscaled_m[:, 2], "--", label="average model")
+    axes[0, 1].set_xlabel("COM x (forward) [m]")
+    axes[0, 1].set_ylabel("COM z [m]")
+    axes[0, 1].set_title("sagittal COM path")
+    axes[0, 1].axis("equal")
+    err = np.linalg.norm(result.model_cop_m[:, :2] - result.measured_cop_m[:, :2], axis=1)
+    axes[1, 1].plot(t, err * 1e3, label="|model COP - measured COP| [mm]")
+    axes[1, 1].plot(t, result.marker_rms_m * 1e3, label="marker fit RMS [mm]")
+    axes[1, 1].fill_between(t, 0, np.where(result.supported, 5, np.nan), color="g", alpha=0.15,
+                            label="whole weight on plates")
+    axes[1, 1].set_ylim(0, max(40, np.nanpercentile(err * 1e3, 98) * 1.2 if np.isfinite(err).any() else 40))
+    for a, label in ((axes[0, 0], "forward [m]"), (axes[1, 0], "height [m]"), (axes[1, 1], "[mm]")):
+        a.set_xlabel("time [s]")
+        a.set_ylabel(label)
+    for a in axes.ravel():
+        a.grid(alpha=0.3)
+        a.legend(fontsize=7)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+
+
+def write_result_bag(result: ComResult, out: Path, joint_names: list[str]) -> None:
+    from ..io.typestore import typestore
+
+    store = typestore().types
+    with BagWriter(out) as bag:
+        bag.add_topic(HUMAN_COM_TOPIC, M.COM_TYPE)
+        bag.add_topic(HUMAN_MODEL_COP_TOPIC, "geometry_msgs/msg/PointStamped")
+        bag.add_topic(HUMAN_JOINTS_TOPIC, "sensor_msgs/msg/JointState")
+        bag.add_topic(HUMAN_SCALING_TOPIC, "sit2stand_msgs/msg/InertialParameters")
+        factors = result.scaling.factors()
+        t0 = int(round(result.t_s[0] * 1e9))
+        bag.write(HUMAN_SCALING_TOPIC, t0, store["sit2stand_msgs/msg/InertialParameters"](
+            header=M.header(t0), model="human_scaling",
+            names=[f"{g}.mass" for g in result.scaling.masses] + [f"{g}.length_factor" for g in result.subject.lengths]
+            + ["torso.com_shift_x"],
+            values=np.array(list(result.scaling.masses.values()) + list(result.subject.lengths.values())
+                            + [result.scaling.torso_com_shift_m[0]]),
+            std_devs=np.full(len(result.scaling.masses) + len(result.subject.lengths) + 1, np.nan), yaml_path=""))
+        for k, ts in enumerate(result.t_s):
+            t_ns = int(round(ts * 1e9))
+            bag.write(HUMAN_COM_TOPIC, t_ns, M.center_of_mass(
+                t_ns, result.com_m[k], result.com_vel[k], result.com_acc[k], source="skeleton_fit",
+                valid=bool(result.fit_ok[k]), marker_rms_m=float(result.marker_rms_m[k]),
+                cop_error_m=float(np.linalg.norm(result.model_cop_m[k, :2] - result.measured_cop_m[k, :2])),
+                n_markers=int(result.n_markers[k])))
+            p = store["geometry_msgs/msg/PointStamped"](header=M.header(t_ns), point=store["geometry_msgs/msg/Point"](
+                x=float(result.model_cop_m[k, 0]), y=float(result.model_cop_m[k, 1]), z=0.0))
+            bag.write(HUMAN_MODEL_COP_TOPIC, t_ns, p)
+            bag.write(HUMAN_JOINTS_TOPIC, t_ns, store["sensor_msgs/msg/JointState"](
+                header=M.header(t_ns, "pelvis"), name=["pelvis_x", "pelvis_y", "pelvis_z", "pelvis_qx", "pelvis_qy",
+                                                       "pelvis_qz", "pelvis_qw"] + joint_names,
+                position=result.q[k].astype(float), velocity=np.zeros(0), effort=np.zeros(0)))
+
+
+def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg: float | None = None,
+        sex: str | None = None, calibrate: bool = True, scale: bool = True, quiet: bool = False) -> dict:
+    """The whole offline job; returns the summary dict (also written to OUT/summary.json)."""
+    trial = read_trial(bag_path)
+    height = height_m or trial.height_m
+    mass = mass_kg or trial.mass_kg
+    if height is None or mass is None:
+        raise BagError(f"{bag_path}: the subject's {'height' if height is None else 'mass'} is not in the bag's "
+                       f"metadata; give --height/--mass")
+    subject = Subject(height, mass, sex or trial.sex)
+    chair = any(p["name"] == "chair" for p in trial.plates)
+
+    def progress(k: int, n: int) -> None:
+        if not quiet and (k == n or k % max(1, n // 10) == 0):
+            print(f"  fitted {k}/{n} frames", file=sys.stderr, flush=True)
+
+    if not quiet:
+        print(f"{bag_path}: {len(trial.marker_names)} markers x {len(trial.marker_t_s)} frames, plates "
+              f"{', '.join(p['name'] for p in trial.plates)}; subject {height:g} m, {mass:g} kg"
+              f"{'' if chair else ' (chair not on a plate: scaling uses frames after seat-off)'}", file=sys.stderr)
+    result = estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,
+                          subject, calibrate=calibrate, scale_masses=scale, chair_on_plate=chair, progress=progress,
+                          trust_plate_mass=mass_kg is None)
+    summary = {"bag": str(bag_path), "subject": {"height_m": height, "mass_kg": mass, "sex": subject.sex},
+               **evaluate(trial, result)}
+    for note in result.notes:
+        print(f"note: {note}", file=sys.stderr)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    figure(trial, result, out_dir / "human_com.png", f"Human COM: {Path(bag_path).name}")
+    from .skeleton import build_human
+
+    res_bag = out_dir / "human_com"
+    if res_bag.exists():
+        import shutil
+
+        shutil.rmtree(res_bag)
+    write_result_bag(result, res_bag, build_human(result.subject).joint_names())
+    return summary
