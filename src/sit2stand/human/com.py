@@ -74,6 +74,7 @@ class MarkerIK:
         self.q_ref = pin.neutral(self.model) if q_ref is None else q_ref.copy()
         self.lo, self.hi = self.model.lowerPositionLimit.copy(), self.model.upperPositionLimit.copy()
         self.q: np.ndarray | None = None
+        self._q_prev: np.ndarray | None = None
 
     def _marker_positions(self, q: np.ndarray) -> np.ndarray:
         pin.framesForwardKinematics(self.model, self.data, q)
@@ -95,15 +96,19 @@ class MarkerIK:
         return q
 
     def fit(self, positions_m: np.ndarray, valid: np.ndarray, q0: np.ndarray | None = None,
-            max_iter: int = 12, tol: float = 1e-6) -> FrameFit:
+            max_iter: int = 12, tol: float = 1e-5) -> FrameFit:
         """Fit one frame. ``positions_m``/``valid`` are in the stream's marker order (all names, as received)."""
         pos = np.asarray(positions_m, float)[self.stream_index]
         ok = np.asarray(valid, bool)[self.stream_index] & np.all(np.isfinite(pos), axis=1)
         n_ok = int(ok.sum())
         if n_ok < MIN_MARKERS or sum(ok[k] for k, n in enumerate(self.used_names) if n in PELVIS_MARKERS) < 3:
             return FrameFit(self.q if self.q is not None else self.q_ref, float("nan"), n_ok, 0, False)
+        if q0 is None and self.q is not None and self._q_prev is not None:
+            # constant-velocity prediction from the last two fits: fewer iterations when streaming
+            q0 = pin.integrate(self.model, self.q, pin.difference(self.model, self._q_prev, self.q))
         q = q0 if q0 is not None else (self.q if self.q is not None else self.initial_guess(pos, ok))
         q = q.copy()
+        q[7:] = np.clip(q[7:], self.lo[7:], self.hi[7:])
         model, data, nv = self.model, self.data, self.model.nv
         w_post = self.posture_weight
         it = 0
@@ -130,6 +135,7 @@ class MarkerIK:
             if np.max(np.abs(dq)) < tol:
                 break
         err = self._marker_positions(q)[ok] - pos[ok]
+        self._q_prev = self.q
         self.q = q
         return FrameFit(q, float(np.sqrt(np.mean(np.sum(err**2, axis=1)))), n_ok, it, True)
 
@@ -387,32 +393,48 @@ def static_rows(human: HumanModel, q: np.ndarray, cop_xy: np.ndarray, body_mass_
     return A, G * body_mass_kg * np.asarray(cop_xy, float)[:2]
 
 
-def scaling_rows(human: HumanModel, qs: np.ndarray, vs: np.ndarray, as_: np.ndarray, force_n: np.ndarray,
-                 moment_nm: np.ndarray, cop_m: np.ndarray, supported: np.ndarray, body_mass_kg: float,
-                 quasi_static_acc: float = 0.15, quiet_fraction: float = 0.4, force_sd_n: float = 5.0,
-                 moment_sd_nm: float = 2.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rows and weights of every supported frame: quasi-static frames give the world vertical-force row and COM
-    over COP; the others the six dynamic rows. Quasi-static: |a_com| below ``quasi_static_acc`` [m/s^2], or among
-    the quietest ``quiet_fraction`` of the supported frames (a short recording may never be quite still)."""
-    data = human.model.createData()
-    idx = np.flatnonzero(supported)
-    acc = np.zeros(len(idx))
-    for i, k in enumerate(idx):
-        pin.centerOfMass(human.model, data, qs[k], vs[k], as_[k])
-        acc[i] = np.linalg.norm(data.acom[0])
-    limit = max(quasi_static_acc, float(np.quantile(acc, quiet_fraction))) if len(acc) else quasi_static_acc
+@dataclass
+class FrameRows:
+    """One supported frame's equations: the six dynamic rows, the quasi-static alternative (world vertical force
+    and COM over COP), and the COM acceleration [m/s^2] that decides between them."""
+
+    acc: float
+    dynamic: tuple[np.ndarray, np.ndarray]
+    static: tuple[np.ndarray, np.ndarray] | None
+
+
+def frame_rows(human: HumanModel, q: np.ndarray, v: np.ndarray, a: np.ndarray, force_n: np.ndarray,
+               moment_nm: np.ndarray, cop_m: np.ndarray, body_mass_kg: float,
+               data: pin.Data | None = None) -> FrameRows:
+    """The equations of one supported frame (see :class:`FrameRows`)."""
+    data = data or human.model.createData()
+    A6, b6 = mass_scaling_rows(human, q, v, a, force_n, moment_nm, data)
+    pin.centerOfMass(human.model, data, q, v, a)
+    acc = float(np.linalg.norm(data.acom[0]))
+    static = None
+    if np.all(np.isfinite(cop_m)):
+        R = pin.Quaternion(q[3:7]).normalized().matrix()
+        As, bs = static_rows(human, q, cop_m, body_mass_kg, data)
+        static = (np.vstack([(R[2] @ A6[:3])[None, :], As]), np.concatenate([[R[2] @ b6[:3]], bs]))
+    return FrameRows(acc, (A6, b6), static)
+
+
+def assemble_rows(rows: list[FrameRows], quasi_static_acc: float = 0.15, quiet_fraction: float = 0.4,
+                  force_sd_n: float = 5.0, moment_sd_nm: float = 2.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stack frames' equations with weights. Quasi-static frames use the static alternative: |a_com| below
+    ``quasi_static_acc``, or among the quietest ``quiet_fraction`` of all the frames given (a short recording may
+    never be quite still)."""
+    accs = np.array([r.acc for r in rows])
+    limit = max(quasi_static_acc, float(np.quantile(accs, quiet_fraction))) if len(accs) else quasi_static_acc
     A_rows, b_rows, w_rows = [], [], []
-    for k, a_k in zip(idx, acc):
-        A6, b6 = mass_scaling_rows(human, qs[k], vs[k], as_[k], force_n[k], moment_nm[k], data)
-        if a_k <= limit and np.all(np.isfinite(cop_m[k])):
-            R = pin.Quaternion(qs[k][3:7]).normalized().matrix()
-            As, bs = static_rows(human, qs[k], cop_m[k], body_mass_kg, data)
-            A_rows += [(R[2] @ A6[:3])[None, :], As]
-            b_rows += [np.array([R[2] @ b6[:3]]), bs]
-            w_rows += [np.array([1 / force_sd_n]), np.full(2, 1 / moment_sd_nm)]
+    for r in rows:
+        if r.acc <= limit and r.static is not None:
+            A_rows.append(r.static[0])
+            b_rows.append(r.static[1])
+            w_rows.append(np.array([1 / force_sd_n, 1 / moment_sd_nm, 1 / moment_sd_nm]))
         else:
-            A_rows.append(A6)
-            b_rows.append(b6)
+            A_rows.append(r.dynamic[0])
+            b_rows.append(r.dynamic[1])
             w_rows.append(np.array([1 / force_sd_n] * 3 + [1 / moment_sd_nm] * 3))
     return np.vstack(A_rows), np.concatenate(b_rows), np.concatenate(w_rows)
 
@@ -424,7 +446,7 @@ def solve_mass_scaling(human: HumanModel, A: np.ndarray, b: np.ndarray, body_mas
     """Constrained least squares for the group masses and torso COM shift (rows stacked from many frames).
 
     ``weights`` (one per row) default to blocks of six dynamic rows: 1/force_sd_n for forces, 1/moment_sd_nm for
-    moments; :func:`scaling_rows` builds mixed dynamic / quasi-static rows with their weights.
+    moments; :func:`assemble_rows` builds mixed dynamic / quasi-static rows with their weights.
     """
     from ..optim import constrained_lsq
 
@@ -570,8 +592,9 @@ def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.
     com_unscaled, _, _, cop_unscaled = _model_series(human.model, qs, vs, as_)
 
     if scale_masses and supported.sum() >= 10:
-        A_rows, b_rows, w_rows = scaling_rows(human, qs, vs, as_, force, moment, measured_cop, supported,
-                                              subject.mass_kg, quasi_static_acc)
+        rows = [frame_rows(human, qs[k], vs[k], as_[k], force[k], moment[k], measured_cop[k], subject.mass_kg, data)
+                for k in np.flatnonzero(supported)]
+        A_rows, b_rows, w_rows = assemble_rows(rows, quasi_static_acc)
         scaling = solve_mass_scaling(human, A_rows, b_rows, subject.mass_kg, weights=w_rows)
         model = apply_scaling(human, scaling)
     else:
@@ -619,3 +642,239 @@ def _plate_gaps(times_s: np.ndarray, plates: list[dict], dt: float) -> list[tupl
             else:
                 k += 1
     return gaps
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# streaming (the node's core; pure, so it is tested without ROS)
+# ---------------------------------------------------------------------------------------------------------------
+
+@dataclass
+class StreamOutput:
+    """What one frame yields: the COM now, and, half a window later, the model COP of an earlier frame."""
+
+    t_s: float
+    valid: bool
+    q: np.ndarray
+    com_m: np.ndarray
+    com_vel: np.ndarray
+    com_acc: np.ndarray
+    marker_rms_m: float
+    n_markers: int
+    delayed_t_s: float | None = None
+    model_cop_m: np.ndarray | None = None
+    measured_cop_m: np.ndarray | None = None
+    rescaled: bool = False
+
+
+class StreamingComEstimator:
+    """Frame-by-frame COM estimation with calibration at the start and COP-matched scaling as data arrive.
+
+    ``add_plate_samples`` takes force-plate samples as they come; ``update`` takes one marker frame and returns a
+    :class:`StreamOutput`. The first ``calibration_frames`` valid frames calibrate segment lengths and marker
+    placements (one pause of ~1-2 s, after which queued frames are processed at the normal rate). The COM
+    velocity/acceleration published are from a causal Savitzky-Golay fit over the last ``window`` frames; the
+    scaling uses the centred fit of the frame ``window // 2`` back, as the offline estimator does.
+    """
+
+    def __init__(self, subject: Subject, marker_names: list[str], *, rate_hz: float = 100.0, window: int = 31,
+                 calibration_frames: int = 50, rescale_every: int = 100, chair_on_plate: bool = True,
+                 min_frames_to_scale: int = 30) -> None:
+        self.subject = subject
+        self.marker_names = list(marker_names)
+        self.dt = 1.0 / rate_hz
+        self.window = window | 1
+        self.calibration_frames = calibration_frames
+        self.rescale_every = rescale_every
+        self.chair_on_plate = chair_on_plate
+        self.min_frames_to_scale = min_frames_to_scale
+        self.human = build_human(subject)
+        self.ik = MarkerIK(self.human, self.marker_names)   # raises TooFewMarkers early
+        self.model = self.human.model
+        self.data = self.model.createData()
+        self.calibrated = calibration_frames <= 0
+        self._calib: list[tuple[np.ndarray, np.ndarray]] = []
+        self._t: list[float] = []
+        self._q: list[np.ndarray] = []
+        self._plates: dict[str, dict[str, list]] = {}
+        self.rows: list[FrameRows] = []
+        self._x: list[np.ndarray] = []       # tangent coordinates of each frame (see smooth_motion)
+        self._R0: np.ndarray | None = None
+        self.scaling: MassScaling | None = None
+        self.scaled_model = self.model
+        self.scaled_data = self.model.createData()
+        self.frames = 0
+        self.plate_gaps: dict[str, int] = {}
+        self._seat_off_seen = chair_on_plate
+        self._coeffs: dict[tuple[int, int], list[np.ndarray]] = {}
+        self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+
+    # -- inputs ------------------------------------------------------------------------------------------------
+    def expect_plate(self, name: str) -> None:
+        """Declare a plate that must have data for a frame to count (before its first sample arrives)."""
+        self._plates.setdefault(name, {"data": np.empty((4096, 7)), "n": 0})
+
+    def add_plate_samples(self, name: str, t_s: np.ndarray, force_n: np.ndarray, moment_nm: np.ndarray) -> None:
+        """Append force-plate samples (times [s], force [N] and moment about the lab origin [N m], (K, 3))."""
+        t = np.atleast_1d(np.asarray(t_s, float))
+        rows = np.hstack([t[:, None], np.atleast_2d(force_n), np.atleast_2d(moment_nm)])
+        buf = self._plates.get(name)
+        if buf is None:
+            buf = self._plates[name] = {"data": np.empty((max(4096, 2 * len(rows)), 7)), "n": 0}
+        n = buf["n"]
+        if n + len(rows) > len(buf["data"]):
+            t_min = (self._t[-1] if self._t else t[0]) - 2.0      # keep ~2 s behind the newest marker frame
+            keep = buf["data"][:n][buf["data"][:n, 0] > t_min]
+            size = max(len(buf["data"]), 2 * (len(keep) + len(rows)))
+            buf["data"] = np.vstack([keep, np.empty((size - len(keep), 7))])
+            n = buf["n"] = len(keep)
+        buf["data"][n:n + len(rows)] = rows
+        buf["n"] = n + len(rows)
+
+    def update(self, t_s: float, positions_m: np.ndarray, valid: np.ndarray) -> StreamOutput:
+        if not self.calibrated:
+            if np.sum(valid) >= MIN_MARKERS + 4:
+                self._calib.append((np.asarray(positions_m, float).copy(), np.asarray(valid, bool).copy()))
+            if len(self._calib) >= self.calibration_frames:
+                self._calibrate()
+        fit = self.ik.fit(positions_m, valid)
+        self.frames += 1
+        if not fit.ok and not self._q:
+            nan3 = np.full(3, np.nan)
+            return StreamOutput(t_s, False, fit.q, nan3, nan3, nan3, fit.rms_m, fit.n_markers)
+        q = fit.q if fit.ok else self._q[-1]
+        self._t.append(t_s)
+        self._q.append(q.copy())
+        self._x.append(self._coords(q))
+        keep = 2 * self.window
+        if len(self._q) > keep:
+            del self._t[:-keep], self._q[:-keep], self._x[:-keep]
+        com, vcom, acom = self._causal_com()
+        out = StreamOutput(t_s, fit.ok, q, com, vcom, acom, fit.rms_m, fit.n_markers)
+        self._delayed(out)
+        return out
+
+    # -- internals ----------------------------------------------------------------------------------------------
+    def _calibrate(self) -> None:
+        pos = np.array([p for p, _ in self._calib])
+        val = np.array([v for _, v in self._calib])
+        subject, _, _ = calibrate_lengths(self.subject, self.marker_names, pos, val, n_frames=8, max_nfev=40)
+        human = build_human(subject)
+        calibrate_markers(human, self.marker_names, pos, val, iterations=2, stride=max(1, len(pos) // 15))
+        self.subject, self.human, self.model = subject, human, human.model
+        self.data = self.model.createData()
+        q_prev = self.ik.q
+        self.ik = MarkerIK(human, self.marker_names)
+        self.ik.q = q_prev
+        self.scaled_model, self.scaled_data = self.model, self.model.createData()
+        self._q.clear()
+        self._t.clear()
+        self._x.clear()
+        self.calibrated = True
+
+    def _coords(self, q: np.ndarray) -> np.ndarray:
+        """Decoupled coordinates of smooth_motion: base position, base rotation vector about R0, joint angles."""
+        R = pin.Quaternion(q[3:7]).normalized().matrix()
+        if self._R0 is None:
+            self._R0 = R
+        return np.concatenate([q[:3], pin.log3(self._R0.T @ R), q[7:]])
+
+    def _derivatives_at(self, pos: int, length: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, v, a of the window's sample ``pos`` from a Savitzky-Golay fit of the last ``length`` frames."""
+        from scipy.signal import savgol_coeffs
+
+        key = (pos, length)
+        if key not in self._coeffs:
+            order = min(4, length - 2)
+            self._coeffs[key] = [savgol_coeffs(length, order, deriv=d, pos=pos, use="dot") / self.dt**d
+                                 for d in (0, 1, 2)]
+        X = np.array(self._x[-length:])
+        xs, xd, xdd = (c @ X for c in self._coeffs[key])
+        r, rd, rdd = xs[3:6], xd[3:6], xdd[3:6]
+        R = self._R0 @ pin.exp3(r)
+        q = np.concatenate([xs[:3], pin.Quaternion(R).coeffs(), xs[6:]])
+        Jr = pin.Jexp3(r)
+        h = 1e-4
+        dJr = (pin.Jexp3(r + h * rd) - pin.Jexp3(r - h * rd)) / (2 * h)
+        w = Jr @ rd
+        v_lin = R.T @ xd[:3]
+        v = np.concatenate([v_lin, w, xd[6:]])
+        a = np.concatenate([R.T @ xdd[:3] - np.cross(w, v_lin), Jr @ rdd + dJr @ rd, xdd[6:]])
+        return q, v, a
+
+    def _causal_com(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        n = len(self._x)
+        if n < 7:
+            pin.centerOfMass(self.scaled_model, self.scaled_data, self._q[-1])
+            return self.scaled_data.com[0].copy(), np.zeros(3), np.zeros(3)
+        length = min(self.window, n - (1 - n % 2))
+        q, v, a = self._derivatives_at(length - 1, length)
+        pin.centerOfMass(self.scaled_model, self.scaled_data, self._q[-1], v, a)
+        return self.scaled_data.com[0].copy(), self.scaled_data.vcom[0].copy(), self.scaled_data.acom[0].copy()
+
+    def _delayed(self, out: StreamOutput) -> None:
+        """Queue the frame half a window back (its centred derivatives are known now) and process every queued
+        frame whose plate samples have all arrived (plates may lag the markers on a busy executor)."""
+        n, half = len(self._x), self.window // 2
+        if n >= self.window and self.calibrated:
+            q_k, v_k, a_k = self._derivatives_at(half, self.window)
+            times = np.array(self._t[-self.window:])
+            self._pending.append((times, q_k, v_k, a_k))
+        while self._pending:
+            times, q_k, v_k, a_k = self._pending[0]
+            t_k = times[len(times) // 2]
+            newest = min((b["data"][b["n"] - 1, 0] if b["n"] else -np.inf for b in self._plates.values()),
+                         default=-np.inf)
+            if newest < times[-1] + self.dt / 2 and self._t[-1] - t_k < 0.5 and self._plates:
+                break                      # plate samples for this window not all here yet
+            self._pending.pop(0)
+            self._process(out, times, q_k, v_k, a_k)
+
+    def _process(self, out: StreamOutput, times: np.ndarray, q_k: np.ndarray, v_k: np.ndarray,
+                 a_k: np.ndarray) -> None:
+        t_k = times[len(times) // 2]
+        force, moment, covered = self._plate_wrench(times)
+        com, _, _, cop_model = model_cop(self.scaled_model, self.scaled_data, q_k, v_k, a_k)
+        out.delayed_t_s = t_k
+        out.model_cop_m = cop_model
+        if not covered:
+            return
+        cop, ok, _ = center_of_pressure(force, moment, np.zeros(3), np.array([0.0, 0.0, 1.0]), threshold_n=1.0)
+        out.measured_cop_m = cop if ok else None
+        weight = self.subject.mass_kg * G
+        if not self._seat_off_seen and force[2] >= 0.9 * weight:
+            self._seat_off_seen = True
+        if not (self._seat_off_seen and 0.3 * weight < force[2] < 3.0 * weight) or not ok:
+            return
+        self.rows.append(frame_rows(self.human, q_k, v_k, a_k, force, moment, cop, self.subject.mass_kg, self.data))
+        if len(self.rows) >= self.min_frames_to_scale and len(self.rows) % self.rescale_every == 0:
+            self.rescale()
+            out.rescaled = True
+
+    def rescale(self) -> MassScaling | None:
+        """Solve the scaling from all rows so far and switch the COM model to it."""
+        if len(self.rows) < self.min_frames_to_scale:
+            return None
+        A, b, w = assemble_rows(self.rows)
+        self.scaling = solve_mass_scaling(self.human, A, b, self.subject.mass_kg, weights=w)
+        self.scaled_model = apply_scaling(self.human, self.scaling)
+        self.scaled_data = self.scaled_model.createData()
+        return self.scaling
+
+    def _plate_wrench(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Summed plate wrench at the centre of the window's marker ``times``, smoothed by the same centred
+        Savitzky-Golay fit as the kinematics; covered is False if a plate has no sample there."""
+        plates = [{"name": name, "t_s": b["data"][:b["n"], 0], "force_n": b["data"][:b["n"], 1:4],
+                   "moment_nm": b["data"][:b["n"], 4:7]} for name, b in self._plates.items()]
+        if not plates:
+            return np.zeros(3), np.zeros(3), False
+        force, moment, covered = plate_wrench_at(times, plates, self.dt / 2)
+        centre = len(times) // 2
+        if not covered[centre]:
+            for p in plates:
+                if not plate_wrench_at(times[centre:centre + 1], [p], self.dt / 2)[2][0]:
+                    self.plate_gaps[p["name"]] = self.plate_gaps.get(p["name"], 0) + 1
+            return force[centre], moment[centre], False
+        if covered.all():
+            c = self._coeffs[(centre, len(times))][0]
+            return c @ force, c @ moment, True
+        return force[centre], moment[centre], True

@@ -25,7 +25,7 @@ from pathlib import Path
 from rclpy.node import Node
 
 from ..io.bag import BagError, BagWriter
-from .runtime import NodeError, declare, message_class, node_main, qos_matching_publishers, qos_to_bag
+from .runtime import IdleDrain, NodeError, declare, message_class, node_main, qos_matching_publishers, qos_to_bag
 
 DEFAULT_EXCLUDE = r"^/rosout$|^/parameter_events$"
 
@@ -64,6 +64,8 @@ class Recorder(Node):
         self.create_timer(discovery_period, self._discover)
         self.create_timer(flush_period, self.writer.flush)
         self.create_timer(5.0, self._log_counts)
+        # after SIGINT/SIGTERM, take what DDS already delivered (a publisher that just finished expects it on disk)
+        self.drain = IdleDrain(lambda: sum(self.writer.counts.values()))
         what = ["all topics"] if self.record_all else ([", ".join(sorted(self.topics))] if self.topics else []) + \
             ([f"topics matching /{regex}/"] if regex else [])
         self.get_logger().info(f"recording to {self.output} ({' and '.join(what)})")
@@ -100,15 +102,6 @@ class Recorder(Node):
 
     def _on_message(self, topic: str, data: bytes) -> None:
         self.writer.write_raw(topic, self.get_clock().now().nanoseconds, data)
-
-    def drain(self) -> bool:
-        """After SIGINT/SIGTERM: keep taking messages until none arrived for 0.3 s (DDS may hold acknowledged,
-        not yet taken samples; a publisher that just finished expects them on disk)."""
-        now = time.monotonic()
-        total = sum(self.writer.counts.values())
-        if total != getattr(self, "_drain_total", None):
-            self._drain_total, self._drain_since = total, now
-        return now - self._drain_since < 0.3
 
     def _log_counts(self) -> None:
         counts = ", ".join(f"{t}: {n}" for t, n in sorted(self.writer.counts.items()))

@@ -11,6 +11,7 @@ Parameters:
     publish_clock (bool, true)   publish rosgraph_msgs/Clock on /clock at clock_rate_hz of bag time.
     clock_rate_hz (float, 100)
     wait_for_subscribers (int, 0)  before playing, wait until every topic has this many subscribers ...
+    wait_for (str[], [])         ... or, instead, until each listed "TOPIC:COUNT" has COUNT subscribers ...
     wait_timeout_s (float, 10)   ... or this long (then play anyway, with a warning).
     delay_s (float, 0)           extra wait before the first message.
     skip_unknown_types (bool, false)  skip topics whose type has no Python class here, instead of failing.
@@ -60,6 +61,7 @@ class Replayer(Node):
         self.publish_clock = declare(self, "publish_clock", True, "publish /clock")
         self.clock_period_ns = int(1e9 / max(1e-3, declare(self, "clock_rate_hz", 100.0, "/clock rate [Hz]")))
         self.wait_for_subscribers = declare(self, "wait_for_subscribers", 0, "subscribers per topic to wait for")
+        self.wait_for = declare(self, "wait_for", [], "TOPIC:COUNT entries: wait for these instead of every topic")
         self.wait_timeout_s = declare(self, "wait_timeout_s", 10.0, "longest wait for subscribers [s]")
         self.delay_s = declare(self, "delay_s", 0.0, "wait before the first message [s]")
         start_paused = declare(self, "start_paused", False, "wait for ~/pause false before playing")
@@ -143,16 +145,24 @@ class Replayer(Node):
 
     # --- playback thread ---------------------------------------------------------------------------------------
     def _wait_for_subscribers(self) -> None:
-        if self.wait_for_subscribers <= 0:
+        wanted = {}
+        for entry in self.wait_for:
+            topic, _, count = entry.rpartition(":")
+            if topic not in self.pubs or not count.isdigit():
+                raise NodeError(f"parameter wait_for: {entry!r} is not TOPIC:COUNT of a played topic")
+            wanted[topic] = int(count)
+        if not wanted and self.wait_for_subscribers > 0:
+            wanted = {t: self.wait_for_subscribers for t in self.pubs}
+        if not wanted:
             return
         deadline = time.monotonic() + self.wait_timeout_s
         while not self._stop.is_set():
-            short = [t for t, pub in self.pubs.items() if pub.get_subscription_count() < self.wait_for_subscribers]
+            short = [t for t, n in wanted.items() if self.pubs[t].get_subscription_count() < n]
             if not short:
                 return
             if time.monotonic() > deadline:
-                self.get_logger().warning(f"playing without {self.wait_for_subscribers} subscriber(s) on "
-                                          f"{', '.join(short)} after {self.wait_timeout_s:g} s")
+                self.get_logger().warning(f"playing without the awaited subscribers on {', '.join(short)} after "
+                                          f"{self.wait_timeout_s:g} s")
                 return
             time.sleep(0.02)
 

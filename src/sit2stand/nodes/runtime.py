@@ -124,6 +124,21 @@ def qos_matching_publishers(node: Node, topic: str, keep_all: bool = True, depth
         durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)
 
 
+class IdleDrain:
+    """A node's ``drain()`` after a signal: keep spinning until ``count()`` has not changed for ``idle_s``."""
+
+    def __init__(self, count: Callable[[], int], idle_s: float = 0.3) -> None:
+        self.count, self.idle_s = count, idle_s
+        self._last: int | None = None
+        self._since = 0.0
+
+    def __call__(self) -> bool:
+        now, n = time.monotonic(), self.count()
+        if n != self._last:
+            self._last, self._since = n, now
+        return now - self._since < self.idle_s
+
+
 def _make_executor(kind: str):
     """SingleThreadedExecutor, or rclpy's EventsExecutor (about 3x the message rate in one process; never publish
     from another thread while it spins: that was seen to deadlock)."""

@@ -1,0 +1,198 @@
+"""Human COM estimator node: markers + force plates in, the human centre of mass out, per frame.
+
+Subscribes ``/mocap/markers`` (sit2stand_msgs/MocapFrame) and every ``/force_plate/*`` topic
+(sit2stand_msgs/ForcePlateSample, discovered as they appear). Publishes, per marker frame:
+
+* ``/human/com`` (sit2stand_msgs/CenterOfMass): position now; velocity and acceleration from a causal fit;
+  ``valid`` false (last estimate repeated) on frames with too few markers;
+* ``/human/joint_states`` (sensor_msgs/JointState): the fitted skeleton (pelvis pose as pelvis_* entries);
+* ``/human/model_cop`` and ``/human/measured_cop`` (geometry_msgs/PointStamped), half a window (~150 ms) behind;
+* ``/human/scaling`` (sit2stand_msgs/InertialParameters, transient local): the segment masses it chose, each
+  time it re-solves them (every ``rescale_every`` frames with plate data).
+
+Parameters: ``height_m``, ``mass_kg``, ``sex`` (the subject), ``rate_hz`` (marker rate, 100), ``window`` (31
+frames), ``calibration_frames`` (50: length and marker calibration from the first frames), ``rescale_every`` (100),
+``chair_on_plate`` (true: every frame with the whole weight on plates is used; false: only after seat-off),
+``plates`` (names of the plates to expect, e.g. [chair, feet]: frames count only when all have data; default:
+the plates that appear).
+The per-frame cost is logged on exit (p50/p99) and on ``~/stats`` (diagnostic_msgs/DiagnosticStatus) every 2 s.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PointStamped
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, InertialParameters, MocapFrame
+
+from ..human.com import StreamingComEstimator, TooFewMarkers
+from ..human.skeleton import Subject
+from ..io.messages import FORCE_PLATE_PREFIX, MARKERS_TOPIC, stamp_ns
+from .runtime import IdleDrain, NodeError, declare, node_main
+
+ROOT_NAMES = ["pelvis_x", "pelvis_y", "pelvis_z", "pelvis_qx", "pelvis_qy", "pelvis_qz", "pelvis_qw"]
+
+
+class HumanComNode(Node):
+    """Streams the human COM (see the module docstring)."""
+
+    executor_kind = "events"  # publishes only from its own callbacks: the fast executor is safe here
+
+    def __init__(self) -> None:
+        super().__init__("human_com")
+        self.subject = Subject(declare(self, "height_m", 1.75, "stature [m]"),
+                               declare(self, "mass_kg", 75.0, "body mass [kg]"),
+                               declare(self, "sex", "male", "male | female"))
+        self.rate_hz = declare(self, "rate_hz", 100.0, "marker rate [Hz]")
+        self.window = declare(self, "window", 31, "Savitzky-Golay window [frames]")
+        self.calibration_frames = declare(self, "calibration_frames", 50, "frames used to calibrate the model")
+        self.rescale_every = declare(self, "rescale_every", 100, "re-solve the masses every N frames with plates")
+        self.chair_on_plate = declare(self, "chair_on_plate", True, "the chair stands on a force plate")
+        self.expected_plates = declare(self, "plates", [], "plate names to expect (default: whatever appears)")
+        deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
+        self.create_subscription(MocapFrame, MARKERS_TOPIC, self._on_markers, deep)
+        self.com_pub = self.create_publisher(CenterOfMass, "/human/com", 100)
+        self.joint_pub = self.create_publisher(JointState, "/human/joint_states", 100)
+        self.model_cop_pub = self.create_publisher(PointStamped, "/human/model_cop", 100)
+        self.measured_cop_pub = self.create_publisher(PointStamped, "/human/measured_cop", 100)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.scaling_pub = self.create_publisher(InertialParameters, "/human/scaling", latched)
+        self.stats_pub = self.create_publisher(DiagnosticStatus, "~/stats", 10)
+        self.plate_subs: dict[str, object] = {}
+        self._pending_plates: list = []
+        self.estimator: StreamingComEstimator | None = None
+        self.costs: list[float] = []
+        self.skipped = 0
+        self.last_com: np.ndarray | None = None
+        self.finished = False
+        self.exit_code = 0
+        self.drain = IdleDrain(lambda: len(self.costs))   # after a signal, finish the frames already received
+        self.create_timer(0.5, self._discover_plates)
+        self.create_timer(2.0, self._report)
+        self._discover_plates()
+        self.get_logger().info(f"human COM estimator for a {self.subject.height_m:g} m, {self.subject.mass_kg:g} kg "
+                               f"{self.subject.sex}; waiting for {MARKERS_TOPIC}")
+
+    def _discover_plates(self) -> None:
+        for topic, types in self.get_topic_names_and_types():
+            if topic.startswith(FORCE_PLATE_PREFIX) and topic not in self.plate_subs and \
+                    "sit2stand_msgs/msg/ForcePlateSample" in types:
+                name = topic[len(FORCE_PLATE_PREFIX):]
+                qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000, reliability=ReliabilityPolicy.RELIABLE)
+                self.plate_subs[topic] = self.create_subscription(
+                    ForcePlateSample, topic, lambda msg, n=name: self._on_plate(n, msg), qos)
+                self.get_logger().info(f"using force plate {topic}")
+
+    def _on_plate(self, name: str, msg: ForcePlateSample) -> None:
+        if self.estimator is None:
+            self._pending_plates.append((name, msg))
+            return
+        self._add_plate(name, msg)
+
+    def _add_plate(self, name: str, msg: ForcePlateSample) -> None:
+        f, m = msg.wrench.force, msg.wrench.torque
+        self.estimator.add_plate_samples(name, stamp_ns(msg.header) * 1e-9, np.array([[f.x, f.y, f.z]]),
+                                         np.array([[m.x, m.y, m.z]]))
+
+    def _on_markers(self, msg: MocapFrame) -> None:
+        t0 = time.perf_counter()
+        names = list(msg.marker_names)
+        if self.estimator is None:
+            try:
+                self.estimator = StreamingComEstimator(
+                    self.subject, names, rate_hz=self.rate_hz, window=self.window,
+                    calibration_frames=self.calibration_frames, rescale_every=self.rescale_every,
+                    chair_on_plate=self.chair_on_plate)
+                for name in self.expected_plates:
+                    self.estimator.expect_plate(name)
+            except TooFewMarkers as err:
+                self.get_logger().error(f"{MARKERS_TOPIC}: {err}")
+                self.exit_code, self.finished = 2, True
+                return
+            for name, pmsg in self._pending_plates:
+                self._add_plate(name, pmsg)
+            self._pending_plates.clear()
+            self.names = names
+        pos = np.array([[p.x, p.y, p.z] for p in msg.positions], float).reshape(-1, 3)
+        valid = np.asarray(msg.valid, bool)
+        if names != self.names:  # a frame with another marker order: map by name
+            pos_m, valid_m = np.full((len(self.names), 3), np.nan), np.zeros(len(self.names), bool)
+            for j, n in enumerate(names):
+                if n in self.names:
+                    pos_m[self.names.index(n)], valid_m[self.names.index(n)] = pos[j], valid[j]
+            pos, valid = pos_m, valid_m
+        t_s = stamp_ns(msg.header) * 1e-9
+        out = self.estimator.update(t_s, pos, valid)
+        if not out.valid:
+            self.skipped += 1
+        self._publish(msg.header, out)
+        self.costs.append(time.perf_counter() - t0)
+
+    def _publish(self, header, out) -> None:
+        com_msg = CenterOfMass(header=header, source="skeleton_fit", valid=bool(out.valid),
+                               marker_rms_m=float(out.marker_rms_m), n_markers=int(out.n_markers),
+                               cop_error_m=float("nan"))
+        com = out.com_m if np.all(np.isfinite(out.com_m)) else (self.last_com if self.last_com is not None else None)
+        if com is not None:
+            com_msg.position.x, com_msg.position.y, com_msg.position.z = map(float, com)
+            if out.valid:
+                self.last_com = com
+                (com_msg.velocity.x, com_msg.velocity.y, com_msg.velocity.z) = map(float, out.com_vel)
+                (com_msg.acceleration.x, com_msg.acceleration.y, com_msg.acceleration.z) = map(float, out.com_acc)
+        if out.model_cop_m is not None and out.measured_cop_m is not None:
+            com_msg.cop_error_m = float(np.linalg.norm(out.model_cop_m[:2] - out.measured_cop_m[:2]))
+        self.com_pub.publish(com_msg)
+        js = JointState(header=header, name=ROOT_NAMES + self.estimator.human.joint_names(),
+                        position=[float(x) for x in out.q])
+        js.header.frame_id = "pelvis"
+        self.joint_pub.publish(js)
+        for pub, cop in ((self.model_cop_pub, out.model_cop_m), (self.measured_cop_pub, out.measured_cop_m)):
+            if cop is not None and out.delayed_t_s is not None:
+                p = PointStamped()
+                p.header.frame_id = header.frame_id
+                p.header.stamp.sec, p.header.stamp.nanosec = divmod(int(round(out.delayed_t_s * 1e9)), 1_000_000_000)
+                p.point.x, p.point.y = float(cop[0]), float(cop[1])
+                pub.publish(p)
+        if out.rescaled and self.estimator.scaling is not None:
+            sc = self.estimator.scaling
+            names = [f"{g}.mass" for g in sc.masses] + ["torso.com_shift_x", "torso.com_shift_y"]
+            values = list(sc.masses.values()) + [float(sc.torso_com_shift_m[0]), float(sc.torso_com_shift_m[1])]
+            self.scaling_pub.publish(InertialParameters(header=header, model="human_scaling", names=names,
+                                                        values=[float(v) for v in values],
+                                                        std_devs=[float("nan")] * len(values)))
+            self.get_logger().info("scaling: " + ", ".join(f"{g} x{f:.2f}" for g, f in sc.factors().items()))
+
+    def _stats(self) -> dict[str, str]:
+        c = np.array(self.costs[-2000:]) * 1e3
+        gaps = self.estimator.plate_gaps if self.estimator else {}
+        return {"frames": str(len(self.costs)), "skipped_frames": str(self.skipped),
+                "cost_p50_ms": f"{np.percentile(c, 50):.3f}" if len(c) else "nan",
+                "cost_p99_ms": f"{np.percentile(c, 99):.3f}" if len(c) else "nan",
+                "plate_dropouts": ", ".join(f"{k}: {v} frames" for k, v in gaps.items()) or "none"}
+
+    def _report(self) -> None:
+        stats = self._stats()
+        status = DiagnosticStatus(level=DiagnosticStatus.OK if stats["plate_dropouts"] == "none" else
+                                  DiagnosticStatus.WARN, name=self.get_fully_qualified_name(),
+                                  message=f"{stats['frames']} frames")
+        status.values = [KeyValue(key=k, value=v) for k, v in stats.items()]
+        self.stats_pub.publish(status)
+        if stats["plate_dropouts"] != "none":
+            self.get_logger().warning(f"force plate without samples for some frames: {stats['plate_dropouts']}")
+
+    def close(self) -> None:
+        stats = self._stats()
+        print(f"[human_com] {stats['frames']} frames, {stats['skipped_frames']} skipped (too few markers), per-frame "
+              f"cost p50 {stats['cost_p50_ms']} ms p99 {stats['cost_p99_ms']} ms; plate dropouts: "
+              f"{stats['plate_dropouts']}", flush=True)
+
+
+main = node_main(HumanComNode)
+
+if __name__ == "__main__":
+    raise SystemExit(main())
