@@ -264,10 +264,10 @@ def synthesize(cfg: SynthConfig) -> Demonstration:
     # velocities and accelerations by central differences (Pinocchio's tangent space)
     n = len(t)
     v = np.zeros((n, model.nv))
-    for k in range(1, n - 1):
-        v[k] = pin.difference(model, q[k - 1], q[k + 1]) / (2 * dt)
-    a = np.zeros_like(v)
-    a[1:-1] = (v[2:] - v[:-2]) / (2 * dt)
+    for k in range(n):
+        lo, hi = max(k - 1, 0), min(k + 1, n - 1)     # one-sided at the ends
+        v[k] = pin.difference(model, q[lo], q[hi]) / ((hi - lo) * dt)
+    a = np.gradient(v, dt, axis=0)
     com = np.zeros((n, 3))
     vcom = np.zeros((n, 3))
     acom = np.zeros((n, 3))
@@ -295,7 +295,7 @@ def synthesize(cfg: SynthConfig) -> Demonstration:
     with np.errstate(divide="ignore", invalid="ignore"):
         x_seat = (seat * f_c[:, 0] - x_feet * (force[:, 2] - f_c[:, 2]) - moment_o[:, 1]) / f_c[:, 2]
     x_seat = np.clip(np.nan_to_num(x_seat, nan=0.0), hx - 0.12 * H / REFERENCE_STATURE_M,
-                     hx + 0.2 * H / REFERENCE_STATURE_M)
+                     hx + 0.15 * H / REFERENCE_STATURE_M)
     seat_point = np.stack([x_seat, np.zeros(n), np.full(n, seat)], axis=1)
     f_chair = alpha[:, None] * force
     m_chair = np.cross(seat_point, f_chair)
@@ -303,8 +303,8 @@ def synthesize(cfg: SynthConfig) -> Demonstration:
 
     # plates: chair plate under the seat, feet plate under the feet, both on the floor
     scale = H / REFERENCE_STATURE_M
-    chair_plate = _rect(np.array([hip0[0] - 0.08 * scale, 0.0, 0.0]), 0.2 * scale, 0.25 * scale)
-    feet_plate = _rect(np.array([0.07 * scale, 0.0, 0.0]), 0.2 * scale, 0.25 * scale)
+    chair_plate = _rect(np.array([hip0[0] - 0.02 * scale, 0.0, 0.0]), 0.22 * scale, 0.25 * scale)
+    feet_plate = _rect(np.array([0.09 * scale, 0.0, 0.0]), 0.18 * scale, 0.25 * scale)
     if chair_plate[:, 0].max() >= feet_plate[:, 0].min():
         raise ValueError("chair and feet plates overlap; raise the seat or shorten the thighs")
     noise = lambda shape, sd: rng.normal(0.0, sd, shape)  # noqa: E731

@@ -1,0 +1,59 @@
+"""Graph tests of the human COM estimator: replayer -> human_com -> recorder, real processes over DDS."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import GRAPHS
+from sit2stand.human.synth import SynthConfig, synthesize, write_demonstration_bag
+from sit2stand.io import messages as M
+from sit2stand.io.bag import BagReader, BagWriter
+
+pytestmark = pytest.mark.graph
+
+
+def series(bag, topic):
+    msgs = bag.read(topic)
+    t = np.array([M.stamp_ns(m.header) for _, m in msgs]) * 1e-9
+    return t, np.array([[m.position.x, m.position.y, m.position.z] for _, m in msgs]), msgs
+
+
+def test_live_human_com_in_a_graph(tmp_path, ros_env):
+    demo = synthesize(SynthConfig(style="natural", seed=6, stand_after_s=0.8))
+    write_demonstration_bag(demo, tmp_path / "demo")
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(GRAPHS / "human_com.yaml"), f"bag:={tmp_path / 'demo'}",
+           f"out:={out}", "height:=1.75", f"mass:={demo.human.total_mass:.3f}"]
+    result = subprocess.run(cmd, env=ros_env, capture_output=True, text=True, timeout=180)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    assert "per-frame cost p50" in result.stdout
+    with BagReader(out) as bag:
+        t, com, msgs = series(bag, "/human/com")
+        tg, truth, _ = series(bag, "/ground_truth/com")
+        assert len(msgs) == len(demo.marker_t_s), "one COM per marker frame"
+        assert all(m.source == "skeleton_fit" for _, m in msgs)
+        truth_i = np.array([np.interp(t, tg, truth[:, i]) for i in range(3)]).T
+        err = np.linalg.norm(com - truth_i, axis=1)
+        assert np.mean(err[t - t[0] > 1.0]) < 0.02, f"live COM error {np.mean(err) * 1e3:.1f} mm"
+        assert bag.topics()["/human/scaling"].count >= 1
+        assert bag.topics()["/human/joint_states"].count == len(msgs)
+        # the model COP starts after the 50 calibration frames and lags half a 31-frame window
+        assert bag.topics()["/human/model_cop"].count >= len(msgs) - 50 - 31
+
+
+def test_too_few_markers_stop_the_node_with_a_clear_error(tmp_path, ros_env, run_node):
+    with BagWriter(tmp_path / "few") as bag:
+        bag.add_topic(M.MARKERS_TOPIC, M.MOCAP_TYPE)
+        for k in range(50):
+            t = 10_000_000_000 + k * 10_000_000
+            bag.write(M.MARKERS_TOPIC, t, M.mocap_frame(t, ["LASI", "RASI", "LPSI", "FOO", "BAR"], np.ones((5, 3)),
+                                                        np.ones(5, bool)))
+    node = run_node("sit2stand.nodes.human_com")
+    assert node.wait_for_output("waiting for", 20)
+    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={tmp_path / 'few'}",
+                    "-p", "wait_for_subscribers:=1")
+    assert node.wait(60) == 2, node.output
+    assert "/mocap/markers" in node.output and "at least 8 are needed" in node.output
+    play.stop()

@@ -1,0 +1,111 @@
+"""sit2stand.human.com: COM from markers and plates, with COP-matched scaling, against the synthetic ground truth."""
+
+import numpy as np
+import pytest
+
+from sit2stand.human.com import (MarkerIK, StreamingComEstimator, TooFewMarkers, estimate_com, plate_wrench_at)
+from sit2stand.human.skeleton import ExtraMass, Subject, build_human
+from sit2stand.human.synth import SynthConfig, synthesize
+
+
+def plates_of(demo):
+    return [dict(name=p.name, t_s=demo.t_s, force_n=p.force_n, moment_nm=p.moment_origin_nm) for p in demo.plates]
+
+
+def com_error_mm(demo, com):
+    truth = demo.com_m[:: int(round(demo.config.plate_rate_hz / demo.config.marker_rate_hz))][: len(com)]
+    return float(np.sqrt(np.mean(np.sum((com - truth) ** 2, axis=1))) * 1e3)
+
+
+def run(style, extra=(), seed=5, **kwargs):
+    demo = synthesize(SynthConfig(style=style, seed=seed, extra=[ExtraMass.parse(e) for e in extra]))
+    result = estimate_com(demo.marker_t_s, demo.marker_names, demo.markers_m, demo.marker_valid, plates_of(demo),
+                          Subject(demo.config.height_m, demo.human.total_mass), **kwargs)
+    return demo, result
+
+
+@pytest.mark.parametrize("style, extra", [
+    ("natural", ()),
+    ("elderly", ()),
+    ("elderly", ("trunk:8",)),
+    ("natural", ("torso:10:-0.2,0,0.1",)),      # a backpack: the average model is off by several cm
+])
+def test_com_within_1cm_after_scaling_and_cop_within_2cm(style, extra):
+    demo, result = run(style, extra)
+    scaled, unscaled = com_error_mm(demo, result.com_m), com_error_mm(demo, result.com_unscaled_m)
+    assert scaled <= 10.0, f"COM RMS {scaled:.1f} mm after scaling (average model {unscaled:.1f} mm)"
+    assert result.scaling.cop_rms_after_m <= 0.02
+    if extra == ("torso:10:-0.2,0,0.1",):
+        assert unscaled > 20.0 and scaled < unscaled / 3
+        assert result.scaling.torso_com_shift_m[0] < -0.03    # the backpack is found behind the trunk
+
+
+def test_velocity_and_acceleration_follow_the_truth():
+    demo, result = run("natural")
+    step = 10
+    v_true, a_true = demo.com_vel[::step][: len(result.t_s)], demo.com_acc[::step][: len(result.t_s)]
+    inner = slice(20, -20)
+    assert np.sqrt(np.mean((result.com_vel[inner] - v_true[inner]) ** 2)) < 0.02      # m/s
+    assert np.sqrt(np.mean((result.com_acc[inner] - a_true[inner]) ** 2)) < 0.15      # m/s^2
+
+
+def test_a_subset_of_markers_is_enough_and_too_few_is_a_clear_error():
+    demo = synthesize(SynthConfig(seed=2, sit_before_s=0.3, stand_after_s=0.4))
+    keep = [i for i, n in enumerate(demo.marker_names) if not n.endswith(("WRA", "WRB", "FIN", "ELB"))]  # no arms
+    result = estimate_com(demo.marker_t_s, [demo.marker_names[i] for i in keep], demo.markers_m[:, keep],
+                          demo.marker_valid[:, keep], plates_of(demo), Subject(1.75, demo.human.total_mass),
+                          calibrate=False)
+    # the arms swing but no marker sees them: they stay at the reference posture (a few cm of COM error)
+    assert result.fit_ok.all() and com_error_mm(demo, result.com_m) < 40.0
+    with pytest.raises(TooFewMarkers, match="at least 8 are needed"):
+        MarkerIK(build_human(), ["LASI", "RASI", "LPSI", "C7", "FOO"])
+
+
+def test_frames_with_few_markers_are_skipped_and_flagged():
+    demo = synthesize(SynthConfig(seed=2, sit_before_s=0.3, stand_after_s=0.4))
+    valid = demo.marker_valid.copy()
+    valid[40:45, 5:] = False                       # five frames with only five markers left
+    result = estimate_com(demo.marker_t_s, demo.marker_names, demo.markers_m, valid, plates_of(demo),
+                          Subject(1.75, demo.human.total_mass), calibrate=False)
+    assert not result.fit_ok[40:45].any() and result.fit_ok[:40].all()
+    assert (result.n_markers[40:45] == 5).all()
+    assert np.all(np.isfinite(result.com_m))       # bridged, never NaN or zero
+
+
+def test_a_plate_that_drops_out_is_reported_not_zero():
+    demo = synthesize(SynthConfig(seed=2, sit_before_s=0.3, stand_after_s=0.4))
+    plates = plates_of(demo)
+    cut = (demo.t_s > 1.0) & (demo.t_s < 1.3)
+    plates[1] = dict(plates[1], t_s=plates[1]["t_s"][~cut], force_n=plates[1]["force_n"][~cut],
+                     moment_nm=plates[1]["moment_nm"][~cut])
+    result = estimate_com(demo.marker_t_s, demo.marker_names, demo.markers_m, demo.marker_valid, plates,
+                          Subject(1.75, demo.human.total_mass), calibrate=False)
+    (name, start, end), = result.plate_gaps
+    assert name == "feet" and 0.99 < start < 1.02 and 1.28 < end < 1.31
+    gap = (result.t_s > 1.0) & (result.t_s < 1.3)
+    assert not result.supported[gap].any()          # no equations from frames without the feet plate
+    assert np.isnan(result.measured_cop_m[gap]).all()
+
+
+def test_plate_wrench_window_average():
+    t = np.arange(0, 1, 0.001)
+    f = np.c_[np.zeros_like(t), np.zeros_like(t), 100 + t]
+    force, moment, covered = plate_wrench_at(np.array([0.5]), [dict(name="p", t_s=t, force_n=f, moment_nm=f * 0)],
+                                             0.005)
+    assert covered[0] and force[0, 2] == pytest.approx(100.5, abs=1e-3)
+
+
+def test_streaming_estimator_matches_the_truth_after_calibration():
+    demo = synthesize(SynthConfig(style="natural", seed=3))
+    est = StreamingComEstimator(Subject(1.75, demo.human.total_mass), demo.marker_names)
+    coms = []
+    for i, t in enumerate(demo.marker_t_s):
+        sl = slice(i * 10, (i + 1) * 10)
+        for p in demo.plates:
+            est.add_plate_samples(p.name, demo.t_s[sl], p.force_n[sl], p.moment_origin_nm[sl])
+        coms.append(est.update(t, demo.markers_m[i], demo.marker_valid[i]).com_m)
+    coms = np.array(coms)
+    truth = demo.com_m[::10][: len(coms)]
+    err = np.linalg.norm(coms - truth, axis=1)[100:]
+    assert est.calibrated and est.scaling is not None
+    assert err.mean() < 0.015                       # the live estimate; offline does better (see above)
