@@ -99,6 +99,56 @@ def _replayer_rate(bag: Path, env: dict[str, str], record_to: Path | None) -> fl
     return _rate(int(match.group(1)), float(match.group(2)))
 
 
+def bench_human_com(bag: Path) -> dict[str, float]:
+    """Per-frame cost of the streaming human COM estimator (the node's core) over a shipped demonstration, and
+    the offline estimator's throughput. Calibration (one frame, once) and re-solves are included in the tails."""
+    from .human.com import StreamingComEstimator, estimate_com
+    from .human.offline import read_trial
+    from .human.skeleton import Subject
+
+    trial = read_trial(bag)
+    subject = Subject(trial.height_m, trial.mass_kg, trial.sex)
+    est = StreamingComEstimator(subject, trial.marker_names, rescale_every=250)
+    plates = trial.plates
+    idx = [0] * len(plates)
+    costs = []
+    for k, t in enumerate(trial.marker_t_s):
+        for i, p in enumerate(plates):
+            j = np.searchsorted(p["t_s"], t, side="right")
+            est.add_plate_samples(p["name"], p["t_s"][idx[i]:j], p["force_n"][idx[i]:j], p["moment_nm"][idx[i]:j])
+            idx[i] = j
+        t0 = time.perf_counter()
+        est.update(t, trial.positions[k], trial.valid[k])
+        costs.append(time.perf_counter() - t0)
+    c = np.array(costs) * 1e3
+    steady = np.delete(c, int(np.argmax(c)))       # without the one calibration frame
+    t0 = time.perf_counter()
+    estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, plates, subject)
+    offline_s = time.perf_counter() - t0
+    return {"stream_frames": int(len(c)), "stream_cost_p50_ms": float(np.percentile(steady, 50)),
+            "stream_cost_p99_ms": float(np.percentile(steady, 99)), "stream_cost_max_ms": float(steady.max()),
+            "calibration_frame_ms": float(c.max()), "offline_s": offline_s,
+            "offline_frames_per_s": len(c) / offline_s}
+
+
+def bench_human_com_graph(bag: Path, env: dict[str, str]) -> dict[str, float]:
+    """The human_com node's own per-frame cost (p50/p99) in a real-time graph: replayer -> node -> recorder."""
+    import tempfile as _tmp
+
+    with BagReader(bag) as b:
+        meta = b.custom_data
+    with _tmp.TemporaryDirectory() as tmp:
+        root = Path(__file__).resolve().parents[2]
+        out = subprocess.run([sys.executable, "-m", "sit2stand.cli", "launch", str(root / "ros_ws/graphs/human_com.yaml"),
+                              f"bag:={bag}", f"out:={Path(tmp) / 'rec'}", f"height:={meta['height_m']}",
+                              f"mass:={meta['body_mass_kg']}"], env=env, capture_output=True, text=True, timeout=300)
+    m = re.search(r"(\d+) frames, \d+ skipped .*cost p50 ([\d.]+) ms p99 ([\d.]+) ms", out.stdout)
+    if out.returncode != 0 or not m:
+        raise RuntimeError(f"human_com graph failed:\n{out.stdout[-3000:]}{out.stderr[-2000:]}")
+    return {"node_frames": int(m.group(1)), "node_cost_p50_ms": float(m.group(2)),
+            "node_cost_p99_ms": float(m.group(3))}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sit2stand-bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results/bench.json"))
@@ -122,8 +172,15 @@ def main(argv: list[str] | None = None) -> int:
         results["replayer"] = {"top_rate_msg_per_s": alone, "top_rate_vs_bare_read": alone / bare,
                                "into_recorder_msg_per_s": into_recorder, "into_recorder_vs_bare_read": into_recorder / bare}
 
-    width = max(len(k) for section in ("bag", "replayer") for k in results[section])
-    for section in ("bag", "replayer"):
+    demo = Path(__file__).resolve().parents[2] / "bags" / "natural"
+    if demo.exists():
+        print("human COM: streaming estimator and offline run on bags/natural ...", flush=True)
+        results["human_com"] = bench_human_com(demo)
+        print("human COM: the node in a real-time graph ...", flush=True)
+        results["human_com"].update(bench_human_com_graph(demo, env))
+    sections = [s for s in ("bag", "replayer", "human_com") if s in results]
+    width = max(len(k) for section in sections for k in results[section])
+    for section in sections:
         print(f"\n[{section}]")
         for key, value in results[section].items():
             print(f"  {key:<{width}}  {value:>12,.2f}" if isinstance(value, float) else f"  {key:<{width}}  {value:>12}")

@@ -1,13 +1,16 @@
-"""`make demo`: the main job on a demonstration, end to end through real nodes, into a run directory.
+"""`make demo`: the main job on the shipped demonstrations, end to end through real nodes, into a run directory.
 
-At this stage of the project (foundation) the job is: a lab recording -> bag -> replayer node -> DDS -> recorder node
--> bag, checked message by message, with a figure of what was recorded. The demonstration is the real sit-to-stand
-recording ``../shared/data/real/sts_child_vicon_01.c3d`` (read in place, never copied into the project) until the
-shipped digital-human demonstrations arrive in ``bags/``.
+For each shipped bag (``bags/natural``, ``bags/elderly``):
 
-    python -m sit2stand.demo --out runs/demo [--c3d FILE] [--rate 1.0]
+1. the human COM offline (``sit2stand human-com``): skeleton fit, length and marker calibration, COP-matched mass
+   scaling; COM error against the demonstration's ground truth; JSON + figure;
+2. the same live: replayer -> human_com node -> recorder over DDS (``ros_ws/graphs/human_com.yaml``); the
+   recorded ``/human/com`` against the ground truth, and the node's per-frame cost.
 
-Writes ``OUT/imported`` (bag), ``OUT/recorded`` (bag), ``OUT/summary.json`` and ``OUT/demo.png``.
+Then a figure of the sagittal COM paths, natural against elderly (the paper's Fig. 7 idea), and ``summary.json``.
+The robot side (identification, retargeting, the MuJoCo driver) joins this job as it lands.
+
+    python -m sit2stand.demo --out runs/demo [--bags bags/natural bags/elderly] [--rate 1.0]
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -23,104 +27,104 @@ from pathlib import Path
 
 import numpy as np
 
+from .human.offline import run as human_com_offline
 from .io import messages as M
-from .io.bag import BagReader, bag_info
-from .io.c3d import read_c3d, write_trial_bag
+from .io.bag import BagReader
 
 ROOT = Path(__file__).resolve().parents[2]
-DEFAULT_C3D = ROOT.parent / "shared" / "data" / "real" / "sts_child_vicon_01.c3d"
+DEFAULT_BAGS = [ROOT / "bags" / "natural", ROOT / "bags" / "elderly"]
 
 
-def compare_bags(original: Path, recorded: Path) -> dict[str, dict[str, int]]:
-    """Per topic: messages in each bag and how many recorded messages differ from the original (by value)."""
-    out = {}
-    with BagReader(original) as a, BagReader(recorded) as b:
-        rec_topics = b.topics()
-        for topic in sorted(a.topics()):
-            xs = a.read(topic)
-            ys = b.read(topic) if topic in rec_topics else []
-            differ = sum(1 for (_, x), (_, y) in zip(xs, ys) if repr(x).replace("nan", "N") != repr(y).replace("nan", "N"))
-            out[topic] = {"original": len(xs), "recorded": len(ys), "differ": differ + abs(len(xs) - len(ys))}
-    return out
+def _series(bag: BagReader, topic: str) -> tuple[np.ndarray, np.ndarray]:
+    msgs = bag.read(topic)
+    return (np.array([M.stamp_ns(m.header) for _, m in msgs]) * 1e-9,
+            np.array([[m.position.x, m.position.y, m.position.z] for _, m in msgs]))
 
 
-def figure(bag: Path, png: Path) -> None:
-    """Vertical force and COP of each plate, and pelvis-marker height, against time."""
+def live(bag: Path, out: Path, rate: float) -> dict:
+    """Run the human COM graph on ``bag``; returns the live figures."""
+    with BagReader(bag) as b:
+        meta = b.custom_data
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(ROOT / "ros_ws/graphs/human_com.yaml"),
+           f"bag:={bag.resolve()}", f"out:={out.resolve()}", f"rate:={rate}",
+           f"height:={meta.get('height_m', '1.75')}", f"mass:={meta.get('body_mass_kg', '75')}"]
+    t0 = time.monotonic()
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+    if proc.returncode != 0:
+        raise RuntimeError(f"the human_com graph failed on {bag} (exit {proc.returncode}):\n{proc.stdout[-4000:]}")
+    cost = re.search(r"cost p50 ([\d.]+) ms p99 ([\d.]+) ms", proc.stdout)
+    with BagReader(out) as rec:
+        t, com = _series(rec, "/human/com")
+        tg, truth = _series(rec, "/ground_truth/com")
+    truth_i = np.array([np.interp(t, tg, truth[:, i]) for i in range(3)]).T
+    err = np.linalg.norm(com - truth_i, axis=1)
+    return {"wall_s": round(time.monotonic() - t0, 2), "frames": int(len(t)),
+            "com_error_mean_mm": float(err.mean() * 1e3), "com_error_p95_mm": float(np.percentile(err, 95) * 1e3),
+            "cost_p50_ms": float(cost.group(1)) if cost else None, "cost_p99_ms": float(cost.group(2)) if cost else None}
+
+
+def com_paths_figure(runs: dict[str, tuple[Path, Path]], png: Path) -> None:
+    """Sagittal COM paths of the demonstrations: estimated (offline, scaled) and true."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    with BagReader(bag) as b:
-        topics = b.topics()
-        plates = {t: b.read(t) for t in topics if t.startswith(M.FORCE_PLATE_PREFIX)}
-        frames = b.read(M.MARKERS_TOPIC)
-    t0 = frames[0][0]
-    fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
-    for topic, msgs in plates.items():
-        arr = M.plate_arrays([m for _, m in msgs])
-        t = (np.array([ts for ts, _ in msgs]) - t0) * 1e-9
-        axes[0].plot(t, arr["force_n"][:, 2], label=topic)
-        axes[1].plot(t, arr["cop_m"][:, 0], label=f"{topic} COP x (forward)")
-        axes[1].plot(t, arr["cop_m"][:, 1], "--", label=f"{topic} COP y (left)")
-    names, _, _ = M.mocap_arrays(frames[0][1])
-    pelvis = [i for i, n in enumerate(names) if n in ("LASI", "RASI", "LPSI", "RPSI")]
-    if pelvis:
-        z = np.array([np.nanmean(M.mocap_arrays(m)[1][pelvis, 2]) for _, m in frames])
-        axes[2].plot((np.array([ts for ts, _ in frames]) - t0) * 1e-9, z, label="pelvis markers mean height")
-    axes[0].set_ylabel("vertical force [N]")
-    axes[1].set_ylabel("COP [m] (lab frame)")
-    axes[2].set_ylabel("height [m]")
-    axes[2].set_xlabel("time since first frame [s]")
-    for ax in axes:
-        ax.grid(alpha=0.3)
-        ax.legend(loc="best", fontsize=8)
-    fig.suptitle(f"Recorded through replayer -> DDS -> recorder: {bag.parent.name}")
+    fig, ax = plt.subplots(figsize=(7, 5.5))
+    for (name, (run_dir, bag)), color in zip(runs.items(), ("tab:blue", "tab:red", "tab:green")):
+        with BagReader(run_dir / "human_com") as b:
+            _, com = _series(b, "/human/com")
+        with BagReader(bag) as b:
+            _, truth = _series(b, "/ground_truth/com")
+        ax.plot(truth[:, 0], truth[:, 2], color=color, lw=1, ls="--", label=f"{name}: true COM")
+        ax.plot(com[:, 0], com[:, 2], color=color, lw=2, label=f"{name}: estimated (skeleton + COP scaling)")
+        ax.plot(com[0, 0], com[0, 2], "o", color=color)
+    ax.set_xlabel("COM forward x [m] (feet at x = 0)")
+    ax.set_ylabel("COM height z [m]")
+    ax.set_title("Sagittal COM paths from sitting (dot) to standing")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(png, dpi=110)
+    fig.savefig(png, dpi=120)
     plt.close(fig)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sit2stand-demo", description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("runs/demo"))
-    parser.add_argument("--c3d", type=Path, default=DEFAULT_C3D)
+    parser.add_argument("--bags", type=Path, nargs="*", default=DEFAULT_BAGS)
     parser.add_argument("--rate", type=float, default=1.0)
     args = parser.parse_args(argv)
-    if not args.c3d.is_file():
-        print(f"sit2stand demo: error: demonstration {args.c3d} not found (the real recordings live in "
-              f"../shared/data/real beside the project)", file=sys.stderr)
+    missing = [b for b in args.bags if not (b / "metadata.yaml").exists()]
+    if missing:
+        print(f"sit2stand demo: error: no demonstration bag at {', '.join(map(str, missing))}", file=sys.stderr)
         return 2
     if args.out.exists():
         shutil.rmtree(args.out)
     args.out.mkdir(parents=True)
-    imported, recorded = args.out / "imported", args.out / "recorded"
-
-    print(f"[1/3] import {args.c3d}", flush=True)
-    trial = read_c3d(args.c3d, feet_plate=2 if args.c3d == DEFAULT_C3D else None)
-    write_trial_bag(trial, imported)
-    print(bag_info(imported), flush=True)
-
-    print(f"\n[2/3] replay at {args.rate:g}x through DDS into the recorder (sit2stand launch)", flush=True)
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    t0 = time.monotonic()
-    code = subprocess.call([sys.executable, "-m", "sit2stand.cli", "launch", str(ROOT / "ros_ws/graphs/roundtrip.yaml"),
-                            f"bag:={imported.resolve()}", f"out:={recorded.resolve()}", f"rate:={args.rate}"], env=env)
-    wall = time.monotonic() - t0
-    if code != 0:
-        print(f"sit2stand demo: error: the graph exited with code {code}", file=sys.stderr)
-        return 1
-
-    print("\n[3/3] compare and plot", flush=True)
-    comparison = compare_bags(imported, recorded)
-    figure(recorded, args.out / "demo.png")
-    summary = {"demonstration": str(args.c3d), "lab_axes": trial.axes.reason, "graph_wall_s": round(wall, 3),
-               "topics": comparison, "identical": all(v["differ"] == 0 for v in comparison.values())}
+    summary: dict = {}
+    runs: dict[str, tuple[Path, Path]] = {}
+    for i, bag in enumerate(args.bags, 1):
+        name = bag.name
+        run_dir = args.out / name
+        runs[name] = (run_dir, bag)
+        print(f"[{i}/{len(args.bags)}] {name}: human COM offline", flush=True)
+        offline = human_com_offline(bag, run_dir, quiet=True)
+        print(f"      COM RMS vs truth {offline['com_rms_vs_truth_scaled_mm']:.1f} mm scaled, "
+              f"{offline['com_rms_vs_truth_unscaled_mm']:.1f} mm average model; COP RMS "
+              f"{offline['cop_rms_scaled_mm']:.1f} mm", flush=True)
+        print(f"      live graph: replayer -> human_com -> recorder at {args.rate:g}x", flush=True)
+        live_figs = live(bag, run_dir / "live", args.rate)
+        print(f"      live COM error mean {live_figs['com_error_mean_mm']:.1f} mm; per-frame cost p50 "
+              f"{live_figs['cost_p50_ms']} ms, p99 {live_figs['cost_p99_ms']} ms", flush=True)
+        summary[name] = {"offline": offline, "live": live_figs}
+    com_paths_figure(runs, args.out / "com_paths.png")
     (args.out / "summary.json").write_text(json.dumps(summary, indent=2))
-    for topic, v in comparison.items():
-        print(f"  {topic:<28} original {v['original']:>6}  recorded {v['recorded']:>6}  differing {v['differ']}")
-    print(f"\n{'identical' if summary['identical'] else 'DIFFERENT'}; wrote {args.out}/summary.json and demo.png")
-    return 0 if summary["identical"] else 1
+    ok = all(s["offline"]["com_rms_vs_truth_scaled_mm"] <= 10.0 for s in summary.values())
+    print(f"\n{'done' if ok else 'COM ERROR ABOVE 1 cm'}: {args.out}/summary.json, com_paths.png, "
+          + ", ".join(f"{n}/human_com.png" for n in runs))
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":

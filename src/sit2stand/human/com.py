@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
+from scipy.signal import savgol_coeffs, savgol_filter   # at import time: the first frame must not pay for it
 
 from ..io.forceplate import center_of_pressure
 from .skeleton import LENGTH_GROUPS, SEGMENTS, HumanModel, Subject, build_human
@@ -282,8 +283,6 @@ def smooth_motion(model: pin.Model, qs: np.ndarray, dt: float, window: int = 31,
 
 def _savgol_series(x: np.ndarray, window: int, order: int, deriv: int) -> np.ndarray:
     """Savitzky-Golay along axis 0 with the polynomial fitted to the nearest window at the edges."""
-    from scipy.signal import savgol_filter
-
     return savgol_filter(x, window, order, deriv=deriv, axis=0, mode="interp")
 
 
@@ -678,7 +677,7 @@ class StreamingComEstimator:
 
     def __init__(self, subject: Subject, marker_names: list[str], *, rate_hz: float = 100.0, window: int = 31,
                  calibration_frames: int = 50, rescale_every: int = 100, chair_on_plate: bool = True,
-                 min_frames_to_scale: int = 30) -> None:
+                 min_frames_to_scale: int = 30, first_rescale: int = 100) -> None:
         self.subject = subject
         self.marker_names = list(marker_names)
         self.dt = 1.0 / rate_hz
@@ -687,6 +686,7 @@ class StreamingComEstimator:
         self.rescale_every = rescale_every
         self.chair_on_plate = chair_on_plate
         self.min_frames_to_scale = min_frames_to_scale
+        self.first_rescale = first_rescale
         self.human = build_human(subject)
         self.ik = MarkerIK(self.human, self.marker_names)   # raises TooFewMarkers early
         self.model = self.human.model
@@ -780,8 +780,6 @@ class StreamingComEstimator:
 
     def _derivatives_at(self, pos: int, length: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """q, v, a of the window's sample ``pos`` from a Savitzky-Golay fit of the last ``length`` frames."""
-        from scipy.signal import savgol_coeffs
-
         key = (pos, length)
         if key not in self._coeffs:
             order = min(4, length - 2)
@@ -846,7 +844,8 @@ class StreamingComEstimator:
         if not (self._seat_off_seen and 0.3 * weight < force[2] < 3.0 * weight) or not ok:
             return
         self.rows.append(frame_rows(self.human, q_k, v_k, a_k, force, moment, cop, self.subject.mass_kg, self.data))
-        if len(self.rows) >= self.min_frames_to_scale and len(self.rows) % self.rescale_every == 0:
+        n = len(self.rows)
+        if n >= self.min_frames_to_scale and (n == self.first_rescale or n % self.rescale_every == 0):
             self.rescale()
             out.rescaled = True
 

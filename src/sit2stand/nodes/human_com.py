@@ -51,7 +51,7 @@ class HumanComNode(Node):
         self.rate_hz = declare(self, "rate_hz", 100.0, "marker rate [Hz]")
         self.window = declare(self, "window", 31, "Savitzky-Golay window [frames]")
         self.calibration_frames = declare(self, "calibration_frames", 50, "frames used to calibrate the model")
-        self.rescale_every = declare(self, "rescale_every", 100, "re-solve the masses every N frames with plates")
+        self.rescale_every = declare(self, "rescale_every", 250, "re-solve the masses every N frames with plates")
         self.chair_on_plate = declare(self, "chair_on_plate", True, "the chair stands on a force plate")
         self.expected_plates = declare(self, "plates", [], "plate names to expect (default: whatever appears)")
         deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
@@ -159,7 +159,11 @@ class HumanComNode(Node):
                 p.point.x, p.point.y = float(cop[0]), float(cop[1])
                 pub.publish(p)
         if out.rescaled and self.estimator.scaling is not None:
-            sc = self.estimator.scaling
+            self._publish_scaling(header)
+
+    def _publish_scaling(self, header) -> None:
+        sc = self.estimator.scaling
+        if sc is not None:
             names = [f"{g}.mass" for g in sc.masses] + ["torso.com_shift_x", "torso.com_shift_y"]
             values = list(sc.masses.values()) + [float(sc.torso_com_shift_m[0]), float(sc.torso_com_shift_m[1])]
             self.scaling_pub.publish(InertialParameters(header=header, model="human_scaling", names=names,
@@ -186,6 +190,12 @@ class HumanComNode(Node):
             self.get_logger().warning(f"force plate without samples for some frames: {stats['plate_dropouts']}")
 
     def close(self) -> None:
+        if self.estimator is not None and self.estimator.rescale() is not None:   # a last solve with all rows
+            from std_msgs.msg import Header
+
+            header = Header(frame_id="lab")
+            header.stamp = self.get_clock().now().to_msg()
+            self._publish_scaling(header)
         stats = self._stats()
         print(f"[human_com] {stats['frames']} frames, {stats['skipped_frames']} skipped (too few markers), per-frame "
               f"cost p50 {stats['cost_p50_ms']} ms p99 {stats['cost_p99_ms']} ms; plate dropouts: "
