@@ -1,0 +1,263 @@
+"""PAL TALOS as a MuJoCo plant and as the controller's Pinocchio model, from PyPI ``example-robot-data``.
+
+* :class:`PlantConfig` (YAML): robot, chair, seated posture, gains, control rate, sensor noise, and ``unmodeled``:
+  what only the simulated plant has (extra rigid masses fixed to links, joint friction, sensor biases, actuator
+  delay). Nothing outside :mod:`sit2stand.robot.plant` reads ``unmodeled``.
+* :func:`build_spec` makes the MuJoCo spec: free-floating base, torque motors limited to the URDF efforts, a small
+  armature, ``jointactuatorfrc`` sensors, 6-axis force/torque at a site on ``leg_*_6_link`` (the sole link has no
+  contact geometry), a floor and a box chair; only the legs and the pelvis collide.
+* :func:`controller_model` is the "CAD" model the controller and the identification start from: the URDF's
+  inertias, built by Pinocchio from the MJCF MuJoCo compiles (same joint order as the plant).
+
+Facts and pitfalls: ``../shared/notes/robot-talos.md``.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import yaml
+
+SIDES = ("left", "right")
+LEG_JOINTS = [f"leg_{s}_{i}_joint" for s in SIDES for i in range(1, 7)]
+SOLE_OFFSET_M = 0.107
+"""The sole is this far below the origin of ``leg_*_6_link`` (URDF ``*_sole_link``)."""
+COLLIDING = ("base_link",) + tuple(f"leg_{s}_{i}_link" for s in SIDES for i in range(1, 7))
+
+
+class PlantConfigError(ValueError):
+    """A plant file that cannot be used; the message names the file and the field."""
+
+
+def talos_dir() -> Path:
+    """The installed ``talos_data`` folder of example-robot-data."""
+    for base in map(Path, sys.path):
+        d = base / "cmeel.prefix" / "share" / "example-robot-data" / "robots" / "talos_data"
+        if d.is_dir():
+            return d
+    raise FileNotFoundError("example-robot-data is not installed (pip install example-robot-data==6.0.0)")
+
+
+def talos_urdf_text(variant: str = "talos_reduced") -> str:
+    """The TALOS URDF with absolute mesh paths and the MuJoCo compiler options it needs."""
+    d = talos_dir()
+    text = (d / "robots" / f"{variant}.urdf").read_text()
+    text = text.replace("package://example-robot-data/robots/", str(d.parent) + "/")
+    # keep the sole and F/T frames (fusestatic would drop them) and both meshes named base_link.STL
+    compiler = ('<mujoco><compiler strippath="false" fusestatic="false" discardvisual="false" '
+                'balanceinertia="false" autolimits="true"/></mujoco>')
+    return re.sub(r"(<robot\b[^>]*>)", r"\1" + compiler, text, count=1)
+
+
+@dataclass
+class ExtraBodyMass:
+    """A rigid point mass [kg] fixed to ``link`` at ``pos_m`` in the link frame (unmodeled)."""
+
+    link: str
+    mass_kg: float
+    pos_m: tuple[float, float, float]
+    name: str = ""
+
+
+@dataclass
+class Unmodeled:
+    masses: list[ExtraBodyMass] = field(default_factory=list)
+    viscous_friction: dict[str, float] = field(default_factory=dict)   # joint glob -> N m s/rad
+    coulomb_friction: dict[str, float] = field(default_factory=dict)   # joint glob -> N m
+    torque_bias_nm: dict[str, float] = field(default_factory=dict)     # joint glob -> N m
+    ft_force_bias_n: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ft_torque_bias_nm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    actuator_delay_s: float = 0.0
+
+
+@dataclass
+class PlantConfig:
+    """Everything about the simulated robot and its surroundings (see ``ros_ws/plants/default.yaml``)."""
+
+    name: str = "default"
+    robot: str = "talos_reduced"
+    timestep_s: float = 0.001
+    armature: float = 0.1
+    control_rate_hz: float = 1000.0
+    feedforward_rate_hz: float = 200.0   # contact-consistent gravity / inverse dynamics refreshed at this rate
+    kp_per_effort: float = 10.0          # kp = effort limit / 0.1 rad
+    kd_ratio: float = 0.05               # kd = kd_ratio * kp, capped at kd_cap * M_ii / dt
+    kd_cap: float = 0.5
+    chair_height_m: float | None = None  # None: 1 cm below the lowest pelvis/thigh point when seated
+    chair_front_gap_m: float = 0.02      # chair front edge this far behind the heels
+    chair_depth_m: float = 0.45
+    chair_width_m: float = 0.5
+    chair_friction: float = 0.9
+    floor_friction: float = 1.0
+    seated_posture: dict[str, float] = field(default_factory=lambda: {
+        "leg_*_3_joint": -1.5708, "leg_*_4_joint": 2.0071, "leg_*_5_joint": -0.4363,
+        "arm_left_2_joint": 0.2, "arm_right_2_joint": -0.2, "arm_*_4_joint": -0.4})
+    joint_torque_noise_nm: float = 0.2
+    ft_force_noise_n: float = 0.5
+    ft_torque_noise_nm: float = 0.05
+    encoder_noise_rad: float = 0.0
+    fall_pelvis_height_m: float = 0.35
+    fall_tilt_rad: float = 1.3
+    seed: int = 0
+    unmodeled: Unmodeled = field(default_factory=Unmodeled)
+    source: str = ""
+
+    @staticmethod
+    def load(path: str | Path | None) -> PlantConfig:
+        """Read a plant YAML (None: the defaults, which carry no unmodeled effects)."""
+        if path is None:
+            return PlantConfig()
+        path = Path(path)
+        if not path.is_file():
+            raise PlantConfigError(f"{path}: no such plant file")
+        try:
+            doc = yaml.safe_load(path.read_text()) or {}
+        except yaml.YAMLError as err:
+            raise PlantConfigError(f"{path}: not valid YAML: {err}") from None
+        cfg = PlantConfig(source=str(path))
+        known = set(PlantConfig.__dataclass_fields__) - {"unmodeled", "source"}
+        for key, value in doc.items():
+            if key == "unmodeled":
+                continue
+            if key not in known:
+                raise PlantConfigError(f"{path}: unknown field {key!r} (known: {', '.join(sorted(known))})")
+            setattr(cfg, key, value)
+        um = doc.get("unmodeled") or {}
+        try:
+            cfg.unmodeled = Unmodeled(
+                masses=[ExtraBodyMass(m["link"], float(m["mass_kg"]), tuple(map(float, m.get("pos_m", (0, 0, 0)))),
+                                      m.get("name", f"extra_{i}")) for i, m in enumerate(um.get("masses", []))],
+                viscous_friction={k: float(v) for k, v in (um.get("viscous_friction") or {}).items()},
+                coulomb_friction={k: float(v) for k, v in (um.get("coulomb_friction") or {}).items()},
+                torque_bias_nm={k: float(v) for k, v in (um.get("torque_bias_nm") or {}).items()},
+                ft_force_bias_n=tuple(map(float, um.get("ft_force_bias_n", (0, 0, 0)))),
+                ft_torque_bias_nm=tuple(map(float, um.get("ft_torque_bias_nm", (0, 0, 0)))),
+                actuator_delay_s=float(um.get("actuator_delay_s", 0.0)))
+        except (KeyError, TypeError, ValueError) as err:
+            raise PlantConfigError(f"{path}: unmodeled section: {err!r}") from None
+        return cfg
+
+    def total_extra_mass(self) -> float:
+        return sum(m.mass_kg for m in self.unmodeled.masses)
+
+
+def expand(pattern_values: dict[str, float], joint_names: list[str]) -> dict[str, float]:
+    """Joint-name globs (``leg_*_4_joint``) to per-joint values; later patterns win."""
+    import fnmatch
+
+    out: dict[str, float] = {}
+    for pattern, value in pattern_values.items():
+        matches = fnmatch.filter(joint_names, pattern)
+        if not matches:
+            raise PlantConfigError(f"pattern {pattern!r} matches no joint")
+        for name in matches:
+            out[name] = float(value)
+    return out
+
+
+def build_spec(cfg: PlantConfig, *, plant: bool) -> mujoco.MjSpec:
+    """MuJoCo spec of the robot on its floor with the chair; ``plant=True`` adds the ``unmodeled`` masses and
+    friction (the simulated truth), ``plant=False`` gives the CAD robot."""
+    spec = mujoco.MjSpec.from_string(talos_urdf_text(cfg.robot))
+    spec.option.timestep = cfg.timestep_s
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    root = spec.worldbody.first_body()
+    root.add_freejoint(name="root")
+    joints = [j for j in spec.joints if j.type != mujoco.mjtJoint.mjJNT_FREE]
+    names = [j.name for j in joints]
+    for j in joints:
+        j.armature = cfg.armature
+        j.damping = [0.0, 0.0, 0.0]                  # friction is an unmodeled effect, given below for the plant
+        j.frictionloss = 0.0
+        effort = float(j.actfrcrange[1]) if j.actfrcrange[1] > 0 else 100.0
+        act = spec.add_actuator(name=j.name, target=j.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        act.set_to_motor()
+        act.ctrllimited = True
+        act.ctrlrange = [-effort, effort]
+        spec.add_sensor(name=f"tau_{j.name}", type=mujoco.mjtSensor.mjSENS_JOINTACTFRC,
+                        objtype=mujoco.mjtObj.mjOBJ_JOINT, objname=j.name)
+    for side in SIDES:
+        body = spec.body(f"leg_{side}_6_link")
+        body.add_site(name=f"ft_{side}", pos=[0, 0, 0])
+        body.add_site(name=f"sole_{side}", pos=[0, 0, -SOLE_OFFSET_M])
+        spec.add_sensor(name=f"force_{side}", type=mujoco.mjtSensor.mjSENS_FORCE,
+                        objtype=mujoco.mjtObj.mjOBJ_SITE, objname=f"ft_{side}")
+        spec.add_sensor(name=f"torque_{side}", type=mujoco.mjtSensor.mjSENS_TORQUE,
+                        objtype=mujoco.mjtObj.mjOBJ_SITE, objname=f"ft_{side}")
+    root.add_site(name="pelvis", pos=[0, 0, 0])
+    for geom in spec.geoms:
+        body_name = geom.parent.name if hasattr(geom.parent, "name") else ""
+        collide = body_name in COLLIDING
+        # robot geoms (bit 1) touch only the environment (bit 2): no self-collision in deep hip flexion
+        geom.contype, geom.conaffinity = (1, 2) if collide else (0, 0)
+        geom.friction = [cfg.floor_friction, 0.005, 0.0001]
+    floor = spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[5, 5, 0.1],
+                                    rgba=[0.8, 0.8, 0.8, 1])
+    floor.contype, floor.conaffinity = 2, 1
+    floor.friction = [cfg.floor_friction, 0.005, 0.0001]
+    if plant:
+        um = cfg.unmodeled
+        for extra in um.masses:
+            try:
+                parent = spec.body(extra.link)
+            except Exception:  # noqa: BLE001 - mujoco raises a generic error for a missing name
+                parent = None
+            if parent is None:
+                raise PlantConfigError(f"{cfg.source or 'plant'}: unmodeled mass on unknown link {extra.link!r}")
+            b = parent.add_body(name=extra.name or f"extra_{extra.link}", pos=list(extra.pos_m))
+            b.mass = extra.mass_kg
+            b.inertia = [1e-4 * extra.mass_kg] * 3
+            b.explicitinertial = True
+        for name, value in expand(um.viscous_friction, names).items():
+            spec.joint(name).damping = [value, 0.0, 0.0]
+        for name, value in expand(um.coulomb_friction, names).items():
+            spec.joint(name).frictionloss = value
+    return spec
+
+
+def add_chair(spec: mujoco.MjSpec, cfg: PlantConfig, seat_top_z: float, front_x: float) -> None:
+    """A box chair whose seat top is at ``seat_top_z`` and front edge at ``front_x`` (lab x)."""
+    half = [cfg.chair_depth_m / 2, cfg.chair_width_m / 2, seat_top_z / 2]
+    chair = spec.worldbody.add_body(name="chair", pos=[front_x - half[0], 0.0, half[2]])
+    g = chair.add_geom(name="chair_seat", type=mujoco.mjtGeom.mjGEOM_BOX, size=half, rgba=[0.55, 0.35, 0.2, 1])
+    g.contype, g.conaffinity = 2, 1
+    g.friction = [cfg.chair_friction, 0.005, 0.0001]
+
+
+def controller_model(cfg: PlantConfig | None = None):
+    """The controller's Pinocchio model of the robot: the URDF ("CAD") inertias, the plant's joint order.
+
+    Built from the MJCF that MuJoCo compiles from the same spec (without chair, floor or unmodeled effects);
+    Pinocchio's free-flyer quaternion is (x, y, z, w), MuJoCo's (w, x, y, z).
+    """
+    import pinocchio as pin
+
+    cfg = cfg or PlantConfig()
+    spec = build_spec(cfg, plant=False)
+    spec.compile()
+    xml = spec.to_xml()
+    # Pinocchio's MJCF parser reads a file; sensors/actuators/floor are irrelevant to it
+    with tempfile.NamedTemporaryFile("w", suffix=".xml", delete=False) as f:
+        f.write(xml)
+        path = f.name
+    try:
+        model = pin.buildModelFromMJCF(path)
+    finally:
+        Path(path).unlink(missing_ok=True)
+    for side in SIDES:
+        jid = model.getJointId(f"leg_{side}_6_joint")
+        model.addFrame(pin.Frame(f"sole_{side}", jid, pin.SE3(np.eye(3), np.array([0, 0, -SOLE_OFFSET_M])),
+                                 pin.FrameType.OP_FRAME))
+        model.addFrame(pin.Frame(f"ft_{side}", jid, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
+    return model
+
+
+def actuated_joint_names(model) -> list[str]:
+    """Names of the actuated joints of a Pinocchio model (all but the universe and the free flyer)."""
+    return list(model.names[2:])

@@ -1,0 +1,306 @@
+"""The simulated robot: TALOS in MuJoCo under joint PD control with the feed-forward of a torque-controlled robot.
+
+:class:`Plant` is pure Python (no ROS): ``command()`` sets the reference (positions, optional velocities and
+accelerations), ``step()`` advances the physics under
+
+    tau = kp (q_ref - q) + kd (qd_ref - qd) + tau_ff,     tau_ff = contact-consistent gravity or inverse dynamics
+
+computed with the **controller's** model (CAD, or identified parameters loaded from YAML; never the plant's truth),
+clipped to the URDF effort limits. ``sensors()`` returns what a real robot measures: joint positions and
+velocities, joint torques (actuator torque + noise + the unmodeled bias), the two ankle force/torque sensors (plus
+noise and bias) and the COP computed from them. ``status()`` reports a fall (pelvis too low, base tilted).
+
+Gains follow the measured recipe in ``../shared/notes/robot-talos.md``: kp = effort limit / 0.1 rad, kd = 0.05 kp,
+capped at kd_cap * M_ii / dt so that explicit PD at 1 kHz stays stable at the ankles.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+
+from ..io.forceplate import DEFAULT_COP_THRESHOLD_N
+from .model import SIDES, SOLE_OFFSET_M, PlantConfig, add_chair, build_spec, controller_model, expand
+
+G = 9.81
+
+
+@dataclass
+class Sensors:
+    """One sample of the robot's own sensors (lab frame = MuJoCo world, REP-103)."""
+
+    t_s: float
+    q: np.ndarray                  # (n,) joint positions [rad]
+    qd: np.ndarray                 # (n,) joint velocities [rad/s]
+    tau: np.ndarray                # (n,) measured joint torques [N m]
+    ft: dict[str, np.ndarray]      # side -> (6,) force [N] and torque [N m] in the sensor frame
+    wrench_world: dict[str, np.ndarray]   # side -> (6,) ground reaction on the foot: force, torque about the sole
+    cop_m: np.ndarray              # (3,) COP of both feet on the floor, NaN when unloaded
+    cop_valid: bool
+    base_pose: np.ndarray          # (7,) MuJoCo free joint: position, quaternion w x y z (what a state estimator gives)
+
+
+def seated_configuration(model: mujoco.MjModel, cfg: PlantConfig) -> np.ndarray:
+    """qpos of the seated posture with the soles on the floor, the base upright above the origin."""
+    names = [model.joint(i).name for i in range(1, model.njnt)]
+    q = model.qpos0.copy()
+    q[3:7] = [1, 0, 0, 0]
+    for name, value in expand(cfg.seated_posture, names).items():
+        q[model.joint(name).qposadr[0]] = value
+    data = mujoco.MjData(model)
+    data.qpos[:] = q
+    mujoco.mj_kinematics(model, data)
+    foot_z, _ = lowest_point(model, data, tuple(f"leg_{s}_6_link" for s in SIDES))   # the foot mesh, not the URDF sole
+    sole_x = np.mean([data.site(f"sole_{s}").xpos[0] for s in SIDES])
+    q[2] -= foot_z
+    q[0] -= sole_x           # feet (sole centres) at x = 0
+    return q
+
+
+def lowest_point(model: mujoco.MjModel, data: mujoco.MjData, bodies: tuple[str, ...]) -> tuple[float, float]:
+    """Lowest z [m] of the collision geometry of ``bodies`` (mesh vertices; other shapes' bounding boxes) and the
+    x where it is."""
+    best = (np.inf, 0.0)
+    for g in range(model.ngeom):
+        if model.body(model.geom_bodyid[g]).name not in bodies or model.geom_contype[g] == 0:
+            continue
+        R = data.geom_xmat[g].reshape(3, 3)
+        if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
+            mesh = model.geom_dataid[g]
+            start, count = model.mesh_vertadr[mesh], model.mesh_vertnum[mesh]
+            local = model.mesh_vert[start:start + count]
+        else:
+            centre, half = model.geom_aabb[g][:3], model.geom_aabb[g][3:]
+            local = centre + half * np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        world = data.geom_xpos[g] + local @ R.T
+        k = np.argmin(world[:, 2])
+        if world[k, 2] < best[0]:
+            best = (float(world[k, 2]), float(world[k, 0]))
+    return best
+
+
+class Plant:
+    """TALOS on a chair in MuJoCo under joint PD + feed-forward (see the module docstring)."""
+
+    def __init__(self, cfg: PlantConfig | None = None, controller_params: dict | None = None,
+                 with_chair: bool = True) -> None:
+        self.cfg = cfg = cfg or PlantConfig()
+        spec = build_spec(cfg, plant=True)
+        probe = spec.compile()
+        self.q_seated = seated_configuration(probe, cfg)
+        pd = mujoco.MjData(probe)
+        pd.qpos[:] = self.q_seated
+        mujoco.mj_kinematics(probe, pd)
+        seat_z, _ = lowest_point(probe, pd, ("base_link",) + tuple(f"leg_{s}_{i}_link" for s in SIDES
+                                                                       for i in (1, 2, 3)))
+        heel_x = min(pd.site(f"sole_{s}").xpos[0] for s in SIDES) - 0.1   # the sole is ~0.2 m long
+        self.seat_height_m = cfg.chair_height_m if cfg.chair_height_m is not None else seat_z - 0.002
+        self.chair_front_x = heel_x - cfg.chair_front_gap_m
+        if with_chair:
+            add_chair(spec, cfg, self.seat_height_m, self.chair_front_x)
+        self.model = spec.compile()
+        self.data = mujoco.MjData(self.model)
+        self.joint_names = [self.model.joint(i).name for i in range(1, self.model.njnt)]
+        self.n = len(self.joint_names)
+        self.qadr = np.array([self.model.joint(n).qposadr[0] for n in self.joint_names])
+        self.vadr = np.array([self.model.joint(n).dofadr[0] for n in self.joint_names])
+        self.effort = np.array([self.model.actuator(n).ctrlrange[1] for n in self.joint_names])
+        self.rng = np.random.default_rng(cfg.seed)
+        um = cfg.unmodeled
+        self.tau_bias = np.zeros(self.n)
+        for name, value in expand(um.torque_bias_nm, self.joint_names).items():
+            self.tau_bias[self.joint_names.index(name)] = value
+        self.delay_steps = int(round(um.actuator_delay_s / cfg.timestep_s))
+        self._tau_queue: deque[np.ndarray] = deque()
+        # the controller's model (CAD unless identified parameters are given)
+        self.ctrl = controller_model(cfg)
+        # where the seat supports the pelvis when seated: on the seat surface, a little behind the hip joints
+        self.ctrl.addFrame(pin.Frame("seat", 1, pin.SE3(np.eye(3), np.array(
+            [-0.05, 0.0, self.seat_height_m - float(self.q_seated[2])])), pin.FrameType.OP_FRAME))
+        if controller_params:
+            apply_parameters(self.ctrl, controller_params)
+        self.ctrl_data = self.ctrl.createData()
+        self.kp = cfg.kp_per_effort * self.effort
+        self.kd = cfg.kd_ratio * self.kp
+        self.seated_base_z = float(self.q_seated[2])
+        self.ff_every = max(1, int(round(1.0 / (cfg.feedforward_rate_hz * cfg.timestep_s))))
+        self._ff = np.zeros(self.n)
+        self._ff_age = 10**9
+        self.reset()
+        M = np.zeros((self.model.nv, self.model.nv))
+        mujoco.mj_fullM(self.model, self.data, M)   # MuJoCo 4: (model, data, dst)
+        m_ii = np.diag(M)[self.vadr]
+        self.kd = np.minimum(self.kd, cfg.kd_cap * m_ii / cfg.timestep_s)
+        self.status_text = "ok"
+
+    # -- state ------------------------------------------------------------------------------------------------
+    def reset(self, q: np.ndarray | None = None) -> None:
+        """Back to the seated posture (or ``q``), at rest, holding it."""
+        mujoco.mj_resetData(self.model, self.data)
+        self.data.qpos[:] = self.q_seated if q is None else q
+        mujoco.mj_forward(self.model, self.data)
+        self.q_ref = self.data.qpos[self.qadr].copy()
+        self.qd_ref = np.zeros(self.n)
+        self.qdd_ref = np.zeros(self.n)
+        self.feedforward = "gravity"
+        self._ff_age = 10**9
+        self.limp = False
+        self._tau_queue.clear()
+        self.fallen = False
+
+    @property
+    def t_s(self) -> float:
+        return float(self.data.time)
+
+    def command(self, q: np.ndarray, qd: np.ndarray | None = None, qdd: np.ndarray | None = None,
+                feedforward: str | None = None) -> None:
+        """Set the joint reference; ``feedforward``: "none", "gravity" or "inverse_dynamics"."""
+        q = np.asarray(q, float)
+        if q.shape != (self.n,):
+            raise ValueError(f"joint command has {q.shape} positions, the robot has {self.n} joints")
+        self.q_ref = q.copy()
+        self.qd_ref = np.zeros(self.n) if qd is None else np.asarray(qd, float).copy()
+        self.qdd_ref = np.zeros(self.n) if qdd is None else np.asarray(qdd, float).copy()
+        if feedforward is not None:
+            self.feedforward = feedforward
+        self._ff_age = 10**9
+
+    # -- control ----------------------------------------------------------------------------------------------
+    def pin_configuration(self, qpos: np.ndarray) -> np.ndarray:
+        """MuJoCo qpos -> Pinocchio q (quaternion w x y z -> x y z w)."""
+        q = qpos.copy()
+        q[3:7] = [qpos[4], qpos[5], qpos[6], qpos[3]]
+        return q
+
+    def _feedforward(self) -> np.ndarray:
+        if self.feedforward == "none":
+            return np.zeros(self.n)
+        model, data = self.ctrl, self.ctrl_data
+        q = self.pin_configuration(self.data.qpos)
+        q[7:] = self.q_ref
+        v = np.zeros(model.nv)
+        a = np.zeros(model.nv)
+        if self.feedforward == "inverse_dynamics":
+            v[6:], a[6:] = self.qd_ref, self.qdd_ref
+        tau = pin.rnea(model, data, q, v, a)
+        # contact-consistent: the feet (and the seat when it carries load) take the base's wrench
+        frames = [model.getFrameId(f"sole_{s}") for s in SIDES]
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        J = np.vstack([pin.getFrameJacobian(model, data, f, pin.LOCAL_WORLD_ALIGNED) for f in frames])
+        seated = self.data.qpos[2] < self.seated_base_z + 0.03 or self._feet_load_fraction() < 0.9
+        if seated:   # the seat pushes up under the buttocks (a frame on the pelvis at the seat surface)
+            J = np.vstack([J, pin.getFrameJacobian(model, data, model.getFrameId("seat"), pin.LOCAL_WORLD_ALIGNED)[:3]])
+        lam = np.linalg.lstsq(J[:, :6].T, tau[:6], rcond=None)[0]
+        return tau[6:] - J[:, 6:].T @ lam
+
+    def _feet_load_fraction(self) -> float:
+        fz = sum(self._ground_reaction(s)[2] for s in SIDES)
+        return fz / (pin.computeTotalMass(self.ctrl) * G)
+
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` physics steps under the PD + feed-forward law (limp: zero torque)."""
+        for _ in range(n):
+            q = self.data.qpos[self.qadr]
+            qd = self.data.qvel[self.vadr]
+            if self.limp:
+                tau = np.zeros(self.n)
+            else:
+                if self._ff_age >= self.ff_every:          # the feed-forward changes slowly: refresh at its rate
+                    self._ff, self._ff_age = self._feedforward(), 0
+                self._ff_age += 1
+                tau = self.kp * (self.q_ref - q) + self.kd * (self.qd_ref - qd) + self._ff
+                tau = np.clip(tau, -self.effort, self.effort)
+            if self.delay_steps:
+                self._tau_queue.append(tau)
+                tau = self._tau_queue.popleft() if len(self._tau_queue) > self.delay_steps else np.zeros(self.n)
+            self.data.ctrl[:] = tau
+            mujoco.mj_step(self.model, self.data)
+        self._check_fall()
+
+    def _check_fall(self) -> None:
+        z = self.data.qpos[2]
+        w = self.data.qpos[3:7]
+        tilt = 2 * np.arccos(min(1.0, np.sqrt(w[0] ** 2 + w[3] ** 2)))   # angle of the base z axis from vertical
+        if z < self.cfg.fall_pelvis_height_m or tilt > self.cfg.fall_tilt_rad:
+            self.fallen = True
+            self.status_text = f"fallen: pelvis at {z:.2f} m, base tilted {np.degrees(tilt):.0f} deg"
+
+    # -- sensors ----------------------------------------------------------------------------------------------
+    def _ft_raw(self, side: str) -> np.ndarray:
+        f = self.data.sensor(f"force_{side}").data
+        t = self.data.sensor(f"torque_{side}").data
+        return np.concatenate([f, t])
+
+    def _ground_reaction(self, side: str, ft: np.ndarray | None = None) -> np.ndarray:
+        """Ground reaction on the foot (world axes): force, and torque about the sole point, from the F/T reading
+        (compensated for the foot's weight below the sensor, with the controller's foot mass)."""
+        ft = self._ft_raw(side) if ft is None else ft
+        site = self.data.site(f"ft_{side}")
+        R = site.xmat.reshape(3, 3)
+        f_parent, t_parent = R @ ft[:3], R @ ft[3:]       # what the leg exerts on the foot subtree, world axes
+        foot = self.ctrl.inertias[self.ctrl.getJointId(f"leg_{side}_6_joint")]
+        m_foot = foot.mass
+        com = site.xpos + R @ foot.lever
+        sole = self.data.site(f"sole_{side}").xpos
+        f_ground = -f_parent + m_foot * np.array([0.0, 0.0, G])
+        # moments about the sole: ground + leg + gravity balance the (static) foot
+        t_ground = -(t_parent + np.cross(site.xpos - sole, f_parent)) - np.cross(com - sole,
+                                                                                  m_foot * np.array([0, 0, -G]))
+        return np.concatenate([f_ground, t_ground])
+
+    def sensors(self) -> Sensors:
+        cfg, um = self.cfg, self.cfg.unmodeled
+        q = self.data.qpos[self.qadr] + self.rng.normal(0, cfg.encoder_noise_rad, self.n) if cfg.encoder_noise_rad \
+            else self.data.qpos[self.qadr].copy()
+        tau = np.array([self.data.sensor(f"tau_{n}").data[0] for n in self.joint_names])
+        tau = tau + self.tau_bias + self.rng.normal(0, cfg.joint_torque_noise_nm, self.n)
+        ft, world, cops, fzs = {}, {}, [], []
+        for side in SIDES:
+            raw = self._ft_raw(side)
+            meas = raw + np.concatenate([um.ft_force_bias_n, um.ft_torque_bias_nm]) + np.concatenate(
+                [self.rng.normal(0, cfg.ft_force_noise_n, 3), self.rng.normal(0, cfg.ft_torque_noise_nm, 3)])
+            ft[side] = meas
+            world[side] = self._ground_reaction(side, meas)
+        # combined COP on the floor from both feet: sum moments about the origin, then z = 0 plane
+        force = sum(world[s][:3] for s in SIDES)
+        moment = sum(world[s][3:] + np.cross(self.data.site(f"sole_{s}").xpos, world[s][:3]) for s in SIDES)
+        if force[2] > DEFAULT_COP_THRESHOLD_N:
+            cop = np.array([-moment[1] / force[2], moment[0] / force[2], 0.0])
+            ok = True
+        else:
+            cop, ok = np.full(3, np.nan), False
+        return Sensors(self.t_s, q, self.data.qvel[self.vadr].copy(), tau, ft, world, cop, ok,
+                       self.data.qpos[:7].copy())
+
+    def true_com(self) -> np.ndarray:
+        """The plant's true COM [m] (for tests and figures only; controllers must not use it)."""
+        return self.data.subtree_com[1].copy()
+
+    def chair_force_n(self) -> float:
+        """Vertical force the chair takes [N] (the plant's truth, from contacts; for tests)."""
+        total = 0.0
+        chair = self.model.geom("chair_seat").id if "chair_seat" in [self.model.geom(i).name
+                                                                       for i in range(self.model.ngeom)] else -1
+        f6 = np.zeros(6)
+        for i in range(self.data.ncon):
+            c = self.data.contact[i]
+            if chair in (c.geom1, c.geom2):
+                mujoco.mj_contactForce(self.model, self.data, i, f6)
+                total += abs((c.frame.reshape(3, 3).T @ f6[:3])[2])
+        return total
+
+
+def apply_parameters(model, params: dict) -> None:
+    """Set link masses [kg] and COMs [m, link frame] of a Pinocchio model from ``{link_joint: {mass, com}}``."""
+    for joint, p in params.items():
+        jid = model.getJointId(joint)
+        old = model.inertias[jid]
+        mass = float(p["mass"])
+        com = np.asarray(p.get("com", old.lever), float)
+        scale = mass / old.mass if old.mass > 0 else 1.0
+        model.inertias[jid] = pin.Inertia(mass, com, old.inertia * scale)

@@ -1,0 +1,79 @@
+"""sit2stand.robot: TALOS in MuJoCo and Pinocchio (same joints, same CAD body), the plant's sensors and seating."""
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from sit2stand.robot.model import PlantConfig, PlantConfigError, build_spec, controller_model
+from sit2stand.robot.plant import Plant
+from sit2stand.robot.postures import standing_qpos
+
+DEFAULT = "ros_ws/plants/default.yaml"
+
+
+@pytest.fixture(scope="module")
+def cad():
+    return controller_model(PlantConfig())
+
+
+def test_mujoco_and_pinocchio_have_the_same_joints_and_cad_com(cad):
+    model = build_spec(PlantConfig(), plant=False).compile()
+    data = mujoco.MjData(model)
+    names = [model.joint(i).name for i in range(1, model.njnt)]
+    assert names == list(cad.names[2:]) and len(names) == 32
+    assert model.nu == 32 and model.body_subtreemass[1] == pytest.approx(pin.computeTotalMass(cad), abs=1e-3)
+    pdata = cad.createData()
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        q = pin.randomConfiguration(cad)
+        q[:3] = rng.normal(size=3)
+        data.qpos[:3], data.qpos[3:7], data.qpos[7:] = q[:3], [q[6], q[3], q[4], q[5]], q[7:]
+        mujoco.mj_forward(model, data)
+        assert np.abs(data.subtree_com[1] - pin.centerOfMass(cad, pdata, q)).max() < 1e-4
+
+
+def test_unmodeled_masses_only_in_the_plant(cad):
+    cfg = PlantConfig.load(DEFAULT)
+    truth = build_spec(cfg, plant=True).compile()
+    hidden = cfg.total_extra_mass()
+    assert hidden == pytest.approx(28.0)
+    assert truth.body_subtreemass[1] == pytest.approx(pin.computeTotalMass(cad) + hidden, abs=1e-3)
+    assert pin.computeTotalMass(controller_model(cfg)) == pytest.approx(pin.computeTotalMass(cad))
+
+
+def test_bad_plant_files_are_named(tmp_path):
+    bad = tmp_path / "p.yaml"
+    bad.write_text("timestep: 0.001\n")
+    with pytest.raises(PlantConfigError, match="unknown field 'timestep'"):
+        PlantConfig.load(bad)
+    bad.write_text("unmodeled:\n  masses:\n    - {link: wing, mass_kg: 3}\n")
+    with pytest.raises(PlantConfigError, match="unknown link 'wing'"):
+        build_spec(PlantConfig.load(bad), plant=True)
+
+
+def test_standing_robot_measures_its_cop_where_its_true_com_is():
+    plant = Plant(PlantConfig.load(DEFAULT), with_chair=False)
+    # the hidden masses sit behind: standing straight would put the true COM over the heels, so lean 0.1 rad
+    qpos = standing_qpos(plant, 0.0, 0.0, -0.1, 0.0)
+    plant.reset(qpos)
+    plant.command(qpos[plant.qadr], feedforward="gravity")
+    plant.step(3000)
+    s = plant.sensors()
+    assert not plant.fallen and s.cop_valid
+    weight = plant.model.body_subtreemass[1] * 9.81
+    fz = s.wrench_world["left"][2] + s.wrench_world["right"][2]
+    assert fz == pytest.approx(weight, rel=0.01)                  # the F/T sensors carry the whole (true) weight
+    # static: COP under the COM (measured offset 14 mm with the default plant: not yet explained, see README)
+    assert abs(s.cop_m[0] - plant.true_com()[0]) < 0.02
+    assert np.abs(s.tau).max() < plant.effort.max()
+
+
+def test_robot_stays_seated_on_the_chair():
+    plant = Plant(PlantConfig.load(DEFAULT))
+    plant.step(3000)                                               # settle onto the seat
+    x0 = plant.data.qpos[:3].copy()
+    plant.step(5000)
+    assert not plant.fallen
+    assert plant.chair_force_n() > 0.3 * plant.model.body_subtreemass[1] * 9.81
+    assert np.linalg.norm(plant.data.qpos[:3] - x0) < 0.01         # pelvis moved < 1 cm in 5 s
