@@ -28,6 +28,10 @@ SIDES = ("left", "right")
 LEG_JOINTS = [f"leg_{s}_{i}_joint" for s in SIDES for i in range(1, 7)]
 SOLE_OFFSET_M = 0.107
 """The sole is this far below the origin of ``leg_*_6_link`` (URDF ``*_sole_link``)."""
+SOLE_HALF_SIZE_M = (0.105, 0.065, 0.005)
+SOLE_CENTRE_X_M = 0.02
+"""TALOS's sole plate (21 x 13 cm, centre 2 cm ahead of the ankle): the reduced URDF's foot collision mesh spans
+only 13.5 cm, which would leave a support polygon far smaller than the robot's, so the plant stands on this box."""
 COLLIDING = ("base_link",) + tuple(f"leg_{s}_{i}_link" for s in SIDES for i in range(1, 7))
 
 
@@ -87,8 +91,7 @@ class PlantConfig:
     control_rate_hz: float = 1000.0
     feedforward_rate_hz: float = 200.0   # contact-consistent gravity / inverse dynamics refreshed at this rate
     kp_per_effort: float = 10.0          # kp = effort limit / 0.1 rad
-    kd_ratio: float = 0.05               # kd = kd_ratio * kp, capped at kd_cap * M_ii / dt
-    kd_cap: float = 0.5
+    kd_ratio: float = 0.05               # kd = kd_ratio * kp (implicit: no cap needed)
     chair_height_m: float | None = None  # None: 1 cm below the lowest pelvis/thigh point when seated
     chair_front_gap_m: float = 0.02      # chair front edge this far behind the heels
     chair_depth_m: float = 0.45
@@ -176,14 +179,31 @@ def build_spec(cfg: PlantConfig, *, plant: bool) -> mujoco.MjSpec:
         j.damping = [0.0, 0.0, 0.0]                  # friction is an unmodeled effect, given below for the plant
         j.frictionloss = 0.0
         effort = float(j.actfrcrange[1]) if j.actfrcrange[1] > 0 else 100.0
-        act = spec.add_actuator(name=j.name, target=j.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-        act.set_to_motor()
-        act.ctrllimited = True
-        act.ctrlrange = [-effort, effort]
+        j.actfrcrange = [-effort, effort]             # the joint's total actuator torque is clamped here
+        kp = cfg.kp_per_effort * effort
+        kd = cfg.kd_ratio * kp
+        # joint PD as a position servo, so that MuJoCo integrates its damping implicitly (explicit PD at 1 kHz
+        # must cap kd and leaves the whole-body sway on the feet lightly damped); ctrl = q_ref + kd/kp qd_ref
+        pd = spec.add_actuator(name=j.name, target=j.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        pd.gaintype = mujoco.mjtGain.mjGAIN_FIXED
+        pd.gainprm[0] = kp
+        pd.biastype = mujoco.mjtBias.mjBIAS_AFFINE
+        pd.biasprm[0], pd.biasprm[1], pd.biasprm[2] = 0.0, -kp, -kd
+        pd.ctrllimited = False
+        ff = spec.add_actuator(name=f"ff_{j.name}", target=j.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        ff.set_to_motor()
+        ff.ctrllimited = True
+        ff.ctrlrange = [-effort, effort]
         spec.add_sensor(name=f"tau_{j.name}", type=mujoco.mjtSensor.mjSENS_JOINTACTFRC,
                         objtype=mujoco.mjtObj.mjOBJ_JOINT, objname=j.name)
     for side in SIDES:
         body = spec.body(f"leg_{side}_6_link")
+        for geom in body.geoms:            # the foot mesh stays for drawing; the sole box does the contact
+            geom.contype, geom.conaffinity = 0, 0
+        sole = body.add_geom(name=f"sole_box_{side}", type=mujoco.mjtGeom.mjGEOM_BOX, size=list(SOLE_HALF_SIZE_M),
+                             pos=[SOLE_CENTRE_X_M, 0, -SOLE_OFFSET_M + SOLE_HALF_SIZE_M[2]], rgba=[0.3, 0.3, 0.3, 1],
+                             mass=0.0)
+        sole.group = 3
         body.add_site(name=f"ft_{side}", pos=[0, 0, 0])
         body.add_site(name=f"sole_{side}", pos=[0, 0, -SOLE_OFFSET_M])
         spec.add_sensor(name=f"force_{side}", type=mujoco.mjtSensor.mjSENS_FORCE,
@@ -193,7 +213,7 @@ def build_spec(cfg: PlantConfig, *, plant: bool) -> mujoco.MjSpec:
     root.add_site(name="pelvis", pos=[0, 0, 0])
     for geom in spec.geoms:
         body_name = geom.parent.name if hasattr(geom.parent, "name") else ""
-        collide = body_name in COLLIDING
+        collide = body_name in COLLIDING and (not body_name.endswith("_6_link") or geom.name.startswith("sole_box"))
         # robot geoms (bit 1) touch only the environment (bit 2): no self-collision in deep hip flexion
         geom.contype, geom.conaffinity = (1, 2) if collide else (0, 0)
         geom.friction = [cfg.floor_friction, 0.005, 0.0001]

@@ -10,8 +10,10 @@ clipped to the URDF effort limits. ``sensors()`` returns what a real robot measu
 velocities, joint torques (actuator torque + noise + the unmodeled bias), the two ankle force/torque sensors (plus
 noise and bias) and the COP computed from them. ``status()`` reports a fall (pelvis too low, base tilted).
 
-Gains follow the measured recipe in ``../shared/notes/robot-talos.md``: kp = effort limit / 0.1 rad, kd = 0.05 kp,
-capped at kd_cap * M_ii / dt so that explicit PD at 1 kHz stays stable at the ankles.
+Gains follow the measured recipe in ``../shared/notes/robot-talos.md`` (kp = effort limit / 0.1 rad, kd = 0.05 kp),
+but the PD runs as MuJoCo position servos whose damping is integrated implicitly: no kd cap is needed against the
+explicit-PD ankle instability, and the whole-body sway on the feet is well damped. The feed-forward is a second
+(motor) actuator per joint; the joint's actuator force range (the URDF effort) clamps their sum.
 """
 
 from __future__ import annotations
@@ -108,7 +110,10 @@ class Plant:
         self.n = len(self.joint_names)
         self.qadr = np.array([self.model.joint(n).qposadr[0] for n in self.joint_names])
         self.vadr = np.array([self.model.joint(n).dofadr[0] for n in self.joint_names])
-        self.effort = np.array([self.model.actuator(n).ctrlrange[1] for n in self.joint_names])
+        self.effort = np.array([self.model.jnt_actfrcrange[self.model.joint(n).id][1] for n in self.joint_names])
+        self.pd_ids = np.array([self.model.actuator(n).id for n in self.joint_names])
+        self.ff_ids = np.array([self.model.actuator(f"ff_{n}").id for n in self.joint_names])
+        self._gains = (self.model.actuator_gainprm[self.pd_ids].copy(), self.model.actuator_biasprm[self.pd_ids].copy())
         self.rng = np.random.default_rng(cfg.seed)
         um = cfg.unmodeled
         self.tau_bias = np.zeros(self.n)
@@ -124,17 +129,13 @@ class Plant:
         if controller_params:
             apply_parameters(self.ctrl, controller_params)
         self.ctrl_data = self.ctrl.createData()
-        self.kp = cfg.kp_per_effort * self.effort
-        self.kd = cfg.kd_ratio * self.kp
+        self.kp = self.model.actuator_gainprm[self.pd_ids, 0].copy()
+        self.kd = -self.model.actuator_biasprm[self.pd_ids, 2].copy()
         self.seated_base_z = float(self.q_seated[2])
         self.ff_every = max(1, int(round(1.0 / (cfg.feedforward_rate_hz * cfg.timestep_s))))
         self._ff = np.zeros(self.n)
         self._ff_age = 10**9
         self.reset()
-        M = np.zeros((self.model.nv, self.model.nv))
-        mujoco.mj_fullM(self.model, self.data, M)   # MuJoCo 4: (model, data, dst)
-        m_ii = np.diag(M)[self.vadr]
-        self.kd = np.minimum(self.kd, cfg.kd_cap * m_ii / cfg.timestep_s)
         self.status_text = "ok"
 
     # -- state ------------------------------------------------------------------------------------------------
@@ -148,9 +149,16 @@ class Plant:
         self.qdd_ref = np.zeros(self.n)
         self.feedforward = "gravity"
         self._ff_age = 10**9
-        self.limp = False
+        self.set_limp(False)
         self._tau_queue.clear()
         self.fallen = False
+
+    def set_limp(self, limp: bool) -> None:
+        """Go limp (zero joint torque, e.g. after a fall) or back to PD control."""
+        self.limp = limp
+        gain, bias = self._gains
+        self.model.actuator_gainprm[self.pd_ids] = 0.0 if limp else gain
+        self.model.actuator_biasprm[self.pd_ids] = 0.0 if limp else bias
 
     @property
     def t_s(self) -> float:
@@ -205,20 +213,23 @@ class Plant:
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics steps under the PD + feed-forward law (limp: zero torque)."""
         for _ in range(n):
-            q = self.data.qpos[self.qadr]
-            qd = self.data.qvel[self.vadr]
             if self.limp:
-                tau = np.zeros(self.n)
+                ctrl_pd, ctrl_ff = self.data.qpos[self.qadr].copy(), np.zeros(self.n)
             else:
                 if self._ff_age >= self.ff_every:          # the feed-forward changes slowly: refresh at its rate
                     self._ff, self._ff_age = self._feedforward(), 0
                 self._ff_age += 1
-                tau = self.kp * (self.q_ref - q) + self.kd * (self.qd_ref - qd) + self._ff
-                tau = np.clip(tau, -self.effort, self.effort)
+                # PD (implicit, in the servo actuator) + feed-forward (motor); the joint clamps their sum
+                ctrl_pd = self.q_ref + self.kd / self.kp * self.qd_ref
+                ctrl_ff = np.clip(self._ff, -self.effort, self.effort)
             if self.delay_steps:
-                self._tau_queue.append(tau)
-                tau = self._tau_queue.popleft() if len(self._tau_queue) > self.delay_steps else np.zeros(self.n)
-            self.data.ctrl[:] = tau
+                self._tau_queue.append((ctrl_pd, ctrl_ff))
+                if len(self._tau_queue) > self.delay_steps:
+                    ctrl_pd, ctrl_ff = self._tau_queue.popleft()
+                else:
+                    ctrl_pd, ctrl_ff = self.data.qpos[self.qadr].copy(), np.zeros(self.n)
+            self.data.ctrl[self.pd_ids] = ctrl_pd
+            self.data.ctrl[self.ff_ids] = ctrl_ff
             mujoco.mj_step(self.model, self.data)
         self._check_fall()
 

@@ -40,6 +40,7 @@ class PostureSample:
     cop: np.ndarray          # (3,)
     base_pose: np.ndarray    # (7,) MuJoCo order: x y z qw qx qy qz
     true_com: np.ndarray     # the plant's COM (evaluation only; never used for identification)
+    cop_sd_m: float = 0.0    # standard deviation of the COP x over the averaging window
 
 
 def _set_leg(plant: Plant, q: np.ndarray, hip: float, knee: float, ankle: float, torso: float) -> np.ndarray:
@@ -77,13 +78,31 @@ def cad_com_x(plant: Plant, qpos: np.ndarray) -> float:
     return float(pin.centerOfMass(model, data, plant.pin_configuration(qpos))[0])
 
 
-def plan_postures(plant: Plant, n: int, seed: int = 0, com_offset_m: float = 0.02,
-                  ranges: dict[str, float] = PAPER_RANGES) -> list[np.ndarray]:
-    """``n`` statically stable (by CAD) symmetric stances spanning the paper's joint ranges (qpos, MuJoCo order)."""
+def solve_ankle(plant: Plant, hip: float, knee: float, torso: float, com_x_m: float) -> float | None:
+    """Ankle pitch [rad] putting the controller's (CAD) COM at ``com_x_m`` (feet centred at 0), or None."""
+    a_lo = max(plant.model.joint("leg_left_5_joint").range[0], -0.9)
+    a_hi = min(plant.model.joint("leg_left_5_joint").range[1], 0.4)
+    f = lambda a: cad_com_x(plant, standing_qpos(plant, hip, knee, a, torso)) - com_x_m  # noqa: E731
+    f_lo, f_hi = f(a_lo), f(a_hi)
+    if np.sign(f_lo) == np.sign(f_hi):
+        return None
+    for _ in range(30):       # COM x falls as the ankle pitch rises: bisection
+        mid = 0.5 * (a_lo + a_hi)
+        f_mid = f(mid)
+        if np.sign(f_mid) == np.sign(f_lo):
+            a_lo, f_lo = mid, f_mid
+        else:
+            a_hi = mid
+    return 0.5 * (a_lo + a_hi)
+
+
+def plan_postures(plant: Plant, n: int, seed: int = 0, com_offset_m: float = 0.025, com_centre_m: float = 0.02,
+                  ranges: dict[str, float] = PAPER_RANGES, com_bias_m: float = 0.0) -> list[np.ndarray]:
+    """``n`` statically stable symmetric stances spanning the paper's joint ranges (qpos, MuJoCo order): the ankle
+    puts the CAD COM at a random x within +-``com_offset_m`` of the sole's middle (``com_centre_m`` ahead of the
+    ankles), corrected by ``com_bias_m`` (how far the
+    real COM was measured from CAD's, e.g. by :func:`collect_postures` in its home stance)."""
     rng = np.random.default_rng(seed)
-    lo = {n_: plant.model.joint(n_).range[0] for n_ in ("leg_left_3_joint", "leg_left_4_joint", "leg_left_5_joint",
-                                                         "torso_2_joint")}
-    hi = {n_: plant.model.joint(n_).range[1] for n_ in lo}
     out: list[np.ndarray] = []
     tries = 0
     while len(out) < n and tries < 50 * n:
@@ -91,58 +110,42 @@ def plan_postures(plant: Plant, n: int, seed: int = 0, com_offset_m: float = 0.0
         hip = -rng.uniform(0.0, ranges["hip"])
         knee = rng.uniform(0.0, ranges["knee"])
         torso = rng.uniform(0.0, ranges["torso"])
-        target = rng.uniform(-com_offset_m, com_offset_m)
-        # bisection on the ankle so that the CAD COM is at the target x (COM x decreases as the ankle plantarflexes)
-        a_lo, a_hi = max(lo["leg_left_5_joint"], -ranges["ankle"] - 0.2), min(hi["leg_left_5_joint"], 0.4)
-        f = lambda a: cad_com_x(plant, standing_qpos(plant, hip, knee, a, torso)) - target  # noqa: E731
-        f_lo, f_hi = f(a_lo), f(a_hi)
-        if np.sign(f_lo) == np.sign(f_hi):
+        ankle = solve_ankle(plant, hip, knee, torso,
+                            com_centre_m + rng.uniform(-com_offset_m, com_offset_m) - com_bias_m)
+        if ankle is None:
             continue
-        for _ in range(30):
-            mid = 0.5 * (a_lo + a_hi)
-            if np.sign(f(mid)) == np.sign(f_lo):
-                a_lo, f_lo = mid, f(mid)
-            else:
-                a_hi = mid
-        q = standing_qpos(plant, hip, knee, 0.5 * (a_lo + a_hi), torso)
+        q = standing_qpos(plant, hip, knee, ankle, torso)
         if q[2] < 0.45:   # too deep for the knees' torque at this mass
             continue
         out.append(q)
     return out
 
 
-def hold_and_measure(plant: Plant, qpos: np.ndarray, settle_s: float = 1.5, average_s: float = 0.3,
-                     cop_target_m: float = 0.02, gain_rad_per_m: float = 0.3) -> PostureSample | None:
-    """Start in ``qpos``, hold it under PD + gravity feed-forward while trimming both ankle pitches from the
-    measured COP (from the feet's F/T sensors, as an operator balancing the robot would) until it sits over the
-    mid-foot; then average the sensors. None if the robot tipped or a foot moved."""
+def settle(plant: Plant, qpos: np.ndarray, seconds: float = 3.5) -> bool:
+    """Put the robot in ``qpos`` (feet flat) and hold it there under PD + gravity feed-forward for ``seconds``;
+    False if it tipped over."""
     plant.reset(qpos)
-    ref = qpos[plant.qadr].copy()
-    ankles = [plant.joint_names.index(f"leg_{s}_5_joint") for s in SIDES]
-    plant.command(ref, feedforward="gravity")
-    steps = int(0.05 / plant.cfg.timestep_s)
-    for k in range(int(settle_s / 0.05)):
-        plant.step(steps)
-        sens = plant.sensors()
-        if plant.fallen or (k >= 4 and not sens.cop_valid):
-            return None
-        if sens.cop_valid:   # COM behind the target -> lower the ankle pitch (COM x falls ~0.76 m/rad as it rises)
-            ref[ankles] += gain_rad_per_m * (sens.cop_m[0] - cop_target_m)
-            plant.command(ref)
+    plant.command(qpos[plant.qadr], feedforward="gravity")
+    plant.step(int(round(seconds / plant.cfg.timestep_s)))
+    return not plant.fallen
+
+
+def measure(plant: Plant, average_s: float = 0.3) -> PostureSample | None:
+    """Average the sensors over ``average_s`` while holding; None if the feet moved or the COP was lost."""
     feet0 = {s: plant.data.site(f"sole_{s}").xpos.copy() for s in SIDES}
     samples = []
     for _ in range(int(average_s / plant.cfg.timestep_s / 10)):
         plant.step(10)
         samples.append(plant.sensors())
     moved = max(np.linalg.norm(plant.data.site(f"sole_{s}").xpos - feet0[s]) for s in SIDES)
-    if plant.fallen or moved > 0.003 or not all(s.cop_valid for s in samples):
+    if plant.fallen or moved > 0.002 or not all(s.cop_valid for s in samples):
         return None
     mean = lambda xs: np.mean(xs, axis=0)  # noqa: E731
     return PostureSample(q=mean([s.q for s in samples]), tau=mean([s.tau for s in samples]),
                          wrench={side: mean([s.wrench_world[side] for s in samples]) for side in SIDES},
                          sole={side: plant.data.site(f"sole_{side}").xpos.copy() for side in SIDES},
                          cop=mean([s.cop_m for s in samples]), base_pose=plant.data.qpos[:7].copy(),
-                         true_com=plant.true_com())
+                         true_com=plant.true_com(), cop_sd_m=float(np.std([s.cop_m[0] for s in samples])))
 
 
 def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, progress: bool = True) -> dict:
@@ -155,7 +158,18 @@ def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, p
 
     # squats tilt the pelvis far forward: only a pelvis near the floor or unloaded feet count as a fall here
     plant = Plant(replace(cfg, fall_tilt_rad=np.pi), with_chair=False)
-    planned = plan_postures(plant, int(n * 1.6) + 5, seed=seed)
+    # first, as an operator would: stand still upright with the CAD COM 5 cm forward (room for mass the CAD model
+    # does not know about) and measure how far the real COM (the COP) is from CAD's
+    for forward in (0.10, 0.05, 0.15, 0.0, 0.2):
+        home = standing_qpos(plant, -0.1, 0.2, solve_ankle(plant, -0.1, 0.2, 0.0, forward), 0.0)
+        if settle(plant, home) and plant.sensors().cop_valid:
+            break
+    else:
+        raise RuntimeError("the robot cannot stand upright with its CAD COM anywhere over its feet; check the "
+                           "plant's hidden masses")
+    sample = measure(plant, 0.5)
+    bias = float(sample.cop[0] - cad_com_x(plant, plant.data.qpos)) if sample is not None else 0.0
+    planned = plan_postures(plant, 3 * n + 10, seed=seed, com_bias_m=bias)
     store = typestore().types
     kept, dropped = 0, 0
     with BagWriter(out, custom_data={"source": "sit2stand collect-postures", "plant": cfg.name,
@@ -172,8 +186,10 @@ def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, p
         for qpos in planned:
             if kept >= n:
                 break
-            sample = hold_and_measure(plant, qpos)
-            if sample is None:
+            sample = measure(plant) if settle(plant, qpos) else None
+            if sample is not None and sample.cop_sd_m > 0.002:   # still swaying: give it another second
+                sample = measure(plant) if (plant.step(1000) or not plant.fallen) else None
+            if sample is None or sample.cop_sd_m > 0.002:
                 dropped += 1
                 continue
             kept += 1
@@ -198,4 +214,4 @@ def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, p
                 header=h("world"), point=P(sample.true_com)))
             if progress and kept % 10 == 0:
                 print(f"  {kept}/{n} postures held ({dropped} tipped and dropped)", file=sys.stderr, flush=True)
-    return {"kept": kept, "dropped": dropped}
+    return {"kept": kept, "dropped": dropped, "home_com_bias_m": bias}
