@@ -2,6 +2,8 @@
 
     sit2stand import-c3d FILE.c3d --out bags/NAME [--chair-plate I] [--feet-plate J] [--forward +X --up +Z]
     sit2stand human-com BAG --out DIR
+    sit2stand collect-postures [--plant FILE] --n 88 --out DIR
+    sit2stand identify DIR --model planar5|full --out params.yaml
     sit2stand synth-human --style natural|elderly [--height M --mass KG ...] [--extra-mass SEG:KG[:x,y,z]] --out DIR
     sit2stand bag info DIR
     sit2stand bag recover DIR [--out DIR2]
@@ -74,6 +76,35 @@ def _human_com(args: argparse.Namespace) -> int:
         print(f"  force plates dropped out: " + "; ".join(
             f"{g['plate']} {g['from_s']:.3f}-{g['to_s']:.3f} s" for g in summary["plate_gaps"]))
     print(f"wrote {args.out}/summary.json, human_com.png and the human_com bag")
+    return 0
+
+
+def _collect_postures(args: argparse.Namespace) -> int:
+    from .robot.model import PlantConfig
+    from .robot.postures import collect_postures
+
+    cfg = PlantConfig.load(args.plant)
+    counts = collect_postures(cfg, args.n, args.out, seed=args.seed)
+    print(f"wrote {args.out}: {counts['kept']} postures held ({counts['dropped']} tipped over and were dropped; the "
+          f"upright stance showed the real COM {counts['home_com_bias_m'] * 1e3:+.0f} mm from CAD's)")
+    return 0 if counts["kept"] >= min(args.n, 6) else 1
+
+
+def _identify(args: argparse.Namespace) -> int:
+    from .robot.figures import com_path_figure, posture_figure
+    from .robot.identify import identify, read_postures, write_yaml
+
+    result = identify(args.dir, args.model, eval_fraction=args.eval_fraction, seed=args.seed)
+    print(result.summary())
+    write_yaml(result, args.out, source=str(args.dir))
+    png = Path(args.out).with_suffix(".png")
+    posture_figure(result, read_postures(args.dir), png, args.eval_fraction, args.seed)
+    written = [str(args.out), str(png)]
+    if result.model_name == "full":
+        path_png = Path(args.out).with_name(Path(args.out).stem + "_com_path.png")
+        com_path_figure(result, path_png)
+        written.append(str(path_png))
+    print("wrote " + ", ".join(written))
     return 0
 
 
@@ -171,6 +202,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-scaling", action="store_true", help="keep de Leva's segment masses")
     p.set_defaults(func=_human_com)
 
+    p = sub.add_parser("collect-postures", help="hold the simulated robot in static postures and record its sensors")
+    p.add_argument("--plant", type=Path, help="plant YAML (default: ros_ws/plants/default.yaml)")
+    p.add_argument("--n", type=int, default=88, help="postures to keep (the paper had 88)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=_collect_postures)
+
+    p = sub.add_parser("identify", help="identify the robot's mass/COM parameters from a static-posture bag")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--model", choices=["planar5", "full"], default="full")
+    p.add_argument("--eval-fraction", type=float, default=0.1)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", type=Path, required=True, help="parameters YAML (figures are written beside it)")
+    p.set_defaults(func=_identify)
+
     bag = sub.add_parser("bag", help="bag tools").add_subparsers(dest="bag_command", required=True)
     p = bag.add_parser("info", help="topics, types, counts, rates and duration")
     p.add_argument("dir", type=Path)
@@ -211,9 +257,11 @@ def main(argv: list[str] | None = None) -> int:
     from .io.c3d import C3DError
     from .launch import LaunchError
 
+    if getattr(args, "plant", "unset") is None:
+        args.plant = Path(__file__).resolve().parents[2] / "ros_ws" / "plants" / "default.yaml"
     try:
         return int(args.func(args) or 0)
-    except (BagError, C3DError, LaunchError, FileNotFoundError, ValueError) as err:
+    except (BagError, C3DError, LaunchError, FileNotFoundError, ValueError, RuntimeError) as err:
         print(f"sit2stand {args.command}: error: {err}", file=sys.stderr)
         return 2
 
