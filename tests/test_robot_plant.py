@@ -22,7 +22,7 @@ def test_mujoco_and_pinocchio_have_the_same_joints_and_cad_com(cad):
     data = mujoco.MjData(model)
     names = [model.joint(i).name for i in range(1, model.njnt)]
     assert names == list(cad.names[2:]) and len(names) == 32
-    assert model.nu == 64 and model.body_subtreemass[1]   # a PD servo and a feed-forward motor per joint
+    assert model.nu == 64   # a PD servo and a feed-forward motor per joint
     assert model.body_subtreemass[1] == pytest.approx(pin.computeTotalMass(cad), abs=1e-3)
     pdata = cad.createData()
     rng = np.random.default_rng(0)

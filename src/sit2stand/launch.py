@@ -46,7 +46,7 @@ from pathlib import Path
 
 import yaml
 
-OUR_NODES = {"replayer", "recorder", "human_com"}
+OUR_NODES = {"replayer", "recorder", "human_com", "driver", "identification"}
 SUBST = re.compile(r"\$\((var|env|dirname)(?:\s+([^)\s]+))?(?:\s+([^)]*))?\)")
 
 
@@ -113,7 +113,9 @@ def load_graph(path: str | Path, overrides: dict[str, str] | None = None) -> Gra
     if not isinstance(doc, dict) or not isinstance(doc.get("nodes"), list) or not doc["nodes"]:
         raise LaunchError(f"{path}: needs a non-empty 'nodes' list")
     graph_dir = path.resolve().parent
-    variables = {str(k): str(v) for k, v in (doc.get("arguments") or {}).items()}
+    # argument defaults may use $(dirname) and $(env ...) themselves
+    variables = {str(k): str(_substitute(str(v), {}, graph_dir, f"{path}: arguments.{k}"))
+                 for k, v in (doc.get("arguments") or {}).items()}
     variables.update(overrides or {})
     unknown = set(overrides or {}) - set(doc.get("arguments") or {})
     if unknown:

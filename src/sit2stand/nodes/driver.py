@@ -1,0 +1,213 @@
+"""Robot driver node: TALOS simulated in MuJoCo under joint PD + feed-forward, behaving like the real robot.
+
+Subscribes:
+* ``/robot/joint_command`` (sensor_msgs/JointState): positions, optional velocities, by joint name (joints not
+  named keep their last reference);
+* ``/robot/joint_trajectory`` (trajectory_msgs/JointTrajectory): the first point's positions, velocities and
+  accelerations: inverse-dynamics feed-forward with the plan's accelerations.
+
+Publishes: ``/robot/joint_states`` (position, velocity, measured torque as effort) at ``state_rate_hz`` (500) of
+simulated time, ``/robot/ft/left`` and ``/robot/ft/right`` (geometry_msgs/WrenchStamped: ground reaction in world
+axes about the sole, frame ``sole_<side>``), ``/robot/cop`` (geometry_msgs/PointStamped), ``/robot/base_pose``
+(geometry_msgs/PoseStamped, what a state estimator would give), ``/robot/status`` (diagnostic_msgs/DiagnosticStatus,
+10 Hz), and ``/clock`` when ``publish_clock`` is true (then every stamp is simulated time).
+
+Parameters: ``plant`` (YAML; default ros_ws/plants/default.yaml), ``controller_params`` (identified parameters YAML
+from ``sit2stand identify``; empty: CAD), ``feedforward`` (gravity | inverse_dynamics | none), ``real_time_factor``
+(1.0; 0 = as fast as it can), ``state_rate_hz``, ``publish_clock``, ``on_fall`` (limp | hold).
+Service: ``~/reset`` (std_srvs/Trigger): back to sitting on the chair.
+Safety: torques clamped to the URDF efforts by the joints; a fall (pelvis below ``fall_pelvis_height_m`` or the base
+tilted past ``fall_tilt_rad``) is published on the status and the robot goes limp or holds its posture.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
+
+from ..robot.model import SIDES, PlantConfig, PlantConfigError
+from ..robot.plant import Plant
+from .runtime import NodeError, declare, node_main
+
+DEFAULT_PLANT = Path(__file__).resolve().parents[3] / "ros_ws" / "plants" / "default.yaml"
+SIM_EPOCH_S = 100.0      # simulated time starts here when the driver is the time source (0 reads as "unset")
+
+
+class Driver(Node):
+    """Simulates the robot (see the module docstring)."""
+
+    executor_kind = "events"
+
+    def __init__(self) -> None:
+        super().__init__("driver")
+        plant_file = declare(self, "plant", "", "plant YAML") or str(DEFAULT_PLANT)
+        params_file = declare(self, "controller_params", "", "identified parameters YAML (empty: CAD)")
+        self.ff_mode = declare(self, "feedforward", "gravity", "gravity | inverse_dynamics | none")
+        self.rtf = declare(self, "real_time_factor", 1.0, "1 = real time, 0 = as fast as possible")
+        self.state_period = 1.0 / declare(self, "state_rate_hz", 500.0, "joint state rate [Hz] of simulated time")
+        self.publish_clock = declare(self, "publish_clock", False, "publish /clock (simulated time)")
+        self.on_fall = declare(self, "on_fall", "limp", "limp | hold")
+        if self.ff_mode not in ("gravity", "inverse_dynamics", "none") or self.on_fall not in ("limp", "hold"):
+            raise NodeError(f"feedforward {self.ff_mode!r} or on_fall {self.on_fall!r} not recognised")
+        try:
+            cfg = PlantConfig.load(plant_file)
+            ctrl = None
+            if params_file:
+                doc = yaml.safe_load(Path(params_file).read_text())
+                if "links" not in doc:
+                    raise NodeError(f"{params_file}: no per-link parameters ('links'); identify with --model full")
+                ctrl = doc["links"]
+            self.plant = Plant(cfg, controller_params=ctrl)
+        except (PlantConfigError, OSError) as err:
+            raise NodeError(str(err)) from None
+        self.plant.feedforward = self.ff_mode
+        self.names = self.plant.joint_names
+        self.index = {n: i for i, n in enumerate(self.names)}
+        fast = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.js_pub = self.create_publisher(JointState, "/robot/joint_states", 50)
+        self.ft_pubs = {s: self.create_publisher(WrenchStamped, f"/robot/ft/{s}", 50) for s in SIDES}
+        self.cop_pub = self.create_publisher(PointStamped, "/robot/cop", 50)
+        self.base_pub = self.create_publisher(PoseStamped, "/robot/base_pose", 50)
+        self.status_pub = self.create_publisher(DiagnosticStatus, "/robot/status", 10)
+        self.clock_pub = self.create_publisher(Clock, "/clock", fast) if self.publish_clock else None
+        self.create_subscription(JointState, "/robot/joint_command", self._on_command, 10)
+        self.create_subscription(JointTrajectory, "/robot/joint_trajectory", self._on_trajectory, 10)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self._wall0 = time.monotonic()
+        self._sim0 = self.plant.t_s
+        self.steps_done = 0
+        self._fall_reported = False
+        self.create_timer(0.005, self._tick)
+        self.create_timer(0.1, self._publish_status)
+        self.get_logger().info(f"TALOS seated on a {self.plant.seat_height_m:.3f} m chair; plant {cfg.name}; "
+                               f"controller model {'identified' if params_file else 'CAD'}; "
+                               f"{'as fast as possible' if self.rtf <= 0 else f'{self.rtf:g}x real time'}")
+
+    # -- commands ---------------------------------------------------------------------------------------------
+    def _apply(self, names, positions, velocities=None, accelerations=None, ff=None) -> None:
+        q, qd, qdd = self.plant.q_ref.copy(), self.plant.qd_ref.copy(), self.plant.qdd_ref.copy()
+        for k, name in enumerate(names):
+            j = self.index.get(name)
+            if j is None:
+                self.get_logger().warning(f"command for unknown joint {name!r} ignored", throttle_duration_sec=5.0)
+                continue
+            q[j] = positions[k]
+            qd[j] = velocities[k] if velocities is not None and len(velocities) > k else 0.0
+            qdd[j] = accelerations[k] if accelerations is not None and len(accelerations) > k else 0.0
+        if not np.all(np.isfinite(q)) or not np.all(np.isfinite(qd)) or not np.all(np.isfinite(qdd)):
+            self.get_logger().error("command with NaN or inf rejected", throttle_duration_sec=2.0)
+            return
+        self.plant.command(q, qd, qdd, feedforward=ff)
+
+    def _on_command(self, msg: JointState) -> None:
+        if len(msg.position) != len(msg.name):
+            self.get_logger().error(f"/robot/joint_command: {len(msg.name)} names but {len(msg.position)} positions")
+            return
+        self._apply(msg.name, list(msg.position), list(msg.velocity) or None)
+
+    def _on_trajectory(self, msg: JointTrajectory) -> None:
+        if not msg.points:
+            return
+        p = msg.points[0]
+        self._apply(msg.joint_names, list(p.positions), list(p.velocities) or None, list(p.accelerations) or None,
+                    ff="inverse_dynamics" if len(p.accelerations) else None)
+
+    def _on_reset(self, _req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+        self.plant.reset()
+        self.plant.feedforward = self.ff_mode
+        self._wall0, self._sim0 = time.monotonic(), self.plant.t_s
+        self._fall_reported = False
+        res.success, res.message = True, "reset: seated on the chair"
+        return res
+
+    # -- simulation ----------------------------------------------------------------------------------------------
+    def _tick(self) -> None:
+        plant = self.plant
+        if self.rtf > 0:
+            target = self._sim0 + (time.monotonic() - self._wall0) * self.rtf
+        else:
+            target = plant.t_s + 0.05      # as fast as it can: 50 ms of simulation per tick
+        chunk = max(1, int(round(self.state_period / plant.cfg.timestep_s)))
+        while plant.t_s + 0.5 * plant.cfg.timestep_s < target:
+            plant.step(chunk)
+            self.steps_done += chunk
+            self._publish_state()
+            if plant.fallen and not self._fall_reported:
+                self._fall_reported = True
+                self.get_logger().error(f"robot {plant.status_text}; going {self.on_fall}")
+                if self.on_fall == "limp":
+                    plant.set_limp(True)
+                else:
+                    plant.command(plant.data.qpos[plant.qadr].copy())
+
+    def _stamp(self, msg_header) -> None:
+        if self.publish_clock:
+            sec, nsec = divmod(int(round((SIM_EPOCH_S + self.plant.t_s) * 1e9)), 1_000_000_000)
+            msg_header.stamp.sec, msg_header.stamp.nanosec = sec, nsec
+        else:
+            msg_header.stamp = self.get_clock().now().to_msg()
+
+    def _publish_state(self) -> None:
+        s = self.plant.sensors()
+        if self.clock_pub is not None:
+            c = Clock()
+            c.clock.sec, c.clock.nanosec = divmod(int(round((SIM_EPOCH_S + self.plant.t_s) * 1e9)), 1_000_000_000)
+            self.clock_pub.publish(c)
+        js = JointState(name=self.names, position=s.q.tolist(), velocity=s.qd.tolist(), effort=s.tau.tolist())
+        self._stamp(js.header)
+        js.header.frame_id = "base_link"
+        self.js_pub.publish(js)
+        for side in SIDES:
+            w = WrenchStamped()
+            self._stamp(w.header)
+            w.header.frame_id = f"sole_{side}"
+            f, t = s.wrench_world[side][:3], s.wrench_world[side][3:]
+            w.wrench.force.x, w.wrench.force.y, w.wrench.force.z = map(float, f)
+            w.wrench.torque.x, w.wrench.torque.y, w.wrench.torque.z = map(float, t)
+            self.ft_pubs[side].publish(w)
+        p = PointStamped()
+        self._stamp(p.header)
+        p.header.frame_id = "world"
+        p.point.x, p.point.y, p.point.z = (float(v) for v in s.cop_m) if s.cop_valid else (float("nan"),) * 3
+        self.cop_pub.publish(p)
+        b = PoseStamped()
+        self._stamp(b.header)
+        b.header.frame_id = "world"
+        b.pose.position.x, b.pose.position.y, b.pose.position.z = map(float, s.base_pose[:3])
+        (b.pose.orientation.w, b.pose.orientation.x, b.pose.orientation.y,
+         b.pose.orientation.z) = map(float, s.base_pose[3:7])
+        self.base_pub.publish(b)
+
+    def _publish_status(self) -> None:
+        plant = self.plant
+        wall = time.monotonic() - self._wall0
+        status = DiagnosticStatus(name=self.get_fully_qualified_name(), hardware_id="talos_sim",
+                                  level=DiagnosticStatus.ERROR if plant.fallen else DiagnosticStatus.OK,
+                                  message=plant.status_text if plant.fallen else ("limp" if plant.limp else "ok"))
+        status.values = [KeyValue(key=k, value=v) for k, v in (
+            ("sim_time_s", f"{plant.t_s:.3f}"), ("real_time_factor", f"{(plant.t_s - self._sim0) / max(wall, 1e-9):.2f}"),
+            ("pelvis_height_m", f"{plant.data.qpos[2]:.3f}"), ("feedforward", plant.feedforward))]
+        self.status_pub.publish(status)
+
+    def close(self) -> None:
+        wall = time.monotonic() - self._wall0
+        print(f"[driver] simulated {self.plant.t_s - self._sim0:.2f} s in {wall:.2f} s "
+              f"(real-time factor {(self.plant.t_s - self._sim0) / max(wall, 1e-9):.2f}); "
+              f"{'FALLEN: ' + self.plant.status_text if self.plant.fallen else 'upright'}", flush=True)
+
+
+main = node_main(Driver)
+
+if __name__ == "__main__":
+    raise SystemExit(main())

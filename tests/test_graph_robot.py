@@ -1,0 +1,72 @@
+"""Graph tests of the robot side: the driver with the recorder (seated, steady), the identification service called
+from another process."""
+
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from conftest import GRAPHS
+from sit2stand.io.bag import BagReader
+from sit2stand.robot.model import PlantConfig
+from sit2stand.robot.postures import collect_postures
+
+pytestmark = pytest.mark.graph
+
+
+def test_driver_in_a_graph_sits_still_on_the_chair(tmp_path, ros_env):
+    out = tmp_path / "seated"
+    result = subprocess.run([sys.executable, "-m", "sit2stand.cli", "launch", str(GRAPHS / "robot_seated.yaml"),
+                             f"out:={out}", "rtf:=2.0", "--timeout", "7"], env=ros_env, capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 0, result.stdout[-3000:]
+    assert "upright" in result.stdout and "FALLEN" not in result.stdout
+    with BagReader(out) as bag:
+        topics = bag.topics()
+        assert topics["/robot/joint_states"].count > 2000                 # >= 500 Hz of simulated time
+        poses = bag.read("/robot/base_pose")
+        z = np.array([m.pose.position.z for _, m in poses])
+        x = np.array([m.pose.position.x for _, m in poses])
+        late = slice(len(z) // 2, None)                                     # after settling on the seat
+        assert np.ptp(z[late]) < 0.005 and np.ptp(x[late]) < 0.01           # seated and steady
+        assert 0.6 < z.mean() < 0.72
+        fz = np.array([m.wrench.force.z for _, m in bag.read("/robot/ft/left")])
+        weight = 116.27 * 9.81
+        assert 0.1 * weight < 2 * fz[late].mean() < 0.7 * weight           # the chair takes the rest
+        js = bag.read("/robot/joint_states")
+        assert len(js[-1][1].effort) == 32 and np.all(np.isfinite(js[-1][1].effort))
+
+
+def test_identification_service_called_from_another_process(tmp_path, ros_env, run_node):
+    import rclpy
+    from sit2stand_msgs.srv import IdentifyCom
+
+    data = tmp_path / "postures"
+    collect_postures(PlantConfig.load("ros_ws/plants/default.yaml"), 12, data, progress=False)
+    server = run_node("sit2stand.nodes.identification")
+    assert server.wait_for_output("ready", 30), server.output
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = rclpy.create_node("client", context=context)
+        client = node.create_client(IdentifyCom, "/robot/identify_com")
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        assert client.wait_for_service(timeout_sec=20)
+        for model in ("full", "planar5"):
+            future = client.call_async(IdentifyCom.Request(data_path=str(data), model=model,
+                                                           output_path=str(tmp_path / f"{model}.yaml")))
+            executor.spin_until_future_complete(future, timeout_sec=60)
+            res = future.result()
+            assert res.success, res.message
+            assert res.eval_rms_m < 0.005 < res.cad_eval_rms_m and res.condition_number > 1
+            assert (tmp_path / f"{model}.yaml").exists() and len(res.parameter_names) == len(res.parameter_values)
+        future = client.call_async(IdentifyCom.Request(data_path=str(tmp_path / "nowhere"), model="full"))
+        executor.spin_until_future_complete(future, timeout_sec=30)
+        assert not future.result().success and "no such bag" in future.result().message
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    assert server.stop() == 0
