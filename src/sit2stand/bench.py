@@ -149,6 +149,35 @@ def bench_human_com_graph(bag: Path, env: dict[str, str]) -> dict[str, float]:
             "node_cost_p99_ms": float(m.group(3))}
 
 
+def bench_robot(n_postures: int = 88) -> dict[str, float]:
+    """Plant real-time factor at 1 kHz (seated, PD + gravity feed-forward), and identification time."""
+    import tempfile as _tmp
+
+    from .robot.identify import identify
+    from .robot.model import PlantConfig
+    from .robot.plant import Plant
+    from .robot.postures import collect_postures
+
+    cfg = PlantConfig.load(Path(__file__).resolve().parents[2] / "ros_ws" / "plants" / "default.yaml")
+    plant = Plant(cfg)
+    plant.step(200)
+    t0 = time.perf_counter()
+    plant.step(5000)
+    rtf = 5.0 / (time.perf_counter() - t0)
+    out = {"plant_real_time_factor_1khz": rtf}
+    with _tmp.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        counts = collect_postures(cfg, n_postures, Path(tmp) / "p", progress=False)
+        out["collect_postures_s"] = time.perf_counter() - t0
+        out["postures"] = counts["kept"]
+        for model in ("full", "planar5"):
+            r = identify(Path(tmp) / "p", model)
+            out[f"identify_{model}_s"] = r.seconds
+            out[f"identify_{model}_eval_rms_mm"] = r.eval_rms_m * 1e3
+            out[f"identify_{model}_cad_eval_rms_mm"] = r.cad_eval_rms_m * 1e3
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sit2stand-bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results/bench.json"))
@@ -178,7 +207,9 @@ def main(argv: list[str] | None = None) -> int:
         results["human_com"] = bench_human_com(demo)
         print("human COM: the node in a real-time graph ...", flush=True)
         results["human_com"].update(bench_human_com_graph(demo, env))
-    sections = [s for s in ("bag", "replayer", "human_com") if s in results]
+    print("robot: plant real-time factor, 88 postures, identification ...", flush=True)
+    results["robot"] = bench_robot()
+    sections = [s for s in ("bag", "replayer", "human_com", "robot") if s in results]
     width = max(len(k) for section in sections for k in results[section])
     for section in sections:
         print(f"\n[{section}]")

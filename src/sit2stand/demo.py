@@ -7,8 +7,10 @@ For each shipped bag (``bags/natural``, ``bags/elderly``):
 2. the same live: replayer -> human_com node -> recorder over DDS (``ros_ws/graphs/human_com.yaml``); the
    recorded ``/human/com`` against the ground truth, and the node's per-frame cost.
 
-Then a figure of the sagittal COM paths, natural against elderly (the paper's Fig. 7 idea), and ``summary.json``.
-The robot side (identification, retargeting, the MuJoCo driver) joins this job as it lands.
+Then a figure of the sagittal COM paths, natural against elderly (the paper's Fig. 7 idea). For the robot: static
+postures of the simulated TALOS (default plant, with mass its CAD model lacks), identification of its mass/COM
+parameters (full model), the held-out COM error next to CAD's, and the figures. Everything in ``summary.json``.
+The retargeter and the stand-up join this job as they land.
 
     python -m sit2stand.demo --out runs/demo [--bags bags/natural bags/elderly] [--rate 1.0]
 """
@@ -64,6 +66,27 @@ def live(bag: Path, out: Path, rate: float) -> dict:
             "cost_p50_ms": float(cost.group(1)) if cost else None, "cost_p99_ms": float(cost.group(2)) if cost else None}
 
 
+def robot_identification(out: Path, n_postures: int) -> dict:
+    """Static postures of the default plant, full-model identification, figures."""
+    from .robot.figures import com_path_figure, posture_figure
+    from .robot.identify import identify, read_postures, write_yaml
+    from .robot.model import PlantConfig
+    from .robot.postures import collect_postures
+
+    print(f"[robot] {n_postures} static postures of the simulated TALOS (default plant)", flush=True)
+    out.mkdir(parents=True, exist_ok=True)
+    counts = collect_postures(PlantConfig.load(ROOT / "ros_ws" / "plants" / "default.yaml"), n_postures,
+                              out / "postures", progress=False)
+    result = identify(out / "postures", "full")
+    print(f"      {result.summary()}", flush=True)
+    write_yaml(result, out / "identified_full.yaml", source=str(out / "postures"))
+    posture_figure(result, read_postures(out / "postures"), out / "identified_full.png")
+    com_path_figure(result, out / "identified_full_com_path.png")
+    return {"postures_kept": counts["kept"], "eval_rms_mm": result.eval_rms_m * 1e3,
+            "cad_eval_rms_mm": result.cad_eval_rms_m * 1e3, "total_mass_kg": result.total_mass_kg,
+            "cad_mass_kg": result.cad_mass_kg, "identify_s": result.seconds}
+
+
 def com_paths_figure(runs: dict[str, tuple[Path, Path]], png: Path) -> None:
     """Sagittal COM paths of the demonstrations: estimated (offline, scaled) and true."""
     import matplotlib
@@ -95,6 +118,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("runs/demo"))
     parser.add_argument("--bags", type=Path, nargs="*", default=DEFAULT_BAGS)
     parser.add_argument("--rate", type=float, default=1.0)
+    parser.add_argument("--postures", type=int, default=88, help="static postures for the robot identification")
+    parser.add_argument("--skip-robot", action="store_true")
     args = parser.parse_args(argv)
     missing = [b for b in args.bags if not (b / "metadata.yaml").exists()]
     if missing:
@@ -120,10 +145,13 @@ def main(argv: list[str] | None = None) -> int:
               f"{live_figs['cost_p50_ms']} ms, p99 {live_figs['cost_p99_ms']} ms", flush=True)
         summary[name] = {"offline": offline, "live": live_figs}
     com_paths_figure(runs, args.out / "com_paths.png")
+    if not args.skip_robot:
+        summary["robot"] = robot_identification(args.out / "robot", args.postures)
     (args.out / "summary.json").write_text(json.dumps(summary, indent=2))
-    ok = all(s["offline"]["com_rms_vs_truth_scaled_mm"] <= 10.0 for s in summary.values())
+    ok = all(s["offline"]["com_rms_vs_truth_scaled_mm"] <= 10.0 for n, s in summary.items() if n != "robot")
+    ok = ok and ("robot" not in summary or summary["robot"]["eval_rms_mm"] <= 5.0)
     print(f"\n{'done' if ok else 'COM ERROR ABOVE 1 cm'}: {args.out}/summary.json, com_paths.png, "
-          + ", ".join(f"{n}/human_com.png" for n in runs))
+          + ", ".join(f"{n}/human_com.png" for n in runs) + ("" if args.skip_robot else ", robot/*.png"))
     return 0 if ok else 1
 
 
