@@ -2,6 +2,7 @@
 
     sit2stand import-c3d FILE.c3d --out bags/NAME [--chair-plate I] [--feet-plate J] [--forward +X --up +Z]
     sit2stand human-com BAG --out DIR
+    sit2stand drive [--plant FILE] [--params P.yaml] [--rtf R] [--clock]   (runs the driver node)
     sit2stand collect-postures [--plant FILE] --n 88 --out DIR
     sit2stand identify DIR --model planar5|full --out params.yaml
     sit2stand synth-human --style natural|elderly [--height M --mass KG ...] [--extra-mass SEG:KG[:x,y,z]] --out DIR
@@ -77,6 +78,14 @@ def _human_com(args: argparse.Namespace) -> int:
             f"{g['plate']} {g['from_s']:.3f}-{g['to_s']:.3f} s" for g in summary["plate_gaps"]))
     print(f"wrote {args.out}/summary.json, human_com.png and the human_com bag")
     return 0
+
+
+def _drive(args: argparse.Namespace) -> int:
+    from .nodes.driver import main as driver_main
+
+    return driver_main(["driver"] + _ros_params([
+        ("plant", str(args.plant)), ("controller_params", str(args.params) if args.params else None),
+        ("real_time_factor", float(args.rtf)), ("publish_clock", args.clock), ("feedforward", args.feedforward)]))
 
 
 def _collect_postures(args: argparse.Namespace) -> int:
@@ -201,6 +210,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-calibration", action="store_true", help="keep de Leva's segment lengths")
     p.add_argument("--no-scaling", action="store_true", help="keep de Leva's segment masses")
     p.set_defaults(func=_human_com)
+
+    p = sub.add_parser("drive", help="the simulated robot (the driver node), seated on its chair")
+    p.add_argument("--plant", type=Path, help="plant YAML (default: ros_ws/plants/default.yaml)")
+    p.add_argument("--params", type=Path, help="identified parameters YAML for the controller (default: CAD)")
+    p.add_argument("--rtf", type=float, default=1.0, help="real-time factor; 0 = as fast as possible")
+    p.add_argument("--clock", action="store_true", help="publish /clock (the driver is the time source)")
+    p.add_argument("--feedforward", choices=["gravity", "inverse_dynamics", "none"], default="gravity")
+    p.set_defaults(func=_drive)
 
     p = sub.add_parser("collect-postures", help="hold the simulated robot in static postures and record its sensors")
     p.add_argument("--plant", type=Path, help="plant YAML (default: ros_ws/plants/default.yaml)")

@@ -137,7 +137,7 @@ class Driver(Node):
         if self.rtf > 0:
             target = self._sim0 + (time.monotonic() - self._wall0) * self.rtf
         else:
-            target = plant.t_s + 0.05      # as fast as it can: 50 ms of simulation per tick
+            target = plant.t_s + 0.25      # as fast as it can: 250 ms of simulation per tick
         chunk = max(1, int(round(self.state_period / plant.cfg.timestep_s)))
         while plant.t_s + 0.5 * plant.cfg.timestep_s < target:
             plant.step(chunk)

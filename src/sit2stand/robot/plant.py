@@ -129,9 +129,18 @@ class Plant:
         if controller_params:
             apply_parameters(self.ctrl, controller_params)
         self.ctrl_data = self.ctrl.createData()
+        self.ctrl_mass = float(pin.computeTotalMass(self.ctrl))
         self.kp = self.model.actuator_gainprm[self.pd_ids, 0].copy()
         self.kd = -self.model.actuator_biasprm[self.pd_ids, 2].copy()
         self.seated_base_z = float(self.q_seated[2])
+        # addresses resolved once: MuJoCo's by-name accessors cost ~15 us each
+        m = self.model
+        self.tau_adr = np.array([m.sensor_adr[m.sensor(f"tau_{n}").id] for n in self.joint_names])
+        self.ft_adr = {s: (m.sensor_adr[m.sensor(f"force_{s}").id], m.sensor_adr[m.sensor(f"torque_{s}").id])
+                       for s in SIDES}
+        self.site_id = {name: m.site(name).id for name in [f"{k}_{s}" for k in ("ft", "sole") for s in SIDES]}
+        feet = {s: self.ctrl.inertias[self.ctrl.getJointId(f"leg_{s}_6_joint")] for s in SIDES}
+        self.foot = {s: (float(f.mass), f.lever.copy()) for s, f in feet.items()}
         self.ff_every = max(1, int(round(1.0 / (cfg.feedforward_rate_hz * cfg.timestep_s))))
         self._ff = np.zeros(self.n)
         self._ff_age = 10**9
@@ -208,7 +217,7 @@ class Plant:
 
     def _feet_load_fraction(self) -> float:
         fz = sum(self._ground_reaction(s)[2] for s in SIDES)
-        return fz / (pin.computeTotalMass(self.ctrl) * G)
+        return fz / (self.ctrl_mass * G)
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics steps under the PD + feed-forward law (limp: zero torque)."""
@@ -243,24 +252,23 @@ class Plant:
 
     # -- sensors ----------------------------------------------------------------------------------------------
     def _ft_raw(self, side: str) -> np.ndarray:
-        f = self.data.sensor(f"force_{side}").data
-        t = self.data.sensor(f"torque_{side}").data
-        return np.concatenate([f, t])
+        fa, ta = self.ft_adr[side]
+        return np.concatenate([self.data.sensordata[fa:fa + 3], self.data.sensordata[ta:ta + 3]])
 
     def _ground_reaction(self, side: str, ft: np.ndarray | None = None) -> np.ndarray:
         """Ground reaction on the foot (world axes): force, and torque about the sole point, from the F/T reading
         (compensated for the foot's weight below the sensor, with the controller's foot mass)."""
         ft = self._ft_raw(side) if ft is None else ft
-        site = self.data.site(f"ft_{side}")
-        R = site.xmat.reshape(3, 3)
+        sid = self.site_id[f"ft_{side}"]
+        site_pos = self.data.site_xpos[sid]
+        R = self.data.site_xmat[sid].reshape(3, 3)
         f_parent, t_parent = R @ ft[:3], R @ ft[3:]       # what the leg exerts on the foot subtree, world axes
-        foot = self.ctrl.inertias[self.ctrl.getJointId(f"leg_{side}_6_joint")]
-        m_foot = foot.mass
-        com = site.xpos + R @ foot.lever
-        sole = self.data.site(f"sole_{side}").xpos
+        m_foot, lever = self.foot[side]
+        com = site_pos + R @ lever
+        sole = self.data.site_xpos[self.site_id[f"sole_{side}"]]
         f_ground = -f_parent + m_foot * np.array([0.0, 0.0, G])
         # moments about the sole: ground + leg + gravity balance the (static) foot
-        t_ground = -(t_parent + np.cross(site.xpos - sole, f_parent)) - np.cross(com - sole,
+        t_ground = -(t_parent + np.cross(site_pos - sole, f_parent)) - np.cross(com - sole,
                                                                                   m_foot * np.array([0, 0, -G]))
         return np.concatenate([f_ground, t_ground])
 
@@ -268,7 +276,7 @@ class Plant:
         cfg, um = self.cfg, self.cfg.unmodeled
         q = self.data.qpos[self.qadr] + self.rng.normal(0, cfg.encoder_noise_rad, self.n) if cfg.encoder_noise_rad \
             else self.data.qpos[self.qadr].copy()
-        tau = np.array([self.data.sensor(f"tau_{n}").data[0] for n in self.joint_names])
+        tau = self.data.sensordata[self.tau_adr].copy()
         tau = tau + self.tau_bias + self.rng.normal(0, cfg.joint_torque_noise_nm, self.n)
         ft, world, cops, fzs = {}, {}, [], []
         for side in SIDES:
@@ -279,7 +287,8 @@ class Plant:
             world[side] = self._ground_reaction(side, meas)
         # combined COP on the floor from both feet: sum moments about the origin, then z = 0 plane
         force = sum(world[s][:3] for s in SIDES)
-        moment = sum(world[s][3:] + np.cross(self.data.site(f"sole_{s}").xpos, world[s][:3]) for s in SIDES)
+        moment = sum(world[s][3:] + np.cross(self.data.site_xpos[self.site_id[f"sole_{s}"]], world[s][:3])
+                     for s in SIDES)
         if force[2] > DEFAULT_COP_THRESHOLD_N:
             cop = np.array([-moment[1] / force[2], moment[0] / force[2], 0.0])
             ok = True
