@@ -1,0 +1,75 @@
+"""sit2stand.retarget.ik: the COM equality and the feet hold exactly, limits hold, the result is a constrained
+optimum, and the marker error is reported next to an unconstrained marker-only IK's."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from sit2stand.retarget.ik import ComIk
+from sit2stand.robot.model import controller_model
+
+MARKER_LINKS = ("torso_2_link", "head_2_link", "arm_left_4_link", "arm_right_4_link", "arm_left_7_link",
+                "arm_right_7_link", "leg_left_4_link", "leg_right_4_link", "base_link")
+
+
+@pytest.fixture(scope="module")
+def scene():
+    model = controller_model()
+    data = model.createData()
+    idx = lambda n: model.joints[model.getJointId(n)].idx_q  # noqa: E731
+    q = pin.neutral(model)
+    for s in ("left", "right"):
+        q[idx(f"leg_{s}_3_joint")], q[idx(f"leg_{s}_4_joint")], q[idx(f"leg_{s}_5_joint")] = -0.6, 1.1, -0.5
+    q[idx("torso_2_joint")] = 0.3
+    soles = [model.getFrameId("sole_left"), model.getFrameId("sole_right")]
+    pin.framesForwardKinematics(model, data, q)
+    q[2] -= min(data.oMf[f].translation[2] for f in soles)
+    pin.framesForwardKinematics(model, data, q)
+    return model, q, soles, [data.oMf[f].copy() for f in soles]
+
+
+def frame_markers(model, q, rng, noise=0.01):
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    return [(model.getFrameId(n), data.oMf[model.getFrameId(n)].translation + rng.normal(0, noise, 3), 1.0)
+            for n in MARKER_LINKS]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_com_equality_feet_and_limits_hold_and_the_result_is_a_constrained_optimum(scene, seed):
+    model, q_true, soles, sole_targets = scene
+    rng = np.random.default_rng(seed)
+    markers = frame_markers(model, q_true, rng)
+    com_target = pin.centerOfMass(model, model.createData(), q_true) + rng.uniform(-0.02, 0.02, 3)
+    start = q_true.copy()
+    start[7:] += rng.normal(0, 0.03, model.nq - 7)
+    ik = ComIk(model, soles)
+    r = ik.solve(start, markers, com_target, sole_targets, max_iterations=40, tol=1e-9)
+    assert r.feasible and r.com_error_m < 1e-6 and r.sole_error < 1e-6
+    assert np.all(r.q[7:] >= model.lowerPositionLimit[7:] - 1e-9) and np.all(r.q[7:] <= model.upperPositionLimit[7:] + 1e-9)
+    assert r.step_norm < 1e-4 and r.kkt_dual_residual < 1e-6      # a KKT point of the constrained problem
+    # the same markers without the COM constraint fit at least as well: the price of the hard COM, reported
+    free = ComIk(model, soles).solve(start, markers, com_target, sole_targets, com_axes=(), max_iterations=40, tol=1e-9)
+    assert free.marker_rms_m <= r.marker_rms_m + 1e-9
+    assert r.marker_rms_m < 0.05
+
+
+def test_an_unreachable_com_is_flagged_and_the_pose_stays_valid(scene):
+    model, q_true, soles, sole_targets = scene
+    markers = frame_markers(model, q_true, np.random.default_rng(0))
+    far = pin.centerOfMass(model, model.createData(), q_true) + np.array([0.0, 0.0, 1.0])   # 1 m higher
+    r = ComIk(model, soles).solve(q_true, markers, far, sole_targets, max_iterations=10)
+    assert not r.feasible and np.all(np.isfinite(r.q))
+    assert np.all(r.q[7:] >= model.lowerPositionLimit[7:] - 1e-9) and np.all(r.q[7:] <= model.upperPositionLimit[7:] + 1e-9)
+
+
+def test_speed_limits_bound_the_motion_from_the_previous_frame(scene):
+    model, q_true, soles, sole_targets = scene
+    markers = frame_markers(model, q_true, np.random.default_rng(3), noise=0.0)
+    start = q_true.copy()
+    start[7:] += 0.2
+    start[7:] = np.clip(start[7:], model.lowerPositionLimit[7:], model.upperPositionLimit[7:])
+    com = pin.centerOfMass(model, model.createData(), q_true)
+    ik = ComIk(model, soles, velocity_limit=2.0, dt=0.01)
+    r = ik.solve(start, markers, com, sole_targets, q_prev=start, max_iterations=20)
+    assert np.max(np.abs(r.q[7:] - start[7:])) <= 2.0 * 0.01 + 1e-9
