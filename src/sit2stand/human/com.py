@@ -26,6 +26,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.signal import savgol_coeffs, savgol_filter   # at import time: the first frame must not pay for it
 
+from ..dynamics import model_cop
 from ..io.forceplate import center_of_pressure
 from .skeleton import LENGTH_GROUPS, SEGMENTS, HumanModel, Subject, build_human
 
@@ -477,22 +478,6 @@ def solve_mass_scaling(human: HumanModel, A: np.ndarray, b: np.ndarray, body_mas
     shift = np.array([res.x[-2] / m_torso, res.x[-1] / m_torso, 0.0])
     return MassScaling(masses, shift, {g: prior[g] for g in MASS_GROUPS}, condition_number=res.condition_number,
                        frames_used=int(np.sum(weights > 0) // 3))
-
-
-def model_cop(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, a: np.ndarray,
-              floor_z: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """COM, its velocity and acceleration, and the model COP on the floor from the centroidal dynamics:
-    F = m (a_com - g), M_O = c x F + dL_G/dt."""
-    pin.centerOfMass(model, data, q, v, a)
-    com, vcom, acom = data.com[0].copy(), data.vcom[0].copy(), data.acom[0].copy()
-    pin.computeCentroidalMomentumTimeVariation(model, data, q, v, a)
-    mass = data.mass[0]
-    force = mass * (acom + np.array([0.0, 0.0, G]))
-    moment = np.cross(com, force) + data.dhg.angular
-    point = np.array([0.0, 0.0, floor_z])
-    cop, _ok, _tau = center_of_pressure(force, moment - np.cross(point, force), point, np.array([0.0, 0.0, 1.0]),
-                                        threshold_n=1.0)
-    return com, vcom, acom, cop
 
 
 def _model_series(model: pin.Model, qs: np.ndarray, vs: np.ndarray, as_: np.ndarray):
