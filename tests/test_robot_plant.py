@@ -65,8 +65,7 @@ def test_standing_robot_measures_its_cop_where_its_true_com_is():
     weight = plant.model.body_subtreemass[1] * 9.81
     fz = s.wrench_world["left"][2] + s.wrench_world["right"][2]
     assert fz == pytest.approx(weight, rel=0.01)                  # the F/T sensors carry the whole (true) weight
-    # static: COP under the COM (measured offset 14 mm with the default plant: not yet explained, see README)
-    assert abs(s.cop_m[0] - plant.true_com()[0]) < 0.02
+    assert abs(s.cop_m[0] - plant.true_com()[0]) < 0.005            # static: COP under the COM (1.2 mm measured)
     assert np.abs(s.tau).max() < plant.effort.max()
 
 

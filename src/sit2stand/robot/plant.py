@@ -161,6 +161,7 @@ class Plant:
         self.set_limp(False)
         self._tau_queue.clear()
         self.fallen = False
+        self.status_text = "ok"
 
     def set_limp(self, limp: bool) -> None:
         """Go limp (zero joint torque, e.g. after a fall) or back to PD control."""
