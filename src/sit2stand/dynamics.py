@@ -29,3 +29,13 @@ def model_cop(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, a:
     cop, _ok, _tau = center_of_pressure(force, moment - np.cross(point, force), point, np.array([0.0, 0.0, 1.0]),
                                         threshold_n=1.0)
     return com, vcom, acom, cop
+
+
+def plan_derivatives(model: pin.Model, qs: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Velocities and accelerations (N, nv) of a configuration sequence by central differences (tangent space)."""
+    n = len(qs)
+    v = np.zeros((n, model.nv))
+    for k in range(n):
+        lo, hi = max(k - 1, 0), min(k + 1, n - 1)
+        v[k] = pin.difference(model, qs[lo], qs[hi]) / max((hi - lo) * dt, 1e-12)
+    return v, np.gradient(v, dt, axis=0)

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from ..dynamics import plan_derivatives
 from ..io.forceplate import center_of_pressure, point_in_polygon
 from .anthropometry import ankle_height_m
 from .skeleton import LENGTH_GROUPS, REFERENCE_STATURE_M, SEGMENTS, ExtraMass, HumanModel, Subject, build_human
@@ -263,11 +264,7 @@ def synthesize(cfg: SynthConfig) -> Demonstration:
 
     # velocities and accelerations by central differences (Pinocchio's tangent space)
     n = len(t)
-    v = np.zeros((n, model.nv))
-    for k in range(n):
-        lo, hi = max(k - 1, 0), min(k + 1, n - 1)     # one-sided at the ends
-        v[k] = pin.difference(model, q[lo], q[hi]) / ((hi - lo) * dt)
-    a = np.gradient(v, dt, axis=0)
+    v, a = plan_derivatives(model, q, dt)
     com = np.zeros((n, 3))
     vcom = np.zeros((n, 3))
     acom = np.zeros((n, 3))

@@ -13,18 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..dynamics import model_cop
+from ..dynamics import model_cop, plan_derivatives
 from ..io.forceplate import point_in_polygon
-
-
-def plan_derivatives(model: pin.Model, qs: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """Velocities and accelerations (N, nv) of a configuration sequence by central differences (tangent space)."""
-    n = len(qs)
-    v = np.zeros((n, model.nv))
-    for k in range(n):
-        lo, hi = max(k - 1, 0), min(k + 1, n - 1)
-        v[k] = pin.difference(model, qs[lo], qs[hi]) / max((hi - lo) * dt, 1e-12)
-    return v, np.gradient(v, dt, axis=0)
 
 
 def plan_zmp(model: pin.Model, qs: np.ndarray, dt: float, time_scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
