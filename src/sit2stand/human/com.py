@@ -504,8 +504,8 @@ class ComResult:
     n_markers: np.ndarray
     scaling: MassScaling
     subject: Subject
-    length_rms_before_m: float
-    length_rms_after_m: float
+    calibration_rms_before_m: float
+    calibration_rms_after_m: float
     plate_gaps: list[tuple[str, float, float]] = field(default_factory=list)
     q: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
@@ -519,12 +519,12 @@ def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.
     """Offline COM estimation of a whole trial (see the module docstring). ``plates``: dicts with ``name``,
     ``t_s`` (K,), ``force_n`` (K, 3), ``moment_nm`` (K, 3, about the lab origin)."""
     dt = float(np.median(np.diff(marker_t_s)))
-    len_before = len_after = float("nan")
+    rms_before = rms_after = float("nan")   # marker RMS of the default model, and after lengths + placements
     if calibrate:
-        subject, len_before, len_after = calibrate_lengths(subject, marker_names, positions, valid)
+        subject, rms_before, _ = calibrate_lengths(subject, marker_names, positions, valid)
     human = build_human(subject)
     if calibrate:
-        _, len_after = calibrate_markers(human, marker_names, positions, valid)
+        _, rms_after = calibrate_markers(human, marker_names, positions, valid)
     ik = MarkerIK(human, marker_names)
     fits = fit_sequence(ik, positions, valid, progress)
     ok = np.array([f.ok for f in fits])
@@ -594,7 +594,7 @@ def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.
     scaling.cop_rms_after_m = dist(cop_model) if sel.any() else float("nan")
     return ComResult(marker_t_s, com, vcom, acom, com_unscaled,
                      cop_model, measured_cop, supported, ok, np.array([f.rms_m for f in fits]),
-                     np.array([f.n_markers for f in fits]), scaling, subject, len_before, len_after, gaps, qs, notes)
+                     np.array([f.n_markers for f in fits]), scaling, subject, rms_before, rms_after, gaps, qs, notes)
 
 
 def body_mass_from_plates(force_n: np.ndarray, supported: np.ndarray, qs: np.ndarray, human: HumanModel,
@@ -763,15 +763,19 @@ class StreamingComEstimator:
             self._R0 = R
         return np.concatenate([q[:3], pin.log3(self._R0.T @ R), q[7:]])
 
-    def _derivatives_at(self, pos: int, length: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """q, v, a of the window's sample ``pos`` from a Savitzky-Golay fit of the last ``length`` frames."""
+    def _savgol(self, pos: int, length: int) -> list[np.ndarray]:
+        """Savitzky-Golay weights (position, first and second derivative) at sample ``pos`` of ``length``, cached."""
         key = (pos, length)
         if key not in self._coeffs:
             order = min(4, length - 2)
             self._coeffs[key] = [savgol_coeffs(length, order, deriv=d, pos=pos, use="dot") / self.dt**d
                                  for d in (0, 1, 2)]
+        return self._coeffs[key]
+
+    def _derivatives_at(self, pos: int, length: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, v, a of the window's sample ``pos`` from a Savitzky-Golay fit of the last ``length`` frames."""
         X = np.array(self._x[-length:])
-        xs, xd, xdd = (c @ X for c in self._coeffs[key])
+        xs, xd, xdd = (c @ X for c in self._savgol(pos, length))
         r, rd, rdd = xs[3:6], xd[3:6], xdd[3:6]
         R = self._R0 @ pin.exp3(r)
         q = np.concatenate([xs[:3], pin.Quaternion(R).coeffs(), xs[6:]])
@@ -859,6 +863,6 @@ class StreamingComEstimator:
                     self.plate_gaps[p["name"]] = self.plate_gaps.get(p["name"], 0) + 1
             return force[centre], moment[centre], False
         if covered.all():
-            c = self._coeffs[(centre, len(times))][0]
+            c = self._savgol(centre, len(times))[0]
             return c @ force, c @ moment, True
         return force[centre], moment[centre], True

@@ -105,7 +105,7 @@ def evaluate(trial: Trial, result: ComResult) -> dict:
         "frames": int(len(result.t_s)), "frames_fitted": int(result.fit_ok.sum()),
         "frames_supported": int(result.supported.sum()),
         "marker_rms_mm": float(np.nanmean(result.marker_rms_m) * 1e3),
-        "length_calibration_rms_mm": [result.length_rms_before_m * 1e3, result.length_rms_after_m * 1e3],
+        "calibration_marker_rms_mm": [result.calibration_rms_before_m * 1e3, result.calibration_rms_after_m * 1e3],
         "cop_rms_unscaled_mm": result.scaling.cop_rms_before_m * 1e3,
         "cop_rms_scaled_mm": result.scaling.cop_rms_after_m * 1e3,
         "cop_within_2cm": bool(result.scaling.cop_rms_after_m <= 0.02),

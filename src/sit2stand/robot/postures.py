@@ -188,7 +188,8 @@ def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, p
                 break
             sample = measure(plant) if settle(plant, qpos) else None
             if sample is not None and sample.cop_sd_m > 0.002:   # still swaying: give it another second
-                sample = measure(plant) if (plant.step(1000) or not plant.fallen) else None
+                plant.step(1000)
+                sample = None if plant.fallen else measure(plant)
             if sample is None or sample.cop_sd_m > 0.002:
                 dropped += 1
                 continue
