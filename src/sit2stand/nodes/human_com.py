@@ -42,6 +42,9 @@ class HumanComNode(Node):
     """Streams the human COM (see the module docstring)."""
 
     executor_kind = "events"  # publishes only from its own callbacks: the fast executor is safe here
+    # after a signal, keep taking/processing what already arrived while it keeps coming (stops after 0.3 s idle);
+    # a backlog (e.g. after the human_com calibration pause) can take several seconds under load
+    drain_timeout_s = 30.0
 
     def __init__(self) -> None:
         super().__init__("human_com")
@@ -56,10 +59,14 @@ class HumanComNode(Node):
         self.expected_plates = declare(self, "plates", [], "plate names to expect (default: whatever appears)")
         deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(MocapFrame, MARKERS_TOPIC, self._on_markers, deep)
-        self.com_pub = self.create_publisher(CenterOfMass, "/human/com", 100)
-        self.joint_pub = self.create_publisher(JointState, "/human/joint_states", 100)
-        self.model_cop_pub = self.create_publisher(PointStamped, "/human/model_cop", 100)
-        self.measured_cop_pub = self.create_publisher(PointStamped, "/human/measured_cop", 100)
+        # transient-local with a deep history: a subscriber that matches late (a recorder still discovering the
+        # topic when the first frames come) still gets every estimate
+        history = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.com_pub = self.create_publisher(CenterOfMass, "/human/com", history)
+        self.joint_pub = self.create_publisher(JointState, "/human/joint_states", history)
+        self.model_cop_pub = self.create_publisher(PointStamped, "/human/model_cop", history)
+        self.measured_cop_pub = self.create_publisher(PointStamped, "/human/measured_cop", history)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.scaling_pub = self.create_publisher(InertialParameters, "/human/scaling", latched)
         self.stats_pub = self.create_publisher(DiagnosticStatus, "~/stats", 10)

@@ -34,6 +34,9 @@ class Recorder(Node):
     """Records topics into a bag (see the module docstring)."""
 
     executor_kind = "events"  # callbacks only, no publishing threads: the fast executor is safe here
+    # after a signal, keep taking/processing what already arrived while it keeps coming (stops after 0.3 s idle);
+    # a backlog (e.g. after the human_com calibration pause) can take several seconds under load
+    drain_timeout_s = 30.0
 
     def __init__(self) -> None:
         super().__init__("recorder")
