@@ -82,9 +82,47 @@ def _point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> floa
     return float(np.linalg.norm(p - (a + t * ab)))
 
 
+def marker_group(name: str) -> str:
+    """Body part of a Plug-in-Gait marker name: head, trunk, pelvis, thigh, shank, foot or arm."""
+    n = name[1:] if name[:1] in "LR" and len(name) > 3 else name
+    if n in ("FHD", "BHD"):
+        return "head"
+    if name in ("C7", "T10", "CLAV", "STRN", "RBAK"):
+        return "trunk"
+    if n in ("ASI", "PSI"):
+        return "pelvis"
+    if n in ("THI", "KNE"):
+        return "thigh"
+    if n in ("TIB", "ANK"):
+        return "shank"
+    if n in ("HEE", "TOE"):
+        return "foot"
+    return "arm"
+
+
+def talos_links(model: pin.Model, marker: str) -> tuple[str, ...]:
+    """The TALOS links (Pinocchio joint names) a Plug-in-Gait marker may be fixed to: those of its body part and
+    side. Nearest-link matching alone puts a seated human's hip markers on the robot's hanging arms."""
+    side = "left" if marker.startswith("L") else "right" if marker.startswith("R") else None
+    group = marker_group(marker)
+    names = list(model.names[1:])
+    if group == "pelvis":
+        return (names[0],)
+    if group == "head":
+        return tuple(n for n in names if n.startswith("head_"))
+    if group == "trunk":
+        return ("torso_1_joint", "torso_2_joint")
+    if group == "arm":
+        return tuple(n for n in names if n.startswith((f"arm_{side}", f"gripper_{side}")))
+    return {"thigh": (f"leg_{side}_3_joint", f"leg_{side}_4_joint"), "shank": (f"leg_{side}_4_joint",),
+            "foot": (f"leg_{side}_6_joint",)}[group]
+
+
 def calibrate_markers(model: pin.Model, q_robot: np.ndarray, names: list[str], positions_m: np.ndarray,
-                      valid: np.ndarray, human_thigh_m: float, robot_thigh_m: float) -> MarkerMap:
-    """Fix each valid human marker of one seated frame to the nearest robot link (see the module docstring).
+                      valid: np.ndarray, human_thigh_m: float, robot_thigh_m: float,
+                      allowed_links=talos_links) -> MarkerMap:
+    """Fix each valid human marker of one seated frame to the nearest robot link (see the module docstring)
+    among ``allowed_links(model, marker)`` (None: any link).
 
     Raises:
         ValueError: fewer than 3 of the pelvis markers (LASI RASI LPSI RPSI) are valid in the frame.
@@ -106,6 +144,9 @@ def calibrate_markers(model: pin.Model, q_robot: np.ndarray, names: list[str], p
         side = "left" if name.startswith("L") else "right" if name.startswith("R") else None
         candidates = [b for b in bones if side is None or ("left" not in model.names[b[0]] and "right" not in
                                                           model.names[b[0]]) or side in model.names[b[0]]]
+        if allowed_links is not None:
+            allowed = set(allowed_links(model, name))
+            candidates = [b for b in candidates if model.names[b[0]] in allowed] or candidates
         # nearest bone; within 5 mm, the more distal link (a heel marker belongs to the foot, not the shank's end)
         j = min(candidates, key=lambda b: (round(_point_segment_distance(p, b[1], b[2]) / 0.005),
                                            -_depth(model, b[0])))[0]

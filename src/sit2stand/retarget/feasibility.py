@@ -13,20 +13,42 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..dynamics import model_cop, plan_derivatives
+from ..dynamics import G, model_cop, plan_derivatives
 from ..io.forceplate import point_in_polygon
+
+
+def plan_dynamics(model: pin.Model, qs: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """COM (N, 3) [m], COM acceleration (N, 3) [m/s^2] and centroidal angular momentum rate (N, 3) [N m] of the plan
+    ``qs`` sampled every ``dt`` (central differences), at its own timing."""
+    v, a = plan_derivatives(model, qs, dt)
+    data = model.createData()
+    out = np.zeros((3, len(qs), 3))
+    for k, q in enumerate(qs):
+        out[0, k], _, out[1, k], _ = model_cop(model, data, q, v[k], a[k])
+        out[2, k] = data.dhg.angular
+    return out[0], out[1], out[2]
+
+
+def zmp_at_scale(com_m: np.ndarray, com_acc: np.ndarray, dl_nm: np.ndarray, mass_kg: float,
+                 time_scale: float) -> np.ndarray:
+    """ZMP (N, 3) on the floor z = 0 of a plan played ``time_scale`` x slower, from its COM, COM acceleration and
+    angular momentum rate at its own timing: played s x slower every acceleration and every velocity product, hence
+    both terms of dL/dt, scale by 1/s^2 (exact for a uniform time scaling).
+    x = c_x - (c_z F_x + dL_y) / F_z,  y = c_y - (c_z F_y - dL_x) / F_z,  F = m (a / s^2 + g e_z)."""
+    c, a, dl = (np.atleast_2d(np.asarray(x, float)) for x in (com_m, com_acc, dl_nm))
+    k = 1.0 / time_scale**2
+    fz = mass_kg * (G + k * a[:, 2])
+    fx, fy = mass_kg * k * a[:, 0], mass_kg * k * a[:, 1]
+    x = c[:, 0] - (c[:, 2] * fx + k * dl[:, 1]) / fz
+    y = c[:, 1] - (c[:, 2] * fy - k * dl[:, 0]) / fz
+    return np.stack([x, y, np.zeros_like(x)], axis=1)
 
 
 def plan_zmp(model: pin.Model, qs: np.ndarray, dt: float, time_scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """(ZMP (N, 3) on the floor, COM (N, 3)) of the plan ``qs`` sampled every ``dt`` and played ``time_scale`` x
     slower."""
-    v, a = plan_derivatives(model, qs, dt * time_scale)
-    data = model.createData()
-    zmp, com = np.zeros((len(qs), 3)), np.zeros((len(qs), 3))
-    for k, q in enumerate(qs):
-        c, _, _, z = model_cop(model, data, q, v[k], a[k])
-        zmp[k], com[k] = z, c
-    return zmp, com
+    com, acc, dl = plan_dynamics(model, qs, dt)
+    return zmp_at_scale(com, acc, dl, float(pin.computeTotalMass(model)), time_scale), com
 
 
 def support_polygon(corners_xy: np.ndarray) -> np.ndarray:
@@ -55,8 +77,11 @@ def retime_factor(model: pin.Model, qs: np.ndarray, dt: float, polygon_xy: np.nd
     """Smallest time-scale factor s in [1, ``max_factor``] whose ZMP keeps ``margin_m`` inside ``polygon_xy`` on the
     frames ``on_feet`` (the robot off the chair). Returns (s, the margin reached [m]); s = ``max_factor`` and a
     smaller margin when even that is not enough (the plan must then be changed, not slowed)."""
+    com, acc, dl = plan_dynamics(model, qs, dt)
+    mass = float(pin.computeTotalMass(model))
+
     def margin(s: float) -> float:
-        zmp, _ = plan_zmp(model, qs, dt, s)
+        zmp = zmp_at_scale(com, acc, dl, mass, s)
         return float(support_margin(zmp[on_feet, :2], polygon_xy).min()) if on_feet.any() else np.inf
 
     m1 = margin(1.0)

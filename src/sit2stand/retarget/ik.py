@@ -47,12 +47,13 @@ class ComIk:
         sole_frames: frame ids of the two soles, kept at their target placements.
         velocity_limit: joint speed limit [rad/s] (scalar or per joint, nv - 6).
         dt: frame period [s] (velocity limits become step bounds).
-        posture_weight: mu, the pull toward ``q_ref`` (regularisation of what the markers do not fix).
+        posture_weight: mu, the pull toward ``q_ref`` (regularisation of what the markers do not fix); scalar or
+            per tangent direction (nv; the base's six are ignored).
         damping: Levenberg-Marquardt damping on the step.
     """
 
     def __init__(self, model: pin.Model, sole_frames: list[int], velocity_limit: float | np.ndarray = 5.0,
-                 dt: float = 0.01, posture_weight: float = 1e-3, damping: float = 1e-6) -> None:
+                 dt: float = 0.01, posture_weight: float | np.ndarray = 1e-3, damping: float = 1e-6) -> None:
         import proxsuite
 
         self.model = model
@@ -60,13 +61,15 @@ class ComIk:
         self.soles = list(sole_frames)
         self.nv = model.nv
         self.dt = dt
-        self.mu = posture_weight
+        self.mu = np.broadcast_to(np.asarray(posture_weight, float), (model.nv,)).copy()
+        self.mu[:6] = 0.0
         self.damping = damping
         self.v_max = np.broadcast_to(np.asarray(velocity_limit, float), (model.nv - 6,)).copy()
         self.q_lo = model.lowerPositionLimit[7:].copy()
         self.q_hi = model.upperPositionLimit[7:].copy()
         self._proxsuite = proxsuite
         self._qp: dict[tuple[int, int], object] = {}
+        self._masks: dict[int, np.ndarray] = {}
 
     def _solve_qp(self, H, g, A, b, lo, hi):
         key = (A.shape[0], len(lo))
@@ -83,12 +86,37 @@ class ComIk:
         status = str(qp.results.info.status)
         return qp.results.x.copy(), "SOLVED" in status and "INACCURATE" not in status, float(qp.results.info.dua_res)
 
+    def _marker_jacobians(self, fids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions (M, 3) and world Jacobians (M, 3, nv) of marker frames, from ``data.J`` (computeJointJacobians
+        done): the point's velocity is v_O + omega x p over the joints supporting its link."""
+        data = self.data
+        P = np.array([data.oMf[f].translation for f in fids]).reshape(-1, 3)
+        masks = np.array([self._support_mask(f) for f in fids]).reshape(-1, self.nv)
+        Jl, Ja = data.J[:3], data.J[3:]
+        J = Jl[None, :, :] + np.cross(Ja.T[None, :, :], P[:, None, :]).transpose(0, 2, 1)
+        return P, J * masks[:, None, :]
+
+    def _support_mask(self, fid: int) -> np.ndarray:
+        mask = self._masks.get(fid)
+        if mask is None:
+            model = self.model
+            mask = np.zeros(self.nv)
+            for j in model.supports[model.frames[fid].parentJoint]:
+                if j > 0:
+                    mask[model.joints[j].idx_v:model.joints[j].idx_v + model.joints[j].nv] = 1.0
+            self._masks[fid] = mask
+        return mask
+
     def solve(self, q0: np.ndarray, markers: list[tuple[int, np.ndarray, float]], com_target: np.ndarray,
               sole_targets: list[pin.SE3], q_ref: np.ndarray | None = None, com_axes: tuple[int, ...] = (0, 1, 2),
-              q_prev: np.ndarray | None = None, max_iterations: int = 10, tol: float = 1e-7) -> IkResult:
+              q_prev: np.ndarray | None = None, max_iterations: int = 10, tol: float = 1e-7,
+              base_xz: np.ndarray | None = None, base_weight: float | None = None,
+              base_pitch_min: float | None = None) -> IkResult:
         """Solve one frame from ``q0``. ``markers``: (frame id, target position [m], weight) triples.
         ``q_prev``: the previous frame's configuration; the joint speed limits bound the motion from it (none for
-        the first frame)."""
+        the first frame). ``base_xz``: hold the floating base's world x and z at these values [m] (e.g. the hips on
+        a seat): two more equality rows, or, with ``base_weight``, a soft task of that weight. ``base_pitch_min``
+        [rad]: the base may not pitch back beyond this (a pelvis on a seat cannot roll back about its hips)."""
         import time
 
         t0 = time.perf_counter()
@@ -96,25 +124,25 @@ class ComIk:
         q = q0.copy()
         q_ref = q0 if q_ref is None else q_ref
         axes = list(com_axes)
+        fids = [int(m[0]) for m in markers]
+        targets = np.array([m[1] for m in markers], float).reshape(-1, 3)
+        w = np.array([m[2] for m in markers], float)
         feasible, dua = True, 0.0
         step = np.inf
         it = 0
         for it in range(1, max_iterations + 1):
             pin.computeJointJacobians(model, data, q)
             pin.updateFramePlacements(model, data)
-            Jc = pin.jacobianCenterOfMass(model, data, q, False)
+            Jc = pin.jacobianCenterOfMass(model, data, False)
             com = data.com[0].copy()
             # markers: sum w ||J dq + e||^2
-            H = np.zeros((nv, nv))
-            g = np.zeros(nv)
-            for fid, target, w in markers:
-                J = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)[:3]
-                e = data.oMf[fid].translation - target
-                H += w * J.T @ J
-                g += w * J.T @ e
+            P, J = self._marker_jacobians(fids)
+            wJ = J * w[:, None, None]
+            H = np.einsum("mik,mil->kl", wJ, J)
+            g = np.einsum("mik,mi->k", wJ, P - targets)
             post = pin.difference(model, q_ref, q)
             post[:6] = 0.0
-            H += (self.mu + self.damping) * np.eye(nv)
+            H[np.diag_indices(nv)] += self.mu + self.damping
             g += self.mu * post
             # feet: J_sole dq = -log(X_target^-1 X), COM: J_com dq = c* - c
             rows, rhs = [], []
@@ -122,6 +150,16 @@ class ComIk:
                 err = pin.log6(target.actInv(data.oMf[fid])).vector
                 rows.append(pin.getFrameJacobian(model, data, fid, pin.LOCAL))
                 rhs.append(-err)
+            if base_xz is not None:     # base linear velocity is in the base frame: world rows are R[[0, 2]]
+                rb = np.zeros((2, nv))
+                rb[:, :3] = data.oMi[1].rotation[[0, 2]]
+                eb = (np.asarray(base_xz, float) - q[:3])[[0, 2]]
+                if base_weight is None:
+                    rows.append(rb)
+                    rhs.append(eb)
+                else:
+                    H += base_weight * rb.T @ rb
+                    g -= base_weight * rb.T @ eb
             A_feet, b_feet = np.vstack(rows), np.concatenate(rhs)
             A = np.vstack([A_feet, Jc[axes]])
             b = np.concatenate([b_feet, (com_target - com)[axes]])
@@ -132,6 +170,9 @@ class ComIk:
             if q_prev is not None:     # speed limits: from the previous frame, over all of this frame's iterations
                 lo[6:] = np.maximum(lo[6:], q_prev[7:] - self.v_max * self.dt - qj)
                 hi[6:] = np.minimum(hi[6:], q_prev[7:] + self.v_max * self.dt - qj)
+            if base_pitch_min is not None:
+                R = data.oMi[1].rotation
+                lo[4] = min(0.0, base_pitch_min - np.arctan2(R[0, 2], R[2, 2]))
             lo[6:] = np.minimum(lo[6:], 0.0)   # a configuration just past a limit may always move back inside
             hi[6:] = np.maximum(hi[6:], 0.0)
             dq, ok, dua = self._solve_qp(H, g, A, b, lo, hi)
@@ -157,7 +198,7 @@ class ComIk:
         pin.computeJointJacobians(model, data, q)
         pin.updateFramePlacements(model, data)
         com = pin.centerOfMass(model, data, q)
-        marker_err = [np.linalg.norm(data.oMf[f].translation - t) for f, t, _ in markers]
+        marker_err = [np.linalg.norm(data.oMf[f].translation - t) for f, t in zip(fids, targets)]
         sole_err = max(np.linalg.norm(pin.log6(t.actInv(data.oMf[f])).vector) for f, t in zip(self.soles, sole_targets))
         com_err = float(np.linalg.norm((com - com_target)[axes]))
         if not np.all(np.isfinite(q)):

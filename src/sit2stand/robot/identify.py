@@ -193,7 +193,7 @@ def _check_data(data: PostureData, train: np.ndarray, Y: np.ndarray, min_posture
 
 
 def identify_full(data: PostureData, eval_fraction: float = 0.1, seed: int = 0, com_bound_m: float = 0.35,
-                  max_extra_kg: float = 30.0, prior_weight: float = 1e-3, tau_sd_nm: float = 1.0,
+                  max_extra_kg: float = 30.0, prior_weight: float = 1.0, tau_sd_nm: float = 1.0,
                   wrench_sd: float = 2.0) -> IdentificationResult:
     """The full model (see the module docstring)."""
     t0 = time.perf_counter()

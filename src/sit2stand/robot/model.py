@@ -99,7 +99,7 @@ class PlantConfig:
     chair_friction: float = 0.9
     floor_friction: float = 1.0
     seated_posture: dict[str, float] = field(default_factory=lambda: {
-        "leg_*_3_joint": -1.5708, "leg_*_4_joint": 2.0071, "leg_*_5_joint": -0.4363,
+        "leg_*_3_joint": -1.5708, "leg_*_4_joint": 2.2689, "leg_*_5_joint": -0.6981,
         "arm_left_2_joint": 0.2, "arm_right_2_joint": -0.2, "arm_*_4_joint": -0.4})
     joint_torque_noise_nm: float = 0.2
     ft_force_noise_n: float = 0.5
