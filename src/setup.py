@@ -5,7 +5,7 @@ them in lib/sit2stand/ so that `ros2 run sit2stand replayer` finds them.
 """
 from setuptools import find_packages, setup
 
-NODES = ["replayer", "recorder", "human_com", "driver", "identification"]
+NODES = ["replayer", "recorder", "human_com", "driver", "identification", "retargeter"]
 
 setup(
     name="sit2stand",

@@ -18,6 +18,7 @@ Errors are printed as one line naming the file, topic or field, with exit code 2
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -77,6 +78,23 @@ def _human_com(args: argparse.Namespace) -> int:
         print(f"  force plates dropped out: " + "; ".join(
             f"{g['plate']} {g['from_s']:.3f}-{g['to_s']:.3f} s" for g in summary["plate_gaps"]))
     print(f"wrote {args.out}/summary.json, human_com.png and the human_com bag")
+    return 0
+
+
+def _retarget(args: argparse.Namespace) -> int:
+    from .io.bag import BagError
+    from .retarget.offline import run
+
+    try:
+        summary = run(Path(args.bag), Path(args.out), params=args.params, plant=args.plant,
+                      human_com_bag=args.human_com, margin_m=args.margin, time_scale=args.time_scale,
+                      simulate=args.simulate)
+    except (BagError, ValueError, OSError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(json.dumps(summary, indent=2))
+    if args.simulate:
+        print("stood up" if summary["stood_up"] else f"did not stand up: {summary['fall'] or 'pelvis too low'}")
     return 0
 
 
@@ -210,6 +228,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-calibration", action="store_true", help="keep de Leva's segment lengths")
     p.add_argument("--no-scaling", action="store_true", help="keep de Leva's segment masses")
     p.set_defaults(func=_human_com)
+
+    p = sub.add_parser("retarget", help="retarget a demonstration to robot joint commands (optionally simulate them)")
+    p.add_argument("bag", help="demonstration bag (/mocap/markers, force plates)")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--params", default=None, help="identified COM parameters YAML (default: CAD)")
+    p.add_argument("--plant", default=None, help="plant YAML (seated posture; default: the nominal plant)")
+    p.add_argument("--human-com", default=None, help="bag with /human/com (default: the bag's, else estimated)")
+    p.add_argument("--margin", type=float, default=0.04, help="ZMP margin inside the feet [m]")
+    p.add_argument("--time-scale", type=float, default=None, help="fixed time scale (default: adaptive)")
+    p.add_argument("--simulate", action="store_true", help="execute the commands on the MuJoCo plant")
+    p.set_defaults(func=_retarget)
 
     p = sub.add_parser("drive", help="the simulated robot (the driver node), seated on its chair")
     p.add_argument("--plant", type=Path, help="plant YAML (default: ros_ws/plants/default.yaml)")

@@ -46,7 +46,7 @@ from pathlib import Path
 
 import yaml
 
-OUR_NODES = {"replayer", "recorder", "human_com", "driver", "identification"}
+OUR_NODES = {"replayer", "recorder", "human_com", "driver", "identification", "retargeter"}
 SUBST = re.compile(r"\$\((var|env|dirname)(?:\s+([^)\s]+))?(?:\s+([^)]*))?\)")
 
 

@@ -1,10 +1,10 @@
 """Robot driver node: TALOS simulated in MuJoCo under joint PD + feed-forward, behaving like the real robot.
 
 Subscribes:
-* ``/robot/joint_command`` (sensor_msgs/JointState): positions, optional velocities, by joint name (joints not
-  named keep their last reference);
-* ``/robot/joint_trajectory`` (trajectory_msgs/JointTrajectory): the first point's positions, velocities and
-  accelerations: inverse-dynamics feed-forward with the plan's accelerations.
+* ``/robot/joint_command`` (trajectory_msgs/JointTrajectory, what the retargeter sends): the first point's
+  positions, velocities and accelerations, applied at once; with accelerations the feed-forward is inverse dynamics
+  along the plan (joints not named keep their last reference);
+* ``/robot/joint_state_command`` (sensor_msgs/JointState): positions and optional velocities by joint name.
 
 Publishes: ``/robot/joint_states`` (position, velocity, measured torque as effort) at ``state_rate_hz`` (500) of
 simulated time, ``/robot/ft/left`` and ``/robot/ft/right`` (geometry_msgs/WrenchStamped: ground reaction in world
@@ -81,8 +81,8 @@ class Driver(Node):
         self.base_pub = self.create_publisher(PoseStamped, "/robot/base_pose", 50)
         self.status_pub = self.create_publisher(DiagnosticStatus, "/robot/status", 10)
         self.clock_pub = self.create_publisher(Clock, "/clock", fast) if self.publish_clock else None
-        self.create_subscription(JointState, "/robot/joint_command", self._on_command, 10)
-        self.create_subscription(JointTrajectory, "/robot/joint_trajectory", self._on_trajectory, 10)
+        self.create_subscription(JointTrajectory, "/robot/joint_command", self._on_trajectory, 10)
+        self.create_subscription(JointState, "/robot/joint_state_command", self._on_command, 10)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self._wall0 = time.monotonic()
         self._sim0 = self.plant.t_s
@@ -112,7 +112,8 @@ class Driver(Node):
 
     def _on_command(self, msg: JointState) -> None:
         if len(msg.position) != len(msg.name):
-            self.get_logger().error(f"/robot/joint_command: {len(msg.name)} names but {len(msg.position)} positions")
+            self.get_logger().error(f"/robot/joint_state_command: {len(msg.name)} names but {len(msg.position)} "
+                                    "positions")
             return
         self._apply(msg.name, list(msg.position), list(msg.velocity) or None)
 

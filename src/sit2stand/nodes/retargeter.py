@@ -1,0 +1,271 @@
+"""Streaming IK retargeter node: human markers and COM in, robot joint commands out (Mistry et al. 2010, Sec. IV).
+
+Subscribes ``/mocap/markers`` (sit2stand_msgs/MocapFrame), ``/human/com`` (sit2stand_msgs/CenterOfMass, from the
+human COM estimator), ``/force_plate/chair`` (seat-off, if there is a chair plate), and, with ``wait_for_robot``,
+``/robot/joint_states`` and ``/robot/base_pose`` once (the robot's measured seated posture, which the calibration
+overlays the first human frame on). Per marker frame it runs :class:`sit2stand.retarget.stream.Retargeter` and
+:class:`sit2stand.retarget.stream.PlanPlayer` and publishes:
+
+* ``/robot/joint_command`` (trajectory_msgs/JointTrajectory, one point: positions, velocities, accelerations; header
+  stamp = the marker frame that produced it), at the mocap rate, and on at that rate after the markers stop until
+  the (retimed) plan ends;
+* ``/robot/planned_com`` (sit2stand_msgs/CenterOfMass, source ``robot_plan``) and ``/robot/planned_zmp``
+  (geometry_msgs/PointStamped) of each command;
+* ``/robot/retarget/ik`` (sensor_msgs/JointState, the raw IK pose per frame, base as root_* entries) and
+  ``~/status`` (diagnostic_msgs/DiagnosticStatus: infeasible frames, time scale, latency p50/p99).
+
+The human COM of a frame is the estimator's estimate for that stamp, or its latest one if it is at most ``com_wait_s``
+older (moved on by its velocity); otherwise the frame waits for it. Parameters: ``plant``, ``controller_params``
+(identified YAML; empty: CAD), ``margin_m`` (0.04), ``lookahead_s`` (0.8), ``smooth_frames`` (21), ``time_scale``
+(0: adaptive retiming; else fixed), ``rate_hz`` (100), ``wait_for_robot`` (true), ``marker_map`` (YAML to write the
+calibration to; empty: none), ``hold_s`` (3: the node exits this long after its plan ends; 0: never).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PointStamped, PoseStamped
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, MocapFrame
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from ..io.messages import MARKERS_TOPIC, plate_topic, stamp_ns
+from ..retarget.stream import PlanPlayer, RetargetConfig, Retargeter, robot_setup
+from .driver import DEFAULT_PLANT
+from .runtime import IdleDrain, NodeError, declare, node_main
+
+
+class RetargeterNode(Node):
+    """Streams joint commands (see the module docstring)."""
+
+    executor_kind = "events"
+    drain_timeout_s = 30.0
+
+    def __init__(self) -> None:
+        super().__init__("retargeter")
+        self.plant_file = declare(self, "plant", "", "plant YAML (seated posture, chair)") or str(DEFAULT_PLANT)
+        self.params_file = declare(self, "controller_params", "", "identified parameters YAML (empty: CAD)")
+        self.margin = declare(self, "margin_m", 0.04, "ZMP margin inside the feet [m]")
+        self.lookahead = declare(self, "lookahead_s", 0.8, "look-ahead of the retiming [s]")
+        self.smooth = declare(self, "smooth_frames", 21, "Savitzky-Golay window of the plan [frames]")
+        scale = declare(self, "time_scale", 0.0, "0: adaptive retiming; else a fixed time scale")
+        self.fixed_scale = scale if scale > 0 else None
+        self.rate_hz = declare(self, "rate_hz", 100.0, "marker rate [Hz]")
+        self.com_wait = declare(self, "com_wait_s", 0.03, "use the latest human COM if at most this old [s]")
+        self.wait_for_robot = declare(self, "wait_for_robot", True, "start from the robot's measured posture")
+        self.map_out = declare(self, "marker_map", "", "write the marker calibration YAML here")
+        self.hold_s = declare(self, "hold_s", 3.0, "after the plan ends, exit after this long [s] (0: never)")
+        self._done_at: float | None = None
+        deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
+        self.create_subscription(MocapFrame, MARKERS_TOPIC, self._on_markers, deep)
+        self.create_subscription(CenterOfMass, "/human/com", self._on_com, deep)
+        self.create_subscription(ForcePlateSample, plate_topic("chair"), self._on_chair,
+                                 QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
+                                            reliability=ReliabilityPolicy.RELIABLE))
+        self.create_subscription(JointState, "/robot/joint_states", self._on_joint_states, 10)
+        self.create_subscription(PoseStamped, "/robot/base_pose", self._on_base_pose, 10)
+        self.cmd_pub = self.create_publisher(JointTrajectory, "/robot/joint_command", 100)
+        self.com_pub = self.create_publisher(CenterOfMass, "/robot/planned_com", 100)
+        self.zmp_pub = self.create_publisher(PointStamped, "/robot/planned_zmp", 100)
+        self.ik_pub = self.create_publisher(JointState, "/robot/retarget/ik", 100)
+        self.status_pub = self.create_publisher(DiagnosticStatus, "~/status", 10)
+        self.frames: deque = deque()          # (t_s, header, names, positions, valid, receipt time)
+        self.coms: deque = deque(maxlen=400)  # (t_s, position, velocity)
+        self.chair: deque = deque(maxlen=4000)
+        self.robot_js: JointState | None = None
+        self.robot_base: PoseStamped | None = None
+        self.retargeter: Retargeter | None = None
+        self.player: PlanPlayer | None = None
+        self.latencies: list[float] = []
+        self.ik_costs: list[float] = []
+        self.infeasible = 0
+        self.processed = 0
+        self.last_frame_wall = 0.0
+        self.last_stamp = None
+        self.finished = False
+        self.exit_code = 0
+        self.drain = IdleDrain(lambda: self.processed)
+        self.create_timer(1.0 / self.rate_hz, self._tick)
+        self.create_timer(2.0, self._report)
+        self.get_logger().info(f"retargeter: plant {self.plant_file}, COM parameters "
+                               f"{self.params_file or 'CAD'}; waiting for {MARKERS_TOPIC} and /human/com")
+
+    # -- inputs ------------------------------------------------------------------------------------------------
+    def _on_joint_states(self, msg: JointState) -> None:
+        self.robot_js = msg
+
+    def _on_base_pose(self, msg: PoseStamped) -> None:
+        self.robot_base = msg
+
+    def _on_chair(self, msg: ForcePlateSample) -> None:
+        self.chair.append((stamp_ns(msg.header) * 1e-9, msg.wrench.force.z))
+
+    def _on_com(self, msg: CenterOfMass) -> None:
+        p, v = msg.position, msg.velocity
+        self.coms.append((stamp_ns(msg.header) * 1e-9, np.array([p.x, p.y, p.z]), np.array([v.x, v.y, v.z]),
+                          bool(msg.valid)))
+        self._process()
+
+    def _on_markers(self, msg: MocapFrame) -> None:
+        pos = np.array([[p.x, p.y, p.z] for p in msg.positions], float).reshape(-1, 3)
+        self.frames.append((stamp_ns(msg.header) * 1e-9, msg.header, list(msg.marker_names), pos,
+                            np.asarray(msg.valid, bool), time.perf_counter()))
+        self._process()
+
+    def _com_for(self, t_s: float) -> np.ndarray | None:
+        """The human COM at ``t_s``: its own estimate, else the latest one if recent enough (moved on by its velocity);
+        None: wait."""
+        if not self.coms:
+            return None
+        for tc, p, v, ok in reversed(self.coms):
+            if abs(tc - t_s) < 1e-6:
+                return p
+            if tc < t_s:
+                return p + v * (t_s - tc) if t_s - tc <= self.com_wait else None
+        return None
+
+    def _chair_force(self, t_s: float) -> float | None:
+        if not self.chair:
+            return None
+        for tc, fz in reversed(self.chair):
+            if tc <= t_s:
+                return fz
+        return self.chair[0][1]
+
+    # -- processing --------------------------------------------------------------------------------------------
+    def _start(self, names: list[str], pos: np.ndarray, valid: np.ndarray, com: np.ndarray) -> bool:
+        q_start = None
+        if self.wait_for_robot:
+            if self.robot_js is None or self.robot_base is None:
+                return False
+            q_start = self._robot_q()
+        try:
+            robot = robot_setup(self.plant_file, self.params_file or None, q_start=q_start)
+            self.joint_names = robot.joint_names
+            self.retargeter = Retargeter(robot, RetargetConfig())
+            marker_map = self.retargeter.calibrate(names, pos, valid, com)
+        except (ValueError, OSError) as err:
+            raise NodeError(f"retargeter calibration: {err}") from None
+        if self.map_out:
+            marker_map.save(self.map_out)
+        self.player = PlanPlayer(robot.model, 1.0 / self.rate_hz, robot.support_xy, margin_m=self.margin,
+                                 lookahead_s=self.lookahead, smooth_frames=self.smooth, fixed_scale=self.fixed_scale)
+        self.names = names
+        self.get_logger().info(f"calibrated on the first frame: {len(marker_map.links)} markers fixed to the robot; "
+                               f"leg-length scale {self.retargeter.scale:.3f}")
+        return True
+
+    def _robot_q(self) -> np.ndarray:
+        js, b = self.robot_js, self.robot_base.pose
+        idx = {n: i for i, n in enumerate(js.name)}
+        q = np.zeros(7 + len(js.name))
+        q[:3] = [b.position.x, b.position.y, b.position.z]
+        q[3:7] = [b.orientation.x, b.orientation.y, b.orientation.z, b.orientation.w]
+        q[7:] = [js.position[idx[n]] for n in js.name]
+        return q
+
+    def _process(self) -> None:
+        while self.frames:
+            t_s, header, names, pos, valid, t_rx = self.frames[0]
+            com = self._com_for(t_s)
+            if com is None:
+                return
+            if self.retargeter is None and not self._start(names, pos, valid, com):
+                return
+            self.frames.popleft()
+            if names != self.names:
+                pm, vm = np.full((len(self.names), 3), np.nan), np.zeros(len(self.names), bool)
+                for j, n in enumerate(names):
+                    if n in self.names:
+                        pm[self.names.index(n)], vm[self.names.index(n)] = pos[j], valid[j]
+                pos, valid = pm, vm
+            frame = self.retargeter.step(t_s, pos, valid, com, self._chair_force(t_s))
+            self.ik_costs.append(frame.ik.seconds)
+            self.infeasible += not frame.ik.feasible
+            self._publish_ik(header, frame.q)
+            self.player.push(frame.q, not frame.seated)
+            cmd = self.player.pull()
+            if cmd is not None:
+                self._publish(header, cmd)
+            self.latencies.append(time.perf_counter() - t_rx)
+            self.processed += 1
+            self.last_frame_wall = time.monotonic()
+            self.last_stamp = header.stamp
+
+    def _tick(self) -> None:
+        """After the markers stop: close the plan and play the rest of it at the mocap rate."""
+        if self.player is None or self.frames or time.monotonic() - self.last_frame_wall < 3.0 / self.rate_hz:
+            return
+        if not self.player.finished:
+            self.player.close()
+        if self.player.done:
+            self._done_at = self._done_at or time.monotonic()
+            if self.hold_s > 0 and time.monotonic() - self._done_at > self.hold_s:
+                self.finished = True
+            return
+        cmd = self.player.pull()
+        if cmd is not None:
+            header = JointState().header
+            header.stamp = self.get_clock().now().to_msg()
+            self._publish(header, cmd)
+
+    def _publish(self, header, cmd) -> None:
+        msg = JointTrajectory()
+        msg.header.stamp = header.stamp
+        msg.header.frame_id = "base_link"
+        msg.joint_names = self.joint_names
+        point = JointTrajectoryPoint()
+        point.positions = cmd.q[7:].tolist()
+        point.velocities = cmd.v[6:].tolist()
+        point.accelerations = cmd.a[6:].tolist()
+        msg.points = [point]
+        self.cmd_pub.publish(msg)
+        com = CenterOfMass(source="robot_plan", valid=True, n_markers=0, marker_rms_m=float("nan"),
+                           cop_error_m=float("nan"))
+        com.header.stamp, com.header.frame_id = header.stamp, "world"
+        com.position.x, com.position.y, com.position.z = map(float, cmd.com)
+        self.com_pub.publish(com)
+        z = PointStamped()
+        z.header.stamp, z.header.frame_id = header.stamp, "world"
+        z.point.x, z.point.y, z.point.z = map(float, cmd.zmp)
+        self.zmp_pub.publish(z)
+
+    def _publish_ik(self, header, q: np.ndarray) -> None:
+        js = JointState(name=["root_x", "root_y", "root_z", "root_qx", "root_qy", "root_qz", "root_qw"]
+                        + self.joint_names, position=q.tolist())
+        js.header.stamp, js.header.frame_id = header.stamp, "world"
+        self.ik_pub.publish(js)
+
+    def _stats(self) -> dict[str, str]:
+        lat = np.array(self.latencies) * 1e3
+        ik = np.array(self.ik_costs) * 1e3
+        pct = lambda a, p: f"{np.percentile(a, p):.2f}" if len(a) else "nan"  # noqa: E731
+        return {"frames": str(self.processed), "infeasible_frames": str(self.infeasible),
+                "time_scale": f"{self.player.s:.2f}" if self.player else "nan",
+                "ik_p50_ms": pct(ik, 50), "ik_p99_ms": pct(ik, 99),
+                "latency_p50_ms": pct(lat, 50), "latency_p99_ms": pct(lat, 99)}
+
+    def _report(self) -> None:
+        st = DiagnosticStatus(name=self.get_fully_qualified_name(), hardware_id="retargeter",
+                              level=DiagnosticStatus.OK if not self.infeasible else DiagnosticStatus.WARN,
+                              message=f"{self.processed} frames")
+        st.values = [KeyValue(key=k, value=v) for k, v in self._stats().items()]
+        self.status_pub.publish(st)
+
+    def close(self) -> None:
+        s = self._stats()
+        print(f"[retargeter] {s['frames']} frames, {s['infeasible_frames']} infeasible; time scale {s['time_scale']}; "
+              f"IK p50 {s['ik_p50_ms']} ms p99 {s['ik_p99_ms']} ms; marker->command latency p50 "
+              f"{s['latency_p50_ms']} ms p99 {s['latency_p99_ms']} ms", flush=True)
+
+
+main = node_main(RetargeterNode)
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,180 @@
+"""`sit2stand retarget BAG --out DIR`: a whole demonstration retargeted offline, optionally executed on the plant.
+
+Reads ``/mocap/markers``, the chair plate and the human COM (``/human/com`` from ``--human-com BAG`` or the bag
+itself; else the offline estimator is run), streams every frame through the same
+:class:`~sit2stand.retarget.stream.Retargeter` and :class:`~sit2stand.retarget.stream.PlanPlayer` the node uses, and
+writes into DIR: ``retarget`` (a bag: ``/robot/joint_command``, ``/robot/planned_com``, ``/robot/planned_zmp``),
+``marker_map.yaml``, ``summary.json`` and ``retarget.png``. With ``--simulate`` the commands drive the MuJoCo plant
+(joint PD + inverse-dynamics feed-forward with the same COM parameters) and the summary says whether it stood up.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..human.offline import read_trial
+from ..io.bag import BagReader
+from .stream import PlanPlayer, RetargetConfig, Retargeter, robot_setup
+
+
+def human_com_series(bag: Path, human_com_bag: Path | None, trial) -> np.ndarray:
+    """(N, 3) human COM at the marker frames: ``/human/com`` of a bag, or the offline estimator."""
+    for source in (human_com_bag, bag):
+        if source is None:
+            continue
+        with BagReader(source) as b:
+            if "/human/com" in b.topics():
+                msgs = b.read("/human/com")
+                t = np.array([ts for ts, _ in msgs]) * 1e-9
+                c = np.array([[m.position.x, m.position.y, m.position.z] for _, m in msgs])
+                return np.stack([np.interp(trial.marker_t_s, t, c[:, i]) for i in range(3)], axis=1)
+    from ..human.com import estimate_com
+    from ..human.skeleton import Subject
+
+    subject = Subject(trial.height_m or 1.75, trial.mass_kg or 75.0, trial.sex)
+    return estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,
+                        subject).com_m
+
+
+def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None = None,
+        human_com_bag: Path | None = None, margin_m: float = 0.04, time_scale: float | None = None,
+        simulate: bool = False) -> dict:
+    """Retarget ``bag`` into ``out`` (see the module docstring); returns the summary."""
+    out.mkdir(parents=True, exist_ok=True)
+    trial = read_trial(bag)
+    com_h = human_com_series(bag, human_com_bag, trial)
+    chair = next((p for p in trial.plates if p["name"] == "chair"), None)
+    sim = None
+    q_start = None
+    if simulate:
+        import yaml
+
+        from ..robot.model import PlantConfig
+        from ..robot.plant import Plant
+
+        links = yaml.safe_load(Path(params).read_text())["links"] if params else None
+        sim = Plant(PlantConfig.load(plant), controller_params=links)
+        sim.step(500)       # settle on the chair; the calibration overlays the measured seated posture
+        q_start = sim.pin_configuration(sim.data.qpos)
+    robot = robot_setup(plant, params, q_start=q_start)
+    rt = Retargeter(robot, RetargetConfig())
+    dt = float(np.median(np.diff(trial.marker_t_s)))
+    rt.calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0]).save(out / "marker_map.yaml")
+    player = PlanPlayer(robot.model, dt, robot.support_xy, margin_m=margin_m, fixed_scale=time_scale)
+    frames, cmds = [], []
+    for k, t in enumerate(trial.marker_t_s):
+        fz = None
+        if chair is not None:
+            j = min(np.searchsorted(chair["t_s"], t), len(chair["t_s"]) - 1)
+            fz = float(chair["force_n"][j, 2])
+        f = rt.step(float(t), trial.positions[k], trial.valid[k], com_h[k], fz)
+        frames.append(f)
+        player.push(f.q, not f.seated)
+        c = player.pull()
+        if c is not None:
+            cmds.append(c)
+    player.close()
+    while not player.done:
+        cmds.append(player.pull())
+    ik_ms = np.array([f.ik.seconds for f in frames]) * 1e3
+    feasible = np.array([f.ik.feasible for f in frames])
+    com_err = np.array([f.ik.com_error_m for f in frames])
+    on_feet = [c for c in cmds if c.on_feet]
+    summary = {
+        "bag": str(bag), "parameters": robot.parameters, "frames": len(frames),
+        "infeasible_frames": int((~feasible).sum()),
+        "com_equality_max_error_mm_feasible": float(com_err[feasible].max() * 1e3) if feasible.any() else None,
+        "ik_ms_p50": float(np.percentile(ik_ms, 50)), "ik_ms_p99": float(np.percentile(ik_ms, 99)),
+        "time_scale": float(player.s), "commands": len(cmds), "plan_duration_s": len(cmds) * dt,
+        "min_zmp_margin_on_feet_m": float(min(c.margin_m for c in on_feet)) if on_feet else None,
+        "human_seat_off_frame": next((i for i, f in enumerate(frames) if f.human_seat_off), None),
+        "robot_seat_off_frame": next((i for i, f in enumerate(frames) if not f.seated), None),
+    }
+    _write_bag(out / "retarget", cmds, robot.joint_names, float(trial.marker_t_s[0]), dt)
+    if sim is not None:
+        summary.update(_simulate(sim, cmds, dt, out))
+    _figure(trial, com_h, frames, cmds, dt, out / "retarget.png", summary)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float) -> None:
+    from ..io import messages as M
+    from ..io.bag import BagWriter
+    from ..io.typestore import typestore
+
+    ts = typestore().types
+    with BagWriter(path) as w:
+        w.add_topic("/robot/joint_command", "trajectory_msgs/msg/JointTrajectory")
+        w.add_topic("/robot/planned_com", "geometry_msgs/msg/PointStamped")
+        w.add_topic("/robot/planned_zmp", "geometry_msgs/msg/PointStamped")
+        for k, c in enumerate(cmds):
+            t_ns = int(round((t0_s + k * dt) * 1e9))
+            point = ts["trajectory_msgs/msg/JointTrajectoryPoint"](
+                positions=c.q[7:].copy(), velocities=c.v[6:].copy(), accelerations=c.a[6:].copy(),
+                effort=np.zeros(0), time_from_start=ts["builtin_interfaces/msg/Duration"](sec=0, nanosec=0))
+            w.write("/robot/joint_command", t_ns,
+                    ts["trajectory_msgs/msg/JointTrajectory"](header=M.header(t_ns, "base_link"),
+                                                            joint_names=list(joint_names), points=[point]))
+            w.write("/robot/planned_com", t_ns,
+                    ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, "world"), point=M._point(*c.com)))
+            w.write("/robot/planned_zmp", t_ns,
+                    ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, "world"), point=M._point(*c.zmp)))
+
+
+def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0) -> dict:
+    """Drive the plant with the commands (PD + inverse-dynamics feed-forward), then hold the last one."""
+    steps = max(1, int(round(dt / plant.cfg.timestep_s)))
+    rows = []
+    for c in cmds + [None] * int(hold_s / dt):
+        if c is not None:
+            plant.command(c.q[7:], c.v[6:], c.a[6:], feedforward="inverse_dynamics")
+        plant.step(steps)
+        s = plant.sensors()
+        rows.append([plant.t_s, *plant.true_com(), *(c.com if c is not None else cmds[-1].com),
+                     *s.cop_m, plant.data.qpos[2]])
+        if plant.fallen:
+            break
+    arr = np.array(rows)
+    np.save(out / "simulation.npy", arr)
+    stand_z = float(cmds[-1].q[2])
+    stood = (not plant.fallen) and arr[-1, 10] > stand_z - 0.08
+    err = arr[:, 1:4] - arr[:, 4:7]
+    return {"stood_up": bool(stood), "fall": plant.status_text if plant.fallen else None,
+            "pelvis_final_m": float(arr[-1, 10]), "pelvis_planned_final_m": stand_z,
+            "com_tracking_rms_m": float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1))))}
+
+
+def _figure(trial, com_h, frames, cmds, dt: float, png: Path, summary: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = trial.marker_t_s - trial.marker_t_s[0]
+    fig, ax = plt.subplots(2, 1, figsize=(9, 7), sharex=False)
+    ax[0].plot(t, com_h[:, 0], label="human COM x")
+    ax[0].plot(t, [f.com_target[0] for f in frames], label="robot COM target x (mapped)")
+    ax[0].plot(t, [f.com[0] for f in frames], "--", label="robot IK COM x")
+    so = summary.get("robot_seat_off_frame")
+    if so is not None:
+        ax[0].axvline(t[so], color="k", lw=0.8, ls=":", label="robot seat-off")
+    ax[0].set_ylabel("forward [m]")
+    ax[0].set_xlabel("human time [s]")
+    ax[0].legend(fontsize=8)
+    tc = np.arange(len(cmds)) * dt
+    ax[1].plot(tc, [c.com[0] for c in cmds], label="planned COM x")
+    ax[1].plot(tc, [c.zmp[0] for c in cmds], label="planned ZMP x", alpha=0.7)
+    ax[1].plot(tc, [c.time_scale / 10 for c in cmds], label="time scale / 10")
+    ax[1].set_ylim(-0.3, 0.3)
+    ax[1].set_xlabel("robot time [s]")
+    ax[1].legend(fontsize=8)
+    fig.suptitle(f"{Path(summary['bag']).name}: time scale {summary['time_scale']:.2f}, "
+                 f"{summary['infeasible_frames']} infeasible IK frames"
+                 + (f", {'stood up' if summary.get('stood_up') else 'fell'}" if "stood_up" in summary else ""))
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
