@@ -16,7 +16,7 @@ overlays the first human frame on). Per marker frame it runs :class:`sit2stand.r
 
 The human COM of a frame is the estimator's estimate for that stamp, or its latest one if it is at most ``com_wait_s``
 older (moved on by its velocity); otherwise the frame waits for it. Parameters: ``plant``, ``controller_params``
-(identified YAML; empty: CAD), ``margin_m`` (0.04), ``lookahead_s`` (0.8), ``smooth_frames`` (21), ``time_scale``
+(identified YAML; empty: CAD), ``margin_m`` (0.06), ``lookahead_s`` (0.8), ``smooth_frames`` (21), ``time_scale``
 (0: adaptive retiming; else fixed), ``rate_hz`` (100), ``wait_for_robot`` (true), ``marker_map`` (YAML to write the
 calibration to; empty: none), ``hold_s`` (3: the node exits this long after its plan ends; 0: never).
 """
@@ -51,7 +51,7 @@ class RetargeterNode(Node):
         super().__init__("retargeter")
         self.plant_file = declare(self, "plant", "", "plant YAML (seated posture, chair)") or str(DEFAULT_PLANT)
         self.params_file = declare(self, "controller_params", "", "identified parameters YAML (empty: CAD)")
-        self.margin = declare(self, "margin_m", 0.04, "ZMP margin inside the feet [m]")
+        self.margin = declare(self, "margin_m", 0.06, "ZMP margin inside the feet [m]")
         self.lookahead = declare(self, "lookahead_s", 0.8, "look-ahead of the retiming [s]")
         self.smooth = declare(self, "smooth_frames", 21, "Savitzky-Golay window of the plan [frames]")
         scale = declare(self, "time_scale", 0.0, "0: adaptive retiming; else a fixed time scale")

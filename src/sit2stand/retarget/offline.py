@@ -40,7 +40,7 @@ def human_com_series(bag: Path, human_com_bag: Path | None, trial) -> np.ndarray
 
 
 def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None = None,
-        human_com_bag: Path | None = None, margin_m: float = 0.04, time_scale: float | None = None,
+        human_com_bag: Path | None = None, margin_m: float = 0.06, time_scale: float | None = None,
         simulate: bool = False) -> dict:
     """Retarget ``bag`` into ``out`` (see the module docstring); returns the summary."""
     out.mkdir(parents=True, exist_ok=True)

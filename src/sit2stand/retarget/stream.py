@@ -321,7 +321,7 @@ class PlanPlayer:
     ``push`` one pose per human frame (period ``dt``); ``pull`` once per output tick (same period) returns the next
     command, or None while the look-ahead fills. ``fixed_scale`` set: no adaptation (1.0: the human's timing)."""
 
-    def __init__(self, model: pin.Model, dt: float, polygon_xy: np.ndarray, *, margin_m: float = 0.04,
+    def __init__(self, model: pin.Model, dt: float, polygon_xy: np.ndarray, *, margin_m: float = 0.06,
                  lookahead_s: float = 0.8, smooth_frames: int = 21, max_scale: float = 4.0,
                  max_scale_rate: float = 1.5, fixed_scale: float | None = None) -> None:
         self.model, self.data = model, model.createData()

@@ -1,0 +1,123 @@
+"""Streaming retargeting on the shipped elderly-like demonstration: COM map, per-frame IK, retiming, ZMP."""
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from sit2stand.human.offline import read_trial
+from sit2stand.retarget.feasibility import plan_zmp, zmp_at_scale
+from sit2stand.retarget.stream import PlanPlayer, Retargeter, robot_setup
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def elderly():
+    trial = read_trial(ROOT / "bags" / "elderly")
+    t, com = trial.truth
+    com_h = np.stack([np.interp(trial.marker_t_s, t, com[:, i]) for i in range(3)], axis=1)
+    chair = next(p for p in trial.plates if p["name"] == "chair")
+    fz = np.interp(trial.marker_t_s, chair["t_s"], chair["force_n"][:, 2])
+    return trial, com_h, fz
+
+
+@pytest.fixture(scope="module")
+def retargeted(elderly):
+    trial, com_h, fz = elderly
+    robot = robot_setup()
+    rt = Retargeter(robot)
+    rt.calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0])
+    player = PlanPlayer(robot.model, 0.01, robot.support_xy, margin_m=0.06)
+    frames, cmds = [], []
+    for k, t in enumerate(trial.marker_t_s):
+        f = rt.step(float(t), trial.positions[k], trial.valid[k], com_h[k], float(fz[k]))
+        frames.append(f)
+        player.push(f.q, not f.seated)
+        c = player.pull()
+        if c is not None:
+            cmds.append(c)
+    player.close()
+    while not player.done:
+        cmds.append(player.pull())
+    return robot, rt, frames, cmds, player
+
+
+def test_com_map_is_monotone_and_passes_through_its_knots(retargeted):
+    robot, rt, *_ = retargeted
+    ankle_h = rt.human_ankle_x
+    xs = ankle_h + np.linspace(rt.knots_h[0], 0.1, 200) / rt.scale
+    r = rt.com_target_x(xs)
+    assert np.all(np.diff(r) >= -1e-12), "the COM map must be monotone"
+    knots = rt.com_target_x(ankle_h + rt.knots_h / rt.scale) - robot.ankle_left[0]
+    assert np.allclose(knots, rt.knots_r, atol=1e-9)
+    # the seated start maps to the robot's own seated COM, the seat-off knot lies inside the feet
+    data = rt.model.createData()
+    assert abs(rt.com_target_x(ankle_h + rt.knots_h[0] / rt.scale) - pin.centerOfMass(rt.model, data,
+                                                                                      robot.q_seated)[0]) < 1e-9
+    assert robot.heel_x_m < robot.ankle_left[0] + rt.knots_r[1] < robot.toe_x_m
+
+
+def test_calibration_fixes_markers_to_their_own_body_parts(retargeted):
+    _, rt, *_ = retargeted
+    links = rt.marker_map.links
+    assert all(links[m] == rt.model.names[1] for m in ("LASI", "RASI", "LPSI", "RPSI"))
+    assert links["C7"].startswith("torso_") and links["LFHD"].startswith("head_")
+    assert links["LKNE"].startswith("leg_left_") and links["RWRA"].startswith("arm_right_")
+
+
+def test_every_frame_is_finite_within_limits_and_the_com_equality_holds_where_feasible(retargeted):
+    robot, rt, frames, *_ = retargeted
+    model = rt.model
+    qs = np.array([f.q for f in frames])
+    assert np.all(np.isfinite(qs))
+    assert np.all(qs[:, 7:] >= model.lowerPositionLimit[7:] - 1e-9)
+    assert np.all(qs[:, 7:] <= model.upperPositionLimit[7:] + 1e-9)
+    feasible = np.array([f.ik.feasible for f in frames])
+    assert feasible.mean() > 0.85, f"only {feasible.mean():.0%} of the frames feasible"
+    for f in frames:
+        err = np.abs(f.com - f.com_target)[list(f.com_axes)].max()
+        if f.ik.feasible:
+            assert err < 1e-3, f"COM equality off by {err * 1e3:.2f} mm at t={f.t_s:.2f}"
+        assert f.ik.sole_error < 1e-3, "the feet must stay where they are"
+    # hips on the seat until the robot's seat-off, which comes no earlier than the human's
+    so = next(i for i, f in enumerate(frames) if not f.seated)
+    assert frames[so].human_seat_off
+    assert np.allclose(qs[:so, [0, 2]], qs[0, [0, 2]], atol=1e-3)
+    # standing at the end: the pelvis well above the seat
+    assert qs[-1, 2] > qs[0, 2] + 0.2
+
+
+def test_the_player_retimes_until_the_zmp_keeps_its_margin(retargeted, elderly):
+    robot, rt, frames, cmds, player = retargeted
+    on_feet = [c for c in cmds if c.on_feet]
+    assert on_feet and min(c.margin_m for c in on_feet) >= 0.06 - 1e-3
+    assert player.s > 1.0, "the human's timing is too fast for the robot: the plan must be slowed"
+    scales = np.array([c.time_scale for c in cmds])
+    assert np.all(np.diff(scales) >= -1e-12) and np.all(np.diff(scales) <= 1.5 * 0.01 + 1e-9)
+    # the human's own timing would need the ZMP outside the margin somewhere on the feet
+    qs = np.array([f.q for f in frames])
+    feet = np.array([not f.seated for f in frames])
+    zmp, _ = plan_zmp(rt.model, qs, 0.01)
+    from sit2stand.retarget.feasibility import support_margin
+
+    assert support_margin(zmp[feet, :2], robot.support_xy).min() < 0.06
+    for c in cmds:
+        assert np.all(np.isfinite(c.q)) and np.all(np.isfinite(c.v)) and np.all(np.isfinite(c.a))
+
+
+def test_zmp_at_scale_equals_the_zmp_of_the_slowed_plan():
+    robot = robot_setup()
+    model = robot.model
+    rng = np.random.default_rng(0)
+    q0 = robot.q_seated
+    qs = np.array([pin.integrate(model, q0, np.r_[np.zeros(6), 0.2 * np.sin(0.05 * k + rng.uniform(0, 1, model.nv - 6))])
+                   for k in range(60)])
+    from sit2stand.retarget.feasibility import plan_dynamics
+
+    com, acc, dl = plan_dynamics(model, qs, 0.01)
+    mass = float(pin.computeTotalMass(model))
+    for s in (1.0, 1.7, 3.0):
+        direct, _ = plan_zmp(model, qs, 0.01 * s)      # the same plan sampled s times slower
+        assert np.allclose(zmp_at_scale(com, acc, dl, mass, s)[5:-5], direct[5:-5], atol=1e-9)
