@@ -88,7 +88,7 @@ def _substitute(value, variables: dict[str, str], graph_dir: Path, where: str):
                 raise LaunchError(f"{where}: $(var {name}) has no value: give {name}:=VALUE or add it to 'arguments'")
             return str(variables[name])
         new = SUBST.sub(repl, value)
-        if new != value and SUBST.fullmatch(value):
+        if new != value and SUBST.fullmatch(value) and new.strip():   # an empty value stays an empty string
             try:
                 return yaml.safe_load(new)  # a whole-value substitution keeps its YAML type (numbers, bools)
             except yaml.YAMLError:

@@ -70,13 +70,15 @@ class ComIk:
         self._proxsuite = proxsuite
         self._qp: dict[tuple[int, int], object] = {}
         self._masks: dict[int, np.ndarray] = {}
+        self.eps_abs = 1e-9
+        self._mask_sets: dict[tuple[int, ...], np.ndarray] = {}
 
     def _solve_qp(self, H, g, A, b, lo, hi):
         key = (A.shape[0], len(lo))
         qp = self._qp.get(key)
         if qp is None:
             qp = self._proxsuite.proxqp.dense.QP(self.nv, A.shape[0], 0, True)
-            qp.settings.eps_abs = 1e-9
+            qp.settings.eps_abs = self.eps_abs
             qp.settings.verbose = False
             qp.init(H, g, A, b, None, None, None, lo, hi)
             self._qp[key] = qp
@@ -91,9 +93,18 @@ class ComIk:
         done): the point's velocity is v_O + omega x p over the joints supporting its link."""
         data = self.data
         P = np.array([data.oMf[f].translation for f in fids]).reshape(-1, 3)
-        masks = np.array([self._support_mask(f) for f in fids]).reshape(-1, self.nv)
+        key = tuple(fids)
+        masks = self._mask_sets.get(key)
+        if masks is None:
+            masks = self._mask_sets[key] = np.array([self._support_mask(f) for f in fids]).reshape(-1, self.nv)
         Jl, Ja = data.J[:3], data.J[3:]
-        J = Jl[None, :, :] + np.cross(Ja.T[None, :, :], P[:, None, :]).transpose(0, 2, 1)
+        # omega x p, column by column: (w_y p_z - w_z p_y, w_z p_x - w_x p_z, w_x p_y - w_y p_x)
+        px, py, pz = (P[:, i, None] for i in range(3))
+        wx, wy, wz = Ja
+        J = np.empty((len(P), 3, self.nv))
+        J[:, 0] = Jl[0] + wy * pz - wz * py
+        J[:, 1] = Jl[1] + wz * px - wx * pz
+        J[:, 2] = Jl[2] + wx * py - wy * px
         return P, J * masks[:, None, :]
 
     def _support_mask(self, fid: int) -> np.ndarray:
@@ -137,9 +148,10 @@ class ComIk:
             com = data.com[0].copy()
             # markers: sum w ||J dq + e||^2
             P, J = self._marker_jacobians(fids)
-            wJ = J * w[:, None, None]
-            H = np.einsum("mik,mil->kl", wJ, J)
-            g = np.einsum("mik,mi->k", wJ, P - targets)
+            Jr = J.reshape(-1, nv)
+            wr = np.repeat(w, 3)
+            H = (Jr.T * wr) @ Jr
+            g = Jr.T @ (wr * (P - targets).ravel())
             post = pin.difference(model, q_ref, q)
             post[:6] = 0.0
             H[np.diag_indices(nv)] += self.mu + self.damping

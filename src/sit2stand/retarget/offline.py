@@ -41,7 +41,7 @@ def human_com_series(bag: Path, human_com_bag: Path | None, trial) -> np.ndarray
 
 def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None = None,
         human_com_bag: Path | None = None, margin_m: float = 0.06, time_scale: float | None = None,
-        simulate: bool = False) -> dict:
+        simulate: bool = False, config: RetargetConfig | None = None) -> dict:
     """Retarget ``bag`` into ``out`` (see the module docstring); returns the summary."""
     out.mkdir(parents=True, exist_ok=True)
     trial = read_trial(bag)
@@ -60,7 +60,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         sim.step(500)       # settle on the chair; the calibration overlays the measured seated posture
         q_start = sim.pin_configuration(sim.data.qpos)
     robot = robot_setup(plant, params, q_start=q_start)
-    rt = Retargeter(robot, RetargetConfig())
+    rt = Retargeter(robot, config or RetargetConfig())
     dt = float(np.median(np.diff(trial.marker_t_s)))
     rt.calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0]).save(out / "marker_map.yaml")
     player = PlanPlayer(robot.model, dt, robot.support_xy, margin_m=margin_m, fixed_scale=time_scale)

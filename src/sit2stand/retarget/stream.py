@@ -126,7 +126,8 @@ class RetargetConfig:
     pelvis_rise_m: float = 0.02           # ... or, without a chair plate, when the pelvis markers rose this much
     y_ramp_s: float = 0.5
     hip_release_s: float = 0.4            # the hips' hold on the seat fades out over this after seat-off
-    iterations: int = 4
+    iterations: int = 2                   # Gauss-Newton steps per frame (warm-started from the previous frame)
+    qp_tolerance: float = 1e-6            # proxsuite eps_abs of each step's QP
     damping: float = 0.1                  # Levenberg-Marquardt damping of each Gauss-Newton step: with less, the
     #                                       steps in the weakly fixed yaw directions (base, hips, torso) overshoot
     tolerance: float = 1e-4
@@ -209,6 +210,7 @@ class Retargeter:
                 self.upper[jt.idx_q:jt.idx_q + jt.nq] = True
         self.ik = ComIk(self.model, self.robot.sole_frames, self.cfg.velocity_limit_rad_s, posture_weight=mu,
                         damping=self.cfg.damping)
+        self.ik.eps_abs = self.cfg.qp_tolerance
         self.names = list(names)
         self.weights = np.array([0.0 if n not in self.marker_frames else
                                  self.cfg.weights.get(marker_group(n), 0.0) for n in names])
