@@ -51,6 +51,15 @@ if [ ${#missing[@]} -gt 0 ]; then
   $SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${pkgs[@]}" >/dev/null
 fi
 
+# Offscreen rendering for the demo's frame strip (MuJoCo with MUJOCO_GL=egl): Mesa's EGL. Optional: without it the
+# demo says so and skips the strip.
+if ! ldconfig -p 2>/dev/null | grep -q "libEGL.so.1" && command -v apt-get >/dev/null 2>&1; then
+  SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+  say "installing system packages: libegl1 libgl1-mesa-dri (offscreen rendering)"
+  { $SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libegl1 libgl1-mesa-dri \
+      >/dev/null; } || say "could not install libegl1 (the demo will skip its rendered frames)"
+fi
+
 # --- 3. The virtual environment ----------------------------------------------------------------------------------
 stamp_ok() { [ -f "$STAMPS/$1" ] && [ "$(cat "$STAMPS/$1")" = "$2" ]; }
 stamp_set() { mkdir -p "$STAMPS"; printf '%s' "$2" > "$STAMPS/$1"; }

@@ -7,10 +7,14 @@ For each shipped bag (``bags/natural``, ``bags/elderly``):
 2. the same live: replayer -> human_com node -> recorder over DDS (``ros_ws/graphs/human_com.yaml``); the
    recorded ``/human/com`` against the ground truth, and the node's per-frame cost.
 
-Then a figure of the sagittal COM paths, natural against elderly (the paper's Fig. 7 idea). For the robot: static
-postures of the simulated TALOS (default plant, with mass its CAD model lacks), identification of its mass/COM
-parameters (full model), the held-out COM error next to CAD's, and the figures. Everything in ``summary.json``.
-The retargeter and the stand-up join this job as they land.
+3. the stand-up, live: replayer -> human_com -> retargeter -> driver (default plant, identified COM parameters) ->
+   recorder (``ros_ws/graphs/standup.yaml``); the run analysed (:mod:`sit2stand.retarget.report`): stood up or
+   not, COM tracking, the paper's Fig. 6, and a strip of rendered frames.
+
+Before that, for the robot: static postures of the simulated TALOS (default plant, with mass its CAD model lacks),
+identification of its mass/COM parameters (full model), the held-out COM error next to CAD's, and the figures.
+After: the sagittal COM paths of the humans, and Fig. 7 (the robot's COM paths, natural against elderly, identified
+against CAD parameters). Everything in ``summary.json``; the last line says "stood up" for each demonstration.
 
     python -m sit2stand.demo --out runs/demo [--bags bags/natural bags/elderly] [--rate 1.0]
 """
@@ -64,6 +68,38 @@ def live(bag: Path, out: Path, rate: float) -> dict:
     return {"wall_s": round(time.monotonic() - t0, 2), "frames": int(len(t)),
             "com_error_mean_mm": float(err.mean() * 1e3), "com_error_p95_mm": float(np.percentile(err, 95) * 1e3),
             "cost_p50_ms": float(cost.group(1)) if cost else None, "cost_p99_ms": float(cost.group(2)) if cost else None}
+
+
+def standup(bag: Path, out: Path, params: Path) -> dict:
+    """Run the stand-up graph on ``bag`` with the identified ``params``; analyse and plot the run."""
+    from .retarget.report import analyse, figure_6, render_strip
+
+    with BagReader(bag) as b:
+        meta = b.custom_data
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    plant = ROOT / "ros_ws" / "plants" / "default.yaml"
+    cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(ROOT / "ros_ws/graphs/standup.yaml"),
+           f"bag:={bag.resolve()}", f"out:={(out / 'standup').resolve()}", f"params:={params.resolve()}",
+           f"plant:={plant}", f"height:={meta.get('height_m', '1.75')}", f"mass:={meta.get('body_mass_kg', '75')}",
+           f"marker_map:={(out / 'marker_map.yaml').resolve()}"]
+    t0 = time.monotonic()
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=400)
+    (out / "standup.log").write_text(proc.stdout + proc.stderr)
+    if proc.returncode != 0:
+        raise RuntimeError(f"the stand-up graph failed on {bag} (exit {proc.returncode}):\n{proc.stdout[-4000:]}")
+    stats = re.search(r"\[retargeter\] (\d+) frames, (\d+) infeasible; time scale ([\d.]+); IK p50 ([\d.]+) ms p99 "
+                      r"([\d.]+) ms; marker->command latency p50 ([\d.]+) ms p99 ([\d.]+) ms", proc.stdout)
+    a = analyse(out / "standup", bag.name, params, plant)
+    figure_6(a, out / "fig6_com.png")
+    why = render_strip(a, plant, out / "standup_frames.png")
+    if why:
+        print(f"      no rendered frames ({why})", flush=True)
+    res = dict(a.summary, wall_s=round(time.monotonic() - t0, 1))
+    if stats:
+        keys = ("frames", "infeasible_frames", "time_scale", "ik_p50_ms", "ik_p99_ms", "latency_p50_ms",
+                "latency_p99_ms")
+        res.update({k: float(v) for k, v in zip(keys, stats.groups())})
+    return res, a
 
 
 def robot_identification(out: Path, n_postures: int) -> dict:
@@ -130,6 +166,11 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True)
     summary: dict = {}
     runs: dict[str, tuple[Path, Path]] = {}
+    params = None
+    if not args.skip_robot:
+        summary["robot"] = robot_identification(args.out / "robot", args.postures)
+        params = args.out / "robot" / "identified_full.yaml"
+    analyses = []
     for i, bag in enumerate(args.bags, 1):
         name = bag.name
         run_dir = args.out / name
@@ -144,15 +185,30 @@ def main(argv: list[str] | None = None) -> int:
         print(f"      live COM error mean {live_figs['com_error_mean_mm']:.1f} mm; per-frame cost p50 "
               f"{live_figs['cost_p50_ms']} ms, p99 {live_figs['cost_p99_ms']} ms", flush=True)
         summary[name] = {"offline": offline, "live": live_figs}
+        if params is not None:
+            print("      stand-up graph: replayer -> human_com -> retargeter -> driver -> recorder", flush=True)
+            summary[name]["standup"], a = standup(bag, run_dir, params)
+            analyses.append(a)
+            st = summary[name]["standup"]
+            print(f"      {'stood up' if st['stood_up'] else 'DID NOT STAND UP'}: pelvis {st['pelvis_start_m']:.2f} -> "
+                  f"{st['pelvis_final_m']:.2f} m, COM tracking RMS {st['com_tracking_rms_m'] * 100:.1f} cm, time scale "
+                  f"{st.get('time_scale', float('nan')):.2f}, IK p50 {st.get('ik_p50_ms', float('nan')):.2f} ms",
+                  flush=True)
     com_paths_figure(runs, args.out / "com_paths.png")
-    if not args.skip_robot:
-        summary["robot"] = robot_identification(args.out / "robot", args.postures)
+    if analyses:
+        from .retarget.report import figure_7
+
+        figure_7(analyses, args.out / "fig7_com_paths.png")
     (args.out / "summary.json").write_text(json.dumps(summary, indent=2))
     ok = all(s["offline"]["com_rms_vs_truth_scaled_mm"] <= 10.0 for n, s in summary.items() if n != "robot")
     ok = ok and ("robot" not in summary or summary["robot"]["eval_rms_mm"] <= 5.0)
+    stood = {n: s["standup"]["stood_up"] for n, s in summary.items() if n != "robot" and "standup" in s}
     print(f"\n{'done' if ok else 'COM ERROR ABOVE 1 cm'}: {args.out}/summary.json, com_paths.png, "
-          + ", ".join(f"{n}/human_com.png" for n in runs) + ("" if args.skip_robot else ", robot/*.png"))
-    return 0 if ok else 1
+          + ", ".join(f"{n}/human_com.png" for n in runs) + ("" if args.skip_robot else
+                                                            ", robot/*.png, */fig6_com.png, fig7_com_paths.png"))
+    for n, ok_n in stood.items():
+        print(f"{n}: {'stood up' if ok_n else 'did not stand up'}")
+    return 0 if ok and all(stood.values()) else 1
 
 
 if __name__ == "__main__":

@@ -6,9 +6,9 @@ human COM estimator), ``/force_plate/chair`` (seat-off, if there is a chair plat
 overlays the first human frame on). Per marker frame it runs :class:`sit2stand.retarget.stream.Retargeter` and
 :class:`sit2stand.retarget.stream.PlanPlayer` and publishes:
 
-* ``/robot/joint_command`` (trajectory_msgs/JointTrajectory, one point: positions, velocities, accelerations; header
-  stamp = the marker frame that produced it), at the mocap rate, and on at that rate after the markers stop until
-  the (retimed) plan ends;
+* ``/robot/joint_command`` (trajectory_msgs/JointTrajectory, one point: positions, velocities, accelerations;
+  stamped now: the driver applies it at once), one per marker frame, and on at the mocap rate after the markers stop
+  until the (retimed) plan ends;
 * ``/robot/planned_com`` (sit2stand_msgs/CenterOfMass, source ``robot_plan``) and ``/robot/planned_zmp``
   (geometry_msgs/PointStamped) of each command;
 * ``/robot/retarget/ik`` (sensor_msgs/JointState, the raw IK pose per frame, base as root_* entries) and
@@ -192,7 +192,7 @@ class RetargeterNode(Node):
             self.player.push(frame.q, not frame.seated)
             cmd = self.player.pull()
             if cmd is not None:
-                self._publish(header, cmd)
+                self._publish(cmd)
             self.latencies.append(time.perf_counter() - t_rx)
             self.processed += 1
             self.last_frame_wall = time.monotonic()
@@ -211,13 +211,12 @@ class RetargeterNode(Node):
             return
         cmd = self.player.pull()
         if cmd is not None:
-            header = JointState().header
-            header.stamp = self.get_clock().now().to_msg()
-            self._publish(header, cmd)
+            self._publish(cmd)
 
-    def _publish(self, header, cmd) -> None:
+    def _publish(self, cmd) -> None:
+        stamp = self.get_clock().now().to_msg()         # a command is for now: the driver applies it at once
         msg = JointTrajectory()
-        msg.header.stamp = header.stamp
+        msg.header.stamp = stamp
         msg.header.frame_id = "base_link"
         msg.joint_names = self.joint_names
         point = JointTrajectoryPoint()
@@ -228,11 +227,11 @@ class RetargeterNode(Node):
         self.cmd_pub.publish(msg)
         com = CenterOfMass(source="robot_plan", valid=True, n_markers=0, marker_rms_m=float("nan"),
                            cop_error_m=float("nan"))
-        com.header.stamp, com.header.frame_id = header.stamp, "world"
+        com.header.stamp, com.header.frame_id = stamp, "world"
         com.position.x, com.position.y, com.position.z = map(float, cmd.com)
         self.com_pub.publish(com)
         z = PointStamped()
-        z.header.stamp, z.header.frame_id = header.stamp, "world"
+        z.header.stamp, z.header.frame_id = stamp, "world"
         z.point.x, z.point.y, z.point.z = map(float, cmd.zmp)
         self.zmp_pub.publish(z)
 

@@ -1,0 +1,262 @@
+"""Analysis of a recorded stand-up run (the ``standup`` graph's bag): did the robot stand, how well its COM followed the
+plan, and the paper's figures.
+
+* :func:`analyse` reads ``/robot/joint_states`` + ``/robot/base_pose`` (what a robot measures), ``/robot/planned_com``,
+  ``/robot/cop``, ``/human/com`` and the chair plate, and computes the robot's measured COM with the identified
+  parameters and with CAD's (forward kinematics of the measured state), seat-off, and the verdict.
+* :func:`figure_6`: forward COM of the human, planned robot COM, measured robot COM and robot COP against time,
+  seat-off marked (Mistry et al. 2010, Fig. 6).
+* :func:`figure_7`: sagittal COM paths, natural against elderly-like, measured robot COM with identified against CAD
+  parameters (Fig. 7).
+* :func:`render_strip`: frames of the robot standing up, rendered offscreen by MuJoCo (``MUJOCO_GL=egl`` or
+  ``osmesa``; Fig. 4/5).
+
+Stood up: not fallen, and the pelvis above ``stand_fraction`` of its planned standing height for the last
+``hold_s`` seconds. Units SI.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import yaml
+
+from ..io.bag import BagReader
+from ..io.messages import stamp_ns
+
+
+@dataclass
+class RunAnalysis:
+    name: str
+    t: np.ndarray                   # robot state times [s] from the run's start
+    q: np.ndarray                   # (N, nq) measured configurations (Pinocchio)
+    com: np.ndarray                 # (N, 3) measured COM, identified parameters
+    com_cad: np.ndarray             # (N, 3) measured COM, CAD parameters
+    plan_t: np.ndarray
+    plan_com: np.ndarray
+    cop_t: np.ndarray
+    cop: np.ndarray
+    human_t: np.ndarray
+    human_com: np.ndarray
+    human_seat_off_s: float | None
+    seat_off_s: float | None
+    summary: dict
+
+
+def _stamps(msgs) -> np.ndarray:
+    """Header stamps [s] (the human side: the demonstration's own time)."""
+    return np.array([stamp_ns(m.header) for _, m in msgs]) * 1e-9
+
+
+def _received(msgs) -> np.ndarray:
+    """Recording times [s] (the robot side: one clock for the driver's states and the retargeter's plan)."""
+    return np.array([t for t, _ in msgs]) * 1e-9
+
+
+def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | None = None,
+            hold_s: float = 2.0, stand_fraction: float = 0.9, every: int = 5) -> RunAnalysis:
+    """Analyse the stand-up bag ``run`` (see the module docstring); ``every``: use every n-th robot state."""
+    from ..robot.model import PlantConfig, controller_model
+    from ..robot.plant import apply_parameters
+
+    cad = controller_model(PlantConfig.load(plant_yaml))
+    ident = pin.Model(cad)
+    if params_yaml:
+        apply_parameters(ident, yaml.safe_load(Path(params_yaml).read_text())["links"])
+    with BagReader(run) as bag:
+        topics = bag.topics()
+        for needed in ("/robot/joint_states", "/robot/base_pose", "/robot/planned_com"):
+            if needed not in topics:
+                raise ValueError(f"{run}: no {needed} topic: not a stand-up run")
+        js = bag.read("/robot/joint_states")[::every]
+        base = bag.read("/robot/base_pose")
+        plan = bag.read("/robot/planned_com")
+        cop = bag.read("/robot/cop")
+        human = bag.read("/human/com") if "/human/com" in topics else []
+        chair = bag.read("/force_plate/chair") if "/force_plate/chair" in topics else []
+    t_js, t_base = _received(js), _received(base)
+    bp = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.x,
+                    m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w] for _, m in base])
+    names = list(js[0][1].name)
+    order = [names.index(n) for n in cad.names[2:]]
+    q = np.zeros((len(js), cad.nq))
+    for k, (_, m) in enumerate(js):
+        i = min(np.searchsorted(t_base, t_js[k]), len(t_base) - 1)
+        q[k, :7] = bp[i]
+        q[k, 7:] = np.asarray(m.position)[order]
+    dc, di = cad.createData(), ident.createData()
+    com_cad = np.array([pin.centerOfMass(cad, dc, qk) for qk in q])
+    com = np.array([pin.centerOfMass(ident, di, qk) for qk in q])
+    t0 = t_js[0]
+    plan_t = _received(plan) - t0
+    plan_com = np.array([[m.position.x, m.position.y, m.position.z] for _, m in plan])
+    cop_t = _received(cop) - t0
+    cop_xyz = np.array([[m.point.x, m.point.y, m.point.z] for _, m in cop])
+    human_t = _stamps(human) if human else np.zeros(0)
+    human_com = np.array([[m.position.x, m.position.y, m.position.z] for _, m in human]).reshape(-1, 3)
+    human_seat_off = None
+    if chair:
+        fz = np.array([m.wrench.force.z for _, m in chair])
+        tc = _stamps(chair)
+        loaded = np.flatnonzero(fz > 60.0)
+        if len(loaded):
+            off = np.flatnonzero((fz < 30.0) & (np.arange(len(fz)) > loaded[0]))
+            human_seat_off = float(tc[off[0]] - tc[0]) if len(off) else None
+    if len(human_t):
+        human_t = human_t - human_t[0]
+    t = t_js - t0
+    z = q[:, 2]
+    rise = np.flatnonzero(z > z[0] + 0.02)
+    seat_off = float(t[rise[0]]) if len(rise) else None
+    z_plan = None
+    stood = False
+    last = t > t[-1] - hold_s
+    # the planned standing pelvis height: the plan's final COM height tells the posture; the pelvis is ~0.17 m above
+    # the COM when standing, but the robot's own final pelvis height is the direct test
+    if len(plan_com):
+        z_plan = float(plan_com[-1, 2])
+    fallen = bool(np.any(z < 0.35))
+    stood = (not fallen) and bool(np.all(z[last] > stand_fraction * max(z.max(), 1e-9))) and z[-1] > z[0] + 0.2
+    track = np.nan
+    if len(plan_t) > 1:
+        inside = (plan_t >= t[0]) & (plan_t <= t[-1])
+        meas = np.stack([np.interp(plan_t[inside], t, com[:, i]) for i in range(3)], axis=1)
+        track = float(np.sqrt(np.mean(np.sum((meas[:, :2] - plan_com[inside, :2]) ** 2, axis=1))))
+    summary = {"stood_up": stood, "fallen": fallen, "pelvis_start_m": float(z[0]), "pelvis_final_m": float(z[-1]),
+               "robot_seat_off_s": seat_off, "human_seat_off_s": human_seat_off,
+               "com_tracking_rms_m": track, "planned_final_com_z_m": z_plan,
+               "duration_s": float(t[-1]),
+               "cad_vs_identified_com_rms_m": float(np.sqrt(np.mean(np.sum((com - com_cad)[:, [0, 2]] ** 2, axis=1))))}
+    return RunAnalysis(name, t, q, com, com_cad, plan_t, plan_com, cop_t, cop_xyz, human_t, human_com,
+                       human_seat_off, seat_off, summary)
+
+
+def figure_6(a: RunAnalysis, png: Path) -> None:
+    """Forward COM of the human, planned and measured robot COM and robot COP against time, seat-off marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(2, 1, figsize=(9, 7))
+    if len(a.human_t):
+        ax[0].plot(a.human_t, a.human_com[:, 0], label="human COM (estimated)")
+    if a.human_seat_off_s is not None:
+        ax[0].axvline(a.human_seat_off_s, color="k", ls=":", lw=1, label="human seat-off (chair plate)")
+    ax[0].set_title(f"{a.name}: the human's rise (its own time)")
+    ax[0].set_ylabel("forward [m]")
+    ax[0].set_xlabel("time [s]")
+    ax[0].legend(fontsize=8)
+    ax[1].plot(a.plan_t, a.plan_com[:, 0], label="planned robot COM")
+    ax[1].plot(a.t, a.com[:, 0], label="measured robot COM (identified parameters)")
+    ok = np.isfinite(a.cop[:, 0])
+    ax[1].plot(a.cop_t[ok], a.cop[ok, 0], lw=0.6, alpha=0.6, label="robot COP (ankle F/T)")
+    if a.seat_off_s is not None:
+        ax[1].axvline(a.seat_off_s, color="k", ls=":", lw=1, label="robot seat-off (pelvis +2 cm)")
+    ax[1].set_ylim(-0.3, 0.2)
+    s = a.summary
+    ax[1].set_title(f"the robot (retimed): {'stood up' if s['stood_up'] else 'did not stand up'}, COM tracking RMS "
+                    f"{s['com_tracking_rms_m'] * 100:.1f} cm")
+    ax[1].set_ylabel("forward [m]")
+    ax[1].set_xlabel("time since the robot's first state [s]")
+    ax[1].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+
+
+def figure_7(runs: list[RunAnalysis], png: Path) -> None:
+    """Sagittal COM paths: natural against elderly-like, the robot's measured COM with identified and CAD
+    parameters, and the human's."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(11, 5))
+    for a, color in zip(runs, ("tab:blue", "tab:red", "tab:green")):
+        ax[0].plot(a.com[:, 0], a.com[:, 2], color=color, lw=2, label=f"{a.name}: identified parameters")
+        ax[0].plot(a.com_cad[:, 0], a.com_cad[:, 2], color=color, lw=1, ls="--", label=f"{a.name}: CAD parameters")
+        if len(a.human_t):
+            ax[1].plot(a.human_com[:, 0], a.human_com[:, 2], color=color, lw=2, label=f"{a.name}: human")
+    ax[0].set_title("robot COM from its measured states")
+    ax[1].set_title("human COM (estimated)")
+    for x in ax:
+        x.set_xlabel("forward x [m]")
+        x.set_ylabel("height z [m]")
+        x.grid(alpha=0.3)
+        x.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+
+
+def render_strip(a: RunAnalysis, plant_yaml: Path | None, png: Path, frames: int = 6) -> str | None:
+    """A strip of offscreen-rendered frames of the run; returns None, or why nothing was rendered. MuJoCo picks its GL
+    backend when it is imported, so each backend (``MUJOCO_GL`` if set, else egl then osmesa) is tried in a process
+    of its own."""
+    import os
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        states = Path(tmp) / "states.npz"
+        np.savez(states, q=a.q, t=a.t, name=a.name)
+        reason = "no GL backend"
+        for gl in ([os.environ["MUJOCO_GL"]] if os.environ.get("MUJOCO_GL") else ["egl", "osmesa"]):
+            code = ("import sys; from pathlib import Path; from sit2stand.retarget.report import _render_file; "
+                    "_render_file(*sys.argv[1:])")
+            proc = subprocess.run([sys.executable, "-c", code, str(states), str(plant_yaml or ""), str(png),
+                                   str(frames)], env=dict(os.environ, MUJOCO_GL=gl), capture_output=True, text=True,
+                                  timeout=300)
+            if proc.returncode == 0:
+                return None
+            reason = f"MUJOCO_GL={gl}: {(proc.stderr.strip().splitlines() or ['failed'])[-1]}"
+    return reason
+
+
+def _render_file(states: str, plant_yaml: str, png: str, frames: str) -> None:
+    d = np.load(states)
+    _render(d["q"], d["t"], str(d["name"]), Path(plant_yaml) if plant_yaml else None, Path(png), int(frames))
+
+
+def _render(qs: np.ndarray, ts: np.ndarray, name: str, plant_yaml: Path | None, png: Path, frames: int) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import mujoco
+
+    from ..robot.model import PlantConfig
+    from ..robot.plant import Plant
+
+    plant = Plant(PlantConfig.load(plant_yaml))
+    model, data = plant.model, plant.data
+    renderer = mujoco.Renderer(model, 360, 270)
+    cam = mujoco.MjvCamera()
+    cam.lookat[:] = [0.0, 0.0, 0.6]
+    cam.distance, cam.azimuth, cam.elevation = 2.6, 90.0, -10.0    # from the robot's left side
+    idx = np.linspace(0, len(qs) - 1, frames).astype(int)
+    images = []
+    for k in idx:
+        q = qs[k]
+        data.qpos[:3] = q[:3]
+        data.qpos[3:7] = [q[6], q[3], q[4], q[5]]
+        data.qpos[plant.qadr] = q[7:]
+        mujoco.mj_forward(model, data)
+        renderer.update_scene(data, cam)
+        images.append(renderer.render().copy())
+    renderer.close()
+    fig, ax = plt.subplots(1, frames, figsize=(2.2 * frames, 3))
+    for x, img, k in zip(ax, images, idx):
+        x.imshow(img)
+        x.set_title(f"{ts[k]:.1f} s", fontsize=9)
+        x.axis("off")
+    fig.suptitle(f"{name}: TALOS standing up (simulated, side view)")
+    fig.tight_layout()
+    fig.savefig(png, dpi=100)
+    plt.close(fig)
