@@ -62,6 +62,7 @@ class RetargeterNode(Node):
         self.map_out = declare(self, "marker_map", "", "write the marker calibration YAML here")
         self.hold_s = declare(self, "hold_s", 3.0, "after the plan ends, exit after this long [s] (0: never)")
         self._done_at: float | None = None
+        self._next_due: float | None = None
         deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(MocapFrame, MARKERS_TOPIC, self._on_markers, deep)
         self.create_subscription(CenterOfMass, "/human/com", self._on_com, deep)
@@ -91,7 +92,7 @@ class RetargeterNode(Node):
         self.finished = False
         self.exit_code = 0
         self.drain = IdleDrain(lambda: self.processed)
-        self.create_timer(1.0 / self.rate_hz, self._tick)
+        self.create_timer(0.25 / self.rate_hz, self._tick)
         self.create_timer(2.0, self._report)
         self.get_logger().info(f"retargeter: plant {self.plant_file}, COM parameters "
                                f"{self.params_file or 'CAD'}; waiting for {MARKERS_TOPIC} and /human/com")
@@ -190,17 +191,33 @@ class RetargeterNode(Node):
             self.infeasible += not frame.ik.feasible
             self._publish_ik(header, frame.q)
             self.player.push(frame.q, not frame.seated)
-            cmd = self.player.pull()
-            if cmd is not None:
-                self._publish(cmd)
-            self.latencies.append(time.perf_counter() - t_rx)
+            # one command per period of wall time, published as soon as a frame brings it (a burst of queued frames,
+            # e.g. after the COM estimator's calibration pause, must not play the plan faster)
+            now = time.monotonic()
+            if self._next_due is None or now >= self._next_due - 0.5 / self.rate_hz:
+                if self._pull_and_publish():
+                    self._next_due = max(self._next_due or now, now - 0.5 / self.rate_hz) + 1.0 / self.rate_hz
+                    self.latencies.append(time.perf_counter() - t_rx)
             self.processed += 1
             self.last_frame_wall = time.monotonic()
             self.last_stamp = header.stamp
 
+    def _pull_and_publish(self) -> bool:
+        cmd = self.player.pull()
+        if cmd is not None:
+            self._publish(cmd)
+        return cmd is not None
+
     def _tick(self) -> None:
-        """After the markers stop: close the plan and play the rest of it at the mocap rate."""
-        if self.player is None or self.frames or time.monotonic() - self.last_frame_wall < 3.0 / self.rate_hz:
+        """Keep the commands at the mocap rate when frames are late; after the markers stop, close the plan and play
+        the rest of it."""
+        if self.player is None:
+            return
+        now = time.monotonic()
+        if self._next_due is not None and now > self._next_due + 0.5 / self.rate_hz and not self.player.done:
+            if self._pull_and_publish():
+                self._next_due += 1.0 / self.rate_hz
+        if self.frames or now - self.last_frame_wall < 3.0 / self.rate_hz:
             return
         if not self.player.finished:
             self.player.close()
@@ -208,10 +225,6 @@ class RetargeterNode(Node):
             self._done_at = self._done_at or time.monotonic()
             if self.hold_s > 0 and time.monotonic() - self._done_at > self.hold_s:
                 self.finished = True
-            return
-        cmd = self.player.pull()
-        if cmd is not None:
-            self._publish(cmd)
 
     def _publish(self, cmd) -> None:
         stamp = self.get_clock().now().to_msg()         # a command is for now: the driver applies it at once

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..human.offline import read_trial
 from ..io.bag import BagReader
+from ..io.messages import stamp_ns
 from .stream import PlanPlayer, RetargetConfig, Retargeter, robot_setup
 
 
@@ -28,7 +29,7 @@ def human_com_series(bag: Path, human_com_bag: Path | None, trial) -> np.ndarray
         with BagReader(source) as b:
             if "/human/com" in b.topics():
                 msgs = b.read("/human/com")
-                t = np.array([ts for ts, _ in msgs]) * 1e-9
+                t = np.array([stamp_ns(m.header) for _, m in msgs]) * 1e-9     # the markers' own time
                 c = np.array([[m.position.x, m.position.y, m.position.z] for _, m in msgs])
                 return np.stack([np.interp(trial.marker_t_s, t, c[:, i]) for i in range(3)], axis=1)
     from ..human.com import estimate_com
@@ -141,7 +142,7 @@ def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0) -> dict:
     arr = np.array(rows)
     np.save(out / "simulation.npy", arr)
     stand_z = float(cmds[-1].q[2])
-    stood = (not plant.fallen) and arr[-1, 10] > stand_z - 0.08
+    stood = (not plant.fallen) and arr[-1, 10] > stand_z - 0.08 and arr[-1, 10] > arr[0, 10] + 0.2
     err = arr[:, 1:4] - arr[:, 4:7]
     return {"stood_up": bool(stood), "fall": plant.status_text if plant.fallen else None,
             "pelvis_final_m": float(arr[-1, 10]), "pelvis_planned_final_m": stand_z,

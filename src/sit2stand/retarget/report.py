@@ -47,13 +47,9 @@ class RunAnalysis:
 
 
 def _stamps(msgs) -> np.ndarray:
-    """Header stamps [s] (the human side: the demonstration's own time)."""
+    """Header stamps [s]: the robot side is stamped by the driver and the retargeter on one clock, the human side
+    in the demonstration's own time (the recorder's receive times would mis-pair states that arrive in bursts)."""
     return np.array([stamp_ns(m.header) for _, m in msgs]) * 1e-9
-
-
-def _received(msgs) -> np.ndarray:
-    """Recording times [s] (the robot side: one clock for the driver's states and the retargeter's plan)."""
-    return np.array([t for t, _ in msgs]) * 1e-9
 
 
 def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | None = None,
@@ -77,7 +73,7 @@ def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | N
         cop = bag.read("/robot/cop")
         human = bag.read("/human/com") if "/human/com" in topics else []
         chair = bag.read("/force_plate/chair") if "/force_plate/chair" in topics else []
-    t_js, t_base = _received(js), _received(base)
+    t_js, t_base = _stamps(js), _stamps(base)
     bp = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.x,
                     m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w] for _, m in base])
     names = list(js[0][1].name)
@@ -91,9 +87,9 @@ def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | N
     com_cad = np.array([pin.centerOfMass(cad, dc, qk) for qk in q])
     com = np.array([pin.centerOfMass(ident, di, qk) for qk in q])
     t0 = t_js[0]
-    plan_t = _received(plan) - t0
+    plan_t = _stamps(plan) - t0
     plan_com = np.array([[m.position.x, m.position.y, m.position.z] for _, m in plan])
-    cop_t = _received(cop) - t0
+    cop_t = _stamps(cop) - t0
     cop_xyz = np.array([[m.point.x, m.point.y, m.point.z] for _, m in cop])
     human_t = _stamps(human) if human else np.zeros(0)
     human_com = np.array([[m.position.x, m.position.y, m.position.z] for _, m in human]).reshape(-1, 3)

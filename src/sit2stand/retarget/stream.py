@@ -24,7 +24,8 @@
 :class:`PlanPlayer` (the dynamic-feasibility stage): smooths the poses (Savitzky-Golay on the tangent coordinates,
 ``smooth_frames`` wide), computes each pose's ZMP from the centroidal dynamics, and plays the plan back ``s`` times
 slower, with ``s`` the smallest factor that keeps the ZMP ``margin_m`` inside the feet wherever the robot is off the
-chair, evaluated over the poses already known ``lookahead_s`` ahead of the playback point. ``s`` only grows and at a
+chair, and the joint speeds under ``max_joint_speed``, evaluated over the poses already known ``lookahead_s`` ahead
+of the playback point. ``s`` only grows and at a
 bounded rate, so the command stays smooth; each command carries positions, velocities and accelerations (time-warp
 included). Live, the commands lag the human by ``lookahead_s`` + half the smoothing window, plus the stretching.
 
@@ -302,6 +303,13 @@ class Retargeter:
         return RetargetFrame(t_s, res.q, target, axes, self.data.com[0].copy(), self.seated, self.human_seat_off, res)
 
 
+def _zmp_grid(com: np.ndarray, acc: np.ndarray, dl: np.ndarray, mass: float, scales: np.ndarray) -> np.ndarray:
+    """ZMP (S, 3) of one frame played at each of ``scales`` (see :func:`zmp_at_scale`)."""
+    n = len(scales)
+    return zmp_at_scale(np.broadcast_to(com, (n, 3)), acc[None] / scales[:, None] ** 2, dl[None] / scales[:, None] ** 2,
+                        mass, 1.0)
+
+
 @dataclass
 class Command:
     """One joint command of the played plan."""
@@ -325,7 +333,8 @@ class PlanPlayer:
 
     def __init__(self, model: pin.Model, dt: float, polygon_xy: np.ndarray, *, margin_m: float = 0.06,
                  lookahead_s: float = 0.8, smooth_frames: int = 21, max_scale: float = 4.0,
-                 max_scale_rate: float = 1.5, fixed_scale: float | None = None) -> None:
+                 max_scale_rate: float = 1.5, fixed_scale: float | None = None,
+                 max_joint_speed: float = 1.0) -> None:
         self.model, self.data = model, model.createData()
         self.dt = dt
         self.polygon = polygon_xy
@@ -335,6 +344,7 @@ class PlanPlayer:
         self.max_scale = max_scale
         self.max_rate = max_scale_rate
         self.fixed = fixed_scale
+        self.max_speed = max_joint_speed
         self.s = 1.0 if fixed_scale is None else float(fixed_scale)
         self.s_goal = self.s
         self.mass = float(pin.computeTotalMass(model))
@@ -349,6 +359,8 @@ class PlanPlayer:
         self.started = False
         self.finished = False
         self._coef_cache: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._s_req: list[float] = []          # each frame's own smallest time scale
+        self._grid = np.arange(1.0, max_scale + 1e-9, 0.02)
 
     # -- input -------------------------------------------------------------------------------------------------
     def push(self, q: np.ndarray, on_feet: bool) -> None:
@@ -385,6 +397,7 @@ class PlanPlayer:
             pin.computeCentroidalMomentumTimeVariation(model, self.data, q, v, a)
             # dL/dt's velocity-product and acceleration parts both scale with 1/s^2 when played s x slower
             self._dyn.append((com, acom, self.data.dhg.angular.copy()))
+            self._s_req.append(self.frame_scale(len(self._dyn) - 1))
 
     def _coefs(self, half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         c = self._coef_cache.get(half)
@@ -397,19 +410,21 @@ class PlanPlayer:
         return c
 
     # -- output ------------------------------------------------------------------------------------------------
+    def frame_scale(self, k: int) -> float:
+        """Smallest time scale (grid of 0.02, at most ``max_scale``) keeping frame ``k``'s ZMP ``margin_m`` inside the
+        feet (none while the robot is on the chair) and its joint speeds under ``max_joint_speed`` [rad/s]."""
+        speed = float(np.abs(self._v[k][6:]).max()) / self.max_speed if self.max_speed > 0 else 1.0
+        if not self._feet[k]:
+            return min(max(1.0, speed), self.max_scale)
+        com, acc, dl = self._dyn[k]
+        z = _zmp_grid(com, acc, dl, self.mass, self._grid)
+        ok = np.flatnonzero(support_margin(z[:, :2], self.polygon) >= self.margin_m)
+        return min(max(float(self._grid[ok[0]]) if len(ok) else self.max_scale, speed), self.max_scale)
+
     def required_scale(self, frames: range) -> float:
-        """Smallest time scale (grid of 0.02) keeping the ZMP ``margin_m`` inside the feet on the on-feet ``frames``."""
-        ks = [k for k in frames if k < len(self._dyn) and self._feet[k]]
-        if not ks:
-            return 1.0
-        c = np.array([self._dyn[k][0] for k in ks])
-        acc = np.array([self._dyn[k][1] for k in ks])
-        dl = np.array([self._dyn[k][2] for k in ks])
-        for s in np.arange(1.0, self.max_scale + 1e-9, 0.02):
-            z = zmp_at_scale(c, acc, dl, self.mass, s)
-            if support_margin(z[:, :2], self.polygon).min() >= self.margin_m:
-                return float(s)
-        return self.max_scale
+        """Smallest time scale keeping the ZMP ``margin_m`` inside the feet on all of ``frames`` (known ones)."""
+        ks = [k for k in frames if k < len(self._s_req)]
+        return max((self._s_req[k] for k in ks), default=1.0)
 
     def ready(self) -> bool:
         known = len(self._v)
