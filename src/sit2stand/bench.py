@@ -149,6 +149,68 @@ def bench_human_com_graph(bag: Path, env: dict[str, str]) -> dict[str, float]:
             "node_cost_p99_ms": float(m.group(3))}
 
 
+def bench_retarget(root: Path) -> dict[str, float]:
+    """Per-frame cost of the retargeting IK and of the plan player on the shipped demonstrations (no ROS), and the
+    same IK without the COM and seat constraints (markers and feet only) for comparison."""
+    from .human.offline import read_trial
+    from .retarget.stream import PlanPlayer, Retargeter, robot_setup
+
+    robot = robot_setup()
+    ik_ms, player_ms, free_ms, rms_c, rms_free = [], [], [], [], []
+    for name in ("natural", "elderly"):
+        trial = read_trial(root / "bags" / name)
+        t, com = trial.truth
+        com_h = np.stack([np.interp(trial.marker_t_s, t, com[:, i]) for i in range(3)], axis=1)
+        chair = next(p for p in trial.plates if p["name"] == "chair")
+        fz = np.interp(trial.marker_t_s, chair["t_s"], chair["force_n"][:, 2])
+        rt = Retargeter(robot)
+        rt.calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0])
+        player = PlanPlayer(robot.model, 0.01, robot.support_xy)
+        for k, tk in enumerate(trial.marker_t_s):
+            f = rt.step(float(tk), trial.positions[k], trial.valid[k], com_h[k], float(fz[k]))
+            ik_ms.append(f.ik.seconds * 1e3)
+            rms_c.append(f.ik.marker_rms_m)
+            t0 = time.perf_counter()
+            player.push(f.q, not f.seated)
+            player.pull()
+            player_ms.append((time.perf_counter() - t0) * 1e3)
+            # marker-only IK from the same pose: feet fixed, no COM rows, no seat
+            t0 = time.perf_counter()
+            markers = [(rt.marker_frames[rt.names[i]], rt.robot_pelvis0 + rt.scale * (trial.positions[k][i]
+                        - rt.human_pelvis0), float(rt.weights[i])) for i in range(len(rt.names))
+                       if trial.valid[k][i] and rt.weights[i] > 0]
+            free = rt.ik.solve(f.q, markers, f.com_target, robot.sole_targets, q_ref=f.q, com_axes=(),
+                               max_iterations=rt.cfg.iterations)
+            free_ms.append((time.perf_counter() - t0) * 1e3)
+            rms_free.append(free.marker_rms_m)
+    ik, pl = np.array(ik_ms), np.array(player_ms)
+    return {"frames": len(ik), "ik_p50_ms": float(np.percentile(ik, 50)), "ik_p99_ms": float(np.percentile(ik, 99)),
+            "ik_p50_vs_1ms_target": float(np.percentile(ik, 50)) / 1.0, "ik_p99_vs_3ms_target": float(np.percentile(ik, 99)) / 3,
+            "player_p50_ms": float(np.percentile(pl, 50)), "player_p99_ms": float(np.percentile(pl, 99)),
+            "marker_only_ik_p50_ms": float(np.percentile(free_ms, 50)),
+            "marker_rms_com_hard_mm": float(np.mean(rms_c) * 1e3),
+            "marker_rms_marker_only_mm": float(np.mean(rms_free) * 1e3)}
+
+
+def bench_standup_graph(root: Path, env: dict[str, str]) -> dict[str, float]:
+    """The whole live graph on bags/elderly (CAD plant and parameters): the retargeter's latencies."""
+    import tempfile as _tmp
+
+    with _tmp.TemporaryDirectory() as tmp:
+        out = subprocess.run([sys.executable, "-m", "sit2stand.cli", "launch", str(root / "ros_ws/graphs/standup.yaml"),
+                              f"bag:={root / 'bags' / 'elderly'}", f"out:={Path(tmp) / 'rec'}",
+                              f"plant:={root / 'ros_ws' / 'plants' / 'cad.yaml'}"], env=env, capture_output=True,
+                             text=True, timeout=400)
+    m = re.search(r"latency p50 ([\d.]+) ms p99 ([\d.]+) ms .*COM->command p50 ([\d.]+) ms p99 ([\d.]+) ms",
+                  out.stdout)
+    if out.returncode != 0 or not m:
+        raise RuntimeError(f"stand-up graph failed:\n{out.stdout[-3000:]}{out.stderr[-2000:]}")
+    return {"marker_to_command_p50_ms": float(m.group(1)), "marker_to_command_p99_ms": float(m.group(2)),
+            "com_to_command_p50_ms": float(m.group(3)), "com_to_command_p99_ms": float(m.group(4)),
+            "com_to_command_p99_vs_10ms_target": float(m.group(4)) / 10.0,
+            "stood_up": float("upright" in out.stdout and "FALLEN" not in out.stdout)}
+
+
 def bench_robot(n_postures: int = 88) -> dict[str, float]:
     """Plant real-time factor at 1 kHz (seated, PD + gravity feed-forward), and identification time."""
     import tempfile as _tmp
@@ -209,7 +271,12 @@ def main(argv: list[str] | None = None) -> int:
         results["human_com"].update(bench_human_com_graph(demo, env))
     print("robot: plant real-time factor, 88 postures, identification ...", flush=True)
     results["robot"] = bench_robot()
-    sections = [s for s in ("bag", "replayer", "human_com", "robot") if s in results]
+    root = Path(__file__).resolve().parents[2]
+    print("retargeting: IK and plan player per frame on both demonstrations ...", flush=True)
+    results["retarget"] = bench_retarget(root)
+    print("retargeting: the live stand-up graph on bags/elderly ...", flush=True)
+    results["retarget"].update(bench_standup_graph(root, env))
+    sections = [s for s in ("bag", "replayer", "human_com", "robot", "retarget") if s in results]
     width = max(len(k) for section in sections for k in results[section])
     for section in sections:
         print(f"\n[{section}]")
