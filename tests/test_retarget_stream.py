@@ -8,7 +8,7 @@ import pytest
 
 from sit2stand.human.offline import read_trial
 from sit2stand.retarget.feasibility import plan_zmp, zmp_at_scale
-from sit2stand.retarget.stream import PlanPlayer, Retargeter, robot_setup
+from sit2stand.retarget.stream import PlanPlayer, Retargeter, retarget_sequence, robot_setup
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -30,17 +30,7 @@ def retargeted(elderly):
     rt = Retargeter(robot)
     rt.calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0])
     player = PlanPlayer(robot.model, 0.01, robot.support_xy, margin_m=0.06)
-    frames, cmds = [], []
-    for k, t in enumerate(trial.marker_t_s):
-        f = rt.step(float(t), trial.positions[k], trial.valid[k], com_h[k], float(fz[k]))
-        frames.append(f)
-        player.push(f.q, not f.seated)
-        c = player.pull()
-        if c is not None:
-            cmds.append(c)
-    player.close()
-    while not player.done:
-        cmds.append(player.pull())
+    frames, cmds = retarget_sequence(rt, player, trial.marker_t_s, trial.positions, trial.valid, com_h, fz)
     return robot, rt, frames, cmds, player
 
 

@@ -18,7 +18,7 @@ import numpy as np
 from ..human.offline import read_trial
 from ..io.bag import BagReader
 from ..io.messages import stamp_ns
-from .stream import PlanPlayer, RetargetConfig, Retargeter, robot_setup
+from .stream import PlanPlayer, RetargetConfig, Retargeter, retarget_sequence, robot_setup
 
 
 def human_com_series(bag: Path, human_com_bag: Path | None, trial) -> np.ndarray:
@@ -65,21 +65,8 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     dt = float(np.median(np.diff(trial.marker_t_s)))
     rt.calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0]).save(out / "marker_map.yaml")
     player = PlanPlayer(robot.model, dt, robot.support_xy, margin_m=margin_m, fixed_scale=time_scale)
-    frames, cmds = [], []
-    for k, t in enumerate(trial.marker_t_s):
-        fz = None
-        if chair is not None:
-            j = min(np.searchsorted(chair["t_s"], t), len(chair["t_s"]) - 1)
-            fz = float(chair["force_n"][j, 2])
-        f = rt.step(float(t), trial.positions[k], trial.valid[k], com_h[k], fz)
-        frames.append(f)
-        player.push(f.q, not f.seated)
-        c = player.pull()
-        if c is not None:
-            cmds.append(c)
-    player.close()
-    while not player.done:
-        cmds.append(player.pull())
+    fz = None if chair is None else np.interp(trial.marker_t_s, chair["t_s"], chair["force_n"][:, 2])
+    frames, cmds = retarget_sequence(rt, player, trial.marker_t_s, trial.positions, trial.valid, com_h, fz)
     ik_ms = np.array([f.ik.seconds for f in frames]) * 1e3
     feasible = np.array([f.ik.feasible for f in frames])
     com_err = np.array([f.ik.com_error_m for f in frames])

@@ -468,3 +468,23 @@ class PlanPlayer:
     @property
     def done(self) -> bool:
         return self.finished and self.u >= len(self._v) - 1
+
+
+def retarget_sequence(retargeter: Retargeter, player: PlanPlayer, t_s: np.ndarray, positions_m: np.ndarray,
+                      valid: np.ndarray, human_com_m: np.ndarray, chair_force_n: np.ndarray | None = None
+                      ) -> tuple[list[RetargetFrame], list[Command]]:
+    """A whole recorded demonstration through a calibrated ``retargeter`` and a ``player``, as the node streams it:
+    one pull per frame, then the rest of the (retimed) plan. Returns (frames, commands)."""
+    frames, cmds = [], []
+    for k, t in enumerate(t_s):
+        fz = None if chair_force_n is None else float(chair_force_n[k])
+        f = retargeter.step(float(t), positions_m[k], valid[k], human_com_m[k], fz)
+        frames.append(f)
+        player.push(f.q, not f.seated)
+        c = player.pull()
+        if c is not None:
+            cmds.append(c)
+    player.close()
+    while not player.done:
+        cmds.append(player.pull())
+    return frames, cmds
