@@ -14,7 +14,8 @@ axes about the sole, frame ``sole_<side>``), ``/robot/cop`` (geometry_msgs/Point
 
 Parameters: ``plant`` (YAML; default ros_ws/plants/default.yaml), ``controller_params`` (identified parameters YAML
 from ``sit2stand identify``; empty: CAD), ``feedforward`` (gravity | inverse_dynamics | none), ``real_time_factor``
-(1.0; 0 = as fast as it can), ``state_rate_hz``, ``publish_clock``, ``on_fall`` (limp | hold).
+(1.0; 0 = as fast as it can), ``state_rate_hz``, ``publish_clock``, ``on_fall`` (limp | hold), ``settle_s`` (2:
+simulated seconds to come to rest on the chair before anything is published).
 Service: ``~/reset`` (std_srvs/Trigger): back to sitting on the chair.
 Safety: torques clamped to the URDF efforts by the joints; a fall (pelvis below ``fall_pelvis_height_m`` or the base
 tilted past ``fall_tilt_rad``) is published on the status and the robot goes limp or holds its posture.
@@ -72,6 +73,8 @@ class Driver(Node):
         except (PlantConfigError, OSError) as err:
             raise NodeError(str(err)) from None
         self.plant.feedforward = self.ff_mode
+        self.settle_s = declare(self, "settle_s", 2.0, "simulated seconds to come to rest on the chair at start")
+        self.plant.settle(self.settle_s)
         self.names = self.plant.joint_names
         self.index = {n: i for i, n in enumerate(self.names)}
         fast = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
@@ -127,6 +130,7 @@ class Driver(Node):
     def _on_reset(self, _req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
         self.plant.reset()
         self.plant.feedforward = self.ff_mode
+        self.plant.settle(self.settle_s)
         self._wall0, self._sim0 = time.monotonic(), self.plant.t_s
         self._fall_reported = False
         res.success, res.message = True, "reset: seated on the chair"

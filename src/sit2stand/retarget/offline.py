@@ -14,6 +14,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 
 from ..human.offline import read_trial
 from ..io.bag import BagReader
@@ -58,7 +59,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
 
         links = yaml.safe_load(Path(params).read_text())["links"] if params else None
         sim = Plant(PlantConfig.load(plant), controller_params=links)
-        sim.step(500)       # settle on the chair; the calibration overlays the measured seated posture
+        sim.settle(2.0)     # at rest on the chair, as the driver starts; the calibration overlays this posture
         q_start = sim.pin_configuration(sim.data.qpos)
     robot = robot_setup(plant, params, q_start=q_start)
     rt = Retargeter(robot, config or RetargetConfig())
@@ -114,7 +115,10 @@ def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float)
 
 
 def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0) -> dict:
-    """Drive the plant with the commands (PD + inverse-dynamics feed-forward), then hold the last one."""
+    """Drive the plant with the commands (PD + inverse-dynamics feed-forward), then hold the last one. Writes
+    ``simulation.npy``: t, true COM (3), planned COM (3), COP (3), pelvis z, pelvis x, planned pelvis x, largest joint
+    tracking error [rad] and its joint index, chair force [N], COM of the measured state with the controller's model
+    (3)."""
     steps = max(1, int(round(dt / plant.cfg.timestep_s)))
     rows = []
     for c in cmds + [None] * int(hold_s / dt):
@@ -122,8 +126,11 @@ def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0) -> dict:
             plant.command(c.q[7:], c.v[6:], c.a[6:], feedforward="inverse_dynamics")
         plant.step(steps)
         s = plant.sensors()
+        err = plant.data.qpos[plant.qadr] - plant.q_ref
         rows.append([plant.t_s, *plant.true_com(), *(c.com if c is not None else cmds[-1].com),
-                     *s.cop_m, plant.data.qpos[2]])
+                     *s.cop_m, plant.data.qpos[2], plant.data.qpos[0], (c.q[0] if c is not None else cmds[-1].q[0]),
+                     float(np.abs(err).max()), float(np.argmax(np.abs(err))), plant.chair_force_n(),
+                     *pin.centerOfMass(plant.ctrl, plant.ctrl_data, plant.pin_configuration(plant.data.qpos))])
         if plant.fallen:
             break
     arr = np.array(rows)

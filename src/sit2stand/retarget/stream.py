@@ -25,7 +25,8 @@
 ``smooth_frames`` wide), computes each pose's ZMP from the centroidal dynamics, and plays the plan back ``s`` times
 slower, with ``s`` the smallest factor that keeps the ZMP ``margin_m`` inside the feet wherever the robot is off the
 chair, and the joint speeds under ``max_joint_speed``, evaluated over the poses already known ``lookahead_s`` ahead
-of the playback point. ``s`` only grows and at a
+of the playback point; at the robot's seat-off it dwells ``seat_off_dwell_s`` (the COM settles over the feet before
+the hips lift). ``s`` only grows and at a
 bounded rate, so the command stays smooth; each command carries positions, velocities and accelerations (time-warp
 included). Live, the commands lag the human by ``lookahead_s`` + half the smoothing window, plus the stretching.
 
@@ -334,7 +335,7 @@ class PlanPlayer:
     def __init__(self, model: pin.Model, dt: float, polygon_xy: np.ndarray, *, margin_m: float = 0.06,
                  lookahead_s: float = 0.8, smooth_frames: int = 21, max_scale: float = 4.0,
                  max_scale_rate: float = 1.5, fixed_scale: float | None = None,
-                 max_joint_speed: float = 1.0) -> None:
+                 max_joint_speed: float = 1.0, seat_off_dwell_s: float = 1.0) -> None:
         self.model, self.data = model, model.createData()
         self.dt = dt
         self.polygon = polygon_xy
@@ -345,6 +346,8 @@ class PlanPlayer:
         self.max_rate = max_scale_rate
         self.fixed = fixed_scale
         self.max_speed = max_joint_speed
+        self.dwell_pulls = int(round(seat_off_dwell_s / dt))
+        self._dwelt = 0
         self.s = 1.0 if fixed_scale is None else float(fixed_scale)
         self.s_goal = self.s
         self.mass = float(pin.computeTotalMass(model))
@@ -446,6 +449,11 @@ class PlanPlayer:
             k, frac = known - 1, 0.0
             self.u = float(k)
             hold = True
+        elif self._feet[k] and self._dwelt < self.dwell_pulls:
+            # at the robot's seat-off: wait, so that the COM settles over the feet before the hips lift
+            frac, hold = 0.0, True
+            self.u = float(k)
+            self._dwelt += 1
         else:
             frac = self.u - k
             hold = False

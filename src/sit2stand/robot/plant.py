@@ -163,6 +163,12 @@ class Plant:
         self.fallen = False
         self.status_text = "ok"
 
+    def settle(self, seconds: float = 2.0) -> None:
+        """Let the robot come to rest holding its reference (on the chair: it sinks ~1 cm into its seat posture),
+        then start the clock at 0."""
+        self.step(int(round(seconds / self.cfg.timestep_s)))
+        self.data.time = 0.0
+
     def set_limp(self, limp: bool) -> None:
         """Go limp (zero joint torque, e.g. after a fall) or back to PD control."""
         self.limp = limp

@@ -59,9 +59,13 @@ def _set_leg(plant: Plant, q: np.ndarray, hip: float, knee: float, ankle: float,
     return q
 
 
-def standing_qpos(plant: Plant, hip: float, knee: float, ankle: float, torso: float) -> np.ndarray:
-    """MuJoCo qpos of a symmetric stance with both soles flat on the floor, feet centred at x = 0."""
+def standing_qpos(plant: Plant, hip: float, knee: float, ankle: float, torso: float,
+                  arms: dict[str, float] | None = None) -> np.ndarray:
+    """MuJoCo qpos of a symmetric stance with both soles flat on the floor, feet centred at x = 0; ``arms``: joint
+    name -> angle [rad] for arm joints (default: the seated posture's)."""
     q = _set_leg(plant, plant.q_seated, hip, knee, ankle, torso)
+    for name, value in (arms or {}).items():
+        q[plant.qadr[plant.joint_names.index(name)]] = value
     # base orientation that keeps the feet flat: pitch = -(hip + knee + ankle)
     pitch = -(hip + knee + ankle)
     q[3:7] = [np.cos(pitch / 2), 0.0, np.sin(pitch / 2), 0.0]
@@ -76,16 +80,27 @@ def standing_qpos(plant: Plant, hip: float, knee: float, ankle: float, torso: fl
     return q
 
 
+def random_arms(rng: np.random.Generator) -> dict[str, float]:
+    """Shoulder (pitch, roll) and elbow angles [rad] for both arms, each side drawn on its own."""
+    out = {}
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        out[f"arm_{side}_1_joint"] = rng.uniform(-0.6, 0.2)
+        out[f"arm_{side}_2_joint"] = sign * rng.uniform(0.1, 0.6)
+        out[f"arm_{side}_4_joint"] = rng.uniform(-1.3, -0.2)
+    return out
+
+
 def cad_com_x(plant: Plant, qpos: np.ndarray) -> float:
     model, data = plant.ctrl, plant.ctrl_data
     return float(pin.centerOfMass(model, data, plant.pin_configuration(qpos))[0])
 
 
-def solve_ankle(plant: Plant, hip: float, knee: float, torso: float, com_x_m: float) -> float | None:
+def solve_ankle(plant: Plant, hip: float, knee: float, torso: float, com_x_m: float,
+                arms: dict[str, float] | None = None) -> float | None:
     """Ankle pitch [rad] putting the controller's (CAD) COM at ``com_x_m`` (feet centred at 0), or None."""
     a_lo = max(plant.model.joint("leg_left_5_joint").range[0], -0.9)
     a_hi = min(plant.model.joint("leg_left_5_joint").range[1], 0.4)
-    f = lambda a: cad_com_x(plant, standing_qpos(plant, hip, knee, a, torso)) - com_x_m  # noqa: E731
+    f = lambda a: cad_com_x(plant, standing_qpos(plant, hip, knee, a, torso, arms)) - com_x_m  # noqa: E731
     f_lo, f_hi = f(a_lo), f(a_hi)
     if np.sign(f_lo) == np.sign(f_hi):
         return None
@@ -100,11 +115,14 @@ def solve_ankle(plant: Plant, hip: float, knee: float, torso: float, com_x_m: fl
 
 
 def plan_postures(plant: Plant, n: int, seed: int = 0, com_offset_m: float = 0.025, com_centre_m: float = 0.02,
-                  ranges: dict[str, float] = STANDUP_RANGES, com_bias_m: float = 0.0) -> list[np.ndarray]:
+                  ranges: dict[str, float] = STANDUP_RANGES, com_bias_m: float = 0.0,
+                  move_arms: bool = True) -> list[np.ndarray]:
     """``n`` statically stable symmetric stances spanning the paper's joint ranges (qpos, MuJoCo order): the ankle
     puts the CAD COM at a random x within +-``com_offset_m`` of the sole's middle (``com_centre_m`` ahead of the
     ankles), corrected by ``com_bias_m`` (how far the
-    real COM was measured from CAD's, e.g. by :func:`collect_postures` in its home stance)."""
+    real COM was measured from CAD's, e.g. by :func:`collect_postures` in its home stance). With ``move_arms`` the
+    arms take random shoulder and elbow angles: with the arms always hanging, the arms' parameters cannot be told
+    from the torso's, and a model identified so misplaces the COM by 2-3 cm once the arms move (measured)."""
     rng = np.random.default_rng(seed)
     out: list[np.ndarray] = []
     tries = 0
@@ -113,11 +131,12 @@ def plan_postures(plant: Plant, n: int, seed: int = 0, com_offset_m: float = 0.0
         hip = -rng.uniform(0.0, ranges["hip"])
         knee = rng.uniform(0.0, ranges["knee"])
         torso = rng.uniform(0.0, ranges["torso"])
+        arms = random_arms(rng) if move_arms else None
         ankle = solve_ankle(plant, hip, knee, torso,
-                            com_centre_m + rng.uniform(-com_offset_m, com_offset_m) - com_bias_m)
+                            com_centre_m + rng.uniform(-com_offset_m, com_offset_m) - com_bias_m, arms)
         if ankle is None:
             continue
-        q = standing_qpos(plant, hip, knee, ankle, torso)
+        q = standing_qpos(plant, hip, knee, ankle, torso, arms)
         if q[2] < 0.45:   # too deep for the knees' torque at this mass
             continue
         out.append(q)
