@@ -30,7 +30,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, MocapFrame
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -65,7 +65,10 @@ class RetargeterNode(Node):
         self._next_due: float | None = None
         deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(MocapFrame, MARKERS_TOPIC, self._on_markers, deep)
-        self.create_subscription(CenterOfMass, "/human/com", self._on_com, deep)
+        # transient local, as the estimator publishes it: a subscription that matches late still gets the first COMs
+        history = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.create_subscription(CenterOfMass, "/human/com", self._on_com, history)
         self.create_subscription(ForcePlateSample, plate_topic("chair"), self._on_chair,
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
                                             reliability=ReliabilityPolicy.RELIABLE))
@@ -87,6 +90,7 @@ class RetargeterNode(Node):
         self.own_latencies: list[float] = []      # marker and human COM both received -> command published
         self.ik_costs: list[float] = []
         self.infeasible = 0
+        self.skipped = 0                          # marker frames older than the first human COM received
         self.processed = 0
         self.last_frame_wall = 0.0
         self.last_stamp = None
@@ -177,6 +181,10 @@ class RetargeterNode(Node):
             t_s, header, names, pos, valid, t_rx = self.frames[0]
             com = self._com_for(t_s)
             if com is None:
+                if self.coms and self.coms[0][0] > t_s + 1e-6:     # the COM stream began after this frame
+                    self.frames.popleft()
+                    self.skipped += 1
+                    continue
                 return
             if self.retargeter is None and not self._start(names, pos, valid, com):
                 return
@@ -263,6 +271,7 @@ class RetargeterNode(Node):
         ik = np.array(self.ik_costs) * 1e3
         pct = lambda a, p: f"{np.percentile(a, p):.2f}" if len(a) else "nan"  # noqa: E731
         return {"frames": str(self.processed), "infeasible_frames": str(self.infeasible),
+                "skipped_frames": str(self.skipped),
                 "time_scale": f"{self.player.s:.2f}" if self.player else "nan",
                 "ik_p50_ms": pct(ik, 50), "ik_p99_ms": pct(ik, 99),
                 "latency_p50_ms": pct(lat, 50), "latency_p99_ms": pct(lat, 99),
@@ -277,7 +286,8 @@ class RetargeterNode(Node):
 
     def close(self) -> None:
         s = self._stats()
-        print(f"[retargeter] {s['frames']} frames, {s['infeasible_frames']} infeasible; time scale {s['time_scale']}; "
+        print(f"[retargeter] {s['frames']} frames, {s['infeasible_frames']} infeasible, {s['skipped_frames']} without a "
+              f"human COM; time scale {s['time_scale']}; "
               f"IK p50 {s['ik_p50_ms']} ms p99 {s['ik_p99_ms']} ms; marker->command latency p50 "
               f"{s['latency_p50_ms']} ms p99 {s['latency_p99_ms']} ms (waiting for the human COM included); "
               f"COM->command p50 {s['own_latency_p50_ms']} ms p99 {s['own_latency_p99_ms']} ms", flush=True)

@@ -121,7 +121,7 @@ def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | N
         inside = (plan_t >= t[0]) & (plan_t <= t[-1])
         meas = np.stack([np.interp(plan_t[inside], t, com[:, i]) for i in range(3)], axis=1)
         track = float(np.sqrt(np.mean(np.sum((meas[:, :2] - plan_com[inside, :2]) ** 2, axis=1))))
-    summary = {"stood_up": stood, "fallen": fallen, "pelvis_start_m": float(z[0]), "pelvis_final_m": float(z[-1]),
+    summary = {"stood_up": bool(stood), "fallen": fallen, "pelvis_start_m": float(z[0]), "pelvis_final_m": float(z[-1]),
                "robot_seat_off_s": seat_off, "human_seat_off_s": human_seat_off,
                "com_tracking_rms_m": track, "planned_final_com_z_m": z_plan,
                "duration_s": float(t[-1]),
