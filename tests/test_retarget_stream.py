@@ -111,3 +111,30 @@ def test_zmp_at_scale_equals_the_zmp_of_the_slowed_plan():
     for s in (1.0, 1.7, 3.0):
         direct, _ = plan_zmp(model, qs, 0.01 * s)      # the same plan sampled s times slower
         assert np.allclose(zmp_at_scale(com, acc, dl, mass, s)[5:-5], direct[5:-5], atol=1e-9)
+
+
+def test_without_a_chair_plate_the_pelvis_markers_tell_the_seat_off(elderly):
+    trial, com_h, fz = elderly
+    robot = robot_setup()
+    seat_off = {}
+    for source in ("plate", "pelvis"):
+        rt = Retargeter(robot)
+        rt.calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0])
+        for k, t in enumerate(trial.marker_t_s):
+            f = rt.step(float(t), trial.positions[k], trial.valid[k], com_h[k],
+                        float(fz[k]) if source == "plate" else None)
+            if f.human_seat_off:
+                seat_off[source] = float(t)
+                break
+    assert abs(seat_off["pelvis"] - seat_off["plate"]) < 0.3, seat_off
+
+
+def test_a_calibration_frame_without_the_needed_markers_is_refused_by_name(elderly):
+    trial, com_h, _ = elderly
+    valid = trial.valid[0].copy()
+    valid[trial.marker_names.index("LHEE")] = False
+    with pytest.raises(ValueError, match="LHEE"):
+        Retargeter(robot_setup()).calibrate(trial.marker_names, trial.positions[0], valid, com_h[0])
+    rt = Retargeter(robot_setup())
+    with pytest.raises(RuntimeError, match="calibrate"):
+        rt.step(0.0, trial.positions[0], trial.valid[0], com_h[0])

@@ -91,6 +91,7 @@ class RetargeterNode(Node):
         self.ik_costs: list[float] = []
         self.infeasible = 0
         self.skipped = 0                          # marker frames older than the first human COM received
+        self.invalid_coms = 0
         self.processed = 0
         self.last_frame_wall = 0.0
         self.last_stamp = None
@@ -114,8 +115,11 @@ class RetargeterNode(Node):
 
     def _on_com(self, msg: CenterOfMass) -> None:
         p, v = msg.position, msg.velocity
-        self.coms.append((stamp_ns(msg.header) * 1e-9, np.array([p.x, p.y, p.z]), np.array([v.x, v.y, v.z]),
-                          bool(msg.valid)))
+        pos, vel = np.array([p.x, p.y, p.z]), np.array([v.x, v.y, v.z])
+        if not msg.valid or not np.all(np.isfinite(pos)):
+            self.invalid_coms += 1         # an estimate the estimator itself rejects: frames interpolate across it
+            return
+        self.coms.append((stamp_ns(msg.header) * 1e-9, pos, np.where(np.isfinite(vel), vel, 0.0)))
         self._process()
 
     def _on_markers(self, msg: MocapFrame) -> None:
@@ -125,15 +129,20 @@ class RetargeterNode(Node):
         self._process()
 
     def _com_for(self, t_s: float) -> np.ndarray | None:
-        """The human COM at ``t_s``: its own estimate, else the latest one if recent enough (moved on by its velocity);
-        None: wait."""
-        if not self.coms:
-            return None
-        for tc, p, v, ok in reversed(self.coms):
+        """The human COM at ``t_s``: its own estimate; between two estimates (the frame's own was invalid), the
+        interpolation; after the latest one, that one moved on by its velocity if it is at most ``com_wait_s`` old;
+        None: wait for it."""
+        after = None
+        for tc, p, v in reversed(self.coms):
             if abs(tc - t_s) < 1e-6:
                 return p
-            if tc < t_s:
-                return p + v * (t_s - tc) if t_s - tc <= self.com_wait else None
+            if tc > t_s:
+                after = (tc, p)
+                continue
+            if after is not None:
+                w = (t_s - tc) / (after[0] - tc)
+                return (1.0 - w) * p + w * after[1]
+            return p + v * (t_s - tc) if t_s - tc <= self.com_wait else None
         return None
 
     def _chair_force(self, t_s: float) -> float | None:

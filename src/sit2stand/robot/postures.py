@@ -170,7 +170,8 @@ def measure(plant: Plant, average_s: float = 0.3) -> PostureSample | None:
                          true_com=plant.true_com(), cop_sd_m=float(np.std([s.cop_m[0] for s in samples])))
 
 
-def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, progress: bool = True) -> dict:
+def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, progress: bool = True,
+                     move_arms: bool = True) -> dict:
     """Plan, hold and record ``n`` postures into a bag (see the module docstring); returns counts."""
     from ..io import messages as M
     from ..io.bag import BagWriter
@@ -191,7 +192,7 @@ def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, p
                            "plant's hidden masses")
     sample = measure(plant, 0.5)
     bias = float(sample.cop[0] - cad_com_x(plant, plant.data.qpos)) if sample is not None else 0.0
-    planned = plan_postures(plant, 3 * n + 10, seed=seed, com_bias_m=bias)
+    planned = plan_postures(plant, 3 * n + 10, seed=seed, com_bias_m=bias, move_arms=move_arms)
     store = typestore().types
     kept, dropped = 0, 0
     with BagWriter(out, custom_data={"source": "sit2stand collect-postures", "plant": cfg.name,
