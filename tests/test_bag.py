@@ -175,3 +175,20 @@ def test_unknown_type_in_a_foreign_bag_reads_as_bytes_and_deserializes_from_its_
     with BagReader(tmp_path / "foreign") as r:
         (_, msg), = r.read("/baro")
         assert msg.pressure_pa == 101325.0 and msg.site == "lab"
+
+
+def test_merge_puts_two_bags_in_time_order_and_keeps_the_first_bags_metadata(tmp_path):
+    from sit2stand.io.bag import merge_bags
+
+    a, b = tmp_path / "a", tmp_path / "b"
+    store = typestore().types
+    for path, topic, times, meta in ((a, "/x", [1, 3, 5], {"who": "a"}), (b, "/y", [2, 4], {"who": "b"})):
+        with BagWriter(path, custom_data=meta) as w:
+            w.add_topic(topic, "std_msgs/msg/String")
+            for t in times:
+                w.write(topic, t, store["std_msgs/msg/String"](data=f"{topic}{t}"))
+    counts = merge_bags(tmp_path / "m", [a, b, a])
+    assert counts == {"/x": 3, "/y": 2}
+    with BagReader(tmp_path / "m") as m:
+        assert [msg.timestamp_ns for msg in m.messages()] == [1, 2, 3, 4, 5]
+        assert m.custom_data["who"] == "a"

@@ -37,3 +37,14 @@ def test_the_robot_stands_up_live_from_the_shipped_elderly_demonstration(tmp_pat
         z = np.array([m.pose.position.z for _, m in base])
     assert z[0] < 0.65 and z[-1] > 0.85, f"pelvis from {z[0]:.2f} m to {z[-1]:.2f} m: did not stand up"
     assert "upright" in result.stdout and "FALLEN" not in result.stdout, log
+
+
+def test_marker_frames_without_a_human_com_stop_the_retargeter_with_a_clear_error(tmp_path, run_node):
+    """A demonstration played without any /human/com: the node names what it waited for and exits 2."""
+    node = run_node("sit2stand.nodes.retargeter", "--ros-args", "-p", "wait_for_robot:=false",
+                    "-p", "input_timeout_s:=3.0")
+    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={ROOT / 'bags' / 'elderly'}",
+                    "-p", "wait_for:=['/mocap/markers:1']", "-p", "publish_clock:=false")
+    assert play.wait(60) == 0
+    assert node.wait(60) == 2
+    assert "waited 3 s for /human/com" in node.output

@@ -145,6 +145,18 @@ def _bag_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bag_merge(args: argparse.Namespace) -> int:
+    from .io.bag import BagError, merge_bags
+
+    try:
+        counts = merge_bags(Path(args.out), [Path(p) for p in args.inputs])
+    except (BagError, OSError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.out}: {sum(counts.values())} messages on {len(counts)} topics")
+    return 0
+
+
 def _bag_recover(args: argparse.Namespace) -> int:
     from .io.bag import recover_bag
 
@@ -271,6 +283,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dir", type=Path)
     p.add_argument("--out", type=Path, help="write the rebuilt bag here instead of in place")
     p.set_defaults(func=_bag_recover)
+    p = bag.add_parser("merge", help="several bags into one, in time order (first bag wins a shared topic)")
+    p.add_argument("out", type=Path)
+    p.add_argument("inputs", type=Path, nargs="+")
+    p.set_defaults(func=_bag_merge)
 
     p = sub.add_parser("launch", help="start a graph of nodes from a YAML graph file")
     p.add_argument("graph", type=Path)

@@ -288,6 +288,31 @@ class BagReader:
         self.close()
 
 
+def merge_bags(out: str | Path, inputs: list[str | Path]) -> dict[str, int]:
+    """Write the messages of several bags into one, in time order (e.g. a demonstration and the human COM computed
+    from it offline). A topic present in more than one input is taken from the first that has it; the custom data
+    (metadata) are the first bag's. Returns the message count per topic."""
+    import heapq
+
+    readers = [BagReader(p) for p in inputs]
+    try:
+        owner: dict[str, int] = {}
+        for i, r in enumerate(readers):
+            for topic in r.topics():
+                owner.setdefault(topic, i)
+        with BagWriter(out, custom_data=readers[0].custom_data) as w:
+            for topic, i in owner.items():
+                w.add_topic(topic, readers[i].topics()[topic].msgtype, readers[i].qos(topic) or None)
+            streams = [r.messages([t for t, o in owner.items() if o == i]) for i, r in enumerate(readers)
+                       if any(o == i for o in owner.values())]
+            for m in heapq.merge(*streams, key=lambda m: m.timestamp_ns):
+                w.write_raw(m.topic, m.timestamp_ns, m.data)
+            return dict(w.counts)
+    finally:
+        for r in readers:
+            r.close()
+
+
 def topic_stats(path: str | Path) -> tuple[dict[str, TopicInfo], int, int]:
     """Per-topic counts and first/last times by reading every message's header; also bag start/end [ns]."""
     with BagReader(path) as bag:

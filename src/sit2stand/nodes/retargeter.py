@@ -18,7 +18,8 @@ The human COM of a frame is the estimator's estimate for that stamp, or its late
 older (moved on by its velocity); otherwise the frame waits for it. Parameters: ``plant``, ``controller_params``
 (identified YAML; empty: CAD), ``margin_m`` (0.06), ``lookahead_s`` (0.8), ``smooth_frames`` (21), ``time_scale``
 (0: adaptive retiming; else fixed), ``rate_hz`` (100), ``wait_for_robot`` (true), ``marker_map`` (YAML to write the
-calibration to; empty: none), ``hold_s`` (3: the node exits this long after its plan ends; 0: never).
+calibration to; empty: none), ``hold_s`` (3: the node exits this long after its plan ends; 0: never),
+``input_timeout_s`` (20: marker frames waiting this long for a human COM end the node with an error).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, MocapFrame
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -61,14 +62,15 @@ class RetargeterNode(Node):
         self.wait_for_robot = declare(self, "wait_for_robot", True, "start from the robot's measured posture")
         self.map_out = declare(self, "marker_map", "", "write the marker calibration YAML here")
         self.hold_s = declare(self, "hold_s", 3.0, "after the plan ends, exit after this long [s] (0: never)")
+        self.input_timeout_s = declare(self, "input_timeout_s", 20.0, "marker frames may wait this long for a COM")
+        self._first_wait: float | None = None
         self._done_at: float | None = None
         self._next_due: float | None = None
         deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(MocapFrame, MARKERS_TOPIC, self._on_markers, deep)
-        # transient local, as the estimator publishes it: a subscription that matches late still gets the first COMs
-        history = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.create_subscription(CenterOfMass, "/human/com", self._on_com, history)
+        # volatile: matches a transient-local publisher (the estimator) and a volatile one (a replayed bag) alike;
+        # marker frames older than the first COM received are skipped (a late match)
+        self.create_subscription(CenterOfMass, "/human/com", self._on_com, deep)
         self.create_subscription(ForcePlateSample, plate_topic("chair"), self._on_chair,
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
                                             reliability=ReliabilityPolicy.RELIABLE))
@@ -88,6 +90,8 @@ class RetargeterNode(Node):
         self.player: PlanPlayer | None = None
         self.latencies: list[float] = []          # marker received -> its command published
         self.own_latencies: list[float] = []      # marker and human COM both received -> command published
+        self.in_step_latencies: list[float] = []  # marker -> command, frames whose COM came within in_step_s
+        self.in_step_s = 0.02
         self.ik_costs: list[float] = []
         self.infeasible = 0
         self.skipped = 0                          # marker frames older than the first human COM received
@@ -208,7 +212,6 @@ class RetargeterNode(Node):
             frame = self.retargeter.step(t_s, pos, valid, com, self._chair_force(t_s))
             self.ik_costs.append(frame.ik.seconds)
             self.infeasible += not frame.ik.feasible
-            self._publish_ik(header, frame.q)
             self.player.push(frame.q, not frame.seated)
             # one command per period of wall time, published as soon as a frame brings it (a burst of queued frames,
             # e.g. after the COM estimator's calibration pause, must not play the plan faster)
@@ -216,8 +219,12 @@ class RetargeterNode(Node):
             if self._next_due is None or now >= self._next_due - 0.5 / self.rate_hz:
                 if self._pull_and_publish():
                     self._next_due = max(self._next_due or now, now - 0.5 / self.rate_hz) + 1.0 / self.rate_hz
-                    self.latencies.append(time.perf_counter() - t_rx)
-                    self.own_latencies.append(time.perf_counter() - t_ready)
+                    now_pc = time.perf_counter()
+                    self.latencies.append(now_pc - t_rx)
+                    self.own_latencies.append(now_pc - t_ready)
+                    if t_ready - t_rx <= self.in_step_s:     # the COM stream kept up with the markers
+                        self.in_step_latencies.append(now_pc - t_rx)
+            self._publish_ik(header, frame.q)       # after the command: it is for the record, not on the path
             self.processed += 1
             self.last_frame_wall = time.monotonic()
             self.last_stamp = header.stamp
@@ -230,10 +237,20 @@ class RetargeterNode(Node):
 
     def _tick(self) -> None:
         """Keep the commands at the mocap rate when frames are late; after the markers stop, close the plan and play
-        the rest of it."""
+        the rest of it. Marker frames that wait ``input_timeout_s`` for a human COM (or the robot's state) end the
+        node with an error naming what is missing."""
+        now = time.monotonic()
+        if self.frames and now - max(self.last_frame_wall, self._first_wait or now) > self.input_timeout_s:
+            missing = "/robot/joint_states and /robot/base_pose" if self.retargeter is None and self.coms and \
+                self.wait_for_robot else "/human/com"
+            self.get_logger().error(f"{len(self.frames)} marker frames waited {self.input_timeout_s:g} s for "
+                                    f"{missing}; stopping")
+            self.exit_code, self.finished = 2, True
+            return
+        if self.frames and self._first_wait is None:
+            self._first_wait = now
         if self.player is None:
             return
-        now = time.monotonic()
         if self._next_due is not None and now > self._next_due + 0.5 / self.rate_hz and not self.player.done:
             if self._pull_and_publish():
                 self._next_due += 1.0 / self.rate_hz
@@ -277,6 +294,7 @@ class RetargeterNode(Node):
     def _stats(self) -> dict[str, str]:
         lat = np.array(self.latencies) * 1e3
         own = np.array(self.own_latencies) * 1e3
+        step = np.array(self.in_step_latencies) * 1e3
         ik = np.array(self.ik_costs) * 1e3
         pct = lambda a, p: f"{np.percentile(a, p):.2f}" if len(a) else "nan"  # noqa: E731
         return {"frames": str(self.processed), "infeasible_frames": str(self.infeasible),
@@ -284,7 +302,9 @@ class RetargeterNode(Node):
                 "time_scale": f"{self.player.s:.2f}" if self.player else "nan",
                 "ik_p50_ms": pct(ik, 50), "ik_p99_ms": pct(ik, 99),
                 "latency_p50_ms": pct(lat, 50), "latency_p99_ms": pct(lat, 99),
-                "own_latency_p50_ms": pct(own, 50), "own_latency_p99_ms": pct(own, 99)}
+                "own_latency_p50_ms": pct(own, 50), "own_latency_p99_ms": pct(own, 99),
+                "in_step_frames": str(len(step)), "in_step_latency_p50_ms": pct(step, 50),
+                "in_step_latency_p99_ms": pct(step, 99)}
 
     def _report(self) -> None:
         st = DiagnosticStatus(name=self.get_fully_qualified_name(), hardware_id="retargeter",
@@ -299,7 +319,9 @@ class RetargeterNode(Node):
               f"human COM; time scale {s['time_scale']}; "
               f"IK p50 {s['ik_p50_ms']} ms p99 {s['ik_p99_ms']} ms; marker->command latency p50 "
               f"{s['latency_p50_ms']} ms p99 {s['latency_p99_ms']} ms (waiting for the human COM included); "
-              f"COM->command p50 {s['own_latency_p50_ms']} ms p99 {s['own_latency_p99_ms']} ms", flush=True)
+              f"COM->command p50 {s['own_latency_p50_ms']} ms p99 {s['own_latency_p99_ms']} ms; marker->command with the "
+              f"COM stream in step ({s['in_step_frames']} frames) p50 {s['in_step_latency_p50_ms']} ms p99 "
+              f"{s['in_step_latency_p99_ms']} ms", flush=True)
 
 
 main = node_main(RetargeterNode)
