@@ -55,6 +55,7 @@ class RetargeterNode(Node):
         self.margin = declare(self, "margin_m", 0.06, "ZMP margin inside the feet [m]")
         self.lookahead = declare(self, "lookahead_s", 0.8, "look-ahead of the retiming [s]")
         self.smooth = declare(self, "smooth_frames", 21, "Savitzky-Golay window of the plan [frames]")
+        self.max_speed = declare(self, "max_joint_speed", 0.6, "joint speed limit of the retimed plan [rad/s]")
         scale = declare(self, "time_scale", 0.0, "0: adaptive retiming; else a fixed time scale")
         self.fixed_scale = scale if scale > 0 else None
         self.rate_hz = declare(self, "rate_hz", 100.0, "marker rate [Hz]")
@@ -174,7 +175,8 @@ class RetargeterNode(Node):
         if self.map_out:
             marker_map.save(self.map_out)
         self.player = PlanPlayer(robot.model, 1.0 / self.rate_hz, robot.support_xy, margin_m=self.margin,
-                                 lookahead_s=self.lookahead, smooth_frames=self.smooth, fixed_scale=self.fixed_scale)
+                                 lookahead_s=self.lookahead, smooth_frames=self.smooth, fixed_scale=self.fixed_scale,
+                                 max_joint_speed=self.max_speed)
         self.names = names
         self.get_logger().info(f"calibrated on the first frame: {len(marker_map.links)} markers fixed to the robot; "
                                f"leg-length scale {self.retargeter.scale:.3f}")

@@ -335,7 +335,7 @@ class PlanPlayer:
     def __init__(self, model: pin.Model, dt: float, polygon_xy: np.ndarray, *, margin_m: float = 0.06,
                  lookahead_s: float = 0.8, smooth_frames: int = 21, max_scale: float = 4.0,
                  max_scale_rate: float = 1.5, fixed_scale: float | None = None,
-                 max_joint_speed: float = 1.0, seat_off_dwell_s: float = 1.0) -> None:
+                 max_joint_speed: float = 0.6, seat_off_dwell_s: float = 1.0) -> None:
         self.model, self.data = model, model.createData()
         self.dt = dt
         self.polygon = polygon_xy
