@@ -207,14 +207,13 @@ class ComIk:
             step = float(np.linalg.norm(dq))
             if step < tol:
                 break
-        pin.computeJointJacobians(model, data, q)
-        pin.updateFramePlacements(model, data)
-        com = pin.centerOfMass(model, data, q)
-        marker_err = [np.linalg.norm(data.oMf[f].translation - t) for f, t in zip(fids, targets)]
-        sole_err = max(np.linalg.norm(pin.log6(t.actInv(data.oMf[f])).vector) for f, t in zip(self.soles, sole_targets))
-        com_err = float(np.linalg.norm((com - com_target)[axes]))
         if not np.all(np.isfinite(q)):
             raise FloatingPointError("IK produced a non-finite configuration")
+        pin.framesForwardKinematics(model, data, q)        # the result's errors (no Jacobians needed)
+        com = pin.centerOfMass(model, data, q, False)
+        marker_sq = np.sum((np.array([data.oMf[f].translation for f in fids]).reshape(-1, 3) - targets) ** 2, axis=1)
+        sole_err = max(np.linalg.norm(pin.log6(t.actInv(data.oMf[f])).vector) for f, t in zip(self.soles, sole_targets))
+        com_err = float(np.linalg.norm((com - com_target)[axes]))
         return IkResult(q, feasible and com_err < 1e-3, com_err, float(sole_err),
-                        float(np.sqrt(np.mean(np.square(marker_err)))) if marker_err else 0.0, it, step, dua,
+                        float(np.sqrt(np.mean(marker_sq))) if len(marker_sq) else 0.0, it, step, dua,
                         time.perf_counter() - t0)
