@@ -174,12 +174,9 @@ def bench_retarget(root: Path) -> dict[str, float]:
             player.push(f.q, not f.seated)
             player.pull()
             player_ms.append((time.perf_counter() - t0) * 1e3)
-            # marker-only IK from the same pose: feet fixed, no COM rows, no seat
+            # marker-only IK of the same marker tasks from the same pose: feet fixed, no COM rows, no seat
             t0 = time.perf_counter()
-            markers = [(rt.marker_frames[rt.names[i]], rt.robot_pelvis0 + rt.scale * (trial.positions[k][i]
-                        - rt.human_pelvis0), float(rt.weights[i])) for i in range(len(rt.names))
-                       if trial.valid[k][i] and rt.weights[i] > 0]
-            free = rt.ik.solve(f.q, markers, f.com_target, robot.sole_targets, q_ref=f.q, com_axes=(),
+            free = rt.ik.solve(f.q, f.markers, f.com_target, robot.sole_targets, q_ref=f.q, com_axes=(),
                                max_iterations=rt.cfg.iterations)
             free_ms.append((time.perf_counter() - t0) * 1e3)
             rms_free.append(free.marker_rms_m)

@@ -27,7 +27,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
 from rclpy.node import Node
@@ -37,6 +36,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
 from ..robot.plant import Plant
 from .runtime import NodeError, declare, node_main
@@ -63,14 +63,9 @@ class Driver(Node):
             raise NodeError(f"feedforward {self.ff_mode!r} or on_fall {self.on_fall!r} not recognised")
         try:
             cfg = PlantConfig.load(plant_file)
-            ctrl = None
-            if params_file:
-                doc = yaml.safe_load(Path(params_file).read_text())
-                if "links" not in doc:
-                    raise NodeError(f"{params_file}: no per-link parameters ('links'); identify with --model full")
-                ctrl = doc["links"]
+            ctrl = read_link_parameters(params_file) if params_file else None
             self.plant = Plant(cfg, controller_params=ctrl)
-        except (PlantConfigError, OSError) as err:
+        except (PlantConfigError, IdentificationError, OSError) as err:
             raise NodeError(str(err)) from None
         self.plant.feedforward = self.ff_mode
         self.settle_s = declare(self, "settle_s", 2.0, "simulated seconds to come to rest on the chair at start")

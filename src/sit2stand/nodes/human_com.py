@@ -33,7 +33,7 @@ from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, InertialParameter
 from ..human.com import StreamingComEstimator, TooFewMarkers
 from ..human.skeleton import Subject
 from ..io.messages import FORCE_PLATE_PREFIX, MARKERS_TOPIC, stamp_ns
-from .runtime import IdleDrain, NodeError, declare, node_main
+from .runtime import IdleDrain, declare, node_main
 
 ROOT_NAMES = ["pelvis_x", "pelvis_y", "pelvis_z", "pelvis_qx", "pelvis_qy", "pelvis_qz", "pelvis_qw"]
 

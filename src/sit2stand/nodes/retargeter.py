@@ -39,7 +39,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from ..io.messages import MARKERS_TOPIC, plate_topic, stamp_ns
 from ..retarget.stream import PlanPlayer, RetargetConfig, Retargeter, robot_setup
 from .driver import DEFAULT_PLANT
-from .runtime import IdleDrain, NodeError, declare, node_main
+from .runtime import IdleDrain, NodeError, declare, node_main, qos_matching_publishers
 
 
 class RetargeterNode(Node):
@@ -69,9 +69,11 @@ class RetargeterNode(Node):
         self._next_due: float | None = None
         deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(MocapFrame, MARKERS_TOPIC, self._on_markers, deep)
-        # volatile: matches a transient-local publisher (the estimator) and a volatile one (a replayed bag) alike;
-        # marker frames older than the first COM received are skipped (a late match)
-        self.create_subscription(CenterOfMass, "/human/com", self._on_com, deep)
+        # /human/com is subscribed with its publishers' durability once they appear (transient local from the
+        # estimator: a late match still gets every estimate; volatile from a replayed bag); marker frames older than
+        # the first COM received are skipped
+        self.com_sub = None
+        self._com_discovery = self.create_timer(0.1, self._discover_com)
         self.create_subscription(ForcePlateSample, plate_topic("chair"), self._on_chair,
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
                                             reliability=ReliabilityPolicy.RELIABLE))
@@ -118,6 +120,12 @@ class RetargeterNode(Node):
     def _on_chair(self, msg: ForcePlateSample) -> None:
         self.chair.append((stamp_ns(msg.header) * 1e-9, msg.wrench.force.z))
 
+    def _discover_com(self) -> None:
+        if self.get_publishers_info_by_topic("/human/com"):
+            qos = qos_matching_publishers(self, "/human/com", keep_all=False, depth=2000)
+            self.com_sub = self.create_subscription(CenterOfMass, "/human/com", self._on_com, qos)
+            self._com_discovery.cancel()
+
     def _on_com(self, msg: CenterOfMass) -> None:
         p, v = msg.position, msg.velocity
         pos, vel = np.array([p.x, p.y, p.z]), np.array([v.x, v.y, v.z])
@@ -160,13 +168,14 @@ class RetargeterNode(Node):
 
     # -- processing --------------------------------------------------------------------------------------------
     def _start(self, names: list[str], pos: np.ndarray, valid: np.ndarray, com: np.ndarray) -> bool:
-        q_start = None
+        q_start, joint_names = None, None
         if self.wait_for_robot:
             if self.robot_js is None or self.robot_base is None:
                 return False
-            q_start = self._robot_q()
+            q_start, joint_names = self._robot_q(), list(self.robot_js.name)
         try:
-            robot = robot_setup(self.plant_file, self.params_file or None, q_start=q_start)
+            robot = robot_setup(self.plant_file, self.params_file or None, q_start=q_start,
+                                start_joint_names=joint_names)
             self.joint_names = robot.joint_names
             self.retargeter = Retargeter(robot, RetargetConfig())
             marker_map = self.retargeter.calibrate(names, pos, valid, com)
@@ -183,13 +192,12 @@ class RetargeterNode(Node):
         return True
 
     def _robot_q(self) -> np.ndarray:
+        """The measured configuration: base pose (x y z, quaternion x y z w) and the joints in the JointState's
+        order (``robot_setup`` maps them by name)."""
         js, b = self.robot_js, self.robot_base.pose
-        idx = {n: i for i, n in enumerate(js.name)}
-        q = np.zeros(7 + len(js.name))
-        q[:3] = [b.position.x, b.position.y, b.position.z]
-        q[3:7] = [b.orientation.x, b.orientation.y, b.orientation.z, b.orientation.w]
-        q[7:] = [js.position[idx[n]] for n in js.name]
-        return q
+        return np.concatenate([[b.position.x, b.position.y, b.position.z],
+                               [b.orientation.x, b.orientation.y, b.orientation.z, b.orientation.w],
+                               np.asarray(js.position, float)])
 
     def _process(self) -> None:
         while self.frames:

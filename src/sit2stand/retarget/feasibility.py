@@ -72,29 +72,34 @@ def support_margin(points_xy: np.ndarray, polygon_xy: np.ndarray) -> np.ndarray:
     return np.where(inside, np.abs(out), -np.abs(out))
 
 
+def frame_time_scales(com_m: np.ndarray, com_acc: np.ndarray, dl_nm: np.ndarray, mass_kg: float,
+                      polygon_xy: np.ndarray, margin_m: float, max_factor: float = 4.0,
+                      resolution: float = 0.02) -> np.ndarray:
+    """Per frame, the smallest time-scale factor s (on a grid of ``resolution`` in [1, ``max_factor``]) whose ZMP
+    (:func:`zmp_at_scale`) keeps ``margin_m`` inside ``polygon_xy``; ``max_factor`` where none does. Slowing down moves
+    a frame's ZMP toward its COM, and the margin is concave inside a convex polygon, so every larger s keeps the
+    margin too (when the COM itself has it): a plan needs the largest of its frames' factors."""
+    c, a, dl = (np.atleast_2d(np.asarray(x, float)) for x in (com_m, com_acc, dl_nm))
+    scales = np.arange(1.0, max_factor + 1e-9, resolution)
+    n, k = len(c), len(scales)
+    inv2 = np.repeat(1.0 / scales**2, n)[:, None]                   # grid-major: (k * n, 1)
+    z = zmp_at_scale(np.tile(c, (k, 1)), np.tile(a, (k, 1)) * inv2, np.tile(dl, (k, 1)) * inv2, mass_kg, 1.0)
+    ok = (support_margin(z[:, :2], polygon_xy) >= margin_m).reshape(k, n)
+    first = np.argmax(ok, axis=0)
+    return np.where(ok.any(axis=0), scales[first], max_factor)
+
+
 def retime_factor(model: pin.Model, qs: np.ndarray, dt: float, polygon_xy: np.ndarray, on_feet: np.ndarray,
                   margin_m: float = 0.04, max_factor: float = 4.0) -> tuple[float, float]:
     """Smallest time-scale factor s in [1, ``max_factor``] whose ZMP keeps ``margin_m`` inside ``polygon_xy`` on the
-    frames ``on_feet`` (the robot off the chair). Returns (s, the margin reached [m]); s = ``max_factor`` and a
-    smaller margin when even that is not enough (the plan must then be changed, not slowed)."""
+    frames ``on_feet`` (the robot off the chair): the largest of those frames' :func:`frame_time_scales`. Returns
+    (s, the margin reached [m]); s = ``max_factor`` and a smaller margin when even that is not enough (the plan must
+    then be changed, not slowed)."""
     com, acc, dl = plan_dynamics(model, qs, dt)
     mass = float(pin.computeTotalMass(model))
-
-    def margin(s: float) -> float:
-        zmp = zmp_at_scale(com, acc, dl, mass, s)
-        return float(support_margin(zmp[on_feet, :2], polygon_xy).min()) if on_feet.any() else np.inf
-
-    m1 = margin(1.0)
-    if m1 >= margin_m:
-        return 1.0, m1
-    m_max = margin(max_factor)
-    if m_max < margin_m:
-        return max_factor, m_max
-    lo, hi = 1.0, max_factor
-    for _ in range(12):
-        mid = 0.5 * (lo + hi)
-        if margin(mid) >= margin_m:
-            hi = mid
-        else:
-            lo = mid
-    return hi, margin(hi)
+    if not on_feet.any():
+        return 1.0, np.inf
+    s = float(frame_time_scales(com[on_feet], acc[on_feet], dl[on_feet], mass, polygon_xy, margin_m,
+                                max_factor).max())
+    zmp = zmp_at_scale(com[on_feet], acc[on_feet], dl[on_feet], mass, s)
+    return s, float(support_margin(zmp[:, :2], polygon_xy).min())

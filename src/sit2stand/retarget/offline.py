@@ -52,12 +52,11 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     sim = None
     q_start = None
     if simulate:
-        import yaml
-
+        from ..robot.identify import read_link_parameters
         from ..robot.model import PlantConfig
         from ..robot.plant import Plant
 
-        links = yaml.safe_load(Path(params).read_text())["links"] if params else None
+        links = read_link_parameters(params) if params else None
         sim = Plant(PlantConfig.load(plant), controller_params=links)
         sim.settle(2.0)     # at rest on the chair, as the driver starts; the calibration overlays this posture
         q_start = sim.pin_configuration(sim.data.qpos)

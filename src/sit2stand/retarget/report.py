@@ -11,8 +11,8 @@ plan, and the paper's figures.
 * :func:`render_strip`: frames of the robot standing up, rendered offscreen by MuJoCo (``MUJOCO_GL=egl`` or
   ``osmesa``; Fig. 4/5).
 
-Stood up: not fallen, and the pelvis above ``stand_fraction`` of its planned standing height for the last
-``hold_s`` seconds. Units SI.
+Stood up: not fallen (the pelvis never below the plant's fall height), the pelvis 20 cm or more above where it sat,
+and above ``stand_fraction`` of the highest it reached for the whole last ``hold_s`` seconds. Units SI.
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-import yaml
 
 from ..io.bag import BagReader
 from ..io.messages import stamp_ns
@@ -55,13 +54,15 @@ def _stamps(msgs) -> np.ndarray:
 def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | None = None,
             hold_s: float = 2.0, stand_fraction: float = 0.9, every: int = 5) -> RunAnalysis:
     """Analyse the stand-up bag ``run`` (see the module docstring); ``every``: use every n-th robot state."""
+    from ..robot.identify import read_link_parameters
     from ..robot.model import PlantConfig, controller_model
     from ..robot.plant import apply_parameters
 
-    cad = controller_model(PlantConfig.load(plant_yaml))
+    cfg = PlantConfig.load(plant_yaml)
+    cad = controller_model(cfg)
     ident = pin.Model(cad)
     if params_yaml:
-        apply_parameters(ident, yaml.safe_load(Path(params_yaml).read_text())["links"])
+        apply_parameters(ident, read_link_parameters(params_yaml))
     with BagReader(run) as bag:
         topics = bag.topics()
         for needed in ("/robot/joint_states", "/robot/base_pose", "/robot/planned_com"):
@@ -107,14 +108,9 @@ def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | N
     z = q[:, 2]
     rise = np.flatnonzero(z > z[0] + 0.02)
     seat_off = float(t[rise[0]]) if len(rise) else None
-    z_plan = None
-    stood = False
+    z_plan = float(plan_com[-1, 2]) if len(plan_com) else None
     last = t > t[-1] - hold_s
-    # the planned standing pelvis height: the plan's final COM height tells the posture; the pelvis is ~0.17 m above
-    # the COM when standing, but the robot's own final pelvis height is the direct test
-    if len(plan_com):
-        z_plan = float(plan_com[-1, 2])
-    fallen = bool(np.any(z < 0.35))
+    fallen = bool(np.any(z < cfg.fall_pelvis_height_m))
     stood = (not fallen) and bool(np.all(z[last] > stand_fraction * max(z.max(), 1e-9))) and z[-1] > z[0] + 0.2
     track = np.nan
     if len(plan_t) > 1:

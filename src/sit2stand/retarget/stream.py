@@ -40,10 +40,9 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-import yaml
 
 from .calibration import PELVIS_MARKERS, MarkerMap, calibrate_markers, marker_group
-from .feasibility import support_margin, support_polygon, zmp_at_scale
+from .feasibility import frame_time_scales, support_margin, support_polygon, zmp_at_scale
 from .ik import ComIk, IkResult
 
 FOOT_MARKERS = ("LANK", "RANK", "LHEE", "RHEE", "LTOE", "RTOE")
@@ -67,13 +66,13 @@ class RobotSetup:
 
 
 def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | None = None,
-                q_start: np.ndarray | None = None) -> RobotSetup:
+                q_start: np.ndarray | None = None, start_joint_names: list[str] | None = None) -> RobotSetup:
     """TALOS seated as in the plant file (only the posture and chair; never ``unmodeled``), with the identified
     COM parameters of ``params_yaml`` (``sit2stand identify --model full`` output) or the CAD ones. ``q_start``:
     the robot's measured seated configuration (Pinocchio order), as the paper calibrates on the robot's measured
-    sitting posture; default: the plant file's nominal one."""
-    import mujoco
-
+    sitting posture; default: the plant file's nominal one. ``start_joint_names``: the joint of each of
+    ``q_start[7:]`` when they come in another order (e.g. a JointState's)."""
+    from ..robot.identify import read_link_parameters
     from ..robot.model import SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, PlantConfig, build_spec, controller_model
     from ..robot.plant import apply_parameters, seated_configuration
 
@@ -81,10 +80,7 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
     model = controller_model(cfg)
     label = "CAD"
     if params_yaml:
-        doc = yaml.safe_load(Path(params_yaml).read_text())
-        if not isinstance(doc, dict) or "links" not in doc:
-            raise ValueError(f"{params_yaml}: no per-link parameters ('links'); identify with --model full")
-        apply_parameters(model, doc["links"])
+        apply_parameters(model, read_link_parameters(params_yaml))     # IdentificationError is a ValueError
         label = str(params_yaml)
     qpos = seated_configuration(build_spec(cfg, plant=False).compile(), cfg)
     q = qpos.copy()
@@ -93,6 +89,12 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
         if np.shape(q_start) != q.shape or not np.all(np.isfinite(q_start)):
             raise ValueError(f"start configuration: {np.shape(q_start)} values (finite), expected {q.shape}")
         q = np.asarray(q_start, float).copy()
+        if start_joint_names is not None:
+            by_name = dict(zip(start_joint_names, q_start[7:]))
+            missing = [n for n in model.names[2:] if n not in by_name]
+            if missing:
+                raise ValueError(f"start configuration: no position for {', '.join(missing[:5])}")
+            q[7:] = [by_name[n] for n in model.names[2:]]
     data = model.createData()
     pin.framesForwardKinematics(model, data, q)
     soles = [model.getFrameId(f"sole_{s}") for s in SIDES]
@@ -147,6 +149,7 @@ class RetargetFrame:
     seated: bool                  # hips held on the seat
     human_seat_off: bool
     ik: IkResult
+    markers: list = field(default_factory=list)     # the marker tasks solved: (frame id, target [m], weight)
 
 
 class Retargeter:
@@ -201,7 +204,8 @@ class Retargeter:
         self.marker_frames = marker_map.add_frames(self.model)
         self.data = self.model.createData()
         mu = np.full(self.model.nv, self.cfg.posture_weight)
-        self.upper = np.zeros(self.model.nq, bool)
+        # arms, head and the lateral joints are regularised toward the seated posture (the rest: the previous frame)
+        self.held_to_seated = np.zeros(self.model.nq, bool)
         lateral = ("torso_1_joint",) + tuple(f"leg_{s}_{i}_joint" for s in ("left", "right") for i in (1, 2, 6))
         for j in range(2, self.model.njoints):
             name, jt = self.model.names[j], self.model.joints[j]
@@ -209,7 +213,7 @@ class Retargeter:
                 self.cfg.lateral_weight if name in lateral else None
             if w is not None:
                 mu[jt.idx_v:jt.idx_v + jt.nv] = w
-                self.upper[jt.idx_q:jt.idx_q + jt.nq] = True
+                self.held_to_seated[jt.idx_q:jt.idx_q + jt.nq] = True
         self.ik = ComIk(self.model, self.robot.sole_frames, self.cfg.velocity_limit_rad_s, posture_weight=mu,
                         damping=self.cfg.damping)
         self.ik.eps_abs = self.cfg.qp_tolerance
@@ -295,20 +299,14 @@ class Retargeter:
             fade = (t_s - self._t_off) / max(cfg.hip_release_s, 1e-9)
             weight = 1e4 * (1.0 - min(1.0, fade)) ** 2 if fade < 1.0 else None
             hold = self.base_seated if weight is not None else None
-        q_ref = np.where(self.upper, robot.q_seated, self.q)
+        q_ref = np.where(self.held_to_seated, robot.q_seated, self.q)
         res = self.ik.solve(self.q, markers, target, robot.sole_targets, q_ref=q_ref, com_axes=axes,
                             q_prev=self.q, max_iterations=cfg.iterations, tol=cfg.tolerance, base_xz=hold,
                             base_weight=weight, base_pitch_min=self.pitch_seated if self.seated else None)
         self.q = res.q
         pin.centerOfMass(self.model, self.data, self.q)
-        return RetargetFrame(t_s, res.q, target, axes, self.data.com[0].copy(), self.seated, self.human_seat_off, res)
-
-
-def _zmp_grid(com: np.ndarray, acc: np.ndarray, dl: np.ndarray, mass: float, scales: np.ndarray) -> np.ndarray:
-    """ZMP (S, 3) of one frame played at each of ``scales`` (see :func:`zmp_at_scale`)."""
-    n = len(scales)
-    return zmp_at_scale(np.broadcast_to(com, (n, 3)), acc[None] / scales[:, None] ** 2, dl[None] / scales[:, None] ** 2,
-                        mass, 1.0)
+        return RetargetFrame(t_s, res.q, target, axes, self.data.com[0].copy(), self.seated, self.human_seat_off, res,
+                             markers)
 
 
 @dataclass
@@ -363,7 +361,6 @@ class PlanPlayer:
         self.finished = False
         self._coef_cache: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._s_req: list[float] = []          # each frame's own smallest time scale
-        self._grid = np.arange(1.0, max_scale + 1e-9, 0.02)
 
     # -- input -------------------------------------------------------------------------------------------------
     def push(self, q: np.ndarray, on_feet: bool) -> None:
@@ -417,12 +414,11 @@ class PlanPlayer:
         """Smallest time scale (grid of 0.02, at most ``max_scale``) keeping frame ``k``'s ZMP ``margin_m`` inside the
         feet (none while the robot is on the chair) and its joint speeds under ``max_joint_speed`` [rad/s]."""
         speed = float(np.abs(self._v[k][6:]).max()) / self.max_speed if self.max_speed > 0 else 1.0
-        if not self._feet[k]:
-            return min(max(1.0, speed), self.max_scale)
-        com, acc, dl = self._dyn[k]
-        z = _zmp_grid(com, acc, dl, self.mass, self._grid)
-        ok = np.flatnonzero(support_margin(z[:, :2], self.polygon) >= self.margin_m)
-        return min(max(float(self._grid[ok[0]]) if len(ok) else self.max_scale, speed), self.max_scale)
+        s = 1.0
+        if self._feet[k]:
+            com, acc, dl = self._dyn[k]
+            s = float(frame_time_scales(com, acc, dl, self.mass, self.polygon, self.margin_m, self.max_scale)[0])
+        return min(max(s, speed), self.max_scale)
 
     def required_scale(self, frames: range) -> float:
         """Smallest time scale keeping the ZMP ``margin_m`` inside the feet on all of ``frames`` (known ones)."""

@@ -324,6 +324,23 @@ def identify(path: str | Path, model: str = "full", eval_fraction: float = 0.1, 
     return fn(data, eval_fraction=eval_fraction, seed=seed)
 
 
+def read_link_parameters(path: str | Path) -> dict:
+    """The per-link parameters (``{joint: {mass, com}}``) of a YAML written by :func:`write_yaml`, for
+    ``plant.apply_parameters``.
+
+    Raises:
+        IdentificationError: the file is not valid YAML or has no ``links`` (only ``--model full`` writes them).
+        OSError: the file cannot be read.
+    """
+    try:
+        doc = yaml.safe_load(Path(path).read_text())
+    except yaml.YAMLError as err:
+        raise IdentificationError(f"{path}: not valid YAML: {err}") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("links"), dict):
+        raise IdentificationError(f"{path}: no per-link parameters ('links'); identify with --model full")
+    return doc["links"]
+
+
 def write_yaml(result: IdentificationResult, path: str | Path, source: str = "") -> None:
     """The parameters for the retargeter and the analysis (``plant.apply_parameters`` loads ``links``)."""
     doc = {"model": result.model_name, "source": source, "total_mass_kg": result.total_mass_kg,

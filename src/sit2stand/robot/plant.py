@@ -26,7 +26,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..io.forceplate import DEFAULT_COP_THRESHOLD_N
-from .model import SIDES, SOLE_OFFSET_M, PlantConfig, add_chair, build_spec, controller_model, expand
+from .model import SIDES, PlantConfig, add_chair, build_spec, controller_model, expand
 
 G = 9.81
 
@@ -285,7 +285,7 @@ class Plant:
             else self.data.qpos[self.qadr].copy()
         tau = self.data.sensordata[self.tau_adr].copy()
         tau = tau + self.tau_bias + self.rng.normal(0, cfg.joint_torque_noise_nm, self.n)
-        ft, world, cops, fzs = {}, {}, [], []
+        ft, world = {}, {}
         for side in SIDES:
             raw = self._ft_raw(side)
             meas = raw + np.concatenate([um.ft_force_bias_n, um.ft_torque_bias_nm]) + np.concatenate(
