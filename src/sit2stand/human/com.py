@@ -24,9 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
-from scipy.signal import savgol_coeffs, savgol_filter   # at import time: the first frame must not pay for it
+from scipy.signal import savgol_coeffs   # at import time: the first frame must not pay for it
 
-from ..dynamics import model_cop
+from ..dynamics import model_cop, savgol_series, smooth_motion
 from ..io.forceplate import center_of_pressure
 from .skeleton import LENGTH_GROUPS, SEGMENTS, HumanModel, Subject, build_human
 
@@ -241,51 +241,6 @@ def calibrate_markers(human: HumanModel, marker_names: list[str], positions: np.
 # ---------------------------------------------------------------------------------------------------------------
 # smoothing and differentiation (the same filter offline and live)
 # ---------------------------------------------------------------------------------------------------------------
-
-def smooth_motion(model: pin.Model, qs: np.ndarray, dt: float, window: int = 31,
-                  order: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Smoothed configurations and their velocities and accelerations (N, nq), (N, nv), (N, nv).
-
-    Savitzky-Golay position, first and second derivative of decoupled coordinates: the floating base's position
-    (world), its rotation vector r about the first frame's orientation (R = R0 exp(r)), and the joint angles. They
-    map to Pinocchio's free-flyer velocity (body frame) as v = R^T p', w = Jr(r) r', with accelerations
-    R^T p'' - w x (R^T p') and Jr r'' + (dJr/dt) r'. Differentiating the fit, not the smoothed samples, keeps the
-    noise of accelerations small (1 mm of marker noise gives ~0.1 m/s^2 at 100 Hz with the defaults; the window
-    keeps ~95 % of a 2 Hz motion's acceleration).
-    """
-    n = len(qs)
-    window = min(window, n - (1 - n % 2))
-    if window <= order:
-        raise ValueError(f"{n} frames are too few to smooth (need more than {order + 1})")
-    R0 = pin.Quaternion(qs[0][3:7]).normalized().matrix()
-    rot = np.array([pin.log3(R0.T @ pin.Quaternion(q[3:7]).normalized().matrix()) for q in qs])
-    x = np.hstack([qs[:, :3], rot, qs[:, 7:]])
-    xs, xd, xdd = (_savgol_series(x, window, order, d) / dt**d for d in (0, 1, 2))
-    q_s = np.zeros_like(qs)
-    v = np.zeros((n, model.nv))
-    a = np.zeros((n, model.nv))
-    for k in range(n):
-        r, rd, rdd = xs[k, 3:6], xd[k, 3:6], xdd[k, 3:6]
-        R = R0 @ pin.exp3(r)
-        q_s[k, :3] = xs[k, :3]
-        q_s[k, 3:7] = pin.Quaternion(R).coeffs()
-        q_s[k, 7:] = xs[k, 6:]
-        Jr = pin.Jexp3(r)
-        h = 1e-4
-        dJr = (pin.Jexp3(r + h * rd) - pin.Jexp3(r - h * rd)) / (2 * h)
-        w = Jr @ rd
-        v_lin = R.T @ xd[k, :3]
-        v[k, :3], v[k, 3:6], v[k, 6:] = v_lin, w, xd[k, 6:]
-        a[k, :3] = R.T @ xdd[k, :3] - np.cross(w, v_lin)
-        a[k, 3:6] = Jr @ rdd + dJr @ rd
-        a[k, 6:] = xdd[k, 6:]
-    return q_s, v, a
-
-
-def _savgol_series(x: np.ndarray, window: int, order: int, deriv: int) -> np.ndarray:
-    """Savitzky-Golay along axis 0 with the polynomial fitted to the nearest window at the edges."""
-    return savgol_filter(x, window, order, deriv=deriv, axis=0, mode="interp")
-
 
 def plate_wrench_at(times_s: np.ndarray, plates: list[dict], half_width_s: float) -> tuple[np.ndarray, np.ndarray,
                                                                                           np.ndarray]:
@@ -542,8 +497,8 @@ def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.
 
     force, moment, covered = plate_wrench_at(marker_t_s, plates, dt / 2)
     w_eff = min(window, len(force) - (1 - len(force) % 2))
-    force = _savgol_series(force, w_eff, 4, 0)     # the same filter as the kinematics: one bandwidth for both
-    moment = _savgol_series(moment, w_eff, 4, 0)
+    force = savgol_series(force, w_eff, 4, 0)     # the same filter as the kinematics: one bandwidth for both
+    moment = savgol_series(moment, w_eff, 4, 0)
     gaps = _plate_gaps(marker_t_s, plates, dt)
     weight = subject.mass_kg * G
     fz_ok = (force[:, 2] > 0.3 * weight) & (force[:, 2] < 3.0 * weight)
