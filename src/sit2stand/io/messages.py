@@ -43,7 +43,7 @@ def stamp_ns(msg_header: Any) -> int:
     return int(msg_header.stamp.sec) * 1_000_000_000 + int(msg_header.stamp.nanosec)
 
 
-def _point(x: float, y: float, z: float) -> Any:
+def point(x: float, y: float, z: float) -> Any:
     return typestore().types["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=float(z))
 
 
@@ -58,7 +58,7 @@ def mocap_frame(t_ns: int, names: list[str], positions_m: np.ndarray, valid: np.
     ok = np.asarray(valid, bool)
     res = np.full(len(names), np.nan, np.float32) if residuals_m is None else np.asarray(residuals_m, np.float32)
     nan = float("nan")
-    pts = [_point(*p) if v else _point(nan, nan, nan) for p, v in zip(pos, ok)]
+    pts = [point(*p) if v else point(nan, nan, nan) for p, v in zip(pos, ok)]
     return typestore().types[MOCAP_TYPE](header=header(t_ns, frame_id), marker_names=list(names), positions=pts,
                                          valid=ok.copy(), residuals_m=res.copy())
 
@@ -78,7 +78,7 @@ def force_plate_sample(t_ns: int, plate_name: str, force_n: np.ndarray, moment_o
     s = typestore().types
     wrench = s["geometry_msgs/msg/Wrench"](force=_vector(force_n), torque=_vector(moment_origin_nm))
     nan = float("nan")
-    cop = _point(*cop_m) if cop_valid else _point(nan, nan, nan)
+    cop = point(*cop_m) if cop_valid else point(nan, nan, nan)
     return s[PLATE_TYPE](header=header(t_ns, frame_id), plate_name=plate_name, wrench=wrench, cop=cop,
                          cop_valid=bool(cop_valid), free_moment_z=float(free_moment_nm) if cop_valid else nan)
 
@@ -98,6 +98,53 @@ def center_of_mass(t_ns: int, position_m: np.ndarray, velocity_mps: np.ndarray, 
                    cop_error_m: float = float("nan"), n_markers: int = 0, frame_id: str = LAB_FRAME) -> Any:
     """A sit2stand_msgs/CenterOfMass."""
     s = typestore().types
-    return s[COM_TYPE](header=header(t_ns, frame_id), position=_point(*position_m), velocity=_vector(velocity_mps),
+    return s[COM_TYPE](header=header(t_ns, frame_id), position=point(*position_m), velocity=_vector(velocity_mps),
                        acceleration=_vector(acceleration_mps2), source=source, valid=bool(valid),
                        marker_rms_m=float(marker_rms_m), cop_error_m=float(cop_error_m), n_markers=int(n_markers))
+
+
+ROBOT_STATE_TOPICS = {
+    "/robot/joint_states": "sensor_msgs/msg/JointState",
+    "/robot/ft/left": "geometry_msgs/msg/WrenchStamped",
+    "/robot/ft/right": "geometry_msgs/msg/WrenchStamped",
+    "/robot/cop": "geometry_msgs/msg/PointStamped",
+    "/robot/base_pose": "geometry_msgs/msg/PoseStamped",
+}
+"""What the robot driver publishes per state sample (and what robot bags written offline carry)."""
+
+
+def robot_state(t_ns: int, joint_names: list[str], q: np.ndarray, qd: np.ndarray | None, tau: np.ndarray,
+                wrench_world: dict[str, np.ndarray], cop_m: np.ndarray, base_pose: np.ndarray,
+                sole_m: dict[str, np.ndarray] | None = None) -> list[tuple[str, Any]]:
+    """(topic, message) of one robot state sample, as the driver publishes it: joint states (effort = measured
+    torque [N m]), ground reaction per foot (world axes, torque about the sole; frame ``sole_<side>``, with
+    ``@x,y,z`` of the sole point appended when ``sole_m`` is given), COP (NaN when unloaded) and the base pose
+    (``base_pose`` in MuJoCo order x y z qw qx qy qz)."""
+    s = typestore().types
+    out: list[tuple[str, Any]] = [("/robot/joint_states", s["sensor_msgs/msg/JointState"](
+        header=header(t_ns, "base_link"), name=list(joint_names), position=np.asarray(q, float),
+        velocity=np.zeros(0) if qd is None else np.asarray(qd, float), effort=np.asarray(tau, float)))]
+    for side, w in wrench_world.items():
+        frame = f"sole_{side}" if sole_m is None else \
+            f"sole_{side}@{sole_m[side][0]:.6f},{sole_m[side][1]:.6f},{sole_m[side][2]:.6f}"
+        out.append((f"/robot/ft/{side}", s["geometry_msgs/msg/WrenchStamped"](
+            header=header(t_ns, frame), wrench=s["geometry_msgs/msg/Wrench"](force=_vector(w[:3]),
+                                                                             torque=_vector(w[3:])))))
+    out.append(("/robot/cop", s["geometry_msgs/msg/PointStamped"](header=header(t_ns, "world"), point=point(*cop_m))))
+    b = base_pose
+    out.append(("/robot/base_pose", s["geometry_msgs/msg/PoseStamped"](
+        header=header(t_ns, "world"), pose=s["geometry_msgs/msg/Pose"](
+            position=point(*b[:3]), orientation=s["geometry_msgs/msg/Quaternion"](
+                x=float(b[4]), y=float(b[5]), z=float(b[6]), w=float(b[3]))))))
+    return out
+
+
+def joint_trajectorypoint(t_ns: int, joint_names: list[str], q: np.ndarray, qd: np.ndarray,
+                           qdd: np.ndarray) -> Any:
+    """A one-point trajectory_msgs/JointTrajectory: the reference the driver applies at once."""
+    s = typestore().types
+    point = s["trajectory_msgs/msg/JointTrajectoryPoint"](
+        positions=np.asarray(q, float), velocities=np.asarray(qd, float), accelerations=np.asarray(qdd, float),
+        effort=np.zeros(0), time_from_start=s["builtin_interfaces/msg/Duration"](sec=0, nanosec=0))
+    return s["trajectory_msgs/msg/JointTrajectory"](header=header(t_ns, "base_link"), joint_names=list(joint_names),
+                                                    points=[point])

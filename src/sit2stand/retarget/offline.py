@@ -108,9 +108,9 @@ def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float)
                     ts["trajectory_msgs/msg/JointTrajectory"](header=M.header(t_ns, "base_link"),
                                                             joint_names=list(joint_names), points=[point]))
             w.write("/robot/planned_com", t_ns,
-                    ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, "world"), point=M._point(*c.com)))
+                    ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, "world"), point=M.point(*c.com)))
             w.write("/robot/planned_zmp", t_ns,
-                    ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, "world"), point=M._point(*c.zmp)))
+                    ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, "world"), point=M.point(*c.zmp)))
 
 
 def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0) -> dict:

@@ -75,8 +75,11 @@ class Unmodeled:
     viscous_friction: dict[str, float] = field(default_factory=dict)   # joint glob -> N m s/rad
     coulomb_friction: dict[str, float] = field(default_factory=dict)   # joint glob -> N m
     torque_bias_nm: dict[str, float] = field(default_factory=dict)     # joint glob -> N m
-    ft_force_bias_n: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    torque_gain: dict[str, float] = field(default_factory=dict)        # joint glob -> measured / true torque
+    joint_offset_rad: dict[str, float] = field(default_factory=dict)   # joint glob -> encoder reading - true angle
+    ft_force_bias_n: tuple[float, float, float] = (0.0, 0.0, 0.0)      # both F/T sensors, sensor axes
     ft_torque_bias_nm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ft_bias: dict[str, tuple[float, ...]] = field(default_factory=dict)   # side -> (fx fy fz [N], tx ty tz [N m])
     actuator_delay_s: float = 0.0
 
 
@@ -139,6 +142,9 @@ class PlantConfig:
                 viscous_friction={k: float(v) for k, v in (um.get("viscous_friction") or {}).items()},
                 coulomb_friction={k: float(v) for k, v in (um.get("coulomb_friction") or {}).items()},
                 torque_bias_nm={k: float(v) for k, v in (um.get("torque_bias_nm") or {}).items()},
+                torque_gain={k: float(v) for k, v in (um.get("torque_gain") or {}).items()},
+                joint_offset_rad={k: float(v) for k, v in (um.get("joint_offset_rad") or {}).items()},
+                ft_bias={str(k): _six(v, f"ft_bias.{k}") for k, v in (um.get("ft_bias") or {}).items()},
                 ft_force_bias_n=tuple(map(float, um.get("ft_force_bias_n", (0, 0, 0)))),
                 ft_torque_bias_nm=tuple(map(float, um.get("ft_torque_bias_nm", (0, 0, 0)))),
                 actuator_delay_s=float(um.get("actuator_delay_s", 0.0)))
@@ -148,6 +154,13 @@ class PlantConfig:
 
     def total_extra_mass(self) -> float:
         return sum(m.mass_kg for m in self.unmodeled.masses)
+
+
+def _six(values, what: str) -> tuple[float, ...]:
+    out = tuple(float(v) for v in values)
+    if len(out) != 6:
+        raise ValueError(f"{what}: needs 6 values (fx fy fz [N], tx ty tz [N m]), got {len(out)}")
+    return out
 
 
 def expand(pattern_values: dict[str, float], joint_names: list[str]) -> dict[str, float]:

@@ -119,6 +119,17 @@ class Plant:
         self.tau_bias = np.zeros(self.n)
         for name, value in expand(um.torque_bias_nm, self.joint_names).items():
             self.tau_bias[self.joint_names.index(name)] = value
+        self.tau_gain = np.ones(self.n)
+        for name, value in expand(um.torque_gain, self.joint_names).items():
+            self.tau_gain[self.joint_names.index(name)] = value
+        self.q_offset = np.zeros(self.n)      # encoder reading - true angle; the servo tracks the reading
+        for name, value in expand(um.joint_offset_rad, self.joint_names).items():
+            self.q_offset[self.joint_names.index(name)] = value
+        bad = set(um.ft_bias) - set(SIDES)
+        if bad:
+            raise ValueError(f"{cfg.source or 'plant'}: ft_bias for unknown side(s) {sorted(bad)} (sides: {SIDES})")
+        both = np.concatenate([um.ft_force_bias_n, um.ft_torque_bias_nm])
+        self.ft_bias = {s: both + np.asarray(um.ft_bias.get(s, np.zeros(6)), float) for s in SIDES}
         self.delay_steps = int(round(um.actuator_delay_s / cfg.timestep_s))
         self._tau_queue: deque[np.ndarray] = deque()
         # the controller's model (CAD unless identified parameters are given)
@@ -153,7 +164,7 @@ class Plant:
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[:] = self.q_seated if q is None else q
         mujoco.mj_forward(self.model, self.data)
-        self.q_ref = self.data.qpos[self.qadr].copy()
+        self.q_ref = self.data.qpos[self.qadr] + self.q_offset     # what the encoders read: hold it
         self.qd_ref = np.zeros(self.n)
         self.qdd_ref = np.zeros(self.n)
         self.feedforward = "gravity"
@@ -236,7 +247,7 @@ class Plant:
                     self._ff, self._ff_age = self._feedforward(), 0
                 self._ff_age += 1
                 # PD (implicit, in the servo actuator) + feed-forward (motor); the joint clamps their sum
-                ctrl_pd = self.q_ref + self.kd / self.kp * self.qd_ref
+                ctrl_pd = self.q_ref - self.q_offset + self.kd / self.kp * self.qd_ref
                 ctrl_ff = np.clip(self._ff, -self.effort, self.effort)
             if self.delay_steps:
                 self._tau_queue.append((ctrl_pd, ctrl_ff))
@@ -280,15 +291,16 @@ class Plant:
         return np.concatenate([f_ground, t_ground])
 
     def sensors(self) -> Sensors:
-        cfg, um = self.cfg, self.cfg.unmodeled
-        q = self.data.qpos[self.qadr] + self.rng.normal(0, cfg.encoder_noise_rad, self.n) if cfg.encoder_noise_rad \
-            else self.data.qpos[self.qadr].copy()
-        tau = self.data.sensordata[self.tau_adr].copy()
+        cfg = self.cfg
+        q = self.data.qpos[self.qadr] + self.q_offset
+        if cfg.encoder_noise_rad:
+            q = q + self.rng.normal(0, cfg.encoder_noise_rad, self.n)
+        tau = self.tau_gain * self.data.sensordata[self.tau_adr]
         tau = tau + self.tau_bias + self.rng.normal(0, cfg.joint_torque_noise_nm, self.n)
         ft, world = {}, {}
         for side in SIDES:
             raw = self._ft_raw(side)
-            meas = raw + np.concatenate([um.ft_force_bias_n, um.ft_torque_bias_nm]) + np.concatenate(
+            meas = raw + self.ft_bias[side] + np.concatenate(
                 [self.rng.normal(0, cfg.ft_force_noise_n, 3), self.rng.normal(0, cfg.ft_torque_noise_nm, 3)])
             ft[side] = meas
             world[side] = self._ground_reaction(side, meas)

@@ -197,15 +197,9 @@ def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, p
     kept, dropped = 0, 0
     with BagWriter(out, custom_data={"source": "sit2stand collect-postures", "plant": cfg.name,
                                      "joint_names": ",".join(plant.joint_names)}) as bag:
-        for topic, msgtype in (("/robot/joint_states", "sensor_msgs/msg/JointState"),
-                               ("/robot/ft/left", "geometry_msgs/msg/WrenchStamped"),
-                               ("/robot/ft/right", "geometry_msgs/msg/WrenchStamped"),
-                               ("/robot/cop", "geometry_msgs/msg/PointStamped"),
-                               ("/robot/base_pose", "geometry_msgs/msg/PoseStamped"),
-                               ("/ground_truth/robot_com", "geometry_msgs/msg/PointStamped")):
+        for topic, msgtype in M.ROBOT_STATE_TOPICS.items():
             bag.add_topic(topic, msgtype)
-        V = lambda v: store["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))  # noqa
-        P = lambda v: store["geometry_msgs/msg/Point"](x=float(v[0]), y=float(v[1]), z=float(v[2]))  # noqa
+        bag.add_topic("/ground_truth/robot_com", "geometry_msgs/msg/PointStamped")
         for qpos in planned:
             if kept >= n:
                 break
@@ -218,24 +212,11 @@ def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, p
                 continue
             kept += 1
             t_ns = kept * 2_000_000_000
-            h = lambda frame: M.header(t_ns, frame)  # noqa: E731
-            bag.write("/robot/joint_states", t_ns, store["sensor_msgs/msg/JointState"](
-                header=h("base_link"), name=plant.joint_names, position=sample.q, velocity=np.zeros(0),
-                effort=sample.tau))
-            for side in SIDES:
-                w = sample.wrench[side]
-                bag.write(f"/robot/ft/{side}", t_ns, store["geometry_msgs/msg/WrenchStamped"](
-                    header=h(f"sole_{side}@{sample.sole[side][0]:.6f},{sample.sole[side][1]:.6f},"
-                             f"{sample.sole[side][2]:.6f}"),
-                    wrench=store["geometry_msgs/msg/Wrench"](force=V(w[:3]), torque=V(w[3:]))))
-            bag.write("/robot/cop", t_ns, store["geometry_msgs/msg/PointStamped"](header=h("world"), point=P(sample.cop)))
-            b = sample.base_pose
-            bag.write("/robot/base_pose", t_ns, store["geometry_msgs/msg/PoseStamped"](
-                header=h("world"), pose=store["geometry_msgs/msg/Pose"](
-                    position=P(b[:3]), orientation=store["geometry_msgs/msg/Quaternion"](
-                        x=float(b[4]), y=float(b[5]), z=float(b[6]), w=float(b[3])))))
+            for topic, msg in M.robot_state(t_ns, plant.joint_names, sample.q, None, sample.tau, sample.wrench,
+                                            sample.cop, sample.base_pose, sole_m=sample.sole):
+                bag.write(topic, t_ns, msg)
             bag.write("/ground_truth/robot_com", t_ns, store["geometry_msgs/msg/PointStamped"](
-                header=h("world"), point=P(sample.true_com)))
+                header=M.header(t_ns, "world"), point=M.point(*sample.true_com)))
             if progress and kept % 10 == 0:
                 print(f"  {kept}/{n} postures held ({dropped} tipped and dropped)", file=sys.stderr, flush=True)
     return {"kept": kept, "dropped": dropped, "home_com_bias_m": bias}
