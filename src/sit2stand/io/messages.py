@@ -139,7 +139,7 @@ def robot_state(t_ns: int, joint_names: list[str], q: np.ndarray, qd: np.ndarray
     return out
 
 
-def joint_trajectorypoint(t_ns: int, joint_names: list[str], q: np.ndarray, qd: np.ndarray,
+def joint_trajectory_point(t_ns: int, joint_names: list[str], q: np.ndarray, qd: np.ndarray,
                            qdd: np.ndarray) -> Any:
     """A one-point trajectory_msgs/JointTrajectory: the reference the driver applies at once."""
     s = typestore().types

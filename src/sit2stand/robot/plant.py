@@ -192,8 +192,9 @@ class Plant:
         return float(self.data.time)
 
     def command(self, q: np.ndarray, qd: np.ndarray | None = None, qdd: np.ndarray | None = None,
-                feedforward: str | None = None) -> None:
-        """Set the joint reference; ``feedforward``: "none", "gravity" or "inverse_dynamics"."""
+                feedforward: str | None = None, refresh: bool = True) -> None:
+        """Set the joint reference; ``feedforward``: "none", "gravity" or "inverse_dynamics"; ``refresh=False``
+        keeps the feed-forward's own refresh rate (for references interpolated at every physics step)."""
         q = np.asarray(q, float)
         if q.shape != (self.n,):
             raise ValueError(f"joint command has {q.shape} positions, the robot has {self.n} joints")
@@ -202,7 +203,8 @@ class Plant:
         self.qdd_ref = np.zeros(self.n) if qdd is None else np.asarray(qdd, float).copy()
         if feedforward is not None:
             self.feedforward = feedforward
-        self._ff_age = 10**9
+        if refresh:
+            self._ff_age = 10**9
 
     # -- control ----------------------------------------------------------------------------------------------
     def pin_configuration(self, qpos: np.ndarray) -> np.ndarray:

@@ -170,6 +170,20 @@ def measure(plant: Plant, average_s: float = 0.3) -> PostureSample | None:
                          true_com=plant.true_com(), cop_sd_m=float(np.std([s.cop_m[0] for s in samples])))
 
 
+def home_com_bias(plant: Plant) -> float:
+    """As an operator would: stand still upright with the CAD COM 5 cm forward (room for mass the CAD model does
+    not know about) and measure how far the real COM (the COP) is from CAD's [m, forward]."""
+    for forward in (0.10, 0.05, 0.15, 0.0, 0.2):
+        home = standing_qpos(plant, -0.1, 0.2, solve_ankle(plant, -0.1, 0.2, 0.0, forward), 0.0)
+        if settle(plant, home) and plant.sensors().cop_valid:
+            break
+    else:
+        raise RuntimeError("the robot cannot stand upright with its CAD COM anywhere over its feet; check the "
+                           "plant's hidden masses")
+    sample = measure(plant, 0.5)
+    return float(sample.cop[0] - cad_com_x(plant, plant.data.qpos)) if sample is not None else 0.0
+
+
 def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, progress: bool = True,
                      move_arms: bool = True) -> dict:
     """Plan, hold and record ``n`` postures into a bag (see the module docstring); returns counts."""
@@ -181,17 +195,7 @@ def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, p
 
     # squats tilt the pelvis far forward: only a pelvis near the floor or unloaded feet count as a fall here
     plant = Plant(replace(cfg, fall_tilt_rad=np.pi), with_chair=False)
-    # first, as an operator would: stand still upright with the CAD COM 5 cm forward (room for mass the CAD model
-    # does not know about) and measure how far the real COM (the COP) is from CAD's
-    for forward in (0.10, 0.05, 0.15, 0.0, 0.2):
-        home = standing_qpos(plant, -0.1, 0.2, solve_ankle(plant, -0.1, 0.2, 0.0, forward), 0.0)
-        if settle(plant, home) and plant.sensors().cop_valid:
-            break
-    else:
-        raise RuntimeError("the robot cannot stand upright with its CAD COM anywhere over its feet; check the "
-                           "plant's hidden masses")
-    sample = measure(plant, 0.5)
-    bias = float(sample.cop[0] - cad_com_x(plant, plant.data.qpos)) if sample is not None else 0.0
+    bias = home_com_bias(plant)
     planned = plan_postures(plant, 3 * n + 10, seed=seed, com_bias_m=bias, move_arms=move_arms)
     store = typestore().types
     kept, dropped = 0, 0

@@ -1,0 +1,204 @@
+"""A robot's measured recording, read from a bag: what the model-gap workflow is given (and nothing else).
+
+Two kinds of bag carry the same topics (``io.messages.ROBOT_STATE_TOPICS``):
+
+* a run (the driver's stream, or ``sit2stand excite``): joint states with measured torques as effort, the ground
+  reaction under each foot (world axes, torque about the sole), the COP, the base pose, and the commands the robot
+  was sent (``/robot/joint_command``, trajectory_msgs/JointTrajectory) when the bag has them;
+* static postures (``sit2stand collect-postures``): one averaged sample per held posture.
+
+Samples of one state are joined by their header stamp. A run is smoothed and differentiated with the same
+Savitzky-Golay filter for the motion (``dynamics.smooth_motion``) and for the measured torques and wrenches, so that
+both sides of the dynamics equation have one bandwidth; a posture bag is static (zero velocity and acceleration).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..dynamics import savgol_series, smooth_motion
+from ..io.bag import BagError, BagReader
+from ..io.messages import stamp_ns
+from ..robot.model import SIDES
+
+STATIC_PERIOD_S = 0.2     # samples further apart than this are held postures, not a run
+
+
+class RecordingError(BagError):
+    """A bag that does not hold a usable robot recording; the message names the bag, topic or field."""
+
+
+@dataclass
+class Commands:
+    """The joint references the robot was sent (plant joint order)."""
+
+    t_s: np.ndarray           # (K,) [s], on the recording's time base
+    q: np.ndarray             # (K, n) [rad]
+    qd: np.ndarray            # (K, n) [rad/s]
+    qdd: np.ndarray           # (K, n) [rad/s^2]
+
+
+@dataclass
+class Recording:
+    """A robot recording (plant joint order; base pose in MuJoCo order x y z qw qx qy qz)."""
+
+    source: str
+    joint_names: list[str]
+    t_s: np.ndarray                     # (N,) [s] from the first sample
+    q: np.ndarray                       # (N, n) [rad]
+    qd: np.ndarray                      # (N, n) [rad/s]
+    qdd: np.ndarray                     # (N, n) [rad/s^2]
+    tau: np.ndarray                     # (N, n) measured joint torques [N m]
+    wrench: dict[str, np.ndarray]       # side -> (N, 6) ground reaction on the foot, world axes, about the sole
+    cop: np.ndarray                     # (N, 3) [m], NaN when unloaded
+    base_pose: np.ndarray               # (N, 7)
+    base_v: np.ndarray                  # (N, 6) Pinocchio free-flyer velocity (body frame)
+    base_a: np.ndarray                  # (N, 6) and acceleration
+    static: bool                        # held postures (velocities and accelerations are zero)
+    commands: Commands | None = None
+    notes: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+    @property
+    def feet_force_z_n(self) -> np.ndarray:
+        return sum(self.wrench[s][:, 2] for s in SIDES)
+
+    def subset(self, keep: np.ndarray) -> Recording:
+        """The samples where ``keep`` is true (commands unchanged)."""
+        return Recording(self.source, self.joint_names, self.t_s[keep], self.q[keep], self.qd[keep], self.qdd[keep],
+                         self.tau[keep], {s: w[keep] for s, w in self.wrench.items()}, self.cop[keep],
+                         self.base_pose[keep], self.base_v[keep], self.base_a[keep], self.static, self.commands,
+                         list(self.notes))
+
+
+def _by_stamp(msgs: list[tuple[int, object]]) -> dict[int, object]:
+    return {stamp_ns(m.header): m for _, m in msgs}
+
+
+def read_recording(path: str | Path, model, rate_hz: float = 100.0, window_s: float = 0.15) -> Recording:
+    """Read a robot bag (see the module docstring) at most ``rate_hz``; ``model`` is the Pinocchio robot model used to
+    differentiate the base motion. Raises :class:`RecordingError` naming the bag and topic on missing or bad data."""
+    path = Path(path)
+    need = ["/robot/joint_states", "/robot/ft/left", "/robot/ft/right", "/robot/base_pose"]
+    try:
+        reader = BagReader(path)
+    except BagError as err:
+        raise RecordingError(str(err)) from None
+    with reader as bag:
+        topics = bag.topics()
+        missing = [t for t in need if t not in topics]
+        if missing:
+            raise RecordingError(f"{path}: not a robot recording: no {', '.join(missing)}")
+        js = _by_stamp(bag.read("/robot/joint_states"))
+        ft = {s: _by_stamp(bag.read(f"/robot/ft/{s}")) for s in SIDES}
+        base = _by_stamp(bag.read("/robot/base_pose"))
+        cop = _by_stamp(bag.read("/robot/cop")) if "/robot/cop" in topics else {}
+        cmd_msgs = bag.read("/robot/joint_command") if "/robot/joint_command" in topics else []
+    stamps = sorted(set(js) & set(ft["left"]) & set(ft["right"]) & set(base))
+    if len(stamps) < 5:
+        raise RecordingError(f"{path}: only {len(stamps)} samples have joint states, both feet's wrenches and a base "
+                             "pose with the same stamp (need 5)")
+    first = js[stamps[0]]
+    names = list(first.name)
+    t = (np.array(stamps, np.int64) - stamps[0]) * 1e-9
+    static = bool(np.median(np.diff(t)) > STATIC_PERIOD_S)
+    if not static:     # thin to at most rate_hz
+        step = max(1, int(round(1.0 / (rate_hz * float(np.median(np.diff(t)))))))
+        stamps = stamps[::step]
+        t = t[::step]
+    q = np.array([js[s].position for s in stamps], float)
+    tau = np.array([js[s].effort for s in stamps], float)
+    if tau.shape != q.shape:
+        raise RecordingError(f"{path}: /robot/joint_states: effort (measured torque) missing or not one per joint")
+    qd = np.array([js[s].velocity if len(js[s].velocity) == len(names) else np.zeros(len(names)) for s in stamps])
+    wrench = {side: np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z, m.wrench.torque.x,
+                               m.wrench.torque.y, m.wrench.torque.z] for m in (ft[side][s] for s in stamps)])
+              for side in SIDES}
+    b = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.w,
+                   m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z]
+                  for m in (base[s] for s in stamps)])
+    cp = np.array([[cop[s].point.x, cop[s].point.y, cop[s].point.z] if s in cop else [np.nan] * 3 for s in stamps])
+    for label, arr in (("/robot/joint_states position", q), ("/robot/joint_states effort", tau),
+                       ("/robot/base_pose", b), *((f"/robot/ft/{s}", w) for s, w in wrench.items())):
+        bad = ~np.all(np.isfinite(arr), axis=1)
+        if bad.all():
+            raise RecordingError(f"{path}: {label}: no finite sample")
+    ok = np.all(np.isfinite(q), 1) & np.all(np.isfinite(tau), 1) & np.all(np.isfinite(b), 1) & \
+        np.all(np.isfinite(wrench["left"]), 1) & np.all(np.isfinite(wrench["right"]), 1)
+    notes = []
+    if not ok.all():
+        notes.append(f"{int((~ok).sum())} samples with NaN dropped")
+    n = len(names)
+    rec = Recording(str(path), names, t[ok], q[ok], qd[ok], np.zeros_like(q[ok]), tau[ok],
+                    {s: w[ok] for s, w in wrench.items()}, cp[ok], b[ok], np.zeros((ok.sum(), 6)),
+                    np.zeros((ok.sum(), 6)), static, notes=notes)
+    if not static:
+        _smooth(rec, model, window_s)
+    if cmd_msgs:
+        rec.commands = _commands(cmd_msgs, names, stamps[0], path)
+    if n != model.nv - 6:
+        raise RecordingError(f"{path}: /robot/joint_states has {n} joints, the model {model.nv - 6}")
+    return rec
+
+
+def _smooth(rec: Recording, model, window_s: float) -> None:
+    """Savitzky-Golay smoothing and derivatives of the run (in place)."""
+    dt = float(np.median(np.diff(rec.t_s)))
+    window = max(5, int(round(window_s / dt)) | 1)
+    if len(rec) <= window:
+        rec.notes.append(f"run too short to smooth ({len(rec)} samples)")
+        return
+    idx = _joint_index(model, rec.joint_names)
+    qs = np.zeros((len(rec), model.nq))
+    qs[:, :3] = rec.base_pose[:, :3]
+    qs[:, 3:7] = rec.base_pose[:, [4, 5, 6, 3]]
+    qs[:, idx + 1] = rec.q            # joint j's q index is its v index + 1 (one quaternion slot)
+    q_s, v, a = smooth_motion(model, qs, dt, window, order=3)
+    rec.q = q_s[:, idx + 1]
+    rec.qd = v[:, idx]
+    rec.qdd = a[:, idx]
+    rec.base_v, rec.base_a = v[:, :6], a[:, :6]
+    rec.base_pose = np.hstack([q_s[:, :3], q_s[:, [6]], q_s[:, 3:6]])
+    rec.tau = savgol_series(rec.tau, window, 3, 0)
+    rec.wrench = {s: savgol_series(w, window, 3, 0) for s, w in rec.wrench.items()}
+
+
+def _joint_index(model, names: list[str]) -> np.ndarray:
+    """v index of each named joint in ``model`` (names must all exist)."""
+    out = []
+    for name in names:
+        if not model.existJointName(name):
+            raise RecordingError(f"joint {name!r} of the recording is not in the model")
+        out.append(model.joints[model.getJointId(name)].idx_v)
+    return np.array(out)
+
+
+def _commands(msgs, names: list[str], t0_ns: int, path: Path) -> Commands | None:
+    index = {n: i for i, n in enumerate(names)}
+    ts, qs, qds, qdds = [], [], [], []
+    q = np.full(len(names), np.nan)
+    qd, qdd = np.zeros(len(names)), np.zeros(len(names))
+    for log_ns, m in msgs:
+        if not m.points:
+            continue
+        p = m.points[0]
+        for k, name in enumerate(m.joint_names):
+            j = index.get(name)
+            if j is None:
+                continue
+            q[j] = p.positions[k]
+            qd[j] = p.velocities[k] if len(p.velocities) > k else 0.0
+            qdd[j] = p.accelerations[k] if len(p.accelerations) > k else 0.0
+        stamp = stamp_ns(m.header) or log_ns
+        ts.append((stamp - t0_ns) * 1e-9)
+        qs.append(q.copy())
+        qds.append(qd.copy())
+        qdds.append(qdd.copy())
+    if not ts:
+        return None
+    return Commands(np.array(ts), np.array(qs), np.array(qds), np.array(qdds))

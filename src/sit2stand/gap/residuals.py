@@ -1,0 +1,190 @@
+"""The nominal model evaluated along a measured recording: residuals per channel, and each candidate effect's signature.
+
+For a floating-base robot whose only contacts are measured (the feet's F/T sensors), the equations of motion hold
+row by row along the measured state (q, v, a):
+
+    e(t) = S^T tau_meas + sum_feet J_foot^T w_foot - RNEA_model(q, v, a)        (nv rows)
+
+e is zero, up to noise, when the model is right. Its rows are the **channels**: the six base rows (the whole body's
+external wrench: expressed here in world axes about the midpoint of the soles, as force [N] and moment [N m]) and one
+row per actuated joint [N m]. While the robot sits, the seat pushes on the pelvis and thighs unmeasured: the base
+rows and the hip rows (``leg_*_1..3``) are then excluded; the knees, ankles, torso, arms and head still hold.
+
+Every candidate physical effect enters e linearly, to first order, through a **signature** (columns d e / d theta):
+
+* extra point mass on a body (theta = m, m c_x, m c_y, m c_z in the body frame [kg, kg m]): the body's mass and
+  first-moment columns of ``pin.computeJointTorqueRegressor`` (its rotational inertia m |c|^2 is neglected);
+* joint viscous friction [N m s/rad]: q'_j on row j; Coulomb friction [N m]: sat(q'_j / v0) on row j;
+* joint-torque sensor bias [N m]: 1 on row j; gain error (measured / true - 1): the model torque on row j;
+* joint encoder offset (reading - true angle) [rad]: d e / d q_j, by finite differences of the whole evaluation;
+* force/torque sensor bias per foot (sensor axes, [N], [N m]): J_sole^T of the bias carried to the ground reaction.
+
+Actuator delay does not show here (the measured torque is the applied one): it is read from the command tracking,
+see :mod:`sit2stand.gap.workflow`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from ..robot.model import SIDES, SOLE_OFFSET_M
+from .recording import Recording, _joint_index
+
+BASE_CHANNELS = ["base/force_x", "base/force_y", "base/force_z", "base/moment_x", "base/moment_y", "base/moment_z"]
+SEATED_JOINTS = ("leg_left_1_joint", "leg_left_2_joint", "leg_left_3_joint",
+                 "leg_right_1_joint", "leg_right_2_joint", "leg_right_3_joint")
+COULOMB_V0_RADPS = 0.01
+FD_STEP_RAD = 1e-5
+
+
+@dataclass
+class Evaluation:
+    """The nominal model along a recording (N samples, C = 6 + n channels)."""
+
+    channels: list[str]
+    e: np.ndarray                 # (N, C) measured - model
+    valid: np.ndarray             # (N, C) rows the measured contacts fully determine
+    tau_model: np.ndarray         # (N, n) joint torques the model predicts from the measured motion and wrenches
+    mass_cols: np.ndarray         # (N, C, nb, 4) extra-mass signature per body (Pinocchio joint 1..nb)
+    offset_cols: np.ndarray       # (N, C, n) encoder-offset signature per joint
+    ft_cols: dict[str, np.ndarray]   # side -> (N, C, 6) F/T-bias signature
+    body_names: list[str]         # link name of each Pinocchio body (joint 1..nb)
+    centre_m: np.ndarray          # (N, 3) the point the base moments are taken about (mid-soles)
+
+    @property
+    def joint_channels(self) -> slice:
+        return slice(6, len(self.channels))
+
+
+def body_link_names(model: pin.Model) -> list[str]:
+    """The link (body) name of each Pinocchio joint 1..njoints-1 (the first body frame on it)."""
+    out = []
+    for jid in range(1, model.njoints):
+        names = [f.name for f in model.frames if f.parentJoint == jid and f.type == pin.FrameType.BODY]
+        out.append(names[0] if names else model.names[jid])
+    return out
+
+
+def _pin_q(model: pin.Model, rec: Recording, k: int, idx_v: np.ndarray) -> np.ndarray:
+    q = pin.neutral(model)
+    b = rec.base_pose[k]
+    q[:3] = b[:3]
+    q[3:7] = [b[4], b[5], b[6], b[3]]
+    q[idx_v + 1] = rec.q[k]
+    return q
+
+
+class _Rows:
+    """b(q) - RNEA(q, v, a) for one sample, and the pieces the signatures need."""
+
+    def __init__(self, model: pin.Model) -> None:
+        self.model, self.data = model, model.createData()
+        self.soles = {s: model.getFrameId(f"sole_{s}") for s in SIDES}
+
+    def residual(self, q, v, a, tau_full, wrench: dict[str, np.ndarray]) -> tuple[np.ndarray, dict]:
+        m, d = self.model, self.data
+        pin.computeJointJacobians(m, d, q)
+        pin.updateFramePlacements(m, d)
+        J = {s: pin.getFrameJacobian(m, d, f, pin.LOCAL_WORLD_ALIGNED) for s, f in self.soles.items()}
+        b = tau_full.copy()
+        for s in SIDES:
+            b += J[s].T @ wrench[s]
+        return b - pin.rnea(m, d, q, v, a), J
+
+
+def _base_to_world(model, data, q: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """6x6 map of the base rows (a wrench in the base frame, at the base origin) to world axes about ``centre``."""
+    R = pin.Quaternion(q[3:7]).normalized().matrix()
+    p = q[:3] - centre
+    T = np.zeros((6, 6))
+    T[:3, :3] = R
+    T[3:, 3:] = R
+    T[3:, :3] = pin.skew(p) @ R
+    return T
+
+
+def evaluate(model: pin.Model, rec: Recording, seated: np.ndarray | None = None,
+             offsets: bool = True) -> Evaluation:
+    """Evaluate ``model`` along ``rec`` (see the module docstring); ``seated`` (N,) marks samples with the seat
+    loaded (base and hip rows invalid)."""
+    n = len(rec.joint_names)
+    N = len(rec)
+    C = 6 + n
+    idx_v = _joint_index(model, rec.joint_names)
+    perm = np.concatenate([np.arange(6), idx_v])          # channel order: base rows, then the recording's joints
+    rows = _Rows(model)
+    nb = model.njoints - 1
+    e = np.zeros((N, C))
+    tau_model = np.zeros((N, n))
+    mass_cols = np.zeros((N, C, nb, 4))
+    offset_cols = np.zeros((N, C, n))
+    ft_cols = {s: np.zeros((N, C, 6)) for s in SIDES}
+    centre = np.zeros((N, 3))
+    for k in range(N):
+        q = _pin_q(model, rec, k, idx_v)
+        v = np.concatenate([rec.base_v[k], np.zeros(model.nv - 6)])
+        a = np.concatenate([rec.base_a[k], np.zeros(model.nv - 6)])
+        v[idx_v], a[idx_v] = rec.qd[k], rec.qdd[k]
+        tau_full = np.zeros(model.nv)
+        tau_full[idx_v] = rec.tau[k]
+        wrench = {s: rec.wrench[s][k] for s in SIDES}
+        r, J = rows.residual(q, v, a, tau_full, wrench)
+        centre[k] = 0.5 * sum(rows.data.oMf[rows.soles[s]].translation for s in SIDES)
+        T = _base_to_world(model, rows.data, q, centre[k])
+
+        def channel(x: np.ndarray) -> np.ndarray:
+            """Rows of the model's v order (leading axis) -> channel order, base rows to world about the centre."""
+            out = x[perm].copy()
+            out[:6] = np.tensordot(T, x[:6], axes=(1, 0))
+            return out
+
+        e[k] = channel(r)
+        tau_model[k] = rec.tau[k] - e[k, 6:]
+        Y = pin.computeJointTorqueRegressor(model, rows.data, q, v, a)
+        mass_cols[k] = channel(Y.reshape(model.nv, nb, 10)[:, :, :4])
+        for s in SIDES:
+            oMf = rows.data.oMf[rows.soles[s]]
+            R = oMf.rotation
+            lever = R @ np.array([0.0, 0.0, SOLE_OFFSET_M])     # sensor (ankle) minus sole, world axes
+            for c in range(6):
+                beta = np.zeros(6)
+                beta[c] = 1.0
+                df = -R @ beta[:3]
+                dt = -(R @ beta[3:] + np.cross(lever, R @ beta[:3]))
+                ft_cols[s][k, :, c] = channel(J[s].T @ np.concatenate([df, dt]))
+        if offsets:
+            for j in range(n):
+                qj = q.copy()
+                qj[idx_v[j] + 1] += FD_STEP_RAD
+                rj, _ = rows.residual(qj, v, a, tau_full, wrench)
+                offset_cols[k, :, j] = channel(rj - r) / FD_STEP_RAD
+            rows.residual(q, v, a, tau_full, wrench)     # leave the data at the measured state
+    valid = np.ones((N, C), bool)
+    if seated is not None and seated.any():
+        hips = [6 + rec.joint_names.index(j) for j in SEATED_JOINTS if j in rec.joint_names]
+        valid[np.ix_(seated, list(range(6)) + hips)] = False
+    channels = BASE_CHANNELS + [f"tau/{j}" for j in rec.joint_names]
+    return Evaluation(channels, e, valid, tau_model, mass_cols, offset_cols, ft_cols, body_link_names(model), centre)
+
+
+def joint_columns(rec: Recording, ev: Evaluation, kind: str, j: int) -> np.ndarray:
+    """(N, C, 1) signature of a single-joint effect ``kind`` on joint ``j`` (see the module docstring)."""
+    N, C = ev.e.shape
+    col = np.zeros((N, C, 1))
+    row = 6 + j
+    if kind == "viscous_friction":
+        col[:, row, 0] = rec.qd[:, j]
+    elif kind == "coulomb_friction":
+        col[:, row, 0] = np.clip(rec.qd[:, j] / COULOMB_V0_RADPS, -1.0, 1.0)
+    elif kind == "torque_bias":
+        col[:, row, 0] = 1.0
+    elif kind == "torque_gain":
+        col[:, row, 0] = ev.tau_model[:, j]
+    elif kind == "joint_offset":
+        col[:, :, 0] = ev.offset_cols[:, :, j]
+    else:
+        raise ValueError(f"unknown joint effect {kind!r}")
+    return col
