@@ -249,6 +249,7 @@ def build_spec(cfg: PlantConfig, *, plant: bool) -> mujoco.MjSpec:
                 raise PlantConfigError(f"{cfg.source or 'plant'}: unmodeled mass on unknown link {extra.link!r}")
             b = parent.add_body(name=extra.name or f"extra_{extra.link}", pos=list(extra.pos_m))
             b.mass = extra.mass_kg
+            b.ipos = [0.0, 0.0, 0.0]         # the mass sits at the body's origin (MjSpec copies pos into ipos)
             b.inertia = [1e-4 * extra.mass_kg] * 3
             b.explicitinertial = True
         for name, value in expand(um.viscous_friction, names).items():

@@ -84,7 +84,7 @@ def random_arms(rng: np.random.Generator) -> dict[str, float]:
     """Shoulder (pitch, roll) and elbow angles [rad] for both arms, each side drawn on its own."""
     out = {}
     for side, sign in (("left", 1.0), ("right", -1.0)):
-        out[f"arm_{side}_1_joint"] = rng.uniform(-0.6, 0.2)
+        out[f"arm_{side}_1_joint"] = sign * rng.uniform(-0.6, 0.2)    # the right arm's range is the mirror
         out[f"arm_{side}_2_joint"] = sign * rng.uniform(0.1, 0.6)
         out[f"arm_{side}_4_joint"] = rng.uniform(-1.3, -0.2)
     return out

@@ -1,0 +1,531 @@
+"""The model-gap workflow: find where a nominal model disagrees with measured robot data, name the missing physical
+effect(s), add them to the model, and show the gap shrink.
+
+1. **Compare**: the nominal model (CAD, or identified parameters) is evaluated along each measured recording
+   (:mod:`sit2stand.gap.residuals`): one residual per channel (the whole body's external wrench, each joint's torque).
+2. **Find**: each channel's residual is measured against its noise floor (robust scale of the residual's fast part:
+   what no slowly varying physical effect can produce; for static postures, what is left after fitting every
+   candidate at once), per phase of the motion (seated, seat-off, rising, standing; for runs without a chair,
+   moving and still). A ranked table says where the model is wrong.
+3. **Name**: every candidate effect of the library (extra mass on each rigid group of links, viscous and Coulomb
+   friction, encoder offset, torque-sensor bias and gain per joint, F/T bias per foot) is offered to a sparse
+   selection (:mod:`sit2stand.gap.select`); the chosen effects come with 95 % confidence intervals. With none chosen
+   and no channel above its floor, the answer is "no significant discrepancy"; channels still above their floor
+   after the chosen effects are reported as a residual that no candidate explains.
+4. **Add**: the effects are written to an augmented model file: the nominal links with the extra masses merged
+   (``links``: the driver's ``controller_params`` and the analysis read it), the joint and sensor effects, and the
+   same effects as a plant file's ``unmodeled`` section (to re-simulate the nominal model with them).
+5. **Show**: residuals per channel before and after (the augmented model evaluated along the same data), as a JSON
+   summary, a Markdown report and figures.
+
+The workflow reads only the bags and the nominal model: never the plant's ``unmodeled`` section.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import yaml
+
+from ..dynamics import savgol_series
+from ..robot.identify import IdentificationError, read_link_parameters
+from ..robot.model import PlantConfig, controller_model
+from ..robot.plant import apply_parameters
+from .recording import Recording, RecordingError, read_recording
+from .residuals import Evaluation, evaluate, joint_columns
+from .select import Candidate, Selection, select
+
+MOVED_RAD = 0.02             # a joint whose range in the data is below this did not move: its links are one body
+MOVING_RADPS = 0.05          # RMS speed above which a joint's friction can be seen
+FLOOR_WINDOW_S = 1.0         # the residual's slow part (any physical effect) is its Savitzky-Golay fit over this
+FT_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
+MASS_REACH_M = 0.6           # an extra mass further than this from its link's origin is not a mass on that link
+SIGNIFICANT_Z = 3.0          # a channel's RMS residual this many times its floor is a disagreement
+UNITS = {"extra_mass": ("kg", "m"), "viscous_friction": "N m s/rad", "coulomb_friction": "N m",
+         "torque_bias": "N m", "torque_gain": "1", "joint_offset": "rad"}
+
+
+class GapError(ValueError):
+    """Input the workflow cannot use; the message names the file."""
+
+
+# -- nominal model --------------------------------------------------------------------------------------------------
+def load_nominal(path: str | Path | None) -> tuple[pin.Model, str]:
+    """The nominal model: CAD (None or "cad"), identified parameters (``sit2stand identify`` YAML) or an augmented
+    model written by this workflow (its ``links``)."""
+    model = controller_model(PlantConfig())
+    if path is None or str(path) == "cad":
+        return model, "cad"
+    try:
+        apply_parameters(model, read_link_parameters(path))
+    except (IdentificationError, OSError, KeyError, ValueError) as err:
+        raise GapError(f"{path}: not a usable model file: {err}") from None
+    return model, str(path)
+
+
+# -- phases -----------------------------------------------------------------------------------------------------------
+def phases(rec: Recording) -> tuple[np.ndarray, dict]:
+    """Phase label per sample and the events found: a rise from a chair (the feet carry under 90 % of the final
+    standing load, then all of it, and the pelvis ends >= 15 cm higher) gives seated / seat-off / rising / standing;
+    otherwise moving / still (joint speed) or static (held postures)."""
+    n = len(rec)
+    if rec.static:
+        return np.full(n, "static", dtype=object), {}
+    fz = rec.feet_force_z_n
+    z = rec.base_pose[:, 2]
+    speed = np.sqrt(np.mean(rec.qd ** 2, axis=1))
+    labels = np.where(speed > MOVING_RADPS, "moving", "still").astype(object)
+    tail = max(5, n // 5)
+    if z[-tail:].mean() - z[:tail].mean() < 0.15:
+        return labels, {}
+    load = fz / max(np.median(fz[-tail:]), 1e-9)
+    dt = float(np.median(np.diff(rec.t_s)))
+    hold = max(1, int(round(0.2 / dt)))
+    above = load >= 0.95
+    k_so = next((k for k in range(n - hold) if above[k:k + hold].all()), None)
+    if k_so is None or load[:max(k_so, 1)].min() > 0.9:
+        return labels, {}
+    t_so = float(rec.t_s[k_so])
+    z_final = np.median(z[-tail:])
+    k_up = next((k for k in range(k_so, n) if z[k] >= z_final - 0.01), n - 1)
+    t = rec.t_s
+    labels = np.full(n, "rising", dtype=object)
+    labels[t < t_so - 0.25] = "seated"
+    labels[np.abs(t - t_so) <= 0.25] = "seat-off"
+    labels[t >= t[k_up]] = "standing"
+    return labels, {"seat_off_s": t_so, "standing_s": float(t[k_up])}
+
+
+def fallen(rec: Recording) -> np.ndarray:
+    """Samples after the robot fell (pelvis below 0.45 m or the base tilted past 60 degrees)."""
+    w = rec.base_pose[:, 3:7]
+    tilt = 2 * np.arccos(np.clip(np.sqrt(w[:, 0] ** 2 + w[:, 3] ** 2), 0, 1))
+    bad = (rec.base_pose[:, 2] < 0.45) | (tilt > np.radians(60))
+    return np.maximum.accumulate(bad)
+
+
+# -- data --------------------------------------------------------------------------------------------------------------
+@dataclass
+class Dataset:
+    """Recordings with their evaluation, phases and noise floors."""
+
+    recordings: list[Recording]
+    evaluations: list[Evaluation]
+    labels: list[np.ndarray]
+    events: list[dict]
+    floors: list[np.ndarray] = field(default_factory=list)     # per recording: (C,) noise floor per channel
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def channels(self) -> list[str]:
+        return self.evaluations[0].channels
+
+    @property
+    def joint_names(self) -> list[str]:
+        return self.recordings[0].joint_names
+
+
+def load_dataset(bags: list[str | Path], model: pin.Model, rate_hz: float = 50.0, progress=None) -> Dataset:
+    recs, evs, labels, events, notes = [], [], [], [], []
+    for bag in bags:
+        rec = read_recording(bag, model, rate_hz=rate_hz)
+        down = fallen(rec)
+        if down.any():
+            notes.append(f"{bag}: the robot fell at {rec.t_s[np.argmax(down)]:.2f} s; the samples after are left out")
+            rec = rec.subset(~down)
+        if recs and rec.joint_names != recs[0].joint_names:
+            raise GapError(f"{bag}: joints differ from {recs[0].source}'s")
+        lab, ev_info = phases(rec)
+        seated = np.isin(lab, ["seated", "seat-off"])
+        if progress:
+            progress(f"  {bag}: {len(rec)} samples ({'static postures' if rec.static else 'run'}); evaluating the "
+                     "model along them")
+        ev = evaluate(model, rec, seated=seated)
+        recs.append(rec)
+        evs.append(ev)
+        labels.append(lab)
+        events.append(ev_info)
+        notes.extend(rec.notes)
+    return Dataset(recs, evs, labels, events, notes=notes)
+
+
+def fast_part_floor(e: np.ndarray, valid: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+    """(C,) robust scale of each channel's residual minus its slow part (Savitzky-Golay over FLOOR_WINDOW_S)."""
+    dt = float(np.median(np.diff(t_s)))
+    w = max(5, int(round(FLOOR_WINDOW_S / dt)) | 1)
+    out = np.zeros(e.shape[1])
+    for c in range(e.shape[1]):
+        x = e[valid[:, c], c]
+        if len(x) <= w:
+            out[c] = np.nan
+            continue
+        fast = x - savgol_series(x, w, 2, 0)
+        out[c] = 1.4826 * np.median(np.abs(fast - np.median(fast)))
+    return out
+
+
+# -- candidates ----------------------------------------------------------------------------------------------------------
+def moved_joints(ds: Dataset) -> np.ndarray:
+    return np.max([np.ptp(r.q, axis=0) for r in ds.recordings], axis=0) > MOVED_RAD
+
+
+def rigid_groups(model: pin.Model, ds: Dataset) -> dict[int, list[int]]:
+    """Pinocchio body index (0-based: joint i+1) of each group's root -> member bodies: links joined by joints that
+    did not move are one rigid body in these data. The feet (below the F/T sensors) are left out."""
+    moved = moved_joints(ds)
+    by_name = {n: moved[i] for i, n in enumerate(ds.joint_names)}
+    groups: dict[int, list[int]] = {}
+    for jid in range(1, model.njoints):
+        name = model.names[jid]
+        if name.startswith("leg_") and name.endswith("_6_joint"):
+            continue
+        root = jid
+        while root > 1 and not by_name.get(model.names[root], True):
+            root = model.parents[root]
+        groups.setdefault(root - 1, []).append(jid - 1)
+    return groups
+
+
+def _mass_within_reach(theta: np.ndarray) -> bool:
+    """An extra point mass is plausible within MASS_REACH_M of its link's origin (and not vanishingly small)."""
+    m = float(theta[0])
+    return abs(m) > 1e-3 and float(np.linalg.norm(theta[1:] / m)) <= MASS_REACH_M
+
+
+def _stack(ds: Dataset, cols: list[np.ndarray]) -> np.ndarray:
+    """Rows of every recording's valid samples (channel-major, time order within a channel), weighted by the floor;
+    ``cols`` per recording: (N, C, p)."""
+    out = []
+    for ev, X, floor in zip(ds.evaluations, cols, ds.floors):
+        Xw = X / floor[None, :, None]
+        out.append(np.concatenate([Xw[ev.valid[:, c], c, :] for c in range(X.shape[1])], axis=0))
+    return np.concatenate(out, axis=0)
+
+
+def _series_id(ds: Dataset) -> np.ndarray:
+    ids = []
+    for r, ev in enumerate(ds.evaluations):
+        C = ev.e.shape[1]
+        for c in range(C):
+            ids.append(np.full(int(ev.valid[:, c].sum()), r * 1000 + c))
+    return np.concatenate(ids)
+
+
+def build_candidates(model: pin.Model, ds: Dataset) -> list[Candidate]:
+    """Every effect of the library that these data can show (see the module docstring), with its signature rows."""
+    from .residuals import body_link_names
+
+    links = body_link_names(model)
+    names = ds.joint_names
+    static = all(r.static for r in ds.recordings)
+    cands: list[Candidate] = []
+    for root, members in rigid_groups(model, ds).items():
+        cands.append(Candidate("extra_mass", links[root], ["mass [kg]", "mass*com_x [kg m]", "mass*com_y [kg m]",
+                                                           "mass*com_z [kg m]"],
+                               _stack(ds, [ev.mass_cols[:, :, root, :] for ev in ds.evaluations]),
+                               members=[links[m] for m in members], plausible=_mass_within_reach))
+    speed = np.sqrt(np.mean(np.concatenate([r.qd for r in ds.recordings]) ** 2, axis=0))
+    tau_sd = np.std(np.concatenate([ev.tau_model for ev in ds.evaluations]), axis=0)
+    for j, name in enumerate(names):
+        kinds = ["torque_bias", "joint_offset"]
+        if tau_sd[j] > 1.0:
+            kinds.append("torque_gain")
+        if not static and speed[j] > MOVING_RADPS:
+            kinds += ["viscous_friction", "coulomb_friction"]
+        for kind in kinds:
+            X = _stack(ds, [joint_columns(r, ev, kind, j) for r, ev in zip(ds.recordings, ds.evaluations)])
+            if np.linalg.norm(X) < 1e-6:
+                continue
+            cands.append(Candidate(kind, name, [f"{kind} [{UNITS[kind]}]"], X))
+    for side in ("left", "right"):          # one candidate per sensor axis: a bias is per channel
+        for a, axis in enumerate(FT_AXES):
+            cands.append(Candidate("ft_bias", f"ft_{side}/{axis}", [f"{axis} [{'N' if a < 3 else 'N m'}]"],
+                                   _stack(ds, [ev.ft_cols[side][:, :, a:a + 1] for ev in ds.evaluations])))
+    return cands
+
+
+# -- the whole workflow ------------------------------------------------------------------------------------------
+@dataclass
+class GapResult:
+    model_source: str
+    bags: list[str]
+    channels: list[str]
+    floors: np.ndarray                     # (R, C)
+    rms_before: np.ndarray                 # (R, C) over valid samples
+    rms_after: np.ndarray
+    table: list[dict]                      # ranked disagreements (channel x phase)
+    selection: Selection
+    effects: list[dict]
+    verdict: str
+    unexplained: list[dict]
+    gap_before: float                      # gap_size over the channels whose RMS was >= SIGNIFICANT_Z floors before
+    gap_after: float
+    notes: list[str]
+    dataset: Dataset
+    after: list[np.ndarray]                # per recording: (N, C) residual of the augmented model
+
+    @property
+    def shrink(self) -> float:
+        return 1.0 - self.gap_after / self.gap_before if self.gap_before > 0 else 0.0
+
+
+def _rms(e: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    return np.array([np.sqrt(np.mean(e[valid[:, c], c] ** 2)) if valid[:, c].any() else np.nan
+                     for c in range(e.shape[1])])
+
+
+def gap_size(rms: np.ndarray, floors: np.ndarray, channels: np.ndarray) -> float:
+    """The gap above the noise on the given channels (R, C mask): sqrt(mean of max((rms / floor)^2 - 1, 0)); 0 when
+    no channel is given."""
+    if not channels.any():
+        return 0.0
+    z2 = (rms / floors)[channels] ** 2
+    return float(np.sqrt(np.mean(np.maximum(z2 - 1.0, 0.0))))
+
+
+def ranked_table(ds: Dataset) -> list[dict]:
+    """Where the model is wrong: per channel and phase, the RMS residual, its ratio to the floor, and when the
+    largest disagreement happened; sorted by the ratio."""
+    rows = []
+    for r, (rec, ev, lab, floor) in enumerate(zip(ds.recordings, ds.evaluations, ds.labels, ds.floors)):
+        for c, ch in enumerate(ev.channels):
+            for phase in dict.fromkeys(lab):
+                m = (lab == phase) & ev.valid[:, c]
+                if m.sum() < 3:
+                    continue
+                x = ev.e[m, c]
+                k = int(np.argmax(np.abs(x)))
+                rms = float(np.sqrt(np.mean(x ** 2)))
+                rows.append({"recording": r, "channel": ch, "phase": str(phase), "rms": rms,
+                             "floor": float(floor[c]), "z": rms / float(floor[c]),
+                             "worst_t_s": float(rec.t_s[m][k]), "worst": float(x[k]),
+                             "unit": "N" if "force" in ch else "N m"})
+    rows.sort(key=lambda d: -d["z"])
+    return rows
+
+
+def effect_summary(sel: Selection) -> list[dict]:
+    """The chosen effects in physical terms with 95 % intervals (1.96 standard errors; position by the delta
+    method from the mass and first moment)."""
+    out = []
+    for s in sel.effects:
+        c = s.candidate
+        d = {"kind": c.kind, "location": c.location, "share_of_gap": s.gain, "delta_bic": s.delta_bic,
+             "alternatives": s.alternatives}
+        se = np.sqrt(np.clip(np.diag(s.cov), 0, None))
+        if c.kind == "extra_mass":
+            m, mc = float(s.theta[0]), s.theta[1:]
+            pos = mc / m if abs(m) > 1e-6 else np.full(3, np.nan)
+            J = np.zeros((3, 4))           # d(mc/m) / d(m, mc)
+            J[:, 0] = -mc / m ** 2
+            J[:, 1:] = np.eye(3) / m
+            pos_se = np.sqrt(np.clip(np.diag(J @ s.cov @ J.T), 0, None))
+            d.update({"members": c.members, "mass_kg": m, "mass_ci95_kg": 1.96 * float(se[0]),
+                      "pos_m": pos.tolist(), "pos_ci95_m": (1.96 * pos_se).tolist()})
+        else:
+            v = float(s.theta[0])
+            if c.kind == "torque_gain":
+                d.update({"value": 1.0 + v, "ci95": 1.96 * float(se[0]), "unit": "measured / true"})
+            elif c.kind == "ft_bias":
+                d.update({"value": v, "ci95": 1.96 * float(se[0]),
+                          "unit": "N" if c.location.endswith(("fx", "fy", "fz")) else "N m"})
+            else:
+                d.update({"value": v, "ci95": 1.96 * float(se[0]), "unit": UNITS[c.kind]})
+        out.append(d)
+    return out
+
+
+def describe(effect: dict) -> str:
+    """One line naming an effect for a person."""
+    k = effect["kind"]
+    if k == "extra_mass":
+        p = effect["pos_m"]
+        members = [m for m in effect["members"] if m != effect["location"]]
+        group = f" (rigid in these data with {', '.join(members)})" if members else ""
+        return (f"extra mass on {effect['location']}{group}: {effect['mass_kg']:.2f} +- {effect['mass_ci95_kg']:.2f} "
+                f"kg at ({p[0]:+.3f}, {p[1]:+.3f}, {p[2]:+.3f}) m in the link frame")
+    label = {"viscous_friction": "viscous friction", "coulomb_friction": "Coulomb friction",
+             "torque_bias": "torque-sensor bias", "torque_gain": "torque-sensor gain",
+             "joint_offset": "encoder offset", "ft_bias": "force/torque sensor bias (sensor axes)"}[k]
+    return f"{label} at {effect['location']}: {effect['value']:.4g} +- {effect['ci95']:.2g} {effect['unit']}"
+
+
+def _after(ds: Dataset, sel: Selection, cands_unweighted) -> list[np.ndarray]:
+    """Residual of the augmented model along each recording: the nominal residual minus each effect's signature
+    times its estimate (exact for masses without their rotational inertia, friction, biases and gains; first order
+    for encoder offsets)."""
+    out = []
+    for r, ev in enumerate(ds.evaluations):
+        e = ev.e.copy()
+        for s in sel.effects:
+            e -= np.tensordot(cands_unweighted(r, s.candidate), s.theta, axes=(2, 0))
+        out.append(e)
+    return out
+
+
+def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: float = 50.0,
+        progress=None) -> GapResult:
+    """The workflow on ``bags`` against the nominal model (see the module docstring)."""
+    say = progress or (lambda _msg: None)
+    model, source = load_nominal(model_path)
+    if not bags:
+        raise GapError("no measured bag given")
+    ds = load_dataset(bags, model, rate_hz=rate_hz, progress=say)
+    from .residuals import body_link_names
+
+    links = body_link_names(model)
+    # noise floors: the residual's fast part (runs); for static postures, after all candidates at once
+    for rec, ev in zip(ds.recordings, ds.evaluations):
+        ds.floors.append(np.ones(ev.e.shape[1]) if rec.static else fast_part_floor(ev.e, ev.valid, rec.t_s))
+    for r, f in enumerate(ds.floors):
+        bad = ~np.isfinite(f) | (f <= 0)
+        f[bad] = np.nanmedian(f[~bad]) if (~bad).any() else 1.0
+        ds.floors[r] = np.maximum(f, 1e-3)
+    say("  building the candidate effects")
+    cands = build_candidates(model, ds)
+    if any(r.static for r in ds.recordings):
+        X = np.hstack([c.X for c in cands])
+        y = _stack(ds, [ev.e[:, :, None] for ev in ds.evaluations])[:, 0]
+        theta, *_ = np.linalg.lstsq(X, y, rcond=1e-8)
+        res = y - X @ theta
+        i = 0
+        for r, (rec, ev) in enumerate(zip(ds.recordings, ds.evaluations)):
+            nrow = int(ev.valid.sum())
+            if rec.static:
+                part = res[i:i + nrow]
+                # rows are channel-major: rebuild per channel
+                k = 0
+                f = ds.floors[r].copy()
+                for c in range(ev.e.shape[1]):
+                    m = int(ev.valid[:, c].sum())
+                    x = part[k:k + m] * ds.floors[r][c]
+                    k += m
+                    if m >= 3:
+                        f[c] = max(1.4826 * np.median(np.abs(x - np.median(x))), 1e-3)
+                ds.floors[r] = f
+            i += nrow
+        cands = build_candidates(model, ds)
+    y = _stack(ds, [ev.e[:, :, None] for ev in ds.evaluations])[:, 0]
+    sid = _series_id(ds)
+    say(f"  {len(cands)} candidate effects, {len(y)} residual rows: selecting")
+    sel = select(y, cands, series_id=sid, noise_rss=float(len(y)), progress=say)
+
+    def unweighted(r: int, cand: Candidate) -> np.ndarray:
+        ev, rec = ds.evaluations[r], ds.recordings[r]
+        if cand.kind == "extra_mass":
+            return ev.mass_cols[:, :, links.index(cand.location), :]
+        if cand.kind == "ft_bias":
+            side, axis = cand.location.split("_", 1)[1].split("/")
+            a = FT_AXES.index(axis)
+            return ev.ft_cols[side][:, :, a:a + 1]
+        return joint_columns(rec, ev, cand.kind, rec.joint_names.index(cand.location))
+
+    after = _after(ds, sel, unweighted)
+    rms_b = np.array([_rms(ev.e, ev.valid) for ev in ds.evaluations])
+    rms_a = np.array([_rms(e, ev.valid) for e, ev in zip(after, ds.evaluations)])
+    effects = effect_summary(sel)
+    floors = np.array(ds.floors)
+    disagree = np.nan_to_num(rms_b / floors) >= SIGNIFICANT_Z      # the channels where the nominal model was wrong
+    g0, g1 = gap_size(rms_b, floors, disagree), gap_size(rms_a, floors, disagree)
+    table = ranked_table(ds)
+    unexplained = []
+    for r, (a, f) in enumerate(zip(rms_a, ds.floors)):
+        for c, ch in enumerate(ds.channels):
+            if np.isfinite(a[c]) and a[c] > SIGNIFICANT_Z * f[c]:
+                unexplained.append({"recording": r, "channel": ch, "rms": float(a[c]), "floor": float(f[c]),
+                                    "z": float(a[c] / f[c])})
+    unexplained.sort(key=lambda d: -d["z"])
+    worst = table[0]["z"] if table else 0.0
+    if not effects:
+        verdict = ("no significant discrepancy" if worst < SIGNIFICANT_Z
+                   else "disagreement found, but no candidate effect explains it")
+    else:
+        verdict = "; ".join(describe(e) for e in effects)
+    return GapResult(source, [str(b) for b in bags], ds.channels, floors, rms_b, rms_a, table, sel,
+                     effects, verdict, unexplained, g0, g1, ds.notes, ds, after)
+
+
+# -- augmented model -------------------------------------------------------------------------------------------------
+def augmented_model(result: GapResult, nominal: pin.Model) -> dict:
+    """The augmented model file's content (see the module docstring)."""
+    from .residuals import body_link_names
+
+    links = body_link_names(nominal)
+    model = nominal.copy()
+    unmodeled: dict = {"masses": [], "viscous_friction": {}, "coulomb_friction": {}, "torque_bias_nm": {},
+                       "torque_gain": {}, "joint_offset_rad": {}, "ft_bias": {}}
+    for e in result.effects:
+        k = e["kind"]
+        if k == "extra_mass":
+            jid = links.index(e["location"]) + 1
+            extra = pin.Inertia(e["mass_kg"], np.asarray(e["pos_m"]), np.eye(3) * 1e-4 * abs(e["mass_kg"]))
+            if e["mass_kg"] > 0:
+                model.inertias[jid] = model.inertias[jid] + extra
+            else:   # a lighter link than modelled: remove the mass at that point
+                old = model.inertias[jid]
+                m = old.mass + e["mass_kg"]
+                model.inertias[jid] = pin.Inertia(max(m, 1e-6), (old.mass * old.lever + e["mass_kg"] *
+                                                                 np.asarray(e["pos_m"])) / max(m, 1e-6), old.inertia)
+            unmodeled["masses"].append({"name": f"found_{e['location']}", "link": e["location"],
+                                        "mass_kg": e["mass_kg"], "pos_m": list(e["pos_m"])})
+        elif k == "ft_bias":
+            side, axis = e["location"].split("_", 1)[1].split("/")
+            unmodeled["ft_bias"].setdefault(side, [0.0] * 6)[FT_AXES.index(axis)] += e["value"]
+        else:
+            key = {"torque_bias": "torque_bias_nm", "joint_offset": "joint_offset_rad"}.get(k, k)
+            unmodeled[key][e["location"]] = e["value"]
+    link_params = {model.names[j]: {"mass": float(model.inertias[j].mass),
+                                    "com": [float(v) for v in model.inertias[j].lever]}
+                   for j in range(1, model.njoints)}
+    return {"nominal": result.model_source, "bags": result.bags, "verdict": result.verdict,
+            "effects": result.effects, "links": link_params,
+            "unmodeled": {k: v for k, v in unmodeled.items() if v}}
+
+
+def write_augmented(result: GapResult, nominal: pin.Model, path: str | Path) -> dict:
+    doc = augmented_model(result, nominal)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text("# written by sit2stand gap: the nominal model plus the effects it named\n"
+                          + yaml.safe_dump(_plain(doc), sort_keys=False))
+    return doc
+
+
+def _plain(x):
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _plain(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        return float(x)
+    if isinstance(x, (np.integer, int)) and not isinstance(x, bool):
+        return int(x)
+    return x
+
+
+def summary(result: GapResult) -> dict:
+    return _plain({
+        "model": result.model_source, "bags": result.bags, "verdict": result.verdict,
+        "effects": result.effects, "gap_before": result.gap_before, "gap_after": result.gap_after,
+        "gap_shrink": result.shrink, "unexplained": result.unexplained[:20], "ranked": result.table[:30],
+        "channels": {ch: {"floor": result.floors[:, c].tolist(), "rms_before": result.rms_before[:, c].tolist(),
+                          "rms_after": result.rms_after[:, c].tolist()} for c, ch in enumerate(result.channels)},
+        "selection_steps": result.selection.steps, "n_rows": result.selection.n_rows,
+        "n_eff": result.selection.n_eff, "events": result.dataset.events, "notes": result.notes})
+
+
+def progress_printer(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def write_json(result: GapResult, path: str | Path) -> None:
+    Path(path).write_text(json.dumps(summary(result), indent=1))
+
+
+__all__ = ["GapError", "RecordingError", "run", "write_augmented", "summary", "load_nominal", "describe"]
