@@ -164,6 +164,43 @@ def _bag_recover(args: argparse.Namespace) -> int:
     return 0
 
 
+def _excite(args: argparse.Namespace) -> int:
+    from .gap.excite import excite
+    from .robot.model import PlantConfig
+
+    info = excite(PlantConfig.load(args.plant), args.out, seed=args.seed, n_moves=args.moves, progress=True)
+    print(f"wrote {args.out}: {info['duration_s']:.1f} s of excitation"
+          + (f"; the robot fell ({info['status']})" if info["fell"] else ""))
+    return 1 if info["fell"] else 0
+
+
+def _gap(args: argparse.Namespace) -> int:
+    from .gap.report import cop_rms, gap_command
+    from .gap.workflow import GapError, describe, progress_printer
+
+    try:
+        result = gap_command(args.bags, args.out, model=args.model, rate_hz=args.rate, progress=progress_printer)
+    except GapError as err:
+        print(f"sit2stand gap: error: {err}", file=sys.stderr)
+        return 2
+    print(f"nominal model: {result.model_source}")
+    if result.effects:
+        print(f"named {len(result.effects)} effect(s):")
+        for e in result.effects:
+            print(f"  - {describe(e)}")
+    else:
+        print(result.verdict)
+    if result.unexplained:
+        print(f"left unexplained on {len(result.unexplained)} channel(s), worst {result.unexplained[0]['channel']} "
+              f"at {result.unexplained[0]['z']:.1f} x its noise floor")
+    print(f"gap above the noise on the disagreeing channels: {result.gap_before:.2f} -> {result.gap_after:.2f} "
+          f"(shrink {100 * result.shrink:.0f} %)")
+    for r, (b, a) in enumerate(cop_rms(result)):
+        print(f"model COP error, {result.bags[r]}: {100 * b:.2f} -> {100 * a:.2f} cm RMS")
+    print(f"report: {args.out}/report.md (+ gap.json, augmented_model.yaml, gap_*.png)")
+    return 0
+
+
 def _launch(args: argparse.Namespace) -> int:
     from .launch import Launcher, load_graph, parse_overrides
 
@@ -274,6 +311,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, required=True, help="parameters YAML (figures are written beside it)")
     p.set_defaults(func=_identify)
+
+    p = sub.add_parser("excite", help="record an excitation run of the simulated robot (standing, stance to stance)")
+    p.add_argument("--plant", type=Path, help="plant YAML (default: ros_ws/plants/default.yaml)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--moves", type=int, default=8)
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=_excite)
+
+    p = sub.add_parser("gap", help="find, name and add what a robot model misses, from measured robot bags")
+    p.add_argument("bags", type=Path, nargs="+", help="robot bags: runs (driver, excite) and/or static postures")
+    p.add_argument("--model", help="nominal model: cad (default), identified parameters or an augmented model YAML")
+    p.add_argument("--rate", type=float, default=50.0, help="analysis rate [Hz] for runs")
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=_gap)
 
     bag = sub.add_parser("bag", help="bag tools").add_subparsers(dest="bag_command", required=True)
     p = bag.add_parser("info", help="topics, types, counts, rates and duration")

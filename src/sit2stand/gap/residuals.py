@@ -53,6 +53,7 @@ class Evaluation:
     ft_cols: dict[str, np.ndarray]   # side -> (N, C, 6) F/T-bias signature
     body_names: list[str]         # link name of each Pinocchio body (joint 1..nb)
     centre_m: np.ndarray          # (N, 3) the point the base moments are taken about (mid-soles)
+    sole_m: dict[str, np.ndarray]  # side -> (N, 3) sole point [m] (measured base pose and joints)
 
     @property
     def joint_channels(self) -> slice:
@@ -123,6 +124,7 @@ def evaluate(model: pin.Model, rec: Recording, seated: np.ndarray | None = None,
     offset_cols = np.zeros((N, C, n))
     ft_cols = {s: np.zeros((N, C, 6)) for s in SIDES}
     centre = np.zeros((N, 3))
+    sole = {s: np.zeros((N, 3)) for s in SIDES}
     for k in range(N):
         q = _pin_q(model, rec, k, idx_v)
         v = np.concatenate([rec.base_v[k], np.zeros(model.nv - 6)])
@@ -132,7 +134,9 @@ def evaluate(model: pin.Model, rec: Recording, seated: np.ndarray | None = None,
         tau_full[idx_v] = rec.tau[k]
         wrench = {s: rec.wrench[s][k] for s in SIDES}
         r, J = rows.residual(q, v, a, tau_full, wrench)
-        centre[k] = 0.5 * sum(rows.data.oMf[rows.soles[s]].translation for s in SIDES)
+        for s in SIDES:
+            sole[s][k] = rows.data.oMf[rows.soles[s]].translation
+        centre[k] = 0.5 * (sole["left"][k] + sole["right"][k])
         T = _base_to_world(model, rows.data, q, centre[k])
 
         def channel(x: np.ndarray) -> np.ndarray:
@@ -167,7 +171,8 @@ def evaluate(model: pin.Model, rec: Recording, seated: np.ndarray | None = None,
         hips = [6 + rec.joint_names.index(j) for j in SEATED_JOINTS if j in rec.joint_names]
         valid[np.ix_(seated, list(range(6)) + hips)] = False
     channels = BASE_CHANNELS + [f"tau/{j}" for j in rec.joint_names]
-    return Evaluation(channels, e, valid, tau_model, mass_cols, offset_cols, ft_cols, body_link_names(model), centre)
+    return Evaluation(channels, e, valid, tau_model, mass_cols, offset_cols, ft_cols, body_link_names(model), centre,
+                      sole)
 
 
 def joint_columns(rec: Recording, ev: Evaluation, kind: str, j: int) -> np.ndarray:

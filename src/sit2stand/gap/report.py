@@ -1,0 +1,226 @@
+"""The model-gap report: Markdown, JSON and figures of a :class:`sit2stand.gap.workflow.GapResult`.
+
+``sit2stand gap BAG [BAG ...] [--model M] --out DIR`` writes
+
+* ``report.md``: the verdict, the effects named with their parameters and 95 % intervals, the ranked table of where
+  the nominal model was wrong, and the gap per channel before and after;
+* ``gap.json``: the same, machine-readable (``sit2stand.gap.workflow.summary``);
+* ``augmented_model.yaml``: the nominal model plus the effects (the driver's ``controller_params`` reads its
+  ``links``; its ``unmodeled`` section re-simulates the effects);
+* ``gap_channels.png``: RMS residual / noise floor per channel, before and after;
+* ``gap_residuals.png``: the most disagreeing channels against time, before and after, phases shaded;
+* ``gap_cop.png``: the measured centre of pressure against the one each model predicts from the measured motion.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .workflow import GapResult, describe, load_nominal, run, write_augmented, write_json
+
+PHASE_COLOURS = {"seated": "#dde8f5", "seat-off": "#f5dcc8", "rising": "#f7f0c8", "standing": "#ddf2dd",
+                 "moving": "#f2f2f2", "still": "#ffffff", "static": "#ffffff"}
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def channels_figure(result: GapResult, png: Path, top: int = 24) -> None:
+    plt = _plt()
+    z_b = np.nanmax(result.rms_before / result.floors, axis=0)
+    z_a = np.nanmax(result.rms_after / result.floors, axis=0)
+    order = np.argsort(-z_b)[:top]
+    fig, ax = plt.subplots(figsize=(10, 0.28 * len(order) + 1.6))
+    y = np.arange(len(order))
+    ax.barh(y + 0.2, z_b[order], 0.4, label="nominal model", color="#c0504d")
+    ax.barh(y - 0.2, z_a[order], 0.4, label="with the named effects", color="#4f81bd")
+    ax.axvline(3.0, color="k", lw=0.8, ls="--", label="3 x noise floor")
+    ax.set_yticks(y, [result.channels[c] for c in order], fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xscale("log")
+    ax.set_xlabel("RMS residual / noise floor")
+    ax.set_title("Where the model disagrees with the measurements (largest first)")
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+
+
+def _shade(ax, t: np.ndarray, labels: np.ndarray) -> None:
+    start = 0
+    for k in range(1, len(t) + 1):
+        if k == len(t) or labels[k] != labels[start]:
+            ax.axvspan(t[start], t[min(k, len(t) - 1)], color=PHASE_COLOURS.get(str(labels[start]), "#ffffff"),
+                       lw=0, zorder=0)
+            start = k
+
+
+def residuals_figure(result: GapResult, png: Path, n: int = 4) -> None:
+    plt = _plt()
+    ds = result.dataset
+    seen, picks = set(), []
+    for row in result.table:
+        key = (row["recording"], row["channel"])
+        if key not in seen:
+            seen.add(key)
+            picks.append(key)
+        if len(picks) == n:
+            break
+    fig, axes = plt.subplots(max(len(picks), 1), 1, figsize=(10, 2.2 * max(len(picks), 1) + 0.5), squeeze=False)
+    for ax, (r, ch) in zip(axes[:, 0], picks):
+        rec, ev, lab = ds.recordings[r], ds.evaluations[r], ds.labels[r]
+        c = ev.channels.index(ch)
+        t = rec.t_s if not rec.static else np.arange(len(rec), dtype=float)
+        _shade(ax, t, lab)
+        m = ev.valid[:, c]
+        unit = "N" if "force" in ch else "N m"
+        ax.plot(t[m], ev.e[m, c], ".-" if rec.static else "-", color="#c0504d", lw=1, ms=3, label="nominal model")
+        ax.plot(t[m], result.after[r][m, c], ".-" if rec.static else "-", color="#4f81bd", lw=1, ms=3,
+                label="with the named effects")
+        f = result.floors[r, c]
+        ax.axhspan(-3 * f, 3 * f, color="k", alpha=0.08, lw=0)
+        ax.set_ylabel(f"{ch}\n[{unit}]", fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8, loc="upper right")
+    axes[0, 0].set_title("Residual (measured - model) of the most disagreeing channels; grey band: 3 x noise floor; "
+                         "background: phases", fontsize=9)
+    axes[-1, 0].set_xlabel("time [s]" if not all(r.static for r in ds.recordings) else "posture")
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+
+
+def model_cop_x(result: GapResult, r: int, after: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Measured COP x and the COP x the model predicts from the measured motion [m] (recording ``r``): the measured
+    external wrench minus the residual of the base rows (world axes, about the mid-soles on the floor)."""
+    ds = result.dataset
+    rec, ev = ds.recordings[r], ds.evaluations[r]
+    e = result.after[r] if after else ev.e
+    fz = sum(w[:, 2] for w in rec.wrench.values())
+    my = _moment_about_centre(rec, ev)[:, 1]
+    cop_meas = ev.centre_m[:, 0] - my / np.maximum(fz, 1e-6)
+    cop_model = ev.centre_m[:, 0] - (my - e[:, 4]) / np.maximum(fz - e[:, 2], 1e-6)
+    return cop_meas, cop_model
+
+
+def _moment_about_centre(rec, ev) -> np.ndarray:
+    """Moment [N m] of the measured ground reactions about the mid-soles point, world axes (from the sole points
+    the evaluation found)."""
+    out = np.zeros((len(rec), 3))
+    for s, w in rec.wrench.items():
+        sole = ev.sole_m[s]
+        out += w[:, 3:] + np.cross(sole - ev.centre_m, w[:, :3])
+    return out
+
+
+def cop_figure(result: GapResult, png: Path) -> None:
+    plt = _plt()
+    ds = result.dataset
+    fig, axes = plt.subplots(len(ds.recordings), 1, figsize=(10, 2.6 * len(ds.recordings) + 0.4), squeeze=False)
+    for r, ax in enumerate(axes[:, 0]):
+        rec, ev = ds.recordings[r], ds.evaluations[r]
+        t = rec.t_s if not rec.static else np.arange(len(rec), dtype=float)
+        ok = ev.valid[:, 4]
+        meas, before = model_cop_x(result, r, after=False)
+        _, after = model_cop_x(result, r, after=True)
+        _shade(ax, t, ds.labels[r])
+        style = ".-" if rec.static else "-"
+        ax.plot(t[ok], 100 * meas[ok], style, color="k", lw=1.2, ms=3, label="measured (feet F/T)")
+        ax.plot(t[ok], 100 * before[ok], style, color="#c0504d", lw=1, ms=3, label="nominal model")
+        ax.plot(t[ok], 100 * after[ok], style, color="#4f81bd", lw=1, ms=3, label="with the named effects")
+        rms_b = 100 * np.sqrt(np.mean((before - meas)[ok] ** 2)) if ok.any() else np.nan
+        rms_a = 100 * np.sqrt(np.mean((after - meas)[ok] ** 2)) if ok.any() else np.nan
+        ax.set_ylabel("COP x [cm]")
+        ax.set_title(f"{Path(rec.source).name}: model COP error RMS {rms_b:.2f} cm -> {rms_a:.2f} cm", fontsize=9)
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+
+
+def cop_rms(result: GapResult) -> list[tuple[float, float]]:
+    """(before, after) RMS [m] of the model COP x against the measured one, per recording (valid base rows)."""
+    out = []
+    for r, ev in enumerate(result.dataset.evaluations):
+        ok = ev.valid[:, 4]
+        meas, before = model_cop_x(result, r, after=False)
+        _, after = model_cop_x(result, r, after=True)
+        out.append((float(np.sqrt(np.mean((before - meas)[ok] ** 2))) if ok.any() else float("nan"),
+                    float(np.sqrt(np.mean((after - meas)[ok] ** 2))) if ok.any() else float("nan")))
+    return out
+
+
+def markdown(result: GapResult) -> str:
+    lines = ["# Model gap report", "",
+             f"- nominal model: `{result.model_source}`",
+             f"- measured: {', '.join(f'`{b}`' for b in result.bags)}",
+             f"- gap above the noise on the channels that disagreed: **{result.gap_before:.2f} -> "
+             f"{result.gap_after:.2f}** (shrink {100 * result.shrink:.0f} %)", ""]
+    for r, (b, a) in enumerate(cop_rms(result)):
+        lines.append(f"- model COP error (recording {r}): {100 * b:.2f} cm -> {100 * a:.2f} cm RMS")
+    lines += ["", "## Verdict", ""]
+    if result.effects:
+        lines += [f"{len(result.effects)} effect(s) named:", ""]
+        lines += [f"{i + 1}. {describe(e)} ({100 * e['share_of_gap']:.1f} % of the residual when chosen, "
+                  f"dBIC {e['delta_bic']:.0f})" + (f"; equally good here: {', '.join(e['alternatives'][:3])}"
+                                                   if e["alternatives"] else "")
+                  for i, e in enumerate(result.effects)]
+    else:
+        lines.append(f"**{result.verdict}**")
+    lines += [""]
+    if result.unexplained:
+        lines += ["**A residual is left that no candidate explains:**", "",
+                  "| recording | channel | RMS after | floor | ratio |", "| --- | --- | --- | --- | --- |"]
+        lines += [f"| {u['recording']} | {u['channel']} | {u['rms']:.3g} | {u['floor']:.3g} | {u['z']:.1f} |"
+                  for u in result.unexplained[:15]]
+    elif result.effects:
+        lines.append("Nothing is left above 3 x the noise floor on any channel.")
+    lines += ["", "## Where the nominal model was wrong (ranked)", "",
+              "| # | recording | channel | phase | RMS | floor | ratio | worst at [s] |",
+              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    lines += [f"| {i + 1} | {d['recording']} | {d['channel']} | {d['phase']} | {d['rms']:.3g} {d['unit']} | "
+              f"{d['floor']:.3g} | {d['z']:.1f} | {d['worst_t_s']:.2f} |" for i, d in enumerate(result.table[:20])]
+    lines += ["", "## Gap per channel (recording 0): RMS before -> after", "",
+              "| channel | floor | before | after |", "| --- | --- | --- | --- |"]
+    order = np.argsort(-np.nan_to_num(result.rms_before[0] / result.floors[0]))
+    for c in order[:20]:
+        lines.append(f"| {result.channels[c]} | {result.floors[0, c]:.3g} | {result.rms_before[0, c]:.3g} | "
+                     f"{result.rms_after[0, c]:.3g} |")
+    lines += ["", "## Selection steps", ""]
+    lines += [f"- {s}" for s in result.selection.steps]
+    if result.notes:
+        lines += ["", "## Notes", ""] + [f"- {n}" for n in result.notes]
+    lines += ["", "Figures: `gap_channels.png`, `gap_residuals.png`, `gap_cop.png`. Model with the effects: "
+              "`augmented_model.yaml`.", ""]
+    return "\n".join(lines)
+
+
+def write_report(result: GapResult, out: str | Path) -> dict:
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    nominal, _ = load_nominal(None if result.model_source == "cad" else result.model_source)
+    doc = write_augmented(result, nominal, out / "augmented_model.yaml")
+    write_json(result, out / "gap.json")
+    (out / "report.md").write_text(markdown(result))
+    channels_figure(result, out / "gap_channels.png")
+    residuals_figure(result, out / "gap_residuals.png")
+    cop_figure(result, out / "gap_cop.png")
+    return doc
+
+
+def gap_command(bags: list[str | Path], out: str | Path, model: str | None = None, rate_hz: float = 50.0,
+                progress=None) -> GapResult:
+    """``sit2stand gap``: run the workflow and write the report."""
+    result = run(bags, model, rate_hz=rate_hz, progress=progress)
+    write_report(result, out)
+    return result
