@@ -208,7 +208,7 @@ def markdown(result: GapResult) -> str:
 def write_report(result: GapResult, out: str | Path) -> dict:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    nominal, _ = load_nominal(None if result.model_source == "cad" else result.model_source)
+    nominal, _, _ = load_nominal(None if result.model_source == "cad" else result.model_source)
     doc = write_augmented(result, nominal, out / "augmented_model.yaml")
     write_json(result, out / "gap.json")
     (out / "report.md").write_text(markdown(result))

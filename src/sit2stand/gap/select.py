@@ -98,7 +98,7 @@ def _gain(r: np.ndarray, Q: np.ndarray, X: np.ndarray) -> tuple[float, int]:
 
 
 def select(y: np.ndarray, candidates: list[Candidate], series_id: np.ndarray | None = None,
-           bic_threshold: float = 10.0, min_share: float = 0.005, max_effects: int = 40,
+           bic_threshold: float = 10.0, min_share: float = 0.02, max_effects: int = 40,
            ambiguity: float = 0.05, noise_rss: float | None = None, progress=None) -> Selection:
     """Greedy forward selection (see the module docstring); ``noise_rss`` is what pure noise would leave (the number
     of rows when y is in units of the noise floor)."""

@@ -55,17 +55,19 @@ class GapError(ValueError):
 
 
 # -- nominal model --------------------------------------------------------------------------------------------------
-def load_nominal(path: str | Path | None) -> tuple[pin.Model, str]:
+def load_nominal(path: str | Path | None) -> tuple[pin.Model, str, list[dict]]:
     """The nominal model: CAD (None or "cad"), identified parameters (``sit2stand identify`` YAML) or an augmented
-    model written by this workflow (its ``links``)."""
+    model written by this workflow (its ``links``, and its joint and sensor ``effects``, returned third)."""
     model = controller_model(PlantConfig())
     if path is None or str(path) == "cad":
-        return model, "cad"
+        return model, "cad", []
     try:
         apply_parameters(model, read_link_parameters(path))
-    except (IdentificationError, OSError, KeyError, ValueError) as err:
+        doc = yaml.safe_load(Path(path).read_text())
+    except (IdentificationError, OSError, KeyError, ValueError, yaml.YAMLError) as err:
         raise GapError(f"{path}: not a usable model file: {err}") from None
-    return model, str(path)
+    known = [e for e in doc.get("effects", []) or [] if e.get("kind") != "extra_mass"]
+    return model, str(path), known
 
 
 # -- phases -----------------------------------------------------------------------------------------------------------
@@ -263,11 +265,12 @@ class GapResult:
     effects: list[dict]
     verdict: str
     unexplained: list[dict]
-    gap_before: float                      # gap_size over the channels whose RMS was >= SIGNIFICANT_Z floors before
+    gap_before: float                      # gap_size over the (channel, phase) pairs >= SIGNIFICANT_Z floors before
     gap_after: float
     notes: list[str]
     dataset: Dataset
     after: list[np.ndarray]                # per recording: (N, C) residual of the augmented model
+    known: list[dict] = field(default_factory=list)   # joint/sensor effects the nominal model file already had
 
     @property
     def shrink(self) -> float:
@@ -279,13 +282,16 @@ def _rms(e: np.ndarray, valid: np.ndarray) -> np.ndarray:
                      for c in range(e.shape[1])])
 
 
-def gap_size(rms: np.ndarray, floors: np.ndarray, channels: np.ndarray) -> float:
-    """The gap above the noise on the given channels (R, C mask): sqrt(mean of max((rms / floor)^2 - 1, 0)); 0 when
-    no channel is given."""
-    if not channels.any():
+def gap_size(es: list[np.ndarray], ds: Dataset, pairs: list[tuple[int, int, str]]) -> float:
+    """The gap above the noise over ``pairs`` (recording, channel, phase): sqrt(mean of max((rms / floor)^2 - 1, 0))
+    with each pair's RMS of the residuals ``es``; 0 when no pair is given."""
+    if not pairs:
         return 0.0
-    z2 = (rms / floors)[channels] ** 2
-    return float(np.sqrt(np.mean(np.maximum(z2 - 1.0, 0.0))))
+    z2 = []
+    for r, c, phase in pairs:
+        m = (ds.labels[r] == phase) & ds.evaluations[r].valid[:, c]
+        z2.append(np.mean(es[r][m, c] ** 2) / ds.floors[r][c] ** 2)
+    return float(np.sqrt(np.mean(np.maximum(np.array(z2) - 1.0, 0.0))))
 
 
 def ranked_table(ds: Dataset) -> list[dict]:
@@ -368,17 +374,35 @@ def _after(ds: Dataset, sel: Selection, cands_unweighted) -> list[np.ndarray]:
     return out
 
 
+def effect_columns(ds: Dataset, links: list[str], r: int, kind: str, location: str) -> np.ndarray:
+    """(N, C, p) signature of effect ``kind`` at ``location`` along recording ``r`` (physical units)."""
+    ev, rec = ds.evaluations[r], ds.recordings[r]
+    if kind == "extra_mass":
+        return ev.mass_cols[:, :, links.index(location), :]
+    if kind == "ft_bias":
+        side, axis = location.split("_", 1)[1].split("/")
+        a = FT_AXES.index(axis)
+        return ev.ft_cols[side][:, :, a:a + 1]
+    if location not in rec.joint_names:
+        raise GapError(f"effect {kind} at unknown joint {location!r}")
+    return joint_columns(rec, ev, kind, rec.joint_names.index(location))
+
+
 def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: float = 50.0,
         progress=None) -> GapResult:
     """The workflow on ``bags`` against the nominal model (see the module docstring)."""
     say = progress or (lambda _msg: None)
-    model, source = load_nominal(model_path)
+    model, source, known = load_nominal(model_path)
     if not bags:
         raise GapError("no measured bag given")
     ds = load_dataset(bags, model, rate_hz=rate_hz, progress=say)
     from .residuals import body_link_names
 
     links = body_link_names(model)
+    for r, ev in enumerate(ds.evaluations):     # the model file's joint and sensor effects are part of the model
+        for eff in known:
+            theta = np.array([eff["value"] - 1.0 if eff["kind"] == "torque_gain" else eff["value"]])
+            ev.e -= np.tensordot(effect_columns(ds, links, r, eff["kind"], eff["location"]), theta, axes=(2, 0))
     # noise floors: the residual's fast part (runs); for static postures, after all candidates at once
     for rec, ev in zip(ds.recordings, ds.evaluations):
         ds.floors.append(np.ones(ev.e.shape[1]) if rec.static else fast_part_floor(ev.e, ev.valid, rec.t_s))
@@ -416,23 +440,17 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
     sel = select(y, cands, series_id=sid, noise_rss=float(len(y)), progress=say)
 
     def unweighted(r: int, cand: Candidate) -> np.ndarray:
-        ev, rec = ds.evaluations[r], ds.recordings[r]
-        if cand.kind == "extra_mass":
-            return ev.mass_cols[:, :, links.index(cand.location), :]
-        if cand.kind == "ft_bias":
-            side, axis = cand.location.split("_", 1)[1].split("/")
-            a = FT_AXES.index(axis)
-            return ev.ft_cols[side][:, :, a:a + 1]
-        return joint_columns(rec, ev, cand.kind, rec.joint_names.index(cand.location))
+        return effect_columns(ds, links, r, cand.kind, cand.location)
 
     after = _after(ds, sel, unweighted)
     rms_b = np.array([_rms(ev.e, ev.valid) for ev in ds.evaluations])
     rms_a = np.array([_rms(e, ev.valid) for e, ev in zip(after, ds.evaluations)])
     effects = effect_summary(sel)
     floors = np.array(ds.floors)
-    disagree = np.nan_to_num(rms_b / floors) >= SIGNIFICANT_Z      # the channels where the nominal model was wrong
-    g0, g1 = gap_size(rms_b, floors, disagree), gap_size(rms_a, floors, disagree)
     table = ranked_table(ds)
+    pairs = [(d["recording"], ds.channels.index(d["channel"]), d["phase"]) for d in table if d["z"] >= SIGNIFICANT_Z]
+    g0 = gap_size([ev.e for ev in ds.evaluations], ds, pairs)
+    g1 = gap_size(after, ds, pairs)
     unexplained = []
     for r, (a, f) in enumerate(zip(rms_a, ds.floors)):
         for c, ch in enumerate(ds.channels):
@@ -447,7 +465,7 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
     else:
         verdict = "; ".join(describe(e) for e in effects)
     return GapResult(source, [str(b) for b in bags], ds.channels, floors, rms_b, rms_a, table, sel,
-                     effects, verdict, unexplained, g0, g1, ds.notes, ds, after)
+                     effects, verdict, unexplained, g0, g1, ds.notes, ds, after, known)
 
 
 # -- augmented model -------------------------------------------------------------------------------------------------
@@ -459,7 +477,7 @@ def augmented_model(result: GapResult, nominal: pin.Model) -> dict:
     model = nominal.copy()
     unmodeled: dict = {"masses": [], "viscous_friction": {}, "coulomb_friction": {}, "torque_bias_nm": {},
                        "torque_gain": {}, "joint_offset_rad": {}, "ft_bias": {}}
-    for e in result.effects:
+    for e in result.known + result.effects:
         k = e["kind"]
         if k == "extra_mass":
             jid = links.index(e["location"]) + 1
@@ -478,12 +496,15 @@ def augmented_model(result: GapResult, nominal: pin.Model) -> dict:
             unmodeled["ft_bias"].setdefault(side, [0.0] * 6)[FT_AXES.index(axis)] += e["value"]
         else:
             key = {"torque_bias": "torque_bias_nm", "joint_offset": "joint_offset_rad"}.get(k, k)
-            unmodeled[key][e["location"]] = e["value"]
+            if k == "torque_gain":
+                unmodeled[key][e["location"]] = unmodeled[key].get(e["location"], 1.0) * (e["value"])
+            else:
+                unmodeled[key][e["location"]] = unmodeled[key].get(e["location"], 0.0) + e["value"]
     link_params = {model.names[j]: {"mass": float(model.inertias[j].mass),
                                     "com": [float(v) for v in model.inertias[j].lever]}
                    for j in range(1, model.njoints)}
     return {"nominal": result.model_source, "bags": result.bags, "verdict": result.verdict,
-            "effects": result.effects, "links": link_params,
+            "effects": result.known + result.effects, "links": link_params,
             "unmodeled": {k: v for k, v in unmodeled.items() if v}}
 
 

@@ -1,0 +1,159 @@
+"""Plants with a hidden effect drawn by seed, and the scoring of what the workflow named: the hidden-data test suite
+and the benchmark's hit rates use these.
+
+An effect is drawn by kind, then location and magnitude from the seed, among what an excitation run can show
+(:mod:`sit2stand.gap.excite`): masses on links whose joints move, friction on moving joints, gains and offsets on
+joints that carry load. A case is a **hit** when the workflow names the hidden effect's kind at its location (a mass
+on any link of the rigid group named), its magnitude within ``tolerance`` (20 %), and nothing else.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..robot.model import ExtraBodyMass, PlantConfig, Unmodeled
+
+KINDS = ("extra_mass", "viscous_friction", "coulomb_friction", "torque_bias", "torque_gain", "joint_offset",
+         "ft_bias")
+MASS_LINKS = ("base_link", "torso_2_link", "leg_left_3_link", "leg_right_3_link", "leg_left_4_link",
+              "leg_right_4_link", "arm_left_4_link", "arm_right_4_link")
+MOVING_JOINTS = ("torso_2_joint", "leg_left_3_joint", "leg_left_4_joint", "leg_left_5_joint", "leg_right_3_joint",
+                 "leg_right_4_joint", "leg_right_5_joint", "arm_left_1_joint", "arm_left_2_joint", "arm_left_4_joint",
+                 "arm_right_1_joint", "arm_right_2_joint", "arm_right_4_joint")
+LOADED_JOINTS = ("torso_2_joint", "leg_left_3_joint", "leg_left_4_joint", "leg_left_5_joint", "leg_right_3_joint",
+                 "leg_right_4_joint", "leg_right_5_joint")
+ALL_JOINTS_FOR_BIAS = MOVING_JOINTS + ("leg_left_1_joint", "leg_right_2_joint", "torso_1_joint", "head_2_joint",
+                                       "arm_left_3_joint")
+FT_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
+
+
+@dataclass
+class Hidden:
+    """One hidden effect: ``kind`` at ``location`` with ``magnitude`` (kg, N m s/rad, N m, measured/true gain, rad,
+    N or N m); a mass also has ``pos_m`` in the link frame."""
+
+    kind: str
+    location: str
+    magnitude: float
+    pos_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def describe(self) -> str:
+        extra = f" at {tuple(round(p, 3) for p in self.pos_m)} m" if self.kind == "extra_mass" else ""
+        return f"{self.kind} @ {self.location}: {self.magnitude:.4g}{extra}"
+
+
+def draw(kind: str, seed: int) -> Hidden:
+    """A hidden effect of ``kind`` with location and magnitude drawn from ``seed``."""
+    rng = np.random.default_rng([KINDS.index(kind), seed])
+    sign = rng.choice([-1.0, 1.0])
+    if kind == "extra_mass":
+        link = str(rng.choice(MASS_LINKS))
+        mass = rng.uniform(1.5, 4.0) if link.startswith("arm") else rng.uniform(2.0, 8.0)
+        pos = tuple(float(v) for v in rng.uniform(-0.12, 0.12, 3))
+        return Hidden(kind, link, float(mass), pos)
+    if kind == "viscous_friction":
+        return Hidden(kind, str(rng.choice(MOVING_JOINTS)), float(rng.uniform(1.5, 5.0)))
+    if kind == "coulomb_friction":
+        return Hidden(kind, str(rng.choice(MOVING_JOINTS)), float(rng.uniform(1.0, 3.0)))
+    if kind == "torque_bias":
+        return Hidden(kind, str(rng.choice(ALL_JOINTS_FOR_BIAS)), float(sign * rng.uniform(1.0, 5.0)))
+    if kind == "torque_gain":
+        return Hidden(kind, str(rng.choice(LOADED_JOINTS)), float(1.0 + sign * rng.uniform(0.05, 0.15)))
+    if kind == "joint_offset":
+        return Hidden(kind, str(rng.choice(LOADED_JOINTS)), float(sign * rng.uniform(0.01, 0.04)))
+    if kind == "ft_bias":
+        side, axis = str(rng.choice(["left", "right"])), str(rng.choice(FT_AXES))
+        size = rng.uniform(5.0, 20.0) if axis.startswith("f") else rng.uniform(1.0, 4.0)
+        return Hidden(kind, f"ft_{side}/{axis}", float(sign * size))
+    raise ValueError(f"unknown effect kind {kind!r} (known: {', '.join(KINDS)})")
+
+
+def plant_with(effects: list[Hidden], seed: int = 0) -> PlantConfig:
+    """The CAD plant with ``effects`` hidden in its ``unmodeled`` section (named "hidden": the bag tells nothing)."""
+    um = Unmodeled()
+    for h in effects:
+        if h.kind == "extra_mass":
+            um.masses.append(ExtraBodyMass(h.location, h.magnitude, h.pos_m, f"hidden_{len(um.masses)}"))
+        elif h.kind == "ft_bias":
+            side, axis = h.location.split("_", 1)[1].split("/")
+            bias = list(um.ft_bias.get(side, (0.0,) * 6))
+            bias[FT_AXES.index(axis)] += h.magnitude
+            um.ft_bias[side] = tuple(bias)
+        else:
+            table = {"viscous_friction": um.viscous_friction, "coulomb_friction": um.coulomb_friction,
+                     "torque_bias": um.torque_bias_nm, "torque_gain": um.torque_gain,
+                     "joint_offset": um.joint_offset_rad}[h.kind]
+            table[h.location] = h.magnitude
+    cfg = PlantConfig(name="hidden", seed=seed)
+    cfg.unmodeled = um
+    return cfg
+
+
+def found_value(effect: dict) -> float:
+    return float(effect["mass_kg"] if effect["kind"] == "extra_mass" else effect["value"])
+
+
+def matches(h: Hidden, effect: dict) -> bool:
+    """Whether a named effect is ``h``'s kind at ``h``'s location (a mass: any link of the named rigid group)."""
+    if effect["kind"] != h.kind:
+        return False
+    if h.kind == "extra_mass":
+        return h.location in effect.get("members", [effect["location"]])
+    return effect["location"] == h.location
+
+
+def relative_error(h: Hidden, effect: dict) -> float:
+    if h.kind == "torque_gain":      # the gain's error relative to its departure from 1
+        return abs(found_value(effect) - h.magnitude) / abs(h.magnitude - 1.0)
+    return abs(found_value(effect) - h.magnitude) / abs(h.magnitude)
+
+
+@dataclass
+class Score:
+    hidden: list[Hidden]
+    named: list[dict]
+    found: list[bool] = field(default_factory=list)        # per hidden effect: right kind and location
+    errors: list[float] = field(default_factory=list)      # per hidden effect: relative magnitude error (nan: missed)
+    extra: list[dict] = field(default_factory=list)        # named but not hidden
+
+    def hit(self, tolerance: float = 0.2) -> bool:
+        return all(self.found) and all(e <= tolerance for e in self.errors) and not self.extra
+
+
+def score(hidden: list[Hidden], named: list[dict]) -> Score:
+    s = Score(hidden, named)
+    used = set()
+    for h in hidden:
+        k = next((i for i, e in enumerate(named) if i not in used and matches(h, e)), None)
+        s.found.append(k is not None)
+        s.errors.append(relative_error(h, named[k]) if k is not None else float("nan"))
+        if k is not None:
+            used.add(k)
+    s.extra = [e for i, e in enumerate(named) if i not in used]
+    return s
+
+
+def run_case(hidden: list[Hidden], seed: int, workdir: str, n_moves: int = 8) -> dict:
+    """Build the plant, record its excitation bag, run the workflow on the bag alone and score it."""
+    import shutil
+    import time
+    from pathlib import Path
+
+    from .excite import excite
+    from .workflow import run
+
+    bag = Path(workdir) / f"case_{seed}_{'_'.join(h.kind for h in hidden) or 'none'}"
+    shutil.rmtree(bag, ignore_errors=True)
+    t0 = time.monotonic()
+    info = excite(plant_with(hidden, seed=seed), bag, seed=seed, n_moves=n_moves)
+    t1 = time.monotonic()
+    result = run([bag])
+    t2 = time.monotonic()
+    s = score(hidden, result.effects)
+    shutil.rmtree(bag, ignore_errors=True)
+    return {"hidden": [h.describe() for h in hidden], "named": [e["kind"] + " @ " + e["location"] for e in result.effects],
+            "found": s.found, "errors": s.errors, "extra": [e["kind"] + " @ " + e["location"] for e in s.extra],
+            "hit": s.hit(), "shrink": result.shrink, "gap_before": result.gap_before, "gap_after": result.gap_after,
+            "verdict": result.verdict, "fell": info["fell"], "excite_s": t1 - t0, "workflow_s": t2 - t1}
