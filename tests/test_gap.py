@@ -1,0 +1,148 @@
+"""The model-gap workflow (sit2stand.gap): selection on synthetic rows, and the hidden-effect suite: plants with an
+effect hidden by seed, their excitation bags recorded, the workflow run on the bags alone."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from sit2stand.gap.hidden import Hidden, draw, plant_with, run_case, score
+from sit2stand.gap.select import Candidate, select
+
+REPO = Path(__file__).resolve().parents[1]
+
+# one seeded case per effect kind (the benchmark reports the hit rates over 20 seeds per kind), none, and two at once
+CASES = {
+    "extra_mass": [draw("extra_mass", 0)],
+    "viscous_friction": [draw("viscous_friction", 0)],
+    "coulomb_friction": [draw("coulomb_friction", 3)],
+    "torque_bias": [draw("torque_bias", 0)],
+    "torque_gain": [draw("torque_gain", 0)],
+    "joint_offset": [draw("joint_offset", 0)],
+    "ft_bias": [draw("ft_bias", 0)],
+    "none": [],
+    "two": [Hidden("extra_mass", "torso_2_link", 5.0, (-0.1, 0.0, 0.1)),
+            Hidden("viscous_friction", "leg_left_3_joint", 3.0)],
+}
+
+
+@pytest.fixture(scope="module")
+def outcomes(tmp_path_factory) -> dict[str, dict]:
+    work = str(tmp_path_factory.mktemp("hidden"))
+    with ProcessPoolExecutor(2) as pool:
+        futures = {name: pool.submit(run_case, hidden, 3, work) for name, hidden in CASES.items()}
+        return {name: f.result() for name, f in futures.items()}
+
+
+def test_selection_finds_the_sparse_truth_on_synthetic_rows():
+    rng = np.random.default_rng(0)
+    n = 4000
+    cands = [Candidate("k", f"c{i}", ["p"], rng.normal(size=(n, 2 if i % 3 == 0 else 1))) for i in range(30)]
+    y = cands[4].X @ np.array([0.3]) + cands[9].X @ np.array([-0.2, 0.5]) + rng.normal(size=n)
+    sel = select(y, cands, noise_rss=float(n))
+    assert sorted(s.candidate.location for s in sel.effects) == ["c4", "c9"]
+    est = {s.candidate.location: s.theta for s in sel.effects}
+    assert abs(est["c4"][0] - 0.3) < 3 * np.sqrt(sel.effects[0].cov[0, 0]) + 0.05
+    # pure noise: nothing is named
+    assert select(rng.normal(size=n), cands, noise_rss=float(n)).effects == []
+
+
+def test_implausible_winner_is_skipped():
+    rng = np.random.default_rng(1)
+    n = 2000
+    x = rng.normal(size=(n, 1))
+    twin = Candidate("k", "implausible", ["p"], x.copy(), plausible=lambda th: False)
+    real = Candidate("k", "real", ["p"], x + 1e-3 * rng.normal(size=(n, 1)))
+    y = 0.5 * x[:, 0] + rng.normal(size=n)
+    sel = select(y, [twin, real], noise_rss=float(n))
+    assert [s.candidate.location for s in sel.effects] == ["real"]
+
+
+def test_hidden_mass_sits_at_its_stated_offset():
+    from sit2stand.robot.plant import Plant
+
+    cfg = plant_with([Hidden("extra_mass", "torso_2_link", 5.0, (-0.1, 0.02, 0.1))])
+    p = Plant(cfg, with_chair=False)
+    body, parent = p.model.body("hidden_0"), p.model.body("torso_2_link")
+    R = p.data.xmat[parent.id].reshape(3, 3)
+    rel = R.T @ (p.data.xipos[body.id] - p.data.xpos[parent.id])
+    assert np.allclose(rel, [-0.1, 0.02, 0.1], atol=1e-9)
+
+
+@pytest.mark.parametrize("name", [k for k in CASES if k not in ("none", "two")])
+def test_hidden_effect_is_named_with_its_size_and_the_gap_shrinks(outcomes, name):
+    out = outcomes[name]
+    assert not out["fell"]
+    assert out["found"] == [True], f"hidden {out['hidden']}, named {out['named']}"
+    assert out["errors"][0] <= 0.2, f"hidden {out['hidden']}: magnitude off by {100 * out['errors'][0]:.0f} %"
+    assert out["extra"] == [], f"named more than hidden: {out['extra']}"
+    assert out["shrink"] >= 0.7, f"gap {out['gap_before']:.2f} -> {out['gap_after']:.2f}"
+
+
+def test_no_hidden_effect_gives_no_effect(outcomes):
+    out = outcomes["none"]
+    assert out["named"] == []
+    assert out["verdict"] == "no significant discrepancy"
+
+
+def test_two_hidden_effects_are_both_named(outcomes):
+    out = outcomes["two"]
+    assert out["found"] == [True, True], out["named"]
+    assert max(out["errors"]) <= 0.2
+    assert out["extra"] == []
+    assert out["shrink"] >= 0.7
+
+
+def test_score_counts_group_members_and_extras():
+    h = Hidden("extra_mass", "head_1_link", 2.0)
+    named = [{"kind": "extra_mass", "location": "torso_2_link", "members": ["torso_2_link", "head_1_link"],
+              "mass_kg": 2.2}, {"kind": "torque_bias", "location": "leg_left_4_joint", "value": 1.0}]
+    s = score([h], named)
+    assert s.found == [True] and abs(s.errors[0] - 0.1) < 1e-9
+    assert len(s.extra) == 1 and not s.hit()
+
+
+def test_gap_command_report_and_augmented_model(tmp_path):
+    """The command on a hidden-bias bag: report files; the augmented model re-analysed leaves no discrepancy, and the
+    driver's plant loads its links as controller parameters."""
+    from sit2stand.gap.excite import excite
+    from sit2stand.robot.identify import read_link_parameters
+    from sit2stand.robot.model import PlantConfig
+    from sit2stand.robot.plant import Plant
+
+    bag = tmp_path / "bias"
+    hidden = [Hidden("torque_bias", "leg_left_4_joint", 4.0), Hidden("extra_mass", "base_link", 6.0, (-0.1, 0, -0.05))]
+    excite(plant_with(hidden), bag, seed=5, n_moves=6)
+    exe = [sys.executable, "-m", "sit2stand.cli"]
+    out = tmp_path / "report"
+    res = subprocess.run(exe + ["gap", str(bag), "--out", str(out)], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert "torque-sensor bias at leg_left_4_joint" in res.stdout and "extra mass on base_link" in res.stdout
+    for f in ("report.md", "gap.json", "augmented_model.yaml", "gap_channels.png", "gap_residuals.png", "gap_cop.png"):
+        assert (out / f).stat().st_size > 0, f
+    summary = json.loads((out / "gap.json").read_text())
+    assert summary["gap_shrink"] >= 0.7
+    doc = yaml.safe_load((out / "augmented_model.yaml").read_text())
+    assert abs(doc["unmodeled"]["torque_bias_nm"]["leg_left_4_joint"] - 4.0) < 0.8
+    assert abs(doc["links"]["root"]["mass"] - (13.54 + 6.0)) < 1.2
+    again = subprocess.run(exe + ["gap", str(bag), "--model", str(out / "augmented_model.yaml"), "--out",
+                                  str(tmp_path / "again")], capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr
+    assert "no significant discrepancy" in again.stdout
+    plant = Plant(PlantConfig(), controller_params=read_link_parameters(out / "augmented_model.yaml"))
+    assert abs(plant.ctrl_mass - (90.27 + 6.0)) < 1.2
+
+
+def test_not_a_robot_bag_is_named(tmp_path):
+    exe = [sys.executable, "-m", "sit2stand.cli"]
+    res = subprocess.run(exe + ["gap", str(REPO / "bags" / "natural"), "--out", str(tmp_path / "r")],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2
+    assert "bags/natural" in res.stderr and "/robot/joint_states" in res.stderr
