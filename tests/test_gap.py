@@ -146,3 +146,20 @@ def test_not_a_robot_bag_is_named(tmp_path):
                          capture_output=True, text=True, timeout=120)
     assert res.returncode == 2
     assert "bags/natural" in res.stderr and "/robot/joint_states" in res.stderr
+
+
+def test_human_side_names_a_hidden_trunk_mass(tmp_path):
+    """A digital human with 8 kg hidden on the trunk (inside the scale mass): the extra mass is named on the torso."""
+    from sit2stand.gap.human import human_gap
+    from sit2stand.human.skeleton import ExtraMass
+    from sit2stand.human.synth import SynthConfig, synthesize, write_demonstration_bag
+
+    cfg = SynthConfig(style="elderly", seed=1, extra=[ExtraMass.parse("trunk:8")])
+    bag = tmp_path / "trunk8"
+    write_demonstration_bag(synthesize(cfg), bag)
+    r = human_gap(bag)
+    assert r.effects, r.verdict
+    first = r.effects[0]
+    assert first["kind"] == "extra_mass" and first["location"] == "torso", r.verdict
+    assert abs(first["mass_kg"] - 8.0) <= 0.2 * 8.0
+    assert r.rms_after[4] < 0.7 * r.rms_before[4]      # the sagittal moment's gap shrinks

@@ -255,11 +255,84 @@ def bench_robot(n_postures: int = 88) -> dict[str, float]:
     return out
 
 
+def _print_sections(results: dict, sections: list[str]) -> None:
+    width = max(len(k) for section in sections for k in results[section])
+    for section in sections:
+        print(f"\n[{section}]")
+        for key, value in results[section].items():
+            if isinstance(value, list):
+                print(f"  {key:<{width}}  {len(value)} (see the JSON file)")
+            else:
+                print(f"  {key:<{width}}  {value:>12,.2f}" if isinstance(value, float) else f"  {key:<{width}}  {value:>12}")
+
+
+def bench_gap(n_per_kind: int = 20, n_two: int = 10, workers: int = 2, progress: bool = True) -> dict:
+    """Hit rates of the model-gap workflow on hidden-effect plants: ``n_per_kind`` seeds per effect kind, as many
+    plants with nothing hidden, and ``n_two`` with two effects of different kinds. A hit names the hidden effect's
+    kind and location with its magnitude within 20 %; "clean" also names nothing else."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from .gap.hidden import KINDS, draw, run_case
+
+    cases = [(kind, [draw(kind, seed)], seed) for kind in KINDS for seed in range(n_per_kind)]
+    cases += [("none", [], seed) for seed in range(n_per_kind)]
+    rng = np.random.default_rng(7)
+    for seed in range(n_two):
+        a, b = rng.choice(len(KINDS), 2, replace=False)
+        cases.append(("two", [draw(KINDS[a], 100 + seed), draw(KINDS[b], 200 + seed)], 100 + seed))
+    out: dict[str, object] = {}
+    rows = []
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp, ProcessPoolExecutor(workers) as pool:
+        futures = [(kind, pool.submit(run_case, hidden, seed, tmp)) for kind, hidden, seed in cases]
+        for i, (kind, f) in enumerate(futures):
+            r = f.result()
+            r["kind"] = kind
+            rows.append(r)
+            if progress:
+                print(f"  [{i + 1}/{len(cases)}] {'hit ' if r['hit'] or (kind == 'none' and not r['named']) else 'MISS'}"
+                      f" {kind}: hidden {r['hidden']} -> named {r['named']}", flush=True)
+    wall = time.perf_counter() - t0
+    for kind in (*KINDS, "none", "two"):
+        rs = [r for r in rows if r["kind"] == kind]
+        if not rs:
+            continue
+        if kind == "none":
+            out["none_no_effect_rate"] = float(np.mean([not r["named"] for r in rs]))
+            continue
+        found = [all(r["found"]) for r in rs]
+        within = [all(r["found"]) and max(r["errors"]) <= 0.2 for r in rs]
+        shrink = [r["shrink"] for r in rs if r["gap_before"] > 0]
+        out[f"{kind}_hit_rate"] = float(np.mean(within))
+        out[f"{kind}_clean_hit_rate"] = float(np.mean([r["hit"] for r in rs]))
+        out[f"{kind}_located_rate"] = float(np.mean(found))
+        out[f"{kind}_median_error_pct"] = float(100 * np.nanmedian([max(r["errors"]) for r in rs]))
+        out[f"{kind}_median_gap_shrink_pct"] = float(100 * np.median(shrink)) if shrink else float("nan")
+    out["cases"] = len(rows)
+    out["excite_s_median"] = float(np.median([r["excite_s"] for r in rows]))
+    out["workflow_s_median"] = float(np.median([r["workflow_s"] for r in rows]))
+    out["wall_s"] = wall
+    out["misses"] = [{k: r[k] for k in ("kind", "hidden", "named", "errors", "shrink")} for r in rows
+                     if not (r["hit"] or (r["kind"] == "none" and not r["named"]))]
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sit2stand-bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results/bench.json"))
     parser.add_argument("--messages", type=int, default=40_000)
+    parser.add_argument("--only", choices=["gap"], help="run one section and merge it into the JSON file")
+    parser.add_argument("--gap-seeds", type=int, default=20, help="hidden-effect cases per effect kind")
     args = parser.parse_args(argv)
+    if args.only == "gap":
+        results = json.loads(args.out.read_text()) if args.out.exists() else {}
+        print(f"model gap: hidden-effect plants, {args.gap_seeds} seeds per effect kind ...", flush=True)
+        results["gap"] = bench_gap(args.gap_seeds)
+        _print_sections(results, ["gap"])
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(results, indent=2))
+        print(f"\nwritten to {args.out}")
+        return 0
 
     results: dict[str, object] = {"machine": {"python": sys.version.split()[0], "cpu_count": os.cpu_count(),
                                               "platform": platform.platform()}}
@@ -291,12 +364,9 @@ def main(argv: list[str] | None = None) -> int:
     results["retarget"] = bench_retarget(root)
     print("retargeting: latency in the retarget and stand-up graphs on bags/elderly ...", flush=True)
     results["retarget"].update(bench_retarget_graphs(root, env))
-    sections = [s for s in ("bag", "replayer", "human_com", "robot", "retarget") if s in results]
-    width = max(len(k) for section in sections for k in results[section])
-    for section in sections:
-        print(f"\n[{section}]")
-        for key, value in results[section].items():
-            print(f"  {key:<{width}}  {value:>12,.2f}" if isinstance(value, float) else f"  {key:<{width}}  {value:>12}")
+    print("model gap: hidden-effect plants ...", flush=True)
+    results["gap"] = bench_gap(args.gap_seeds)
+    _print_sections(results, [s for s in ("bag", "replayer", "human_com", "robot", "retarget", "gap") if s in results])
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=2))
     print(f"\nwritten to {args.out}")

@@ -201,6 +201,28 @@ def _gap(args: argparse.Namespace) -> int:
     return 0
 
 
+def _gap_human(args: argparse.Namespace) -> int:
+    import json
+
+    from .gap.human import human_gap
+    from .gap.workflow import progress_printer
+
+    r = human_gap(args.bag, progress=progress_printer)
+    print(r.verdict)
+    for e in r.effects:
+        if e.get("alternatives"):
+            print(f"  {e['location']}: nearly as good here: {', '.join(e['alternatives'][:4])}")
+    names = ["force_x", "force_y", "force_z", "moment_x", "moment_y", "moment_z"]
+    for n, f, b, a in zip(names, r.floors, r.rms_before, r.rms_after):
+        print(f"  {n:9s} floor {f:6.2f}  RMS {b:6.2f} -> {a:6.2f}")
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps({"bag": r.bag, "verdict": r.verdict, "effects": r.effects,
+                                        "floors": r.floors.tolist(), "rms_before": r.rms_before.tolist(),
+                                        "rms_after": r.rms_after.tolist(), "steps": r.selection.steps}, indent=1))
+    return 0
+
+
 def _launch(args: argparse.Namespace) -> int:
     from .launch import Launcher, load_graph, parse_overrides
 
@@ -325,6 +347,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rate", type=float, default=50.0, help="analysis rate [Hz] for runs")
     p.add_argument("--out", type=Path, required=True)
     p.set_defaults(func=_gap)
+
+    p = sub.add_parser("gap-human", help="the model-gap workflow on a human demonstration: a mass the skeleton lacks")
+    p.add_argument("bag", type=Path)
+    p.add_argument("--out", type=Path, help="JSON summary")
+    p.set_defaults(func=_gap_human)
 
     bag = sub.add_parser("bag", help="bag tools").add_subparsers(dest="bag_command", required=True)
     p = bag.add_parser("info", help="topics, types, counts, rates and duration")

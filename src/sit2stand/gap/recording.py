@@ -80,6 +80,37 @@ def _by_stamp(msgs: list[tuple[int, object]]) -> dict[int, object]:
     return {stamp_ns(m.header): m for _, m in msgs}
 
 
+def _nearest(target: np.ndarray, stamps: np.ndarray, tol: int) -> np.ndarray:
+    """Index into sorted ``stamps`` of the nearest to each ``target`` (-1 where none is within ``tol`` ns)."""
+    k = np.clip(np.searchsorted(stamps, target), 1, max(len(stamps) - 1, 1))
+    lo, hi = stamps[k - 1], stamps[np.minimum(k, len(stamps) - 1)]
+    pick = np.where(np.abs(target - lo) <= np.abs(hi - target), k - 1, np.minimum(k, len(stamps) - 1))
+    return np.where(np.abs(stamps[pick] - target) <= tol, pick, -1)
+
+
+def _join(js: dict, ft: dict, base: dict, cop: dict):
+    """Samples of one state: the same stamp on every topic (the driver stamps a sample once), else the nearest stamp
+    within half a joint-state period (bags from drivers that stamped each message on its own)."""
+    exact = sorted(set(js) & set(ft["left"]) & set(ft["right"]) & set(base))
+    if len(exact) >= 0.9 * len(js):
+        return exact, ft, base, cop
+    t = np.array(sorted(js), np.int64)
+    tol = int(0.5 * np.median(np.diff(t))) if len(t) > 1 else 0
+    keep = np.ones(len(t), bool)
+    remapped = []
+    for series in (ft["left"], ft["right"], base, cop):
+        if not series:
+            remapped.append({})
+            continue
+        st = np.array(sorted(series), np.int64)
+        idx = _nearest(t, st, tol)
+        if series is not cop:
+            keep &= idx >= 0
+        remapped.append({int(t[i]): series[int(st[j])] for i, j in enumerate(idx) if j >= 0})
+    stamps = [int(x) for x in t[keep]]
+    return stamps, {"left": remapped[0], "right": remapped[1]}, remapped[2], remapped[3]
+
+
 def read_recording(path: str | Path, model, rate_hz: float = 100.0, window_s: float = 0.15) -> Recording:
     """Read a robot bag (see the module docstring) at most ``rate_hz``; ``model`` is the Pinocchio robot model used to
     differentiate the base motion. Raises :class:`RecordingError` naming the bag and topic on missing or bad data."""
@@ -99,7 +130,7 @@ def read_recording(path: str | Path, model, rate_hz: float = 100.0, window_s: fl
         base = _by_stamp(bag.read("/robot/base_pose"))
         cop = _by_stamp(bag.read("/robot/cop")) if "/robot/cop" in topics else {}
         cmd_msgs = bag.read("/robot/joint_command") if "/robot/joint_command" in topics else []
-    stamps = sorted(set(js) & set(ft["left"]) & set(ft["right"]) & set(base))
+    stamps, ft, base, cop = _join(js, ft, base, cop)
     if len(stamps) < 5:
         raise RecordingError(f"{path}: only {len(stamps)} samples have joint states, both feet's wrenches and a base "
                              "pose with the same stamp (need 5)")

@@ -8,7 +8,8 @@ row by row along the measured state (q, v, a):
 e is zero, up to noise, when the model is right. Its rows are the **channels**: the six base rows (the whole body's
 external wrench: expressed here in world axes about the midpoint of the soles, as force [N] and moment [N m]) and one
 row per actuated joint [N m]. While the robot sits, the seat pushes on the pelvis and thighs unmeasured: the base
-rows and the hip rows (``leg_*_1..3``) are then excluded; the knees, ankles, torso, arms and head still hold.
+rows and the hip rows (``leg_*_1..3``) are then excluded; the knees, ankles, torso, arms and head still hold. A joint at its position
+limit is held by its hard stop, whose torque the joint's sensor does not measure: its row is excluded there.
 
 Every candidate physical effect enters e linearly, to first order, through a **signature** (columns d e / d theta):
 
@@ -39,6 +40,7 @@ SEATED_JOINTS = ("leg_left_1_joint", "leg_left_2_joint", "leg_left_3_joint",
                  "leg_right_1_joint", "leg_right_2_joint", "leg_right_3_joint")
 COULOMB_V0_RADPS = 0.03
 FD_STEP_RAD = 1e-5
+LIMIT_MARGIN_RAD = 0.01
 
 
 @dataclass
@@ -168,6 +170,8 @@ def evaluate(model: pin.Model, rec: Recording, seated: np.ndarray | None = None,
                 offset_cols[k, :, j] = channel(rj - r) / FD_STEP_RAD
             rows.residual(q, v, a, tau_full, wrench)     # leave the data at the measured state
     valid = np.ones((N, C), bool)
+    at_limit = joints_at_limit(model, rec, idx_v)
+    valid[:, 6:] &= ~at_limit              # a hard stop's torque is not in the measured actuator torque
     if seated is not None and seated.any():
         hips = [6 + rec.joint_names.index(j) for j in SEATED_JOINTS if j in rec.joint_names]
         valid[np.ix_(seated, list(range(6)) + hips)] = False
@@ -181,6 +185,14 @@ def coulomb_signature(qd: np.ndarray, v0: float = COULOMB_V0_RADPS) -> np.ndarra
     friction can take any value up to the sliding one (stiction), which no signature of the velocity can follow:
     tried, the sign of the last motion fits worse (measured on the hidden-effect cases)."""
     return np.clip(qd / v0, -1.0, 1.0)
+
+
+def joints_at_limit(model: pin.Model, rec: Recording, idx_v: np.ndarray, margin_rad: float = LIMIT_MARGIN_RAD
+                    ) -> np.ndarray:
+    """(N, n) samples in which a joint is within ``margin_rad`` of its position limit (the model's URDF limits)."""
+    lo = model.lowerPositionLimit[idx_v + 1]
+    hi = model.upperPositionLimit[idx_v + 1]
+    return (rec.q <= lo[None, :] + margin_rad) | (rec.q >= hi[None, :] - margin_rad)
 
 
 def joint_columns(rec: Recording, ev: Evaluation, kind: str, j: int) -> np.ndarray:

@@ -464,6 +464,11 @@ class ComResult:
     plate_gaps: list[tuple[str, float, float]] = field(default_factory=list)
     q: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
+    v: np.ndarray | None = None              # (N, nv) smoothed velocities of the fitted motion
+    a: np.ndarray | None = None              # (N, nv) and accelerations
+    force_n: np.ndarray | None = None        # (N, 3) plates' total force at the marker times (smoothed alike)
+    moment_nm: np.ndarray | None = None      # (N, 3) and moment about the lab origin
+    model: pin.Model | None = None           # the calibrated skeleton before any mass scaling
 
 
 def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.ndarray, valid: np.ndarray,
@@ -549,7 +554,8 @@ def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.
     scaling.cop_rms_after_m = dist(cop_model) if sel.any() else float("nan")
     return ComResult(marker_t_s, com, vcom, acom, com_unscaled,
                      cop_model, measured_cop, supported, ok, np.array([f.rms_m for f in fits]),
-                     np.array([f.n_markers for f in fits]), scaling, subject, rms_before, rms_after, gaps, qs, notes)
+                     np.array([f.n_markers for f in fits]), scaling, subject, rms_before, rms_after, gaps, qs, notes,
+                     vs, as_, force, moment, human.model)
 
 
 def body_mass_from_plates(force_n: np.ndarray, supported: np.ndarray, qs: np.ndarray, human: HumanModel,

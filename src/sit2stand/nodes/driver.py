@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from builtin_interfaces.msg import Time as BuiltinTime
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
 from rclpy.node import Node
@@ -152,14 +153,17 @@ class Driver(Node):
                     plant.command(plant.data.qpos[plant.qadr].copy())
 
     def _stamp(self, msg_header) -> None:
+        msg_header.stamp = self._sample_stamp       # one stamp for every message of a state sample
+
+    def _now_stamp(self):
         if self.publish_clock:
             sec, nsec = divmod(int(round((SIM_EPOCH_S + self.plant.t_s) * 1e9)), 1_000_000_000)
-            msg_header.stamp.sec, msg_header.stamp.nanosec = sec, nsec
-        else:
-            msg_header.stamp = self.get_clock().now().to_msg()
+            return BuiltinTime(sec=sec, nanosec=nsec)
+        return self.get_clock().now().to_msg()
 
     def _publish_state(self) -> None:
         s = self.plant.sensors()
+        self._sample_stamp = self._now_stamp()
         if self.clock_pub is not None:
             c = Clock()
             c.clock.sec, c.clock.nanosec = divmod(int(round((SIM_EPOCH_S + self.plant.t_s) * 1e9)), 1_000_000_000)

@@ -29,6 +29,7 @@ from ..io.forceplate import DEFAULT_COP_THRESHOLD_N
 from .model import SIDES, PlantConfig, add_chair, build_spec, controller_model, expand
 
 G = 9.81
+EXTRAPOLATE_MAX_S = 0.05      # a reference is followed along its velocity for at most this long after its message
 
 
 @dataclass
@@ -168,6 +169,7 @@ class Plant:
         self.qd_ref = np.zeros(self.n)
         self.qdd_ref = np.zeros(self.n)
         self.feedforward = "gravity"
+        self._t_ref = float(self.data.time)
         self._ff_age = 10**9
         self.set_limp(False)
         self._tau_queue.clear()
@@ -179,6 +181,7 @@ class Plant:
         then start the clock at 0."""
         self.step(int(round(seconds / self.cfg.timestep_s)))
         self.data.time = 0.0
+        self._t_ref = 0.0
 
     def set_limp(self, limp: bool) -> None:
         """Go limp (zero joint torque, e.g. after a fall) or back to PD control."""
@@ -201,6 +204,7 @@ class Plant:
         self.q_ref = q.copy()
         self.qd_ref = np.zeros(self.n) if qd is None else np.asarray(qd, float).copy()
         self.qdd_ref = np.zeros(self.n) if qdd is None else np.asarray(qdd, float).copy()
+        self._t_ref = float(self.data.time)
         if feedforward is not None:
             self.feedforward = feedforward
         if refresh:
@@ -249,7 +253,13 @@ class Plant:
                     self._ff, self._ff_age = self._feedforward(), 0
                 self._ff_age += 1
                 # PD (implicit, in the servo actuator) + feed-forward (motor); the joint clamps their sum
-                ctrl_pd = self.q_ref - self.q_offset + self.kd / self.kp * self.qd_ref
+                # between commands the joint controller follows the reference's own velocity and acceleration
+                # (as a real one interpolates a trajectory point): a reference held still until the next message
+                # would make the torques jump at every update
+                age = min(max(float(self.data.time) - self._t_ref, 0.0), EXTRAPOLATE_MAX_S)
+                q_t = self.q_ref + age * self.qd_ref + 0.5 * age * age * self.qdd_ref
+                qd_t = self.qd_ref + age * self.qdd_ref
+                ctrl_pd = q_t - self.q_offset + self.kd / self.kp * qd_t
                 ctrl_ff = np.clip(self._ff, -self.effort, self.effort)
             if self.delay_steps:
                 self._tau_queue.append((ctrl_pd, ctrl_ff))

@@ -1,0 +1,126 @@
+"""The model-gap workflow on the human side: the skeletal model (de Leva segments, scaled to the subject's stature and
+scale mass) against the force plates, to find a mass the model does not have (a backpack, a cast, a weight belt).
+
+The person has no joint-torque sensors, but every contact is on a plate (chair and feet), so the whole body's
+equation holds in every phase:
+
+    e(t) = W_plates(t) - W_model(q, v, a)      (6 rows: force [N], moment about the lab origin [N m], world axes)
+
+with q, v, a the marker-fitted motion (the COM estimator's calibrated skeleton, before any mass scaling) and
+W_model the external wrench the model's dynamics need (the base rows of RNEA). The candidates are an extra point mass
+on each segment (mass and first moment in the segment's joint frame: the mass columns of the joint-torque regressor)
+and a uniform mass scale (the scale mass is the total: an extra mass on one segment makes every other one lighter
+than the model says); they go through the same selection as the robot's effects (:mod:`sit2stand.gap.select`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from .select import Candidate, Selection, select
+from .workflow import SIGNIFICANT_Z, _mass_within_reach, fast_part_floor
+
+
+@dataclass
+class HumanGap:
+    bag: str
+    segments: list[str]
+    floors: np.ndarray                 # (6,)
+    rms_before: np.ndarray             # (6,)
+    rms_after: np.ndarray
+    selection: Selection
+    effects: list[dict]
+    verdict: str
+
+
+def _to_world(q: np.ndarray) -> np.ndarray:
+    R = pin.Quaternion(q[3:7]).normalized().matrix()
+    T = np.zeros((6, 6))
+    T[:3, :3] = R
+    T[3:, 3:] = R
+    T[3:, :3] = pin.skew(q[:3]) @ R
+    return T
+
+
+def human_gap(bag: str | Path, progress=None) -> HumanGap:
+    """Run the workflow on a human demonstration bag (markers + force plates + the subject's stature and mass)."""
+    from ..human.com import estimate_com
+    from ..human.offline import read_trial
+    from ..human.skeleton import SEGMENTS, Subject, build_human
+    from ..io.bag import BagError
+
+    trial = read_trial(bag)
+    if trial.height_m is None or trial.mass_kg is None:
+        raise BagError(f"{bag}: the subject's stature and mass are not in the bag's metadata")
+    chair = any(p["name"] == "chair" for p in trial.plates)
+    if progress:
+        progress(f"  {bag}: fitting the skeleton to {len(trial.marker_t_s)} marker frames")
+    res = estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,
+                       Subject(trial.height_m, trial.mass_kg, trial.sex), scale_masses=False, chair_on_plate=chair,
+                       trust_plate_mass=False)
+    model = res.model
+    data = model.createData()
+    human = build_human(res.subject)
+    keep = np.flatnonzero(res.supported)
+    nb = model.njoints - 1
+    e = np.zeros((len(keep), 6))
+    mass_cols = np.zeros((len(keep), 6, nb, 4))
+    own = np.zeros((len(keep), 6, 1))
+    for i, k in enumerate(keep):
+        q, v, a = res.q[k], res.v[k], res.a[k]
+        T = _to_world(q)
+        need = T @ pin.rnea(model, data, q, v, a)[:6]
+        e[i] = np.concatenate([res.force_n[k], res.moment_nm[k]]) - need
+        own[i, :, 0] = need
+        Y = pin.computeJointTorqueRegressor(model, data, q, v, a)[:6]
+        mass_cols[i] = np.tensordot(T, Y.reshape(6, nb, 10)[:, :, :4], axes=(1, 0))
+    valid = np.ones_like(e, bool)
+    floors = np.maximum(fast_part_floor(e, valid, res.t_s[keep]), 1e-3)
+    w = 1.0 / floors
+    stack = lambda X: np.concatenate([X[:, c, :] * w[c] for c in range(6)], axis=0)  # noqa: E731
+    y = stack(e[:, :, None])[:, 0]
+    sid = np.repeat(np.arange(6), len(keep))
+    total = float(sum(model.inertias[j].mass for j in range(1, model.njoints)))
+
+    def within_scale_mass(seg: str) -> np.ndarray:
+        """An extra mass on ``seg`` inside the scale mass: the other segments are lighter by the same share."""
+        X = mass_cols[:, :, human.segment_joint[seg] - 1].copy()
+        X[:, :, 0] -= own[:, :, 0] / total
+        return X
+
+    cands = [Candidate("extra_mass", seg, ["mass [kg]", "mass*com_x [kg m]", "mass*com_y [kg m]",
+                                           "mass*com_z [kg m]"], stack(within_scale_mass(seg)),
+                       plausible=_mass_within_reach) for seg in SEGMENTS]
+    cands.append(Candidate("mass_scale", "whole body", ["scale - 1"], stack(own)))
+    if progress:
+        progress(f"  {len(keep)} supported frames, {len(cands)} candidates: selecting")
+    sel = select(y, cands, series_id=sid, noise_rss=float(len(y)))
+    after = e.copy()
+    effects = []
+    for s in sel.effects:
+        c = s.candidate
+        X = within_scale_mass(c.location) if c.kind == "extra_mass" else own
+        after -= np.tensordot(X, s.theta, axes=(2, 0))
+        se = np.sqrt(np.clip(np.diag(s.cov), 0, None))
+        if c.kind == "extra_mass":
+            m = float(s.theta[0])
+            effects.append({"kind": c.kind, "location": c.location, "mass_kg": m, "mass_ci95_kg": 1.96 * float(se[0]),
+                            "alternatives": s.alternatives,
+                            "pos_m": (s.theta[1:] / m).tolist(), "share_of_gap": s.gain})
+        else:
+            effects.append({"kind": c.kind, "location": c.location, "value": 1.0 + float(s.theta[0]),
+                            "ci95": 1.96 * float(se[0]), "share_of_gap": s.gain})
+    rms_b = np.sqrt(np.mean(e ** 2, axis=0))
+    rms_a = np.sqrt(np.mean(after ** 2, axis=0))
+    if effects:
+        verdict = "; ".join(f"extra mass on {d['location']}: {d['mass_kg']:.2f} +- {d['mass_ci95_kg']:.2f} kg"
+                            if d["kind"] == "extra_mass" else f"whole-body mass scale {d['value']:.3f}"
+                            for d in effects)
+    else:
+        verdict = "no significant discrepancy" if (rms_b / floors).max() < SIGNIFICANT_Z else \
+            "disagreement found, but no candidate effect explains it"
+    return HumanGap(str(bag), list(SEGMENTS), floors, rms_b, rms_a, sel, effects, verdict)
