@@ -35,8 +35,8 @@ def _plt():
 
 def channels_figure(result: GapResult, png: Path, top: int = 24) -> None:
     plt = _plt()
-    z_b = np.nanmax(result.rms_before / result.floors, axis=0)
-    z_a = np.nanmax(result.rms_after / result.floors, axis=0)
+    z_b = np.nan_to_num(result.rms_before / result.floors).max(axis=0)
+    z_a = np.nan_to_num(result.rms_after / result.floors).max(axis=0)
     order = np.argsort(-z_b)[:top]
     fig, ax = plt.subplots(figsize=(10, 0.28 * len(order) + 1.6))
     y = np.arange(len(order))

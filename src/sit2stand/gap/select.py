@@ -16,7 +16,9 @@ kept if
 
 Candidates whose fit is nearly as good as the winner's (``ambiguity`` of its gain) are reported as alternatives: the
 data cannot tell them apart. After the forward pass, each chosen effect is dropped in turn and the criterion checked
-again (backward elimination), so that an early choice made redundant by later ones goes.
+again (backward elimination), so that an early choice made redundant by later ones goes; and an effect whose leading
+parameter is within 1.96 standard errors of zero in the joint fit (two effects trading off along a direction the
+data cannot see) is dropped.
 
 Confidence intervals are 95 % (1.96 standard errors) from the least-squares covariance scaled by the residual variance
 and by n / n_eff.
@@ -171,6 +173,21 @@ def select(y: np.ndarray, candidates: list[Candidate], series_id: np.ndarray | N
                 chosen.pop(i)
                 changed = True
                 break
+    # an effect whose leading parameter is not distinguishable from zero in the joint fit (|theta| < 1.96 standard
+    # errors: two effects trading off along a direction the data cannot see) is dropped, the weakest first
+    while chosen:
+        X = np.hstack([candidates[k].X for k in chosen])
+        theta, *_ = np.linalg.lstsq(X, y, rcond=None)
+        res = y - X @ theta
+        frac = effective_fraction(res, series_id)
+        cov = float(res @ res) / max(n - X.shape[1], 1) * np.linalg.pinv(X.T @ X) / max(frac, 1e-3)
+        starts = np.cumsum([0] + [candidates[k].X.shape[1] for k in chosen])[:-1]
+        t = np.array([abs(theta[i]) / max(np.sqrt(max(cov[i, i], 0.0)), 1e-300) for i in starts])
+        if t.min() >= 1.96:
+            break
+        i = int(np.argmin(t))
+        steps.append({"dropped": candidates[chosen[i]].key, "t": float(t[i]), "why": "not distinguishable from 0"})
+        chosen.pop(i)
     effects = []
     if chosen:
         X = np.hstack([candidates[k].X for k in chosen])

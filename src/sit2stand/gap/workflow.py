@@ -40,7 +40,7 @@ from .recording import Recording, RecordingError, read_recording
 from .residuals import Evaluation, evaluate, joint_columns
 from .select import Candidate, Selection, select
 
-MOVED_RAD = 0.02             # a joint whose range in the data is below this did not move: its links are one body
+MOVED_RAD = 0.1              # a joint whose range in the data is below this did not move: its links are one body
 MOVING_RADPS = 0.05          # RMS speed above which a joint's friction can be seen
 FLOOR_WINDOW_S = 1.0         # the residual's slow part (any physical effect) is its Savitzky-Golay fit over this
 FT_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
