@@ -21,8 +21,8 @@ Every candidate physical effect enters e linearly, to first order, through a **s
 * joint encoder offset (reading - true angle) [rad]: d e / d q_j, by finite differences of the whole evaluation;
 * force/torque sensor bias per foot (sensor axes, [N], [N m]): J_sole^T of the bias carried to the ground reaction.
 
-Actuator delay does not show here (the measured torque is the applied one): it is read from the command tracking,
-see :mod:`sit2stand.gap.workflow`.
+Actuator delay does not show in e (the measured torque is the applied one, whenever it was commanded): it would have
+to be read from how the measured motion tracks the commands, which this library does not do yet.
 """
 
 from __future__ import annotations
