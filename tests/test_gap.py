@@ -125,10 +125,13 @@ def test_gap_command_report_and_augmented_model(tmp_path):
     res = subprocess.run(exe + ["gap", str(bag), "--out", str(out)], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
     assert "torque-sensor bias at leg_left_4_joint" in res.stdout and "extra mass on base_link" in res.stdout
-    for f in ("report.md", "gap.json", "augmented_model.yaml", "gap_channels.png", "gap_residuals.png", "gap_cop.png"):
+    for f in ("report.md", "gap.json", "augmented_model.yaml", "gap_channels.png", "gap_residuals.png", "gap_cop.png",
+              "gap_replay.png"):
         assert (out / f).stat().st_size > 0, f
     summary = json.loads((out / "gap.json").read_text())
     assert summary["gap_shrink"] >= 0.7
+    replay = summary["replay"][0]       # the commands replayed: the named effects bring the simulation closer
+    assert replay["with the named effects"]["feet_fz_rms_n"] < 0.3 * replay["nominal model"]["feet_fz_rms_n"]
     doc = yaml.safe_load((out / "augmented_model.yaml").read_text())
     assert abs(doc["unmodeled"]["torque_bias_nm"]["leg_left_4_joint"] - 4.0) < 0.8
     assert abs(doc["links"]["root"]["mass"] - (13.54 + 6.0)) < 1.2

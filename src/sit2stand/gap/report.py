@@ -9,7 +9,9 @@
   ``links``; its ``unmodeled`` section re-simulates the effects);
 * ``gap_channels.png``: RMS residual / noise floor per channel, before and after;
 * ``gap_residuals.png``: the most disagreeing channels against time, before and after, phases shaded;
-* ``gap_cop.png``: the measured centre of pressure against the one each model predicts from the measured motion.
+* ``gap_cop.png``: the measured centre of pressure against the one each model predicts from the measured motion;
+* ``gap_replay.png``: for runs that carry their commands, the commands replayed in simulation in the nominal model
+  and with the named effects added (COP and feet force against the measured ones).
 """
 
 from __future__ import annotations
@@ -185,6 +187,16 @@ def markdown(result: GapResult) -> str:
                   for u in result.unexplained[:15]]
     elif result.effects:
         lines.append("Nothing is left above 3 x the noise floor on any channel.")
+    if result.replay:
+        lines += ["", "## The recorded commands replayed in simulation", "",
+                  "| recording | model | COP x RMS vs measured | feet vertical force RMS | fell |",
+                  "| --- | --- | --- | --- | --- |"]
+        for rp in result.replay:
+            for name, v in rp.items():
+                if name == "recording":
+                    continue
+                cop = f"{100 * v['cop_x_rms_m']:.2f} cm" if v["cop_x_rms_m"] is not None else "n/a"
+                lines.append(f"| {rp['recording']} | {name} | {cop} | {v['feet_fz_rms_n']:.1f} N | {v['fell']} |")
     lines += ["", "## Where the nominal model was wrong (ranked)", "",
               "| # | recording | channel | phase | RMS | floor | ratio | worst at [s] |",
               "| --- | --- | --- | --- | --- | --- | --- | --- |"]
@@ -200,14 +212,71 @@ def markdown(result: GapResult) -> str:
     lines += [f"- {s}" for s in result.selection.steps]
     if result.notes:
         lines += ["", "## Notes", ""] + [f"- {n}" for n in result.notes]
-    lines += ["", "Figures: `gap_channels.png`, `gap_residuals.png`, `gap_cop.png`. Model with the effects: "
+    lines += ["", "Figures: `gap_channels.png`, `gap_residuals.png`, `gap_cop.png`, `gap_replay.png`. Model with the "
+              "effects: "
               "`augmented_model.yaml`.", ""]
     return "\n".join(lines)
 
 
-def write_report(result: GapResult, out: str | Path) -> dict:
+def replay_all(result: GapResult, progress=None) -> list[dict]:
+    """Re-simulate each run that carries its commands, in the nominal model (CAD) and with the named effects added
+    (see :mod:`sit2stand.gap.replay`); identified nominal models are not re-simulated (their per-link masses are not a
+    plant file)."""
+    from .replay import compare, plant_from_effects, simulate
+    from ..robot.model import PlantConfig
+
+    out = []
+    if result.model_source != "cad":
+        return out
+    for r, rec in enumerate(result.dataset.recordings):
+        if rec.static or rec.commands is None:
+            continue
+        seated = bool(result.dataset.events[r])
+        if progress:
+            progress(f"  re-simulating {Path(rec.source).name}: nominal model, then with the named effects")
+        sims = {"nominal model": simulate(PlantConfig(), rec, seated),
+                "with the named effects": simulate(plant_from_effects(result.known + result.effects), rec, seated)}
+        out.append({"recording": r, "sims": sims, "rms": compare(rec, sims)})
+    return out
+
+
+def replay_figure(result: GapResult, replays: list[dict], png: Path) -> None:
+    plt = _plt()
+    ds = result.dataset
+    fig, axes = plt.subplots(len(replays), 2, figsize=(12, 2.8 * len(replays) + 0.4), squeeze=False)
+    for row, rp in zip(axes, replays):
+        rec = ds.recordings[rp["recording"]]
+        t = rec.t_s
+        for ax in row:
+            _shade(ax, t, ds.labels[rp["recording"]])
+        row[0].plot(t, 100 * rec.cop[:, 0], color="k", lw=1.2, label="measured")
+        row[1].plot(t, rec.feet_force_z_n, color="k", lw=1.2, label="measured")
+        for (name, sim), colour in zip(rp["sims"].items(), ("#c0504d", "#4f81bd")):
+            rms = rp["rms"][name]
+            cop_txt = f"{100 * rms['cop_x_rms_m']:.2f} cm" if rms["cop_x_rms_m"] is not None else "n/a"
+            row[0].plot(t, 100 * sim["cop_x"], color=colour, lw=1, label=f"simulated, {name} (RMS {cop_txt})")
+            row[1].plot(t, sim["feet_fz"], color=colour, lw=1,
+                        label=f"simulated, {name} (RMS {rms['feet_fz_rms_n']:.1f} N)")
+        row[0].set_ylabel("COP x [cm]")
+        row[1].set_ylabel("feet vertical force [N]")
+        row[0].set_title(f"{Path(rec.source).name}: the recorded commands replayed in each model", fontsize=9)
+        for ax in row:
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=7)
+            ax.set_xlabel("time [s]")
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+
+
+def write_report(result: GapResult, out: str | Path, progress=None) -> dict:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    replays = replay_all(result, progress)
+    if replays:
+        replay_figure(result, replays, out / "gap_replay.png")
+    result.replay = [{"recording": rp["recording"], **{k: {kk: vv for kk, vv in v.items() if kk != "tau_rms_nm"}
+                                                      for k, v in rp["rms"].items()}} for rp in replays]
     nominal, _, _ = load_nominal(None if result.model_source == "cad" else result.model_source)
     doc = write_augmented(result, nominal, out / "augmented_model.yaml")
     write_json(result, out / "gap.json")
@@ -222,5 +291,5 @@ def gap_command(bags: list[str | Path], out: str | Path, model: str | None = Non
                 progress=None) -> GapResult:
     """``sit2stand gap``: run the workflow and write the report."""
     result = run(bags, model, rate_hz=rate_hz, progress=progress)
-    write_report(result, out)
+    write_report(result, out, progress)
     return result

@@ -271,6 +271,7 @@ class GapResult:
     dataset: Dataset
     after: list[np.ndarray]                # per recording: (N, C) residual of the augmented model
     known: list[dict] = field(default_factory=list)   # joint/sensor effects the nominal model file already had
+    replay: list[dict] = field(default_factory=list)  # re-simulation figures (report.replay_all)
 
     @property
     def shrink(self) -> float:
@@ -537,7 +538,7 @@ def summary(result: GapResult) -> dict:
         "gap_shrink": result.shrink, "unexplained": result.unexplained[:20], "ranked": result.table[:30],
         "channels": {ch: {"floor": result.floors[:, c].tolist(), "rms_before": result.rms_before[:, c].tolist(),
                           "rms_after": result.rms_after[:, c].tolist()} for c, ch in enumerate(result.channels)},
-        "selection_steps": result.selection.steps, "n_rows": result.selection.n_rows,
+        "replay": result.replay, "selection_steps": result.selection.steps, "n_rows": result.selection.n_rows,
         "n_eff": result.selection.n_eff, "events": result.dataset.events, "notes": result.notes})
 
 
