@@ -27,6 +27,7 @@ CASES = {
     "torque_gain": [draw("torque_gain", 0)],
     "joint_offset": [draw("joint_offset", 0)],
     "ft_bias": [draw("ft_bias", 0)],
+    "actuator_delay": [draw("actuator_delay", 0)],
     "none": [],
     "two": [Hidden("extra_mass", "torso_2_link", 5.0, (-0.1, 0.0, 0.1)),
             Hidden("viscous_friction", "leg_left_3_joint", 3.0)],

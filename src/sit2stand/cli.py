@@ -179,7 +179,8 @@ def _gap(args: argparse.Namespace) -> int:
     from .gap.workflow import GapError, describe, progress_printer
 
     try:
-        result = gap_command(args.bags, args.out, model=args.model, rate_hz=args.rate, progress=progress_printer)
+        result = gap_command(args.bags, args.out, model=args.model, rate_hz=args.rate, progress=progress_printer,
+                             controller=args.controller)
     except GapError as err:
         print(f"sit2stand gap: error: {err}", file=sys.stderr)
         return 2
@@ -344,6 +345,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("gap", help="find, name and add what a robot model misses, from measured robot bags")
     p.add_argument("bags", type=Path, nargs="+", help="robot bags: runs (driver, excite) and/or static postures")
     p.add_argument("--model", help="nominal model: cad (default), identified parameters or an augmented model YAML")
+    p.add_argument("--controller", help="the parameters the robot's controller ran with (driver controller_params; "
+                   "default: CAD): the control law is re-evaluated with them")
     p.add_argument("--rate", type=float, default=50.0, help="analysis rate [Hz] for runs")
     p.add_argument("--out", type=Path, required=True)
     p.set_defaults(func=_gap)

@@ -16,7 +16,7 @@ import numpy as np
 from ..robot.model import ExtraBodyMass, PlantConfig, Unmodeled
 
 KINDS = ("extra_mass", "viscous_friction", "coulomb_friction", "torque_bias", "torque_gain", "joint_offset",
-         "ft_bias")
+         "ft_bias", "actuator_delay")
 MASS_LINKS = ("base_link", "torso_2_link", "leg_left_3_link", "leg_right_3_link", "leg_left_4_link",
               "leg_right_4_link", "arm_left_4_link", "arm_right_4_link")
 MOVING_JOINTS = ("torso_2_joint", "leg_left_3_joint", "leg_left_4_joint", "leg_left_5_joint", "leg_right_3_joint",
@@ -31,7 +31,7 @@ FT_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
 
 @dataclass
 class Hidden:
-    """One hidden effect: ``kind`` at ``location`` with ``magnitude`` (kg, N m s/rad, N m, measured/true gain, rad,
+    """One hidden effect: ``kind`` at ``location`` with ``magnitude`` (kg, N m s/rad, N m, measured/true gain, rad, s,
     N or N m); a mass also has ``pos_m`` in the link frame."""
 
     kind: str
@@ -67,6 +67,8 @@ def draw(kind: str, seed: int) -> Hidden:
         side, axis = str(rng.choice(["left", "right"])), str(rng.choice(FT_AXES))
         size = rng.uniform(5.0, 20.0) if axis.startswith("f") else rng.uniform(1.0, 4.0)
         return Hidden(kind, f"ft_{side}/{axis}", float(sign * size))
+    if kind == "actuator_delay":
+        return Hidden(kind, "all joints", float(rng.uniform(0.005, 0.025)))
     raise ValueError(f"unknown effect kind {kind!r} (known: {', '.join(KINDS)})")
 
 
@@ -81,6 +83,8 @@ def plant_with(effects: list[Hidden], seed: int = 0) -> PlantConfig:
             bias = list(um.ft_bias.get(side, (0.0,) * 6))
             bias[FT_AXES.index(axis)] += h.magnitude
             um.ft_bias[side] = tuple(bias)
+        elif h.kind == "actuator_delay":
+            um.actuator_delay_s += h.magnitude
         else:
             table = {"viscous_friction": um.viscous_friction, "coulomb_friction": um.coulomb_friction,
                      "torque_bias": um.torque_bias_nm, "torque_gain": um.torque_gain,

@@ -33,6 +33,8 @@ def plant_from_effects(effects: list[dict]) -> PlantConfig:
             b = list(um.ft_bias.get(side, (0.0,) * 6))
             b[("fx", "fy", "fz", "tx", "ty", "tz").index(axis)] += float(e["value"])
             um.ft_bias[side] = tuple(b)
+        elif k == "actuator_delay":
+            um.actuator_delay_s += float(e["value"])
         else:
             table = {"viscous_friction": um.viscous_friction, "coulomb_friction": um.coulomb_friction,
                      "torque_bias": um.torque_bias_nm, "torque_gain": um.torque_gain,

@@ -21,8 +21,10 @@ Every candidate physical effect enters e linearly, to first order, through a **s
 * joint encoder offset (reading - true angle) [rad]: d e / d q_j, by finite differences of the whole evaluation;
 * force/torque sensor bias per foot (sensor axes, [N], [N m]): J_sole^T of the bias carried to the ground reaction.
 
-Actuator delay does not show in e (the measured torque is the applied one, whenever it was commanded): it would have
-to be read from how the measured motion tracks the commands, which this library does not do yet.
+Actuator delay does not show in e (the measured torque is the applied one, whenever it was commanded): it shows in
+the controller channels, ``ctrl/<joint>`` = measured torque - the control law re-evaluated from the recorded commands
+(:mod:`sit2stand.gap.control`), added when the bag has the commands; the torque sensor's bias and gain show there
+too, masses and friction do not.
 """
 
 from __future__ import annotations
@@ -57,6 +59,24 @@ class Evaluation:
     body_names: list[str]         # link name of each Pinocchio body (joint 1..nb)
     centre_m: np.ndarray          # (N, 3) the point the base moments are taken about (mid-soles)
     sole_m: dict[str, np.ndarray]  # side -> (N, 3) sole point [m] (measured base pose and joints)
+    ctrl_law: np.ndarray | None = None     # (N, n) the control law's torque (gap.control), when commands were recorded
+    ctrl_delay: np.ndarray | None = None   # (N, n) its actuator-delay signature
+
+    @property
+    def n_joints(self) -> int:
+        return self.tau_model.shape[1]
+
+    def add_control(self, law: np.ndarray, delay: np.ndarray, ok: np.ndarray, tau_meas: np.ndarray,
+                    joint_names: list[str]) -> None:
+        """Append the controller channels ``ctrl/<joint>``: measured torque - control law (see gap.control)."""
+        N, n = law.shape
+        self.channels = self.channels + [f"ctrl/{j}" for j in joint_names]
+        self.e = np.hstack([self.e, np.where(ok[:, None], tau_meas - law, 0.0)])
+        self.valid = np.hstack([self.valid, np.repeat(ok[:, None], n, axis=1)])
+        self.mass_cols = np.concatenate([self.mass_cols, np.zeros((N, n) + self.mass_cols.shape[2:])], axis=1)
+        self.offset_cols = np.concatenate([self.offset_cols, np.zeros((N, n, n))], axis=1)
+        self.ft_cols = {s: np.concatenate([c, np.zeros((N, n, 6))], axis=1) for s, c in self.ft_cols.items()}
+        self.ctrl_law, self.ctrl_delay = law, delay
 
     @property
     def joint_channels(self) -> slice:
@@ -196,18 +216,28 @@ def joints_at_limit(model: pin.Model, rec: Recording, idx_v: np.ndarray, margin_
 
 
 def joint_columns(rec: Recording, ev: Evaluation, kind: str, j: int) -> np.ndarray:
-    """(N, C, 1) signature of a single-joint effect ``kind`` on joint ``j`` (see the module docstring)."""
+    """(N, C, 1) signature of a single-joint effect ``kind`` on joint ``j`` (see the module docstring); with
+    ``actuator_delay`` (all joints, ``j`` ignored) the delay's signature on the controller channels."""
     N, C = ev.e.shape
     col = np.zeros((N, C, 1))
     row = 6 + j
+    ctrl = 6 + ev.n_joints + j if ev.ctrl_law is not None else None
+    if kind == "actuator_delay":
+        if ev.ctrl_delay is not None:
+            col[:, 6 + ev.n_joints:, 0] = ev.ctrl_delay
+        return col
     if kind == "viscous_friction":
         col[:, row, 0] = rec.qd[:, j]
     elif kind == "coulomb_friction":
         col[:, row, 0] = coulomb_signature(rec.qd[:, j])
-    elif kind == "torque_bias":
+    elif kind == "torque_bias":      # the sensor's bias shows against the dynamics and against the control law
         col[:, row, 0] = 1.0
+        if ctrl is not None:
+            col[:, ctrl, 0] = 1.0
     elif kind == "torque_gain":
         col[:, row, 0] = ev.tau_model[:, j]
+        if ctrl is not None:
+            col[:, ctrl, 0] = ev.ctrl_law[:, j]
     elif kind == "joint_offset":
         col[:, :, 0] = ev.offset_cols[:, :, j]
     else:

@@ -36,6 +36,7 @@ from ..dynamics import savgol_series
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import PlantConfig, controller_model
 from ..robot.plant import apply_parameters
+from .control import control_law
 from .recording import Recording, RecordingError, read_recording
 from .residuals import Evaluation, evaluate, joint_columns
 from .select import Candidate, Selection, select
@@ -44,10 +45,11 @@ MOVED_RAD = 0.1              # a joint whose range in the data is below this did
 MOVING_RADPS = 0.05          # RMS speed above which a joint's friction can be seen
 FLOOR_WINDOW_S = 1.0         # the residual's slow part (any physical effect) is its Savitzky-Golay fit over this
 FT_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
+MIN_DELAY_S = 0.001          # one control step of the simulated robot
 MASS_REACH_M = 0.6           # an extra mass further than this from its link's origin is not a mass on that link
 SIGNIFICANT_Z = 3.0          # a channel's RMS residual this many times its floor is a disagreement
 UNITS = {"extra_mass": ("kg", "m"), "viscous_friction": "N m s/rad", "coulomb_friction": "N m",
-         "torque_bias": "N m", "torque_gain": "1", "joint_offset": "rad"}
+         "torque_bias": "N m", "torque_gain": "1", "joint_offset": "rad", "actuator_delay": "s"}
 
 
 class GapError(ValueError):
@@ -132,7 +134,8 @@ class Dataset:
         return self.recordings[0].joint_names
 
 
-def load_dataset(bags: list[str | Path], model: pin.Model, rate_hz: float = 50.0, progress=None) -> Dataset:
+def load_dataset(bags: list[str | Path], model: pin.Model, rate_hz: float = 50.0, progress=None,
+                 controller_params: dict | None = None) -> Dataset:
     recs, evs, labels, events, notes = [], [], [], [], []
     for bag in bags:
         rec = read_recording(bag, model, rate_hz=rate_hz)
@@ -148,6 +151,9 @@ def load_dataset(bags: list[str | Path], model: pin.Model, rate_hz: float = 50.0
             progress(f"  {bag}: {len(rec)} samples ({'static postures' if rec.static else 'run'}); evaluating the "
                      "model along them")
         ev = evaluate(model, rec, seated=seated)
+        law = control_law(rec, controller_params)
+        if law is not None:
+            ev.add_control(*law, rec.tau, rec.joint_names)
         recs.append(rec)
         evs.append(ev)
         labels.append(lab)
@@ -244,6 +250,13 @@ def build_candidates(model: pin.Model, ds: Dataset) -> list[Candidate]:
             if np.linalg.norm(X) < 1e-6:
                 continue
             cands.append(Candidate(kind, name, [f"{kind} [{UNITS[kind]}]"], X))
+    if any(ev.ctrl_delay is not None for ev in ds.evaluations):
+        # a delay is causal and, to matter, at least one control step (1 ms): below that it is the residue of
+        # re-evaluating the law from 50 Hz samples
+        cands.append(Candidate("actuator_delay", "all joints", ["delay [s]"],
+                               _stack(ds, [joint_columns(r, ev, "actuator_delay", 0)
+                                           for r, ev in zip(ds.recordings, ds.evaluations)]),
+                               plausible=lambda theta: float(theta[0]) >= MIN_DELAY_S))
     for side in ("left", "right"):          # one candidate per sensor axis: a bias is per channel
         for a, axis in enumerate(FT_AXES):
             cands.append(Candidate("ft_bias", f"ft_{side}/{axis}", [f"{axis} [{'N' if a < 3 else 'N m'}]"],
@@ -358,7 +371,8 @@ def describe(effect: dict) -> str:
                 f"kg at ({p[0]:+.3f}, {p[1]:+.3f}, {p[2]:+.3f}) m in the link frame")
     label = {"viscous_friction": "viscous friction", "coulomb_friction": "Coulomb friction",
              "torque_bias": "torque-sensor bias", "torque_gain": "torque-sensor gain",
-             "joint_offset": "encoder offset", "ft_bias": "force/torque sensor bias (sensor axes)"}[k]
+             "joint_offset": "encoder offset", "ft_bias": "force/torque sensor bias (sensor axes)",
+             "actuator_delay": "actuator delay"}[k]
     return f"{label} at {effect['location']}: {effect['value']:.4g} +- {effect['ci95']:.2g} {effect['unit']}"
 
 
@@ -384,19 +398,27 @@ def effect_columns(ds: Dataset, links: list[str], r: int, kind: str, location: s
         side, axis = location.split("_", 1)[1].split("/")
         a = FT_AXES.index(axis)
         return ev.ft_cols[side][:, :, a:a + 1]
+    if kind == "actuator_delay":
+        return joint_columns(rec, ev, kind, 0)
     if location not in rec.joint_names:
         raise GapError(f"effect {kind} at unknown joint {location!r}")
     return joint_columns(rec, ev, kind, rec.joint_names.index(location))
 
 
 def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: float = 50.0,
-        progress=None) -> GapResult:
-    """The workflow on ``bags`` against the nominal model (see the module docstring)."""
+        progress=None, controller: str | Path | None = None) -> GapResult:
+    """The workflow on ``bags`` against the nominal model (see the module docstring). ``controller``: the link
+    parameters the robot's controller ran with when the bags were recorded (the driver's ``controller_params``;
+    None: CAD), for the controller channels; it is not the model under test."""
     say = progress or (lambda _msg: None)
     model, source, known = load_nominal(model_path)
     if not bags:
         raise GapError("no measured bag given")
-    ds = load_dataset(bags, model, rate_hz=rate_hz, progress=say)
+    try:
+        ctrl_params = read_link_parameters(controller) if controller not in (None, "cad") else None
+    except (IdentificationError, OSError) as err:
+        raise GapError(f"{controller}: not a usable controller model: {err}") from None
+    ds = load_dataset(bags, model, rate_hz=rate_hz, progress=say, controller_params=ctrl_params)
     from .residuals import body_link_names
 
     links = body_link_names(model)
@@ -496,6 +518,9 @@ def augmented_model(result: GapResult, nominal: pin.Model) -> dict:
             side, axis = e["location"].split("_", 1)[1].split("/")
             unmodeled["ft_bias"].setdefault(side, [0.0] * 6)[FT_AXES.index(axis)] += e["value"]
         else:
+            if k == "actuator_delay":
+                unmodeled["actuator_delay_s"] = unmodeled.get("actuator_delay_s", 0.0) + e["value"]
+                continue
             key = {"torque_bias": "torque_bias_nm", "joint_offset": "joint_offset_rad"}.get(k, k)
             if k == "torque_gain":
                 unmodeled[key][e["location"]] = unmodeled[key].get(e["location"], 1.0) * (e["value"])

@@ -220,24 +220,11 @@ class Plant:
     def _feedforward(self) -> np.ndarray:
         if self.feedforward == "none":
             return np.zeros(self.n)
-        model, data = self.ctrl, self.ctrl_data
         q = self.pin_configuration(self.data.qpos)
         q[7:] = self.q_ref
-        v = np.zeros(model.nv)
-        a = np.zeros(model.nv)
-        if self.feedforward == "inverse_dynamics":
-            v[6:], a[6:] = self.qd_ref, self.qdd_ref
-        tau = pin.rnea(model, data, q, v, a)
-        # contact-consistent: the feet (and the seat when it carries load) take the base's wrench
-        frames = [model.getFrameId(f"sole_{s}") for s in SIDES]
-        pin.computeJointJacobians(model, data, q)
-        pin.updateFramePlacements(model, data)
-        J = np.vstack([pin.getFrameJacobian(model, data, f, pin.LOCAL_WORLD_ALIGNED) for f in frames])
         seated = self.data.qpos[2] < self.seated_base_z + 0.03 or self._feet_load_fraction() < 0.9
-        if seated:   # the seat pushes up under the buttocks (a frame on the pelvis at the seat surface)
-            J = np.vstack([J, pin.getFrameJacobian(model, data, model.getFrameId("seat"), pin.LOCAL_WORLD_ALIGNED)[:3]])
-        lam = np.linalg.lstsq(J[:, :6].T, tau[:6], rcond=None)[0]
-        return tau[6:] - J[:, 6:].T @ lam
+        return contact_feedforward(self.ctrl, self.ctrl_data, q, self.qd_ref, self.qdd_ref,
+                                   self.feedforward == "inverse_dynamics", seated)
 
     def _feet_load_fraction(self) -> float:
         fz = sum(self._ground_reaction(s)[2] for s in SIDES)
@@ -344,6 +331,26 @@ class Plant:
                 mujoco.mj_contactForce(self.model, self.data, i, f6)
                 total += abs((c.frame.reshape(3, 3).T @ f6[:3])[2])
         return total
+
+
+def contact_feedforward(model, data, q: np.ndarray, qd_ref: np.ndarray, qdd_ref: np.ndarray, dynamic: bool,
+                        seated: bool) -> np.ndarray:
+    """The controller's feed-forward joint torques [N m]: gravity (or inverse dynamics along the reference with
+    ``dynamic``) of ``model`` at ``q`` (Pinocchio configuration: measured base, reference joints), with the base's
+    wrench taken by the soles (and the seat frame when ``seated``) in the least-squares sense."""
+    v = np.zeros(model.nv)
+    a = np.zeros(model.nv)
+    if dynamic:
+        v[6:], a[6:] = qd_ref, qdd_ref
+    tau = pin.rnea(model, data, q, v, a)
+    frames = [model.getFrameId(f"sole_{s}") for s in SIDES]
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    J = np.vstack([pin.getFrameJacobian(model, data, f, pin.LOCAL_WORLD_ALIGNED) for f in frames])
+    if seated:   # the seat pushes up under the buttocks (a frame on the pelvis at the seat surface)
+        J = np.vstack([J, pin.getFrameJacobian(model, data, model.getFrameId("seat"), pin.LOCAL_WORLD_ALIGNED)[:3]])
+    lam = np.linalg.lstsq(J[:, :6].T, tau[:6], rcond=None)[0]
+    return tau[6:] - J[:, 6:].T @ lam
 
 
 def apply_parameters(model, params: dict) -> None:

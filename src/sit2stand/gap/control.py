@@ -1,0 +1,74 @@
+"""The controller channel: the measured joint torque against the robot's own control law, re-evaluated from the
+recorded commands and the measured state.
+
+The joint controller is known exactly (it is ours; only the robot's physics is uncertain):
+
+    tau_act = clip(kp (q_ref - q) + kd (q'_ref - q') + clip(ff), +-effort),
+
+with the reference followed along its velocity between command messages, and ff the contact-consistent inverse
+dynamics of the *controller's* model (``robot.plant.contact_feedforward``). The residual of the measured torque
+against it is zero whatever the physics (masses, friction) is, and shows what sits between the command and the
+sensor:
+
+* actuator delay d [s]: the law acts on the reference of d ago: r = -d (kp q'_ref + kd q''_ref + ff'),
+* torque-sensor bias (1) and gain (tau_act).
+
+The simulated driver publishes the torque applied during its last physics step: the law is evaluated
+``sensor_lag_s`` (one step) before the sample.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..robot.model import PlantConfig
+from ..robot.plant import EXTRAPOLATE_MAX_S, Plant, contact_feedforward
+from .recording import Recording
+
+G = 9.81
+
+
+def control_law(rec: Recording, controller_params: dict | None = None, sensor_lag_s: float = 0.001
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(tau_act (N, n), delay signature (N, n), valid (N,)) of the control law along ``rec``; None without commands.
+    ``controller_params``: the controller's identified link parameters (None: CAD)."""
+    cmd = rec.commands
+    if cmd is None or rec.static or len(cmd.t_s) < 2:
+        return None
+    plant = Plant(PlantConfig(), controller_params=controller_params)
+    names = plant.joint_names
+    if names != rec.joint_names:
+        order = [names.index(j) for j in rec.joint_names]
+    else:
+        order = list(range(len(names)))
+    kp, kd, effort = plant.kp[order], plant.kd[order], plant.effort[order]
+    n, N = len(rec.joint_names), len(rec)
+    law = np.zeros((N, n))
+    ff_all = np.zeros((N, n))
+    pd_rate = np.zeros((N, n))
+    valid = np.zeros(N, bool)
+    fz = rec.feet_force_z_n
+    for k in range(N):
+        t = rec.t_s[k] - sensor_lag_s
+        c = int(np.searchsorted(cmd.t_s, t + 1e-6)) - 1
+        if c < 0 or not np.all(np.isfinite(cmd.q[c])):
+            continue
+        age = min(max(t - cmd.t_s[c], 0.0), EXTRAPOLATE_MAX_S)
+        q_t = cmd.q[c] + age * cmd.qd[c] + 0.5 * age * age * cmd.qdd[c]
+        qd_t = cmd.qd[c] + age * cmd.qdd[c]
+        q_meas = rec.q[k] - sensor_lag_s * rec.qd[k]
+        qd_meas = rec.qd[k] - sensor_lag_s * rec.qdd[k]
+        base = rec.base_pose[k]
+        qp = np.concatenate([base[:3], base[[4, 5, 6, 3]], np.zeros(n)])
+        qp[7:][order] = q_t
+        qd_full, qdd_full = np.zeros(n), np.zeros(n)
+        qd_full[order], qdd_full[order] = qd_t, cmd.qdd[c]
+        seated = base[2] < plant.seated_base_z + 0.03 or fz[k] / (plant.ctrl_mass * G) < 0.9
+        ff = contact_feedforward(plant.ctrl, plant.ctrl_data, qp, qd_full, qdd_full, True, seated)[order]
+        ff = np.clip(ff, -effort, effort)
+        law[k] = np.clip(kp * (q_t - q_meas) + kd * (qd_t - qd_meas) + ff, -effort, effort)
+        ff_all[k] = ff
+        pd_rate[k] = kp * qd_t + kd * cmd.qdd[c]
+        valid[k] = True
+    dff = np.gradient(ff_all, rec.t_s, axis=0) if N > 2 else np.zeros_like(ff_all)
+    return law, -(pd_rate + dff), valid
