@@ -118,12 +118,17 @@ def test_gap_command_report_and_augmented_model(tmp_path):
     from sit2stand.robot.model import PlantConfig
     from sit2stand.robot.plant import Plant
 
+    from sit2stand.robot.postures import collect_postures
+
     bag = tmp_path / "bias"
     hidden = [Hidden("torque_bias", "leg_left_4_joint", 4.0), Hidden("extra_mass", "base_link", 6.0, (-0.1, 0, -0.05))]
     excite(plant_with(hidden), bag, seed=5, n_moves=6)
+    postures = tmp_path / "postures"      # a second bag of another kind: static postures, no commands
+    collect_postures(plant_with(hidden), 6, postures, progress=False)
     exe = [sys.executable, "-m", "sit2stand.cli"]
     out = tmp_path / "report"
-    res = subprocess.run(exe + ["gap", str(bag), "--out", str(out)], capture_output=True, text=True, timeout=300)
+    res = subprocess.run(exe + ["gap", str(bag), str(postures), "--out", str(out)], capture_output=True, text=True,
+                         timeout=300)
     assert res.returncode == 0, res.stderr
     assert "torque-sensor bias at leg_left_4_joint" in res.stdout and "extra mass on base_link" in res.stdout
     for f in ("report.md", "gap.json", "augmented_model.yaml", "gap_channels.png", "gap_residuals.png", "gap_cop.png",

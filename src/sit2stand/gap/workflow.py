@@ -159,6 +159,11 @@ def load_dataset(bags: list[str | Path], model: pin.Model, rate_hz: float = 50.0
         labels.append(lab)
         events.append(ev_info)
         notes.extend(rec.notes)
+    if any(ev.ctrl_law is not None for ev in evs):      # one channel layout: no controller rows where no commands
+        for rec, ev in zip(recs, evs):
+            if ev.ctrl_law is None:
+                z = np.zeros_like(rec.tau)
+                ev.add_control(z, z, np.zeros(len(rec), bool), rec.tau, rec.joint_names)
     return Dataset(recs, evs, labels, events, notes=notes)
 
 
