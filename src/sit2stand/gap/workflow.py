@@ -46,7 +46,8 @@ MOVING_RADPS = 0.05          # RMS speed above which a joint's friction can be s
 FLOOR_WINDOW_S = 1.0         # the residual's slow part (any physical effect) is its Savitzky-Golay fit over this
 FT_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
 MIN_DELAY_S = 0.001          # one control step of the simulated robot
-MASS_REACH_M = 0.6           # an extra mass further than this from its link's origin is not a mass on that link
+MASS_REACH_M = 0.6
+MASS_MAX_KG = 40.0           # an extra mass above this on one link of a 90 kg robot is not a missing part           # an extra mass further than this from its link's origin is not a mass on that link
 SIGNIFICANT_Z = 3.0          # a channel's RMS residual this many times its floor is a disagreement
 UNITS = {"extra_mass": ("kg", "m"), "viscous_friction": "N m s/rad", "coulomb_friction": "N m",
          "torque_bias": "N m", "torque_gain": "1", "joint_offset": "rad", "actuator_delay": "s"}
@@ -205,9 +206,10 @@ def rigid_groups(model: pin.Model, ds: Dataset) -> dict[int, list[int]]:
 
 
 def _mass_within_reach(theta: np.ndarray) -> bool:
-    """An extra point mass is plausible within MASS_REACH_M of its link's origin (and not vanishingly small)."""
+    """An extra point mass is plausible within MASS_REACH_M of its link's origin, not vanishingly small, and under
+    MASS_MAX_KG (larger ones are two candidates trading off along a direction the data do not see)."""
     m = float(theta[0])
-    return abs(m) > 1e-3 and float(np.linalg.norm(theta[1:] / m)) <= MASS_REACH_M
+    return 1e-3 < abs(m) <= MASS_MAX_KG and float(np.linalg.norm(theta[1:] / m)) <= MASS_REACH_M
 
 
 def _stack(ds: Dataset, cols: list[np.ndarray]) -> np.ndarray:
