@@ -25,7 +25,7 @@ from ..io import messages as M
 from ..io.bag import BagWriter
 from ..robot.model import SIDES, PlantConfig
 from ..robot.plant import Plant
-from ..robot.postures import home_com_bias, plan_postures, standing_qpos
+from ..robot.postures import home_com_bias, plan_postures
 
 
 def quintic(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -39,7 +39,6 @@ def excite(cfg: PlantConfig, out: str | Path, seed: int = 0, n_moves: int = 8, m
     """Run and record an excitation (see the module docstring); returns a summary (duration, fell)."""
     plant = Plant(replace(cfg, fall_tilt_rad=np.pi), with_chair=False)
     bias = home_com_bias(plant)
-    home = standing_qpos(plant, -0.1, 0.2, 0.0, 0.0)
     stances = plan_postures(plant, n_moves, seed=seed, com_bias_m=bias)
     if len(stances) < n_moves:
         raise RuntimeError(f"only {len(stances)} of {n_moves} stable stances found")
@@ -82,5 +81,5 @@ def excite(cfg: PlantConfig, out: str | Path, seed: int = 0, n_moves: int = 8, m
             if plant.fallen:
                 break
     feet = {s: plant.data.site(f"sole_{s}").xpos.copy() for s in SIDES}
-    return {"duration_s": duration, "fell": bool(plant.fallen), "status": plant.status_text, "home": home[:3].tolist(),
+    return {"duration_s": duration, "fell": bool(plant.fallen), "status": plant.status_text,
             "feet_x_m": [float(feet[s][0]) for s in SIDES]}

@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..robot.model import ExtraBodyMass, PlantConfig, Unmodeled
+from ..robot.model import PlantConfig
+from .effects import FT_AXES, unmodeled_from
 
 KINDS = ("extra_mass", "viscous_friction", "coulomb_friction", "torque_bias", "torque_gain", "joint_offset",
          "ft_bias", "actuator_delay")
@@ -26,7 +27,6 @@ LOADED_JOINTS = ("torso_2_joint", "leg_left_3_joint", "leg_left_4_joint", "leg_l
                  "leg_right_4_joint", "leg_right_5_joint")
 ALL_JOINTS_FOR_BIAS = MOVING_JOINTS + ("leg_left_1_joint", "leg_right_2_joint", "torso_1_joint", "head_2_joint",
                                        "arm_left_3_joint")
-FT_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
 
 
 @dataclass
@@ -38,6 +38,12 @@ class Hidden:
     location: str
     magnitude: float
     pos_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def as_effect(self) -> dict:
+        """In the workflow's terms (see gap.effects)."""
+        if self.kind == "extra_mass":
+            return {"kind": self.kind, "location": self.location, "mass_kg": self.magnitude, "pos_m": self.pos_m}
+        return {"kind": self.kind, "location": self.location, "value": self.magnitude}
 
     def describe(self) -> str:
         extra = f" at {tuple(round(p, 3) for p in self.pos_m)} m" if self.kind == "extra_mass" else ""
@@ -74,24 +80,8 @@ def draw(kind: str, seed: int) -> Hidden:
 
 def plant_with(effects: list[Hidden], seed: int = 0) -> PlantConfig:
     """The CAD plant with ``effects`` hidden in its ``unmodeled`` section (named "hidden": the bag tells nothing)."""
-    um = Unmodeled()
-    for h in effects:
-        if h.kind == "extra_mass":
-            um.masses.append(ExtraBodyMass(h.location, h.magnitude, h.pos_m, f"hidden_{len(um.masses)}"))
-        elif h.kind == "ft_bias":
-            side, axis = h.location.split("_", 1)[1].split("/")
-            bias = list(um.ft_bias.get(side, (0.0,) * 6))
-            bias[FT_AXES.index(axis)] += h.magnitude
-            um.ft_bias[side] = tuple(bias)
-        elif h.kind == "actuator_delay":
-            um.actuator_delay_s += h.magnitude
-        else:
-            table = {"viscous_friction": um.viscous_friction, "coulomb_friction": um.coulomb_friction,
-                     "torque_bias": um.torque_bias_nm, "torque_gain": um.torque_gain,
-                     "joint_offset": um.joint_offset_rad}[h.kind]
-            table[h.location] = h.magnitude
     cfg = PlantConfig(name="hidden", seed=seed)
-    cfg.unmodeled = um
+    cfg.unmodeled = unmodeled_from([h.as_effect() for h in effects], mass_prefix="hidden")
     return cfg
 
 

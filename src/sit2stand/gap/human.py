@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from .residuals import base_to_world
 from .select import Candidate, Selection, select
 from .workflow import SIGNIFICANT_Z, _mass_within_reach, fast_part_floor
 
@@ -35,15 +36,6 @@ class HumanGap:
     selection: Selection
     effects: list[dict]
     verdict: str
-
-
-def _to_world(q: np.ndarray) -> np.ndarray:
-    R = pin.Quaternion(q[3:7]).normalized().matrix()
-    T = np.zeros((6, 6))
-    T[:3, :3] = R
-    T[3:, 3:] = R
-    T[3:, :3] = pin.skew(q[:3]) @ R
-    return T
 
 
 def human_gap(bag: str | Path, progress=None) -> HumanGap:
@@ -72,7 +64,7 @@ def human_gap(bag: str | Path, progress=None) -> HumanGap:
     own = np.zeros((len(keep), 6, 1))
     for i, k in enumerate(keep):
         q, v, a = res.q[k], res.v[k], res.a[k]
-        T = _to_world(q)
+        T = base_to_world(q, np.zeros(3))        # about the lab origin, as the plates give it
         need = T @ pin.rnea(model, data, q, v, a)[:6]
         e[i] = np.concatenate([res.force_n[k], res.moment_nm[k]]) - need
         own[i, :, 0] = need

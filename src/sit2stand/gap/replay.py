@@ -14,34 +14,16 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..robot.model import SIDES, PlantConfig, Unmodeled, ExtraBodyMass
+from ..robot.model import SIDES, PlantConfig
 from ..robot.plant import Plant
+from .effects import unmodeled_from
 from .recording import Recording
 
 
 def plant_from_effects(effects: list[dict]) -> PlantConfig:
     """CAD plus the named effects (the workflow's effect dicts) as a plant configuration."""
-    um = Unmodeled()
-    for e in effects:
-        k = e["kind"]
-        if k == "extra_mass":
-            if e["mass_kg"] > 0:
-                um.masses.append(ExtraBodyMass(e["location"], float(e["mass_kg"]), tuple(e["pos_m"]),
-                                               f"found_{len(um.masses)}"))
-        elif k == "ft_bias":
-            side, axis = e["location"].split("_", 1)[1].split("/")
-            b = list(um.ft_bias.get(side, (0.0,) * 6))
-            b[("fx", "fy", "fz", "tx", "ty", "tz").index(axis)] += float(e["value"])
-            um.ft_bias[side] = tuple(b)
-        elif k == "actuator_delay":
-            um.actuator_delay_s += float(e["value"])
-        else:
-            table = {"viscous_friction": um.viscous_friction, "coulomb_friction": um.coulomb_friction,
-                     "torque_bias": um.torque_bias_nm, "torque_gain": um.torque_gain,
-                     "joint_offset": um.joint_offset_rad}[k]
-            table[e["location"]] = float(e["value"])
     cfg = PlantConfig(name="augmented")
-    cfg.unmodeled = um
+    cfg.unmodeled = unmodeled_from(effects)
     return cfg
 
 

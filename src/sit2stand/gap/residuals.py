@@ -119,7 +119,7 @@ class _Rows:
         return b - pin.rnea(m, d, q, v, a), J
 
 
-def _base_to_world(model, data, q: np.ndarray, centre: np.ndarray) -> np.ndarray:
+def base_to_world(q: np.ndarray, centre: np.ndarray) -> np.ndarray:
     """6x6 map of the base rows (a wrench in the base frame, at the base origin) to world axes about ``centre``."""
     R = pin.Quaternion(q[3:7]).normalized().matrix()
     p = q[:3] - centre
@@ -160,7 +160,7 @@ def evaluate(model: pin.Model, rec: Recording, seated: np.ndarray | None = None,
         for s in SIDES:
             sole[s][k] = rows.data.oMf[rows.soles[s]].translation
         centre[k] = 0.5 * (sole["left"][k] + sole["right"][k])
-        T = _base_to_world(model, rows.data, q, centre[k])
+        T = base_to_world(q, centre[k])
 
         def channel(x: np.ndarray) -> np.ndarray:
             """Rows of the model's v order (leading axis) -> channel order, base rows to world about the centre."""

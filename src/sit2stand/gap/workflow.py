@@ -38,16 +38,16 @@ from ..robot.model import PlantConfig, controller_model
 from ..robot.plant import apply_parameters
 from .control import control_law
 from .recording import Recording, RecordingError, read_recording
-from .residuals import Evaluation, evaluate, joint_columns
+from .effects import FT_AXES, ft_location, unmodeled_dict, unmodeled_from
+from .residuals import Evaluation, body_link_names, evaluate, joint_columns
 from .select import Candidate, Selection, select
 
 MOVED_RAD = 0.1              # a joint whose range in the data is below this did not move: its links are one body
 MOVING_RADPS = 0.05          # RMS speed above which a joint's friction can be seen
 FLOOR_WINDOW_S = 1.0         # the residual's slow part (any physical effect) is its Savitzky-Golay fit over this
-FT_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
 MIN_DELAY_S = 0.001          # one control step of the simulated robot
-MASS_REACH_M = 0.6
-MASS_MAX_KG = 40.0           # an extra mass above this on one link of a 90 kg robot is not a missing part           # an extra mass further than this from its link's origin is not a mass on that link
+MASS_REACH_M = 0.6           # an extra mass further than this from its link's origin is not a mass on that link
+MASS_MAX_KG = 40.0           # an extra mass above this on one link of a 90 kg robot is not a missing part
 SIGNIFICANT_Z = 3.0          # a channel's RMS residual this many times its floor is a disagreement
 UNITS = {"extra_mass": ("kg", "m"), "viscous_friction": "N m s/rad", "coulomb_friction": "N m",
          "torque_bias": "N m", "torque_gain": "1", "joint_offset": "rad", "actuator_delay": "s"}
@@ -233,8 +233,6 @@ def _series_id(ds: Dataset) -> np.ndarray:
 
 def build_candidates(model: pin.Model, ds: Dataset) -> list[Candidate]:
     """Every effect of the library that these data can show (see the module docstring), with its signature rows."""
-    from .residuals import body_link_names
-
     links = body_link_names(model)
     names = ds.joint_names
     static = all(r.static for r in ds.recordings)
@@ -402,8 +400,7 @@ def effect_columns(ds: Dataset, links: list[str], r: int, kind: str, location: s
     if kind == "extra_mass":
         return ev.mass_cols[:, :, links.index(location), :]
     if kind == "ft_bias":
-        side, axis = location.split("_", 1)[1].split("/")
-        a = FT_AXES.index(axis)
+        side, a = ft_location(location)
         return ev.ft_cols[side][:, :, a:a + 1]
     if kind == "actuator_delay":
         return joint_columns(rec, ev, kind, 0)
@@ -426,8 +423,6 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
     except (IdentificationError, OSError) as err:
         raise GapError(f"{controller}: not a usable controller model: {err}") from None
     ds = load_dataset(bags, model, rate_hz=rate_hz, progress=say, controller_params=ctrl_params)
-    from .residuals import body_link_names
-
     links = body_link_names(model)
     for r, ev in enumerate(ds.evaluations):     # the model file's joint and sensor effects are part of the model
         for eff in known:
@@ -501,44 +496,24 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
 # -- augmented model -------------------------------------------------------------------------------------------------
 def augmented_model(result: GapResult, nominal: pin.Model) -> dict:
     """The augmented model file's content (see the module docstring)."""
-    from .residuals import body_link_names
-
     links = body_link_names(nominal)
     model = nominal.copy()
-    unmodeled: dict = {"masses": [], "viscous_friction": {}, "coulomb_friction": {}, "torque_bias_nm": {},
-                       "torque_gain": {}, "joint_offset_rad": {}, "ft_bias": {}}
-    for e in result.known + result.effects:
-        k = e["kind"]
-        if k == "extra_mass":
-            jid = links.index(e["location"]) + 1
-            extra = pin.Inertia(e["mass_kg"], np.asarray(e["pos_m"]), np.eye(3) * 1e-4 * abs(e["mass_kg"]))
-            if e["mass_kg"] > 0:
-                model.inertias[jid] = model.inertias[jid] + extra
-            else:   # a lighter link than modelled: remove the mass at that point
-                old = model.inertias[jid]
-                m = old.mass + e["mass_kg"]
-                model.inertias[jid] = pin.Inertia(max(m, 1e-6), (old.mass * old.lever + e["mass_kg"] *
-                                                                 np.asarray(e["pos_m"])) / max(m, 1e-6), old.inertia)
-            unmodeled["masses"].append({"name": f"found_{e['location']}", "link": e["location"],
-                                        "mass_kg": e["mass_kg"], "pos_m": list(e["pos_m"])})
-        elif k == "ft_bias":
-            side, axis = e["location"].split("_", 1)[1].split("/")
-            unmodeled["ft_bias"].setdefault(side, [0.0] * 6)[FT_AXES.index(axis)] += e["value"]
-        else:
-            if k == "actuator_delay":
-                unmodeled["actuator_delay_s"] = unmodeled.get("actuator_delay_s", 0.0) + e["value"]
-                continue
-            key = {"torque_bias": "torque_bias_nm", "joint_offset": "joint_offset_rad"}.get(k, k)
-            if k == "torque_gain":
-                unmodeled[key][e["location"]] = unmodeled[key].get(e["location"], 1.0) * (e["value"])
-            else:
-                unmodeled[key][e["location"]] = unmodeled[key].get(e["location"], 0.0) + e["value"]
+    effects = result.known + result.effects
+    for e in effects:
+        if e["kind"] != "extra_mass":
+            continue
+        jid = links.index(e["location"]) + 1
+        old, m, p = model.inertias[jid], e["mass_kg"], np.asarray(e["pos_m"])
+        if m > 0:
+            model.inertias[jid] = old + pin.Inertia(m, p, np.eye(3) * 1e-4 * m)
+        else:   # a lighter link than modelled: remove the mass at that point
+            total = max(old.mass + m, 1e-6)
+            model.inertias[jid] = pin.Inertia(total, (old.mass * old.lever + m * p) / total, old.inertia)
     link_params = {model.names[j]: {"mass": float(model.inertias[j].mass),
                                     "com": [float(v) for v in model.inertias[j].lever]}
                    for j in range(1, model.njoints)}
     return {"nominal": result.model_source, "bags": result.bags, "verdict": result.verdict,
-            "effects": result.known + result.effects, "links": link_params,
-            "unmodeled": {k: v for k, v in unmodeled.items() if v}}
+            "effects": effects, "links": link_params, "unmodeled": unmodeled_dict(unmodeled_from(effects))}
 
 
 def write_augmented(result: GapResult, nominal: pin.Model, path: str | Path) -> dict:
