@@ -1,6 +1,7 @@
 """sit2stand.launch: graph files, substitutions, and supervising real processes (signals, prefixes, orphans)."""
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -74,6 +75,10 @@ def test_substitutions_and_parameters(tmp_path):
     ([{"name": "a", "executable": "recorder", "parameters": ["nope.yaml"]}], {}, "does not exist"),
     ([{"name": "a", "executable": "recorder"}], {"typo": "1"}, "unknown argument"),
     ([{"name": "a", "executable": "recorder", "on_exit": "explode"}], {}, "on_exit"),
+    ([{"name": "a", "executable": "recorder", "scheduling": {"policy": "turbo"}}], {}, "scheduling.policy"),
+    ([{"name": "a", "executable": "recorder", "scheduling": {"policy": "fifo"}}], {}, "scheduling.priority"),
+    ([{"name": "a", "executable": "recorder", "scheduling": {"nice": 40}}], {}, "scheduling.nice"),
+    ([{"name": "a", "executable": "recorder", "scheduling": {"priority": "high"}}], {}, "integers"),
 ])
 def test_bad_graphs_name_the_problem(tmp_path, nodes, overrides, message):
     with pytest.raises(LaunchError, match=message) as err:
@@ -151,3 +156,52 @@ def test_no_orphans_when_the_launcher_is_killed(tmp_path):
     while time.monotonic() < deadline and any(alive(p) for p in pids):
         time.sleep(0.05)
     assert not any(alive(p) for p in pids), "children outlived a SIGKILLed launcher"
+
+
+SCHED_CHILD = textwrap.dedent("""\
+    #!{python}
+    import os, sys
+    policy = {{os.SCHED_OTHER: "other", os.SCHED_FIFO: "fifo", os.SCHED_RR: "rr"}}[os.sched_getscheduler(0)]
+    print(sys.argv[1], "runs", policy, os.sched_getparam(0).sched_priority, os.getpriority(os.PRIO_PROCESS, 0),
+          flush=True)
+    """)
+
+
+def _sched_graph(tmp_path):
+    script = tmp_path / "sched.py"
+    script.write_text(SCHED_CHILD.format(python=sys.executable))
+    script.chmod(0o755)
+    return [{"name": "low", "executable": str(script), "arguments": ["low"], "scheduling": {"nice": 5}},
+            {"name": "rt", "executable": str(script), "arguments": ["rt"],
+             "scheduling": {"policy": "fifo", "priority": 10}}]
+
+
+def _check_sched(out: str, permitted: bool | None) -> None:
+    assert "[low] low runs other 0 5" in out and "started low" in out and "SCHED_OTHER nice 5" in out
+    took = "[rt ] rt runs fifo 10 0" in out
+    if permitted is not None:
+        assert took == permitted, out
+    if took:
+        assert "SCHED_FIFO priority 10" in out, out
+    else:   # not permitted: the node still ran, under the default scheduler, and the launcher said so
+        assert "[rt ] rt runs other 0 0" in out and "was not permitted" in out, out
+
+
+def test_scheduling_is_applied_or_reported(tmp_path):
+    proc = run_launch(tmp_path, _sched_graph(tmp_path))
+    out, _ = proc.communicate(timeout=30)
+    assert proc.returncode == 0, out
+    _check_sched(out, None)
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or not shutil.which("setpriv"), reason="needs root and setpriv to drop a capability")
+def test_real_time_refused_without_cap_sys_nice(tmp_path):
+    """As root, run the launcher without CAP_SYS_NICE: the real-time node must still start, and be reported."""
+    path = graph_file(tmp_path, _sched_graph(tmp_path))
+    cmd = ["setpriv", "--inh-caps=-sys_nice", "--bounding-set=-sys_nice", sys.executable, "-m", "sit2stand.cli",
+           "launch", str(path)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    if "setpriv:" in proc.stderr:
+        pytest.skip(f"setpriv cannot drop capabilities here: {proc.stderr.strip()}")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    _check_sched(proc.stdout, False)

@@ -15,6 +15,7 @@ A graph file::
         remappings: {/in: /out}
         arguments: []                # extra command-line arguments before --ros-args
         env: {ROS_LOG_DIR: /tmp}
+        scheduling: {policy: fifo, priority: 50}   # or {nice: 10}; default: the launcher's own (see below)
         delay_s: 0.0                 # start this long after the graph
         on_exit: ignore              # or "shutdown": when this node ends, stop the whole graph
       - name: replayer
@@ -23,6 +24,12 @@ A graph file::
         on_exit: shutdown
 
 Substitutions: ``$(var NAME)``, ``$(env NAME)`` / ``$(env NAME default)``, ``$(dirname)`` (the graph file's folder).
+
+``scheduling`` sets a node's Linux scheduling class before it starts (every thread it makes inherits it):
+``policy`` ``other`` (the default time-sharing scheduler) with an optional ``nice`` (-20..19), or ``fifo`` / ``rr``
+(real-time) with a ``priority`` (1..99). A latency-critical node in real time is what ROS 2 control stacks do
+(ros2_control's controller manager asks for SCHED_FIFO 50); it needs root, CAP_SYS_NICE or an ``rtprio`` limit.
+Where that is not permitted the node still starts, under the default scheduler, and the launcher says so.
 
 Each node's output is printed line by line with a ``[name]`` prefix. SIGINT/SIGTERM to the launcher are forwarded
 as SIGINT to every node; nodes still alive after ``grace_s`` get SIGTERM, then SIGKILL. Every child gets
@@ -54,6 +61,65 @@ class LaunchError(ValueError):
     """A graph file that cannot be launched; the message names the file and the field."""
 
 
+POLICIES = {"other": os.SCHED_OTHER, "fifo": os.SCHED_FIFO, "rr": os.SCHED_RR}
+
+
+@dataclass(frozen=True)
+class Scheduling:
+    """A process's Linux scheduling class: ``policy`` other | fifo | rr, ``priority`` 1..99 (fifo/rr), ``nice``
+    -20..19 (other)."""
+
+    policy: str = "other"
+    priority: int = 0
+    nice: int = 0
+
+    def __str__(self) -> str:
+        if self.policy == "other":
+            return f"SCHED_OTHER nice {self.nice}"
+        return f"SCHED_{self.policy.upper()} priority {self.priority}"
+
+    def apply(self, pid: int = 0) -> None:
+        """Set it on process ``pid`` (0: this one); raises OSError (e.g. PermissionError) when not allowed."""
+        if self.policy == "other":
+            os.sched_setscheduler(pid, os.SCHED_OTHER, os.sched_param(0))
+            if self.nice:
+                os.setpriority(os.PRIO_PROCESS, pid, self.nice)
+        else:
+            os.sched_setscheduler(pid, POLICIES[self.policy], os.sched_param(self.priority))
+
+    def holds_for(self, pid: int) -> bool:
+        """Whether process ``pid`` runs under this class."""
+        if os.sched_getscheduler(pid) != POLICIES[self.policy]:
+            return False
+        if self.policy == "other":
+            return os.getpriority(os.PRIO_PROCESS, pid) == self.nice
+        return os.sched_getparam(pid).sched_priority == self.priority
+
+
+def parse_scheduling(raw, where: str) -> Scheduling | None:
+    """A graph node's ``scheduling`` map; errors name the field."""
+    if raw is None:
+        return None
+    if not isinstance(raw, dict) or set(raw) - {"policy", "priority", "nice"}:
+        raise LaunchError(f"{where}: scheduling must be a map with policy, priority and/or nice")
+    policy = str(raw.get("policy", "other")).lower()
+    if policy not in POLICIES:
+        raise LaunchError(f"{where}: scheduling.policy must be one of {', '.join(POLICIES)}, not {policy!r}")
+    try:
+        priority, nice = int(raw.get("priority", 0)), int(raw.get("nice", 0))
+    except (TypeError, ValueError):
+        raise LaunchError(f"{where}: scheduling.priority and scheduling.nice must be integers") from None
+    if policy == "other":
+        if not -20 <= nice <= 19:
+            raise LaunchError(f"{where}: scheduling.nice must be in -20..19, not {nice}")
+        return Scheduling("other", 0, nice)
+    if not 1 <= priority <= 99:
+        raise LaunchError(f"{where}: scheduling.priority must be in 1..99 for policy {policy}, not {priority}")
+    if nice:
+        raise LaunchError(f"{where}: scheduling.nice applies to policy other only")
+    return Scheduling(policy, priority, 0)
+
+
 @dataclass
 class NodeSpec:
     """One process of a graph."""
@@ -63,6 +129,7 @@ class NodeSpec:
     env: dict[str, str] = field(default_factory=dict)
     delay_s: float = 0.0
     shutdown_on_exit: bool = False
+    scheduling: Scheduling | None = None
 
 
 @dataclass
@@ -168,7 +235,8 @@ def _node_spec(spec: dict, name: str, where: str, graph_dir: Path, tmpdir: Path)
     if on_exit not in ("ignore", "shutdown"):
         raise LaunchError(f"{where} ({name}): on_exit must be 'ignore' or 'shutdown', not {on_exit!r}")
     env = {str(k): str(v) for k, v in (spec.get("env") or {}).items()}
-    return NodeSpec(name, command, env, float(spec.get("delay_s", 0.0)), on_exit == "shutdown")
+    return NodeSpec(name, command, env, float(spec.get("delay_s", 0.0)), on_exit == "shutdown",
+                    parse_scheduling(spec.get("scheduling"), f"{where} ({name})"))
 
 
 def _set_parent_death_signal() -> None:
@@ -178,6 +246,17 @@ def _set_parent_death_signal() -> None:
         libc.prctl(1, signal.SIGTERM, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
     except OSError:
         pass
+
+
+def _child_setup(scheduling: Scheduling | None) -> None:
+    """In the child, before exec: the parent death signal, and the scheduling class if permitted (the launcher
+    checks afterwards whether it took)."""
+    _set_parent_death_signal()
+    if scheduling is not None:
+        try:
+            scheduling.apply(0)
+        except OSError:
+            pass
 
 
 class Launcher:
@@ -210,12 +289,22 @@ class Launcher:
         env.update({"PYTHONUNBUFFERED": "1", "RCUTILS_COLORIZED_OUTPUT": "0", "RCUTILS_LOGGING_BUFFERED_STREAM": "0"})
         env.update(spec.env)
         proc = subprocess.Popen(spec.command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                env=env, start_new_session=True, preexec_fn=_set_parent_death_signal)
+                                env=env, start_new_session=True,
+                                preexec_fn=lambda: _child_setup(spec.scheduling))
         self.procs[spec.name] = proc
         reader = threading.Thread(target=self._pump, args=(spec.name, proc.stdout), daemon=True)
         reader.start()
         self._readers.append(reader)
-        self._emit("launch", f"started {spec.name} (pid {proc.pid})")
+        note = ""
+        if spec.scheduling is not None:
+            try:
+                took = spec.scheduling.holds_for(proc.pid)
+            except OSError:          # it already ended
+                took = True
+            note = f", {spec.scheduling}" if took else \
+                (f"; {spec.scheduling} was not permitted (needs root, CAP_SYS_NICE or an rtprio limit): it runs "
+                 "under the default scheduler")
+        self._emit("launch", f"started {spec.name} (pid {proc.pid}){note}")
 
     def request_stop(self, *_args) -> None:
         self._stop.set()

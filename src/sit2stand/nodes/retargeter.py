@@ -39,7 +39,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from ..io.messages import MARKERS_TOPIC, plate_topic, stamp_ns
 from ..retarget.stream import PlanPlayer, RetargetConfig, Retargeter, robot_setup
 from .driver import DEFAULT_PLANT
-from .runtime import IdleDrain, NodeError, declare, node_main, qos_matching_publishers
+from .runtime import IdleDrain, NodeError, declare, node_main, qos_matching_publishers, scheduling_text
 
 
 class RetargeterNode(Node):
@@ -77,8 +77,9 @@ class RetargeterNode(Node):
         self.create_subscription(ForcePlateSample, plate_topic("chair"), self._on_chair,
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
                                             reliability=ReliabilityPolicy.RELIABLE))
-        self.create_subscription(JointState, "/robot/joint_states", self._on_joint_states, 10)
-        self.create_subscription(PoseStamped, "/robot/base_pose", self._on_base_pose, 10)
+        # the robot's measured posture is needed once, for the calibration: these go once it is done
+        self.robot_subs = [self.create_subscription(JointState, "/robot/joint_states", self._on_joint_states, 10),
+                           self.create_subscription(PoseStamped, "/robot/base_pose", self._on_base_pose, 10)]
         self.cmd_pub = self.create_publisher(JointTrajectory, "/robot/joint_command", 100)
         self.com_pub = self.create_publisher(CenterOfMass, "/robot/planned_com", 100)
         self.zmp_pub = self.create_publisher(PointStamped, "/robot/planned_zmp", 100)
@@ -105,6 +106,7 @@ class RetargeterNode(Node):
         self.finished = False
         self.exit_code = 0
         self.drain = IdleDrain(lambda: self.processed)
+        self.scheduling = scheduling_text()
         self.create_timer(0.25 / self.rate_hz, self._tick)
         self.create_timer(2.0, self._report)
         self.get_logger().info(f"retargeter: plant {self.plant_file}, COM parameters "
@@ -187,6 +189,9 @@ class RetargeterNode(Node):
                                  lookahead_s=self.lookahead, smooth_frames=self.smooth, fixed_scale=self.fixed_scale,
                                  max_joint_speed=self.max_speed)
         self.names = names
+        for sub in self.robot_subs:     # 400 callbacks/s no longer needed, in the same thread as the frames
+            self.destroy_subscription(sub)
+        self.robot_subs = []
         self.get_logger().info(f"calibrated on the first frame: {len(marker_map.links)} markers fixed to the robot; "
                                f"leg-length scale {self.retargeter.scale:.3f}")
         return True
@@ -227,9 +232,10 @@ class RetargeterNode(Node):
             # e.g. after the COM estimator's calibration pause, must not play the plan faster)
             now = time.monotonic()
             if self._next_due is None or now >= self._next_due - 0.5 / self.rate_hz:
-                if self._pull_and_publish():
+                sent = self._pull_and_publish()
+                if sent is not None:
                     self._next_due = max(self._next_due or now, now - 0.5 / self.rate_hz) + 1.0 / self.rate_hz
-                    now_pc = time.perf_counter()
+                    now_pc = sent
                     self.latencies.append(now_pc - t_rx)
                     self.own_latencies.append(now_pc - t_ready)
                     if t_ready - t_rx <= self.in_step_s:     # the COM stream kept up with the markers
@@ -239,11 +245,11 @@ class RetargeterNode(Node):
             self.last_frame_wall = time.monotonic()
             self.last_stamp = header.stamp
 
-    def _pull_and_publish(self) -> bool:
+    def _pull_and_publish(self) -> float | None:
+        """Publish the plan's next command, if it has one; returns when the joint command went out
+        (``time.perf_counter``), or None."""
         cmd = self.player.pull()
-        if cmd is not None:
-            self._publish(cmd)
-        return cmd is not None
+        return None if cmd is None else self._publish(cmd)
 
     def _tick(self) -> None:
         """Keep the commands at the mocap rate when frames are late; after the markers stop, close the plan and play
@@ -262,7 +268,7 @@ class RetargeterNode(Node):
         if self.player is None:
             return
         if self._next_due is not None and now > self._next_due + 0.5 / self.rate_hz and not self.player.done:
-            if self._pull_and_publish():
+            if self._pull_and_publish() is not None:
                 self._next_due += 1.0 / self.rate_hz
         if self.frames or now - self.last_frame_wall < 3.0 / self.rate_hz:
             return
@@ -273,7 +279,9 @@ class RetargeterNode(Node):
             if self.hold_s > 0 and time.monotonic() - self._done_at > self.hold_s:
                 self.finished = True
 
-    def _publish(self, cmd) -> None:
+    def _publish(self, cmd) -> float:
+        """The joint command first (its send time is returned: the latency ends there), then the planned COM and
+        ZMP."""
         stamp = self.get_clock().now().to_msg()         # a command is for now: the driver applies it at once
         msg = JointTrajectory()
         msg.header.stamp = stamp
@@ -285,6 +293,7 @@ class RetargeterNode(Node):
         point.accelerations = cmd.a[6:].tolist()
         msg.points = [point]
         self.cmd_pub.publish(msg)
+        sent = time.perf_counter()
         com = CenterOfMass(source="robot_plan", valid=True, n_markers=0, marker_rms_m=float("nan"),
                            cop_error_m=float("nan"))
         com.header.stamp, com.header.frame_id = stamp, "world"
@@ -294,6 +303,7 @@ class RetargeterNode(Node):
         z.header.stamp, z.header.frame_id = stamp, "world"
         z.point.x, z.point.y, z.point.z = map(float, cmd.zmp)
         self.zmp_pub.publish(z)
+        return sent
 
     def _publish_ik(self, header, q: np.ndarray) -> None:
         js = JointState(name=["root_x", "root_y", "root_z", "root_qx", "root_qy", "root_qz", "root_qw"]
@@ -314,7 +324,7 @@ class RetargeterNode(Node):
                 "latency_p50_ms": pct(lat, 50), "latency_p99_ms": pct(lat, 99),
                 "own_latency_p50_ms": pct(own, 50), "own_latency_p99_ms": pct(own, 99),
                 "in_step_frames": str(len(step)), "in_step_latency_p50_ms": pct(step, 50),
-                "in_step_latency_p99_ms": pct(step, 99)}
+                "in_step_latency_p99_ms": pct(step, 99), "scheduling": self.scheduling}
 
     def _report(self) -> None:
         st = DiagnosticStatus(name=self.get_fully_qualified_name(), hardware_id="retargeter",
@@ -331,7 +341,7 @@ class RetargeterNode(Node):
               f"{s['latency_p50_ms']} ms p99 {s['latency_p99_ms']} ms (waiting for the human COM included); "
               f"COM->command p50 {s['own_latency_p50_ms']} ms p99 {s['own_latency_p99_ms']} ms; marker->command with the "
               f"COM stream in step ({s['in_step_frames']} frames) p50 {s['in_step_latency_p50_ms']} ms p99 "
-              f"{s['in_step_latency_p99_ms']} ms", flush=True)
+              f"{s['in_step_latency_p99_ms']} ms; scheduling {s['scheduling']}", flush=True)
 
 
 main = node_main(RetargeterNode)

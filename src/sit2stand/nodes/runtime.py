@@ -8,6 +8,7 @@ console script (``replayer --ros-args -p bag:=...``), as ``python -m sit2stand.n
 from __future__ import annotations
 
 import importlib
+import os
 import signal
 import sys
 import time
@@ -137,6 +138,14 @@ class IdleDrain:
         if n != self._last:
             self._last, self._since = n, now
         return now - self._since < self.idle_s
+
+
+def scheduling_text() -> str:
+    """This process's Linux scheduling class, e.g. ``SCHED_FIFO priority 50`` or ``SCHED_OTHER nice 0``."""
+    policy = os.sched_getscheduler(0)
+    if policy in (os.SCHED_FIFO, os.SCHED_RR):
+        return f"SCHED_{'FIFO' if policy == os.SCHED_FIFO else 'RR'} priority {os.sched_getparam(0).sched_priority}"
+    return f"SCHED_OTHER nice {os.getpriority(os.PRIO_PROCESS, 0)}"
 
 
 def _make_executor(kind: str):
