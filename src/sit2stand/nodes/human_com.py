@@ -71,7 +71,7 @@ class HumanComNode(Node):
         self.scaling_pub = self.create_publisher(InertialParameters, "/human/scaling", latched)
         self.stats_pub = self.create_publisher(DiagnosticStatus, "~/stats", 10)
         self.plate_subs: dict[str, object] = {}
-        self._pending_plates: list = []
+        self._pending_plates: dict[str, list[tuple]] = {}   # samples received since the last marker frame
         self.estimator: StreamingComEstimator | None = None
         self.costs: list[float] = []
         self.skipped = 0
@@ -96,15 +96,16 @@ class HumanComNode(Node):
                 self.get_logger().info(f"using force plate {topic}")
 
     def _on_plate(self, name: str, msg: ForcePlateSample) -> None:
-        if self.estimator is None:
-            self._pending_plates.append((name, msg))
-            return
-        self._add_plate(name, msg)
-
-    def _add_plate(self, name: str, msg: ForcePlateSample) -> None:
+        # ~1 kHz per plate: only a tuple here; they go to the estimator in one array per plate at the next frame
         f, m = msg.wrench.force, msg.wrench.torque
-        self.estimator.add_plate_samples(name, stamp_ns(msg.header) * 1e-9, np.array([[f.x, f.y, f.z]]),
-                                         np.array([[m.x, m.y, m.z]]))
+        self._pending_plates.setdefault(name, []).append((stamp_ns(msg.header) * 1e-9, f.x, f.y, f.z, m.x, m.y, m.z))
+
+    def _flush_plates(self) -> None:
+        for name, rows in self._pending_plates.items():
+            if rows:
+                a = np.array(rows)
+                self.estimator.add_plate_samples(name, a[:, 0], a[:, 1:4], a[:, 4:7])
+                rows.clear()
 
     def _on_markers(self, msg: MocapFrame) -> None:
         t0 = time.perf_counter()
@@ -121,9 +122,6 @@ class HumanComNode(Node):
                 self.get_logger().error(f"{MARKERS_TOPIC}: {err}")
                 self.exit_code, self.finished = 2, True
                 return
-            for name, pmsg in self._pending_plates:
-                self._add_plate(name, pmsg)
-            self._pending_plates.clear()
             self.names = names
         pos = np.array([[p.x, p.y, p.z] for p in msg.positions], float).reshape(-1, 3)
         valid = np.asarray(msg.valid, bool)
@@ -134,6 +132,7 @@ class HumanComNode(Node):
                     pos_m[self.names.index(n)], valid_m[self.names.index(n)] = pos[j], valid[j]
             pos, valid = pos_m, valid_m
         t_s = stamp_ns(msg.header) * 1e-9
+        self._flush_plates()
         out = self.estimator.update(t_s, pos, valid)
         if not out.valid:
             self.skipped += 1

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from ..kinematics import PointJacobians
+
 
 @dataclass
 class IkResult:
@@ -69,9 +71,8 @@ class ComIk:
         self.q_hi = model.upperPositionLimit[7:].copy()
         self._proxsuite = proxsuite
         self._qp: dict[tuple[int, int], object] = {}
-        self._masks: dict[int, np.ndarray] = {}
         self.eps_abs = 1e-9
-        self._mask_sets: dict[tuple[int, ...], np.ndarray] = {}
+        self.points = PointJacobians(model)
 
     def _solve_qp(self, H, g, A, b, lo, hi):
         key = (A.shape[0], len(lo))
@@ -87,36 +88,6 @@ class ComIk:
         qp.solve()
         status = str(qp.results.info.status)
         return qp.results.x.copy(), "SOLVED" in status and "INACCURATE" not in status, float(qp.results.info.dua_res)
-
-    def _marker_jacobians(self, fids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Positions (M, 3) and world Jacobians (M, 3, nv) of marker frames, from ``data.J`` (computeJointJacobians
-        done): the point's velocity is v_O + omega x p over the joints supporting its link."""
-        data = self.data
-        P = np.array([data.oMf[f].translation for f in fids]).reshape(-1, 3)
-        key = tuple(fids)
-        masks = self._mask_sets.get(key)
-        if masks is None:
-            masks = self._mask_sets[key] = np.array([self._support_mask(f) for f in fids]).reshape(-1, self.nv)
-        Jl, Ja = data.J[:3], data.J[3:]
-        # omega x p, column by column: (w_y p_z - w_z p_y, w_z p_x - w_x p_z, w_x p_y - w_y p_x)
-        px, py, pz = (P[:, i, None] for i in range(3))
-        wx, wy, wz = Ja
-        J = np.empty((len(P), 3, self.nv))
-        J[:, 0] = Jl[0] + wy * pz - wz * py
-        J[:, 1] = Jl[1] + wz * px - wx * pz
-        J[:, 2] = Jl[2] + wx * py - wy * px
-        return P, J * masks[:, None, :]
-
-    def _support_mask(self, fid: int) -> np.ndarray:
-        mask = self._masks.get(fid)
-        if mask is None:
-            model = self.model
-            mask = np.zeros(self.nv)
-            for j in model.supports[model.frames[fid].parentJoint]:
-                if j > 0:
-                    mask[model.joints[j].idx_v:model.joints[j].idx_v + model.joints[j].nv] = 1.0
-            self._masks[fid] = mask
-        return mask
 
     def solve(self, q0: np.ndarray, markers: list[tuple[int, np.ndarray, float]], com_target: np.ndarray,
               sole_targets: list[pin.SE3], q_ref: np.ndarray | None = None, com_axes: tuple[int, ...] = (0, 1, 2),
@@ -147,7 +118,7 @@ class ComIk:
             Jc = pin.jacobianCenterOfMass(model, data, False)
             com = data.com[0].copy()
             # markers: sum w ||J dq + e||^2
-            P, J = self._marker_jacobians(fids)
+            P, J = self.points(data, fids)
             Jr = J.reshape(-1, nv)
             wr = np.repeat(w, 3)
             H = (Jr.T * wr) @ Jr
