@@ -6,7 +6,7 @@ PY    := $(VENV)/bin/python
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export RCUTILS_COLORIZED_OUTPUT ?= 0
 
-.PHONY: setup demo test test-fast bench bench-gap lock clean
+.PHONY: setup demo test test-fast bench bench-gap bench-retarget lock clean
 
 setup:            ## create .venv (pinned wheels, ROS 2 Jazzy), build msgs/, install src/ (idempotent)
 	@ros_ws/bootstrap.sh
@@ -25,6 +25,9 @@ bench: setup      ## speed figures (printed and written to bench/results/bench.j
 
 bench-gap: setup  ## only the model-gap hit rates (20 hidden-effect plants per effect kind), merged into bench.json
 	@$(PY) -m sit2stand.bench --only gap --out bench/results/bench.json
+
+bench-retarget: setup  ## only the retargeting figures (IK per frame, latency in the live graphs), merged into bench.json
+	@$(PY) -m sit2stand.bench --only retarget --out bench/results/bench.json
 
 lock:             ## re-pin constraints.txt from the current .venv (after changing requirements.txt)
 	@(echo "# Full pinned closure of ros_ws/requirements.txt (pip freeze on Python 3.11, Linux x86_64). Regenerate with: make lock"; \

@@ -192,3 +192,25 @@ def test_merge_puts_two_bags_in_time_order_and_keeps_the_first_bags_metadata(tmp
     with BagReader(tmp_path / "m") as m:
         assert [msg.timestamp_ns for msg in m.messages()] == [1, 2, 3, 4, 5]
         assert m.custom_data["who"] == "a"
+
+
+@pytest.mark.parametrize("frame_id, plate", [("lab", "chair"), ("", "feet"), ("abc", "p"), ("lab_frame", "plate12")])
+@pytest.mark.parametrize("little_endian", [True, False])
+def test_plate_sample_read_from_cdr_bytes(frame_id, plate, little_endian):
+    """The nodes read 1 kHz plate samples straight from the serialized bytes: same stamp and wrench as the message
+    (string lengths change the alignment of the wrench)."""
+    t_ns = 1_795_326_767_123_456_789
+    msg = M.force_plate_sample(t_ns, plate, np.array([1.5, -2.0, 700.25]), np.array([3.0, 4.0, -5.0]),
+                               np.array([0.1, 0.2, 0.0]), True, 0.5)
+    msg.header.frame_id = frame_id
+    data = typestore().serialize_cdr(msg, M.PLATE_TYPE, little_endian=little_endian)
+    t_s, *wrench = M.plate_sample_from_cdr(data)
+    assert t_s == M.stamp_ns(msg.header) * 1e-9
+    assert wrench == [1.5, -2.0, 700.25, 3.0, 4.0, -5.0]
+    # and as rclpy itself would build it from the same bytes
+    from rclpy.serialization import deserialize_message
+    from sit2stand_msgs.msg import ForcePlateSample
+
+    if little_endian:
+        ros = deserialize_message(bytes(data), ForcePlateSample)
+        assert (ros.wrench.force.z, ros.wrench.torque.x, ros.header.stamp.nanosec) == (700.25, 3.0, 123_456_789)

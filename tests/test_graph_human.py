@@ -57,3 +57,10 @@ def test_too_few_markers_stop_the_node_with_a_clear_error(tmp_path, ros_env, run
     assert node.wait(60) == 2, node.output
     assert "/mocap/markers" in node.output and "at least 8 are needed" in node.output
     play.stop()
+
+
+def test_a_bad_calibration_file_stops_the_node_naming_it(tmp_path, run_node):
+    (tmp_path / "cal.yaml").write_text("lengths: {thigh: 1.0}\n")      # no marker placements
+    node = run_node("sit2stand.nodes.human_com", "--ros-args", "-p", f"calibration_file:={tmp_path / 'cal.yaml'}")
+    assert node.wait(30) != 0, node.output
+    assert "calibration_file" in node.output and "cal.yaml" in node.output

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from sit2stand.human.com import (MarkerIK, StreamingComEstimator, TooFewMarkers, estimate_com, plate_wrench_at)
+from sit2stand.human.com import (MarkerIK, StreamCalibration, StreamingComEstimator, TooFewMarkers, calibrate_stream,
+                                 estimate_com, plate_wrench_at, static_frames)
 from sit2stand.human.skeleton import ExtraMass, Subject, build_human
 from sit2stand.human.synth import SynthConfig, synthesize
 
@@ -109,3 +110,29 @@ def test_streaming_estimator_matches_the_truth_after_calibration():
     err = np.linalg.norm(coms - truth, axis=1)[100:]
     assert est.calibrated and est.scaling is not None
     assert err.mean() < 0.015                       # the live estimate; offline does better (see above)
+
+
+def test_a_calibration_made_beforehand_gives_the_same_stream_without_the_pause(tmp_path):
+    """A static-trial calibration (the first 50 frames, saved and loaded back) makes the estimator calibrated from
+    its first frame; once the smoothing window has refilled, its COM is the live-calibrated one's."""
+    demo = synthesize(SynthConfig(style="elderly", seed=4))
+    subject = Subject(1.75, demo.human.total_mass)
+    pos, valid = static_frames(demo.markers_m, demo.marker_valid, 50)
+    calibrate_stream(subject, demo.marker_names, pos, valid).save(tmp_path / "cal.yaml")
+    cal = StreamCalibration.load(tmp_path / "cal.yaml")
+    assert cal.frames == 50 and cal.marker_rms_after_m < cal.marker_rms_before_m
+    before = StreamingComEstimator(subject, demo.marker_names, calibration=cal)
+    live = StreamingComEstimator(subject, demo.marker_names)
+    assert before.calibrated and not live.calibrated
+    coms = {id(before): [], id(live): []}
+    for i, t in enumerate(demo.marker_t_s):
+        for est in (before, live):
+            coms[id(est)].append(est.update(t, demo.markers_m[i], demo.marker_valid[i]).com_m)
+    a, b = np.array(coms[id(before)]), np.array(coms[id(live)])
+    assert np.all(np.isfinite(a))                       # from the first frame on
+    assert np.max(np.linalg.norm(a[100:] - b[100:], axis=1)) < 1e-4
+    with pytest.raises(ValueError, match="1.6 m"):      # made for another stature
+        StreamingComEstimator(Subject(1.6, 60.0), demo.marker_names, calibration=cal)
+    (tmp_path / "bad.yaml").write_text("lengths: 3\n")
+    with pytest.raises(ValueError, match="bad.yaml"):
+        StreamCalibration.load(tmp_path / "bad.yaml")

@@ -2,6 +2,7 @@
 
     sit2stand import-c3d FILE.c3d --out bags/NAME [--chair-plate I] [--feet-plate J] [--forward +X --up +Z]
     sit2stand human-com BAG --out DIR
+    sit2stand human-calibrate BAG --out FILE.yaml [--frames 50]   (the human_com node's calibration_file)
     sit2stand drive [--plant FILE] [--params P.yaml] [--rtf R] [--clock]   (runs the driver node)
     sit2stand collect-postures [--plant FILE] --n 88 --out DIR
     sit2stand identify DIR --model planar5|full --out params.yaml
@@ -58,6 +59,19 @@ def _synth_human(args: argparse.Namespace) -> int:
           f"{demo.seat_off_s - demo.rise_start_s:.2f} s into a {demo.rise_end_s - demo.rise_start_s:.2f} s rise; "
           f"COM height {c[i0, 2]:.3f} -> min {c[i0:, 2].min():.3f} -> {c[-1, 2]:.3f} m")
     print(f"wrote {args.out}: " + ", ".join(f"{t} ({n})" for t, n in counts.items()))
+    return 0
+
+
+def _human_calibrate(args: argparse.Namespace) -> int:
+    import time
+
+    from .human.offline import calibrate_from_bag
+
+    t0 = time.perf_counter()
+    cal = calibrate_from_bag(args.bag, args.out, args.frames, args.height, args.mass, args.sex)
+    print(f"calibrated a {cal.height_m:g} m {cal.sex} on the first {cal.frames} frames of {args.bag} in "
+          f"{time.perf_counter() - t0:.1f} s: marker RMS {cal.marker_rms_before_m * 1e3:.1f} -> "
+          f"{cal.marker_rms_after_m * 1e3:.1f} mm; wrote {args.out}")
     return 0
 
 
@@ -300,6 +314,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-calibration", action="store_true", help="keep de Leva's segment lengths")
     p.add_argument("--no-scaling", action="store_true", help="keep de Leva's segment masses")
     p.set_defaults(func=_human_com)
+
+    p = sub.add_parser("human-calibrate", help="calibrate the skeleton on a bag's first (seated, still) frames, "
+                       "for the human_com node's calibration_file")
+    p.add_argument("bag", type=Path)
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--frames", type=int, default=50, help="frames to use (the stream's own calibration takes 50)")
+    p.add_argument("--height", type=float, help="stature [m] if the bag's metadata lacks it")
+    p.add_argument("--mass", type=float, help="body mass [kg] if the bag's metadata lacks it")
+    p.add_argument("--sex", choices=["male", "female"])
+    p.set_defaults(func=_human_calibrate)
 
     p = sub.add_parser("retarget", help="retarget a demonstration to robot joint commands (optionally simulate them)")
     p.add_argument("bag", help="demonstration bag (/mocap/markers, force plates)")

@@ -236,6 +236,89 @@ def calibrate_markers(human: HumanModel, marker_names: list[str], positions: np.
     return rms[0], rms[-1]
 
 
+@dataclass
+class StreamCalibration:
+    """A subject's skeleton calibrated for streaming: segment length factors and each marker's placement in its
+    segment's frame [m], from a stretch of seated, still frames (a static trial, as labs record before the motion).
+
+    Given to :class:`StreamingComEstimator` (or the node's ``calibration_file``), the stream needs no calibration
+    pause of its own."""
+
+    lengths: dict[str, float]
+    marker_placements_m: dict[str, list[float]]
+    frames: int
+    marker_rms_before_m: float
+    marker_rms_after_m: float
+    height_m: float = float("nan")    # the subject it was made for (length factors are relative to the stature)
+    sex: str = ""
+
+    def build(self, subject: Subject) -> tuple[Subject, HumanModel]:
+        """The calibrated subject and skeleton (markers moved to their calibrated placements). Raises ValueError
+        if it was made for another stature or sex."""
+        if np.isfinite(self.height_m) and abs(self.height_m - subject.height_m) > 1e-6 or \
+                self.sex and self.sex != subject.sex:
+            raise ValueError(f"the calibration is for a {self.height_m:g} m {self.sex}, the subject is a "
+                             f"{subject.height_m:g} m {subject.sex}")
+        subj = Subject(subject.height_m, subject.mass_kg, subject.sex, dict(self.lengths), dict(subject.masses),
+                       list(subject.extra))
+        human = build_human(subj)
+        for name, p in self.marker_placements_m.items():
+            fid = human.marker_frames.get(name)
+            if fid is not None:
+                old = human.model.frames[fid].placement
+                human.model.frames[fid].placement = pin.SE3(old.rotation, np.asarray(p, float))
+        return subj, human
+
+    def save(self, path) -> None:
+        import yaml
+
+        doc = {"lengths": {k: float(v) for k, v in self.lengths.items()},
+               "marker_placements_m": {k: [float(x) for x in v] for k, v in self.marker_placements_m.items()},
+               "frames": int(self.frames), "marker_rms_before_m": float(self.marker_rms_before_m),
+               "marker_rms_after_m": float(self.marker_rms_after_m), "height_m": float(self.height_m),
+               "sex": self.sex}
+        with open(path, "w") as f:
+            f.write("# sit2stand human skeleton calibration (segment length factors; marker placements in their "
+                    "segment frames [m])\n")
+            yaml.safe_dump(doc, f, sort_keys=False)
+
+    @classmethod
+    def load(cls, path) -> StreamCalibration:
+        """Read a file written by :meth:`save`; errors name the file and the field."""
+        import yaml
+
+        try:
+            doc = yaml.safe_load(open(path)) or {}
+            return cls({str(k): float(v) for k, v in doc["lengths"].items()},
+                       {str(k): [float(x) for x in v] for k, v in doc["marker_placements_m"].items()},
+                       int(doc.get("frames", 0)), float(doc.get("marker_rms_before_m", "nan")),
+                       float(doc.get("marker_rms_after_m", "nan")), float(doc.get("height_m", "nan")),
+                       str(doc.get("sex", "")))
+        except OSError as err:
+            raise ValueError(f"{path}: cannot read the calibration: {err}") from None
+        except (KeyError, TypeError, ValueError, AttributeError, yaml.YAMLError) as err:
+            raise ValueError(f"{path}: not a skeleton calibration (needs lengths and marker_placements_m): "
+                             f"{err!r}") from None
+
+
+def calibrate_stream(subject: Subject, marker_names: list[str], positions: np.ndarray,
+                     valid: np.ndarray) -> StreamCalibration:
+    """Calibrate segment lengths and then marker placements on (N, M, 3) seated, still frames (the streaming
+    estimator's first ``calibration_frames``, or a static trial beforehand)."""
+    pos, val = np.asarray(positions, float), np.asarray(valid, bool)
+    fitted, before, _ = calibrate_lengths(subject, marker_names, pos, val, n_frames=8, max_nfev=40)
+    human = build_human(fitted)
+    _, after = calibrate_markers(human, marker_names, pos, val, iterations=2, stride=max(1, len(pos) // 15))
+    placements = {n: human.model.frames[f].placement.translation.tolist() for n, f in human.marker_frames.items()}
+    return StreamCalibration(dict(fitted.lengths), placements, len(pos), before, after, subject.height_m, subject.sex)
+
+
+def static_frames(positions: np.ndarray, valid: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The first ``n`` frames with enough markers for a calibration (as the stream itself takes them)."""
+    keep = [k for k in range(len(positions)) if np.sum(valid[k]) >= MIN_MARKERS + 4][:n]
+    return np.asarray(positions)[keep], np.asarray(valid)[keep]
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # smoothing and differentiation (the same filter offline and live)
 # ---------------------------------------------------------------------------------------------------------------
@@ -614,14 +697,16 @@ class StreamingComEstimator:
 
     ``add_plate_samples`` takes force-plate samples as they come; ``update`` takes one marker frame and returns a
     :class:`StreamOutput`. The first ``calibration_frames`` valid frames calibrate segment lengths and marker
-    placements (one pause of ~1-2 s, after which queued frames are processed at the normal rate). The COM
+    placements (one pause of ~1-2 s, after which queued frames are processed at the normal rate), unless a
+    ``calibration`` made beforehand (:func:`calibrate_stream` on a static trial) is given. The COM
     velocity/acceleration published are from a causal Savitzky-Golay fit over the last ``window`` frames; the
     scaling uses the centred fit of the frame ``window // 2`` back, as the offline estimator does.
     """
 
     def __init__(self, subject: Subject, marker_names: list[str], *, rate_hz: float = 100.0, window: int = 31,
                  calibration_frames: int = 50, rescale_every: int = 100, chair_on_plate: bool = True,
-                 min_frames_to_scale: int = 30, first_rescale: int = 100) -> None:
+                 min_frames_to_scale: int = 30, first_rescale: int = 100,
+                 calibration: StreamCalibration | None = None) -> None:
         self.subject = subject
         self.marker_names = list(marker_names)
         self.dt = 1.0 / rate_hz
@@ -651,6 +736,9 @@ class StreamingComEstimator:
         self._seat_off_seen = chair_on_plate
         self._coeffs: dict[tuple[int, int], list[np.ndarray]] = {}
         self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self.calibration: StreamCalibration | None = None
+        if calibration is not None:       # calibrated beforehand: no pause in the stream
+            self._use(calibration)
 
     # -- inputs ------------------------------------------------------------------------------------------------
     def expect_plate(self, name: str) -> None:
@@ -703,9 +791,11 @@ class StreamingComEstimator:
     def _calibrate(self) -> None:
         pos = np.array([p for p, _ in self._calib])
         val = np.array([v for _, v in self._calib])
-        subject, _, _ = calibrate_lengths(self.subject, self.marker_names, pos, val, n_frames=8, max_nfev=40)
-        human = build_human(subject)
-        calibrate_markers(human, self.marker_names, pos, val, iterations=2, stride=max(1, len(pos) // 15))
+        self._use(calibrate_stream(self.subject, self.marker_names, pos, val))
+
+    def _use(self, calibration: StreamCalibration) -> None:
+        self.calibration = calibration
+        subject, human = calibration.build(self.subject)
         self.subject, self.human, self.model = subject, human, human.model
         self.data = self.model.createData()
         q_prev = self.ik.q

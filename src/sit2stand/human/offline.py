@@ -259,3 +259,24 @@ def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg
         shutil.rmtree(res_bag)
     write_result_bag(result, res_bag, build_human(result.subject).joint_names())
     return summary
+
+
+def calibrate_from_bag(bag_path: str | Path, out_yaml: str | Path, frames: int = 50, height_m: float | None = None,
+                       mass_kg: float | None = None, sex: str | None = None):
+    """The streaming estimator's skeleton calibration from a bag's first ``frames`` usable (seated, still) marker
+    frames, as from a static trial recorded before the motion; written to ``out_yaml`` for the human_com node's
+    ``calibration_file``. Returns the :class:`sit2stand.human.com.StreamCalibration`."""
+    from .com import calibrate_stream, static_frames
+
+    trial = read_trial(bag_path)
+    height, mass = height_m or trial.height_m, mass_kg or trial.mass_kg
+    if height is None or mass is None:
+        raise ValueError(f"{bag_path}: no subject height_m/body_mass_kg in its metadata; give them")
+    subject = Subject(height, mass, sex or trial.sex)
+    pos, valid = static_frames(trial.positions, trial.valid, frames)
+    if len(pos) < frames:
+        raise ValueError(f"{bag_path}: only {len(pos)} frames with enough markers, {frames} asked")
+    cal = calibrate_stream(subject, trial.marker_names, pos, valid)
+    Path(out_yaml).parent.mkdir(parents=True, exist_ok=True)
+    cal.save(out_yaml)
+    return cal

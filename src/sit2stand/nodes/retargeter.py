@@ -36,7 +36,7 @@ from sensor_msgs.msg import JointState
 from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, MocapFrame
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from ..io.messages import MARKERS_TOPIC, plate_topic, stamp_ns
+from ..io.messages import MARKERS_TOPIC, plate_sample_from_cdr, plate_topic, stamp_ns
 from ..retarget.stream import PlanPlayer, RetargetConfig, Retargeter, robot_setup
 from .driver import DEFAULT_PLANT
 from .runtime import IdleDrain, NodeError, declare, node_main, qos_matching_publishers, scheduling_text
@@ -76,7 +76,7 @@ class RetargeterNode(Node):
         self._com_discovery = self.create_timer(0.1, self._discover_com)
         self.create_subscription(ForcePlateSample, plate_topic("chair"), self._on_chair,
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
-                                            reliability=ReliabilityPolicy.RELIABLE))
+                                            reliability=ReliabilityPolicy.RELIABLE), raw=True)
         # the robot's measured posture is needed once, for the calibration: these go once it is done
         self.robot_subs = [self.create_subscription(JointState, "/robot/joint_states", self._on_joint_states, 10),
                            self.create_subscription(PoseStamped, "/robot/base_pose", self._on_base_pose, 10)]
@@ -119,8 +119,10 @@ class RetargeterNode(Node):
     def _on_base_pose(self, msg: PoseStamped) -> None:
         self.robot_base = msg
 
-    def _on_chair(self, msg: ForcePlateSample) -> None:
-        self.chair.append((stamp_ns(msg.header) * 1e-9, msg.wrench.force.z))
+    def _on_chair(self, data: bytes) -> None:
+        # 1 kHz, in the real-time process: read the stamp and Fz from the CDR bytes instead of building messages
+        t_s, _, _, fz, _, _, _ = plate_sample_from_cdr(data)
+        self.chair.append((t_s, fz))
 
     def _discover_com(self) -> None:
         if self.get_publishers_info_by_topic("/human/com"):
