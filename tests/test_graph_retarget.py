@@ -48,3 +48,12 @@ def test_marker_frames_without_a_human_com_stop_the_retargeter_with_a_clear_erro
     assert play.wait(60) == 0
     assert node.wait(60) == 2
     assert "waited 3 s for /human/com" in node.output
+
+
+def test_a_bad_parameters_file_stops_the_retargeter_at_start_naming_it(tmp_path, run_node):
+    """The robot model is built when the node starts (not on the first frame): a broken identified-parameters file
+    is reported then, by name."""
+    (tmp_path / "params.yaml").write_text("not: [a parameter file\n")
+    node = run_node("sit2stand.nodes.retargeter", "--ros-args", "-p", f"controller_params:={tmp_path / 'params.yaml'}")
+    assert node.wait(60) == 2, node.output
+    assert "params.yaml" in node.output and "controller_params" in node.output

@@ -37,7 +37,7 @@ from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, MocapFrame
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ..io.messages import MARKERS_TOPIC, plate_sample_from_cdr, plate_topic, stamp_ns
-from ..retarget.stream import PlanPlayer, RetargetConfig, Retargeter, robot_setup
+from ..retarget.stream import PlanPlayer, RetargetConfig, Retargeter, robot_model, robot_setup
 from .driver import DEFAULT_PLANT
 from .runtime import IdleDrain, NodeError, declare, node_main, qos_matching_publishers, scheduling_text
 
@@ -107,6 +107,11 @@ class RetargeterNode(Node):
         self.exit_code = 0
         self.drain = IdleDrain(lambda: self.processed)
         self.scheduling = scheduling_text()
+        try:        # the robot model now (~0.6 s idle, more under load), not when the first frames are queued
+            self.robot_model = robot_model(self.plant_file, self.params_file or None)
+        except (ValueError, OSError) as err:
+            raise NodeError(f"retargeter: plant {self.plant_file}, controller_params "
+                            f"{self.params_file or '(CAD)'}: {err}") from None
         self.create_timer(0.25 / self.rate_hz, self._tick)
         self.create_timer(2.0, self._report)
         self.get_logger().info(f"retargeter: plant {self.plant_file}, COM parameters "
@@ -178,8 +183,7 @@ class RetargeterNode(Node):
                 return False
             q_start, joint_names = self._robot_q(), list(self.robot_js.name)
         try:
-            robot = robot_setup(self.plant_file, self.params_file or None, q_start=q_start,
-                                start_joint_names=joint_names)
+            robot = robot_setup(q_start=q_start, start_joint_names=joint_names, prebuilt=self.robot_model)
             self.joint_names = robot.joint_names
             self.retargeter = Retargeter(robot, RetargetConfig())
             marker_map = self.retargeter.calibrate(names, pos, valid, com)

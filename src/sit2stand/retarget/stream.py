@@ -65,15 +65,14 @@ class RobotSetup:
     parameters: str                      # "CAD" or the identified YAML
 
 
-def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | None = None,
-                q_start: np.ndarray | None = None, start_joint_names: list[str] | None = None) -> RobotSetup:
-    """TALOS seated as in the plant file (only the posture and chair; never ``unmodeled``), with the identified
-    COM parameters of ``params_yaml`` (``sit2stand identify --model full`` output) or the CAD ones. ``q_start``:
-    the robot's measured seated configuration (Pinocchio order), as the paper calibrates on the robot's measured
-    sitting posture; default: the plant file's nominal one. ``start_joint_names``: the joint of each of
-    ``q_start[7:]`` when they come in another order (e.g. a JointState's)."""
+def robot_model(plant_yaml: str | Path | None = None,
+                params_yaml: str | Path | None = None) -> tuple[pin.Model, np.ndarray, str]:
+    """The retargeter's robot model (TALOS with the identified COM parameters of ``params_yaml``, ``sit2stand
+    identify --model full`` output, or CAD's), its nominal seated configuration from the plant file (Pinocchio
+    order; only the posture and chair, never ``unmodeled``), and the parameters' label. The slow part of
+    :func:`robot_setup` (~0.6 s): a node builds it before the stream starts."""
     from ..robot.identify import read_link_parameters
-    from ..robot.model import SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, PlantConfig, build_spec, controller_model
+    from ..robot.model import PlantConfig, build_spec, controller_model
     from ..robot.plant import apply_parameters, seated_configuration
 
     cfg = PlantConfig.load(plant_yaml)
@@ -85,6 +84,21 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
     qpos = seated_configuration(build_spec(cfg, plant=False).compile(), cfg)
     q = qpos.copy()
     q[3:7] = [qpos[4], qpos[5], qpos[6], qpos[3]]
+    return model, q, label
+
+
+def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | None = None,
+                q_start: np.ndarray | None = None, start_joint_names: list[str] | None = None,
+                prebuilt: tuple[pin.Model, np.ndarray, str] | None = None) -> RobotSetup:
+    """TALOS seated as in the plant file, with the identified COM parameters of ``params_yaml`` or the CAD ones
+    (see :func:`robot_model`; ``prebuilt``: its result, made earlier). ``q_start``: the robot's measured seated
+    configuration (Pinocchio order), as the paper calibrates on the robot's measured sitting posture; default: the
+    plant file's nominal one. ``start_joint_names``: the joint of each of ``q_start[7:]`` when they come in another
+    order (e.g. a JointState's)."""
+    from ..robot.model import SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M
+
+    model, q, label = prebuilt if prebuilt is not None else robot_model(plant_yaml, params_yaml)
+    q = q.copy()
     if q_start is not None:
         if np.shape(q_start) != q.shape or not np.all(np.isfinite(q_start)):
             raise ValueError(f"start configuration: {np.shape(q_start)} values (finite), expected {q.shape}")
