@@ -24,6 +24,10 @@ def test_the_robot_stands_up_live_from_the_shipped_elderly_demonstration(tmp_pat
     log = result.stdout[-4000:] + result.stderr[-2000:]
     assert result.returncode == 0, log
     assert "[retargeter] 531 frames" in result.stdout, log
+    # the graph asks for SCHED_FIFO 50 for the retargeter: granted, or refused and said so; the node reports which
+    assert ("started retargeter" in result.stdout and
+            ("SCHED_FIFO priority 50" in result.stdout or "was not permitted" in result.stdout)), log
+    assert "scheduling SCHED_" in result.stdout, log
     assert (tmp_path / "markers.yaml").is_file()
     with BagReader(out) as bag:
         topics = bag.topics()
