@@ -41,17 +41,24 @@ class PointJacobians:
 
     def __call__(self, data: pin.Data, frame_ids) -> tuple[np.ndarray, np.ndarray]:
         """World positions (M, 3) [m] and linear Jacobians (M, 3, nv) [m per unit of v] of ``frame_ids``."""
-        fids = tuple(int(f) for f in frame_ids)
-        P = np.array([data.oMf[f].translation for f in fids]).reshape(-1, 3)
+        fids = tuple(frame_ids)
+        P = positions(data, fids)
         masks = self._mask_sets.get(fids)
         if masks is None:
-            masks = self._mask_sets[fids] = np.array([self.support_mask(f) for f in fids]).reshape(-1, self.nv)
-        Jl, Ja = data.J[:3], data.J[3:]
-        # omega x p, column by column: (w_y p_z - w_z p_y, w_z p_x - w_x p_z, w_x p_y - w_y p_x)
-        px, py, pz = (P[:, i, None] for i in range(3))
-        wx, wy, wz = Ja
-        J = np.empty((len(P), 3, self.nv))
-        J[:, 0] = Jl[0] + wy * pz - wz * py
-        J[:, 1] = Jl[1] + wz * px - wx * pz
-        J[:, 2] = Jl[2] + wx * py - wy * px
-        return P, J * masks[:, None, :]
+            masks = self._mask_sets[fids] = np.array([self.support_mask(int(f)) for f in fids]).reshape(-1, self.nv)
+        # v_p = v_O + omega x p = v_O - [p]x omega, for all points in one batched product
+        S = np.zeros((len(P), 3, 3))
+        S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = P[:, 2], -P[:, 1], P[:, 0]
+        S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = -P[:, 2], P[:, 1], -P[:, 0]
+        J = data.J[:3] + S @ data.J[3:]
+        J *= masks[:, None, :]
+        return P, J
+
+
+def positions(data: pin.Data, frame_ids) -> np.ndarray:
+    """World positions (M, 3) [m] of frames (after ``updateFramePlacements`` or ``framesForwardKinematics``)."""
+    P = np.empty((len(frame_ids), 3))
+    oMf = data.oMf
+    for i, f in enumerate(frame_ids):
+        P[i] = oMf[f].translation
+    return P

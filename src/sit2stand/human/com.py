@@ -28,7 +28,7 @@ from scipy.signal import savgol_coeffs   # at import time: the first frame must 
 
 from ..dynamics import model_cop, savgol_series, smooth_motion
 from ..io.forceplate import center_of_pressure
-from ..kinematics import PointJacobians
+from ..kinematics import PointJacobians, positions
 from .skeleton import LENGTH_GROUPS, SEGMENTS, HumanModel, Subject, build_human
 
 G = 9.81
@@ -83,7 +83,7 @@ class MarkerIK:
 
     def _marker_positions(self, q: np.ndarray) -> np.ndarray:
         pin.framesForwardKinematics(self.model, self.data, q)
-        return np.array([self.data.oMf[f].translation for f in self.frames])
+        return positions(self.data, self.frames)
 
     def initial_guess(self, positions: np.ndarray, valid: np.ndarray) -> np.ndarray:
         """Pelvis pose by a Kabsch fit of the pelvis markers; the rest at the reference posture."""

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ..kinematics import PointJacobians
+from ..kinematics import PointJacobians, positions
 
 
 @dataclass
@@ -182,7 +182,7 @@ class ComIk:
             raise FloatingPointError("IK produced a non-finite configuration")
         pin.framesForwardKinematics(model, data, q)        # the result's errors (no Jacobians needed)
         com = pin.centerOfMass(model, data, q, False)
-        marker_sq = np.sum((np.array([data.oMf[f].translation for f in fids]).reshape(-1, 3) - targets) ** 2, axis=1)
+        marker_sq = np.sum((positions(data, fids) - targets) ** 2, axis=1)
         sole_err = max(np.linalg.norm(pin.log6(t.actInv(data.oMf[f])).vector) for f, t in zip(self.soles, sole_targets))
         com_err = float(np.linalg.norm((com - com_target)[axes]))
         return IkResult(q, feasible and com_err < 1e-3, com_err, float(sole_err),
