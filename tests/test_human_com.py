@@ -136,3 +136,26 @@ def test_a_calibration_made_beforehand_gives_the_same_stream_without_the_pause(t
     (tmp_path / "bad.yaml").write_text("lengths: 3\n")
     with pytest.raises(ValueError, match="bad.yaml"):
         StreamCalibration.load(tmp_path / "bad.yaml")
+
+
+def test_a_deferred_rescale_gives_the_same_stream():
+    """The node re-solves the masses after publishing a frame (defer_rescale): the same estimates as in-line."""
+    demo = synthesize(SynthConfig(style="natural", seed=3))
+    subject = Subject(1.75, demo.human.total_mass)
+    inline = StreamingComEstimator(subject, demo.marker_names)
+    deferred = StreamingComEstimator(subject, demo.marker_names, defer_rescale=True)
+    a, b, solves = [], [], 0
+    for i, t in enumerate(demo.marker_t_s):
+        sl = slice(i * 10, (i + 1) * 10)
+        for est in (inline, deferred):
+            for p in demo.plates:
+                est.add_plate_samples(p.name, demo.t_s[sl], p.force_n[sl], p.moment_origin_nm[sl])
+        a.append(inline.update(t, demo.markers_m[i], demo.marker_valid[i]).com_m)
+        out = deferred.update(t, demo.markers_m[i], demo.marker_valid[i])
+        assert not out.rescaled
+        b.append(out.com_m)
+        if deferred.rescale_pending:
+            deferred.rescale_pending = False
+            solves += deferred.rescale() is not None
+    assert solves >= 1
+    assert np.allclose(np.array(a), np.array(b), atol=1e-12, equal_nan=True)

@@ -706,7 +706,7 @@ class StreamingComEstimator:
     def __init__(self, subject: Subject, marker_names: list[str], *, rate_hz: float = 100.0, window: int = 31,
                  calibration_frames: int = 50, rescale_every: int = 100, chair_on_plate: bool = True,
                  min_frames_to_scale: int = 30, first_rescale: int = 100,
-                 calibration: StreamCalibration | None = None) -> None:
+                 calibration: StreamCalibration | None = None, defer_rescale: bool = False) -> None:
         self.subject = subject
         self.marker_names = list(marker_names)
         self.dt = 1.0 / rate_hz
@@ -736,6 +736,10 @@ class StreamingComEstimator:
         self._seat_off_seen = chair_on_plate
         self._coeffs: dict[tuple[int, int], list[np.ndarray]] = {}
         self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        # a re-solve of the masses costs ~10 ms: a live caller may defer it past the frame's publication
+        # (``rescale_pending``, then :meth:`rescale`); the frame's own COM never depends on it
+        self.defer_rescale = defer_rescale
+        self.rescale_pending = False
         self.calibration: StreamCalibration | None = None
         if calibration is not None:       # calibrated beforehand: no pause in the stream
             self._use(calibration)
@@ -886,8 +890,11 @@ class StreamingComEstimator:
         self.rows.append(frame_rows(self.human, q_k, v_k, a_k, force, moment, cop, self.subject.mass_kg, self.data))
         n = len(self.rows)
         if n >= self.min_frames_to_scale and (n == self.first_rescale or n % self.rescale_every == 0):
-            self.rescale()
-            out.rescaled = True
+            if self.defer_rescale:         # the caller solves it after publishing this frame (see __init__)
+                self.rescale_pending = True
+            else:
+                self.rescale()
+                out.rescaled = True
 
     def rescale(self) -> MassScaling | None:
         """Solve the scaling from all rows so far and switch the COM model to it."""

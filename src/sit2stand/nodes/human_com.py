@@ -126,7 +126,7 @@ class HumanComNode(Node):
                 self.estimator = StreamingComEstimator(
                     self.subject, names, rate_hz=self.rate_hz, window=self.window,
                     calibration_frames=self.calibration_frames, rescale_every=self.rescale_every,
-                    chair_on_plate=self.chair_on_plate, calibration=self.calibration)
+                    chair_on_plate=self.chair_on_plate, calibration=self.calibration, defer_rescale=True)
                 for name in self.expected_plates:
                     self.estimator.expect_plate(name)
             except TooFewMarkers as err:
@@ -149,6 +149,10 @@ class HumanComNode(Node):
             self.skipped += 1
         self._publish(msg.header, out)
         self.costs.append(time.perf_counter() - t0)
+        if self.estimator.rescale_pending:     # after the frame is out: the re-solve does not delay its COM
+            self.estimator.rescale_pending = False
+            if self.estimator.rescale() is not None:
+                self._publish_scaling(msg.header)
 
     def _publish(self, header, out) -> None:
         com_msg = CenterOfMass(header=header, source="skeleton_fit", valid=bool(out.valid),
@@ -175,8 +179,6 @@ class HumanComNode(Node):
                 p.header.stamp.sec, p.header.stamp.nanosec = divmod(int(round(out.delayed_t_s * 1e9)), 1_000_000_000)
                 p.point.x, p.point.y = float(cop[0]), float(cop[1])
                 pub.publish(p)
-        if out.rescaled and self.estimator.scaling is not None:
-            self._publish_scaling(header)
 
     def _publish_scaling(self, header) -> None:
         sc = self.estimator.scaling
