@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import proxsuite   # at import (~0.1 s), not inside a live node's first solve
 
 
 @dataclass
@@ -33,8 +34,6 @@ def constrained_lsq(A: np.ndarray, b: np.ndarray, *, weights: np.ndarray | None 
     Raises:
         ValueError: inconsistent shapes, or the QP solver fails (the status is named).
     """
-    import proxsuite
-
     A = np.atleast_2d(np.asarray(A, float))
     b = np.asarray(b, float).ravel()
     m, n = A.shape

@@ -29,6 +29,7 @@ from scipy.signal import savgol_coeffs   # at import time: the first frame must 
 from ..dynamics import model_cop, savgol_series, smooth_motion
 from ..io.forceplate import center_of_pressure
 from ..kinematics import PointJacobians, positions
+from ..optim import constrained_lsq   # imports proxsuite now: the first re-solve must not pay for it mid-stream
 from .skeleton import LENGTH_GROUPS, SEGMENTS, HumanModel, Subject, build_human
 
 G = 9.81
@@ -484,7 +485,6 @@ def solve_mass_scaling(human: HumanModel, A: np.ndarray, b: np.ndarray, body_mas
     ``weights`` (one per row) default to blocks of six dynamic rows: 1/force_sd_n for forces, 1/moment_sd_nm for
     moments; :func:`assemble_rows` builds mixed dynamic / quasi-static rows with their weights.
     """
-    from ..optim import constrained_lsq
 
     prior = {g: 0.0 for g in MASS_GROUPS}
     count = {g: 0 for g in MASS_GROUPS}

@@ -65,6 +65,7 @@ class RetargeterNode(Node):
         self.hold_s = declare(self, "hold_s", 3.0, "after the plan ends, exit after this long [s] (0: never)")
         self.input_timeout_s = declare(self, "input_timeout_s", 20.0, "marker frames may wait this long for a COM")
         self._first_wait: float | None = None
+        self._robot_wait: float | None = None      # when a frame first waited for the robot's state
         self._done_at: float | None = None
         self._next_due: float | None = None
         deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
@@ -180,6 +181,7 @@ class RetargeterNode(Node):
         q_start, joint_names = None, None
         if self.wait_for_robot:
             if self.robot_js is None or self.robot_base is None:
+                self._robot_wait = self._robot_wait or time.monotonic()
                 return False
             q_start, joint_names = self._robot_q(), list(self.robot_js.name)
         try:
@@ -198,8 +200,10 @@ class RetargeterNode(Node):
         for sub in self.robot_subs:     # 400 callbacks/s no longer needed, in the same thread as the frames
             self.destroy_subscription(sub)
         self.robot_subs = []
+        waited = f"; the first frames waited {time.monotonic() - self._robot_wait:.2f} s for the robot's state " \
+                 "(they count in the latency)" if self._robot_wait else ""
         self.get_logger().info(f"calibrated on the first frame: {len(marker_map.links)} markers fixed to the robot; "
-                               f"leg-length scale {self.retargeter.scale:.3f}")
+                               f"leg-length scale {self.retargeter.scale:.3f}{waited}")
         return True
 
     def _robot_q(self) -> np.ndarray:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
+from scipy.spatial import ConvexHull
 
 from ..dynamics import G, model_cop, plan_derivatives
 from ..io.forceplate import point_in_polygon
@@ -53,8 +54,6 @@ def plan_zmp(model: pin.Model, qs: np.ndarray, dt: float, time_scale: float = 1.
 
 def support_polygon(corners_xy: np.ndarray) -> np.ndarray:
     """Convex hull (counter-clockwise) of the feet's sole corners (K, 2)."""
-    from scipy.spatial import ConvexHull
-
     pts = np.asarray(corners_xy, float)
     return pts[ConvexHull(pts).vertices]
 

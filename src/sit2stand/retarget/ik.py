@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+import proxsuite   # at import (~0.1 s): a node imports this before its stream starts
 
 from ..kinematics import PointJacobians, positions
 
@@ -56,8 +57,6 @@ class ComIk:
 
     def __init__(self, model: pin.Model, sole_frames: list[int], velocity_limit: float | np.ndarray = 5.0,
                  dt: float = 0.01, posture_weight: float | np.ndarray = 1e-3, damping: float = 1e-6) -> None:
-        import proxsuite
-
         self.model = model
         self.data = model.createData()
         self.soles = list(sole_frames)

@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+from scipy.signal import savgol_coeffs   # at import: a live node's first frames must not pay for it
 
 from .calibration import PELVIS_MARKERS, MarkerMap, calibrate_markers, marker_group
 from .feasibility import frame_time_scales, support_margin, support_polygon, zmp_at_scale
@@ -416,8 +417,6 @@ class PlanPlayer:
     def _coefs(self, half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         c = self._coef_cache.get(half)
         if c is None:
-            from scipy.signal import savgol_coeffs
-
             order = min(3, 2 * half)
             c = tuple(savgol_coeffs(2 * half + 1, order, deriv=d, use="dot") for d in (0, 1, 2))
             self._coef_cache[half] = c
