@@ -75,7 +75,7 @@ class Scheduling:
 
     def __str__(self) -> str:
         if self.policy == "other":
-            return f"SCHED_OTHER nice {self.nice}"
+            return f"SCHED_OTHER nice {self.nice}" if self.nice else "SCHED_OTHER"
         return f"SCHED_{self.policy.upper()} priority {self.priority}"
 
     def apply(self, pid: int = 0) -> None:
@@ -91,8 +91,8 @@ class Scheduling:
         """Whether process ``pid`` runs under this class."""
         if os.sched_getscheduler(pid) != POLICIES[self.policy]:
             return False
-        if self.policy == "other":
-            return os.getpriority(os.PRIO_PROCESS, pid) == self.nice
+        if self.policy == "other":     # nice 0 asks for no change (a child inherits the launcher's niceness)
+            return not self.nice or os.getpriority(os.PRIO_PROCESS, pid) == self.nice
         return os.sched_getparam(pid).sched_priority == self.priority
 
 

@@ -37,6 +37,7 @@ from ..human.skeleton import Subject
 from ..io.messages import FORCE_PLATE_PREFIX, MARKERS_TOPIC, plate_sample_from_cdr, stamp_ns
 from .runtime import IdleDrain, NodeError, declare, node_main
 
+PENDING_PLATE_SAMPLES = 4000      # per plate, between two marker frames (4 s at 1 kHz; the estimator keeps ~2 s)
 ROOT_NAMES = ["pelvis_x", "pelvis_y", "pelvis_z", "pelvis_qx", "pelvis_qy", "pelvis_qz", "pelvis_qw"]
 
 
@@ -109,7 +110,10 @@ class HumanComNode(Node):
     def _on_plate(self, name: str, data: bytes) -> None:
         # ~1 kHz per plate: the stamp and wrench are read straight from the CDR bytes (~1 us, against ~30 us to build
         # the message) into a tuple; they go to the estimator in one array per plate at the next marker frame
-        self._pending_plates.setdefault(name, []).append(plate_sample_from_cdr(data))
+        rows = self._pending_plates.setdefault(name, [])
+        rows.append(plate_sample_from_cdr(data))
+        if len(rows) > PENDING_PLATE_SAMPLES:          # plates streaming without marker frames: keep the newest
+            del rows[:-PENDING_PLATE_SAMPLES // 2]
 
     def _flush_plates(self) -> None:
         for name, rows in self._pending_plates.items():
