@@ -194,7 +194,8 @@ def test_scheduling_is_applied_or_reported(tmp_path):
     _check_sched(out, None)
 
 
-@pytest.mark.skipif(os.geteuid() != 0 or not shutil.which("setpriv"), reason="needs root and setpriv to drop a capability")
+@pytest.mark.skipif(os.geteuid() != 0 or not shutil.which("setpriv"),
+                    reason="needs root and setpriv to drop a capability")
 def test_real_time_refused_without_cap_sys_nice(tmp_path):
     """As root, run the launcher without CAP_SYS_NICE: the real-time node must still start, and be reported."""
     path = graph_file(tmp_path, _sched_graph(tmp_path))

@@ -9,8 +9,9 @@ For each shipped bag (``bags/natural``, ``bags/elderly``):
 
 3. the stand-up, live: replayer -> human_com -> retargeter -> driver (default plant, identified COM parameters) ->
    recorder (``ros_ws/graphs/standup.yaml``), the estimator's skeleton calibrated beforehand on the first 0.5 s
-   (``sit2stand human-calibrate``), and it, the retargeter and the robot's loop at real-time priority; the run analysed (:mod:`sit2stand.retarget.report`): stood up or
-   not, COM tracking, the paper's Fig. 6, and a strip of rendered frames.
+   (``sit2stand human-calibrate``), and it, the retargeter and the robot's loop at real-time priority; the run
+   analysed (:mod:`sit2stand.retarget.report`): stood up or not, COM tracking, the paper's Fig. 6, and a strip of
+   rendered frames.
 
 Before that, for the robot: static postures of the simulated TALOS (default plant, with mass its CAD model lacks),
 identification of its mass/COM parameters (full model), the held-out COM error next to CAD's, and the figures.

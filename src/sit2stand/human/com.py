@@ -289,7 +289,8 @@ class StreamCalibration:
         import yaml
 
         try:
-            doc = yaml.safe_load(open(path)) or {}
+            with open(path) as f:
+                doc = yaml.safe_load(f) or {}
             return cls({str(k): float(v) for k, v in doc["lengths"].items()},
                        {str(k): [float(x) for x in v] for k, v in doc["marker_placements_m"].items()},
                        int(doc.get("frames", 0)), float(doc.get("marker_rms_before_m", "nan")),
