@@ -239,3 +239,19 @@ def test_recorder_refuses_to_overwrite(ros_env, tmp_path, sts_bag):
                             env=ros_env, capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "exists already" in result.stderr
     assert BagWriter  # the same rule as the library's writer
+
+
+def test_wait_for_counts_a_topic_the_bag_does_not_hold(sts_bag, ros_env, tmp_path, run_node):
+    """wait_for may name a downstream topic (the stand-up graph waits for /human/com's subscribers): the replayer
+    plays once the graph has them, and, without them, after wait_timeout_s with a warning naming the topic."""
+    alone = replayer_cli(ros_env, f"bag:={sts_bag}", "rate:=20.0", "wait_for:=['/robot/joint_command:1']",
+                         "wait_timeout_s:=1.0")
+    assert alone.returncode == 0, alone.stderr
+    assert "playing without the awaited subscribers on /robot/joint_command" in alone.stdout + alone.stderr
+    driver = run_node("sit2stand.nodes.driver")          # subscribes /robot/joint_command when it starts
+    assert driver.wait_for_output("seated on a", 60)
+    waited = replayer_cli(ros_env, f"bag:={sts_bag}", "rate:=20.0", "wait_for:=['/robot/joint_command:1']",
+                          "wait_timeout_s:=30.0")
+    assert waited.returncode == 0, waited.stderr
+    assert "playing without" not in waited.stdout + waited.stderr
+    driver.stop()

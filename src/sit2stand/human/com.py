@@ -767,7 +767,12 @@ class StreamingComEstimator:
         buf["data"][n:n + len(rows)] = rows
         buf["n"] = n + len(rows)
 
-    def update(self, t_s: float, positions_m: np.ndarray, valid: np.ndarray) -> StreamOutput:
+    def update(self, t_s: float, positions_m: np.ndarray, valid: np.ndarray,
+               defer_delayed: bool = False) -> StreamOutput:
+        """One marker frame (positions [m], validity, in the stream's marker order) at ``t_s`` [s]: the fit and the
+        causal COM, then the delayed work (the centred window half a window back: model and measured COP, scaling
+        rows). ``defer_delayed``: leave that to :meth:`process_delayed`, so that a live caller can publish the COM
+        first (its model/measured COP then come with that call)."""
         if not self.calibrated:
             if np.sum(valid) >= MIN_MARKERS + 4:
                 self._calib.append((np.asarray(positions_m, float).copy(), np.asarray(valid, bool).copy()))
@@ -789,6 +794,12 @@ class StreamingComEstimator:
             del self._t[:-keep], self._q[:-keep], self._x[:-keep]
         com, vcom, acom = self._causal_com()
         out = StreamOutput(t_s, fit.ok, q, com, vcom, acom, fit.rms_m, fit.n_markers)
+        if not defer_delayed:
+            self.process_delayed(out)
+        return out
+
+    def process_delayed(self, out: StreamOutput) -> StreamOutput:
+        """The delayed part of :meth:`update` for its output ``out`` (fills its COP fields; see ``update``)."""
         self._delayed(out)
         return out
 

@@ -88,6 +88,7 @@ class HumanComNode(Node):
         self.costs: list[float] = []
         self.skipped = 0
         self.last_com: np.ndarray | None = None
+        self.last_cop_error = float("nan")
         self.finished = False
         self.exit_code = 0
         self.drain = IdleDrain(lambda: len(self.costs))   # after a signal, finish the frames already received
@@ -148,17 +149,19 @@ class HumanComNode(Node):
             pos, valid = pos_m, valid_m
         t_s = stamp_ns(msg.header) * 1e-9
         self._flush_plates()
-        out = self.estimator.update(t_s, pos, valid)
+        out = self.estimator.update(t_s, pos, valid, defer_delayed=True)
         if not out.valid:
             self.skipped += 1
-        self._publish(msg.header, out)
+        self._publish_com(msg.header, out)        # first: the retargeter waits for it
+        self.estimator.process_delayed(out)        # then the window half a window back (COPs, scaling rows)
+        self._publish_rest(msg.header, out)
         self.costs.append(time.perf_counter() - t0)
         if self.estimator.rescale_pending:     # after the frame is out: the re-solve does not delay its COM
             self.estimator.rescale_pending = False
             if self.estimator.rescale() is not None:
                 self._publish_scaling(msg.header)
 
-    def _publish(self, header, out) -> None:
+    def _publish_com(self, header, out) -> None:
         com_msg = CenterOfMass(header=header, source="skeleton_fit", valid=bool(out.valid),
                                marker_rms_m=float(out.marker_rms_m), n_markers=int(out.n_markers),
                                cop_error_m=float("nan"))
@@ -169,9 +172,12 @@ class HumanComNode(Node):
                 self.last_com = com
                 (com_msg.velocity.x, com_msg.velocity.y, com_msg.velocity.z) = map(float, out.com_vel)
                 (com_msg.acceleration.x, com_msg.acceleration.y, com_msg.acceleration.z) = map(float, out.com_acc)
-        if out.model_cop_m is not None and out.measured_cop_m is not None:
-            com_msg.cop_error_m = float(np.linalg.norm(out.model_cop_m[:2] - out.measured_cop_m[:2]))
+        com_msg.cop_error_m = self.last_cop_error      # of the latest delayed frame (~half a window back)
         self.com_pub.publish(com_msg)
+
+    def _publish_rest(self, header, out) -> None:
+        if out.model_cop_m is not None and out.measured_cop_m is not None:
+            self.last_cop_error = float(np.linalg.norm(out.model_cop_m[:2] - out.measured_cop_m[:2]))
         js = JointState(header=header, name=ROOT_NAMES + self.estimator.human.joint_names(),
                         position=[float(x) for x in out.q])
         js.header.frame_id = "pelvis"

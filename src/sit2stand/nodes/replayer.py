@@ -11,7 +11,8 @@ Parameters:
     publish_clock (bool, true)   publish rosgraph_msgs/Clock on /clock at clock_rate_hz of bag time.
     clock_rate_hz (float, 100)
     wait_for_subscribers (int, 0)  before playing, wait until every topic has this many subscribers ...
-    wait_for (str[], [])         ... or, instead, until each listed "TOPIC:COUNT" has COUNT subscribers ...
+    wait_for (str[], [])         ... or, instead, until each listed "TOPIC:COUNT" has COUNT subscribers (a topic
+                                 the bag does not hold counts the graph's subscriptions: a downstream input) ...
     wait_timeout_s (float, 10)   ... or this long (then play anyway, with a warning).
     delay_s (float, 0)           extra wait before the first message.
     skip_unknown_types (bool, false)  skip topics whose type has no Python class here, instead of failing.
@@ -148,8 +149,8 @@ class Replayer(Node):
         wanted = {}
         for entry in self.wait_for:
             topic, _, count = entry.rpartition(":")
-            if topic not in self.pubs or not count.isdigit():
-                raise NodeError(f"parameter wait_for: {entry!r} is not TOPIC:COUNT of a played topic")
+            if not topic.startswith("/") or not count.isdigit():
+                raise NodeError(f"parameter wait_for: {entry!r} is not TOPIC:COUNT")
             wanted[topic] = int(count)
         if not wanted and self.wait_for_subscribers > 0:
             wanted = {t: self.wait_for_subscribers for t in self.pubs}
@@ -157,7 +158,10 @@ class Replayer(Node):
             return
         deadline = time.monotonic() + self.wait_timeout_s
         while not self._stop.is_set():
-            short = [t for t, n in wanted.items() if self.pubs[t].get_subscription_count() < n]
+            # a played topic: our publisher's matched subscriptions; any other (e.g. a downstream node's input,
+            # /human/com in the stand-up graph): the subscriptions the graph has on it
+            short = [t for t, n in wanted.items()
+                     if (self.pubs[t].get_subscription_count() if t in self.pubs else self.count_subscribers(t)) < n]
             if not short:
                 return
             if time.monotonic() > deadline:

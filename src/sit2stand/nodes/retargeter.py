@@ -74,6 +74,7 @@ class RetargeterNode(Node):
         # estimator: a late match still gets every estimate; volatile from a replayed bag); marker frames older than
         # the first COM received are skipped
         self.com_sub = None
+        self._t_init = time.monotonic()
         self._com_discovery = self.create_timer(0.1, self._discover_com)
         self.create_subscription(ForcePlateSample, plate_topic("chair"), self._on_chair,
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
@@ -134,9 +135,13 @@ class RetargeterNode(Node):
         if self.get_publishers_info_by_topic("/human/com"):
             qos = qos_matching_publishers(self, "/human/com", keep_all=False, depth=2000)
             self.com_sub = self.create_subscription(CenterOfMass, "/human/com", self._on_com, qos)
+            self.get_logger().info(f"/human/com publisher found after {time.monotonic() - self._t_init:.2f} s; "
+                                   f"subscribed ({qos.durability.name.lower()})")
             self._com_discovery.cancel()
 
     def _on_com(self, msg: CenterOfMass) -> None:
+        if not self.coms and not self.invalid_coms:
+            self.get_logger().info(f"first /human/com after {time.monotonic() - self._t_init:.2f} s")
         p, v = msg.position, msg.velocity
         pos, vel = np.array([p.x, p.y, p.z]), np.array([v.x, v.y, v.z])
         if not msg.valid or not np.all(np.isfinite(pos)):
