@@ -22,10 +22,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..robot.model import PlantConfig
-from ..robot.plant import EXTRAPOLATE_MAX_S, Plant, contact_feedforward
+from ..robot.plant import Plant, contact_feedforward, feedforward_seated, reference_at
 from .recording import Recording
-
-G = 9.81
 
 
 def control_law(rec: Recording, controller_params: dict | None = None, sensor_lag_s: float = 0.001
@@ -53,9 +51,7 @@ def control_law(rec: Recording, controller_params: dict | None = None, sensor_la
         c = int(np.searchsorted(cmd.t_s, t + 1e-6)) - 1
         if c < 0 or not np.all(np.isfinite(cmd.q[c])):
             continue
-        age = min(max(t - cmd.t_s[c], 0.0), EXTRAPOLATE_MAX_S)
-        q_t = cmd.q[c] + age * cmd.qd[c] + 0.5 * age * age * cmd.qdd[c]
-        qd_t = cmd.qd[c] + age * cmd.qdd[c]
+        q_t, qd_t = reference_at(cmd.q[c], cmd.qd[c], cmd.qdd[c], t - cmd.t_s[c])
         q_meas = rec.q[k] - sensor_lag_s * rec.qd[k]
         qd_meas = rec.qd[k] - sensor_lag_s * rec.qdd[k]
         base = rec.base_pose[k]
@@ -63,7 +59,7 @@ def control_law(rec: Recording, controller_params: dict | None = None, sensor_la
         qp[7:][order] = q_t
         qd_full, qdd_full = np.zeros(n), np.zeros(n)
         qd_full[order], qdd_full[order] = qd_t, cmd.qdd[c]
-        seated = base[2] < plant.seated_base_z + 0.03 or fz[k] / (plant.ctrl_mass * G) < 0.9
+        seated = feedforward_seated(base[2], plant.seated_base_z, fz[k], plant.ctrl_mass)
         ff = contact_feedforward(plant.ctrl, plant.ctrl_data, qp, qd_full, qdd_full, True, seated)[order]
         ff = np.clip(ff, -effort, effort)
         law[k] = np.clip(kp * (q_t - q_meas) + kd * (qd_t - qd_meas) + ff, -effort, effort)

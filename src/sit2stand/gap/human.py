@@ -23,7 +23,7 @@ import pinocchio as pin
 
 from .residuals import base_to_world
 from .select import Candidate, Selection, select
-from .workflow import SIGNIFICANT_Z, _mass_within_reach, fast_part_floor
+from .workflow import SIGNIFICANT_Z, _mass_within_reach, effect_summary, fast_part_floor
 
 
 @dataclass
@@ -92,20 +92,10 @@ def human_gap(bag: str | Path, progress=None) -> HumanGap:
         progress(f"  {len(keep)} supported frames, {len(cands)} candidates: selecting")
     sel = select(y, cands, series_id=sid, noise_rss=float(len(y)))
     after = e.copy()
-    effects = []
     for s in sel.effects:
-        c = s.candidate
-        X = within_scale_mass(c.location) if c.kind == "extra_mass" else own
+        X = within_scale_mass(s.candidate.location) if s.candidate.kind == "extra_mass" else own
         after -= np.tensordot(X, s.theta, axes=(2, 0))
-        se = np.sqrt(np.clip(np.diag(s.cov), 0, None))
-        if c.kind == "extra_mass":
-            m = float(s.theta[0])
-            effects.append({"kind": c.kind, "location": c.location, "mass_kg": m, "mass_ci95_kg": 1.96 * float(se[0]),
-                            "alternatives": s.alternatives,
-                            "pos_m": (s.theta[1:] / m).tolist(), "share_of_gap": s.gain})
-        else:
-            effects.append({"kind": c.kind, "location": c.location, "value": 1.0 + float(s.theta[0]),
-                            "ci95": 1.96 * float(se[0]), "share_of_gap": s.gain})
+    effects = effect_summary(sel)
     rms_b = np.sqrt(np.mean(e ** 2, axis=0))
     rms_a = np.sqrt(np.mean(after ** 2, axis=0))
     if effects:

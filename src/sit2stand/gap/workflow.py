@@ -50,7 +50,8 @@ MASS_REACH_M = 0.6           # an extra mass further than this from its link's o
 MASS_MAX_KG = 40.0           # an extra mass above this on one link of a 90 kg robot is not a missing part
 SIGNIFICANT_Z = 3.0          # a channel's RMS residual this many times its floor is a disagreement
 UNITS = {"extra_mass": ("kg", "m"), "viscous_friction": "N m s/rad", "coulomb_friction": "N m",
-         "torque_bias": "N m", "torque_gain": "1", "joint_offset": "rad", "actuator_delay": "s"}
+         "torque_bias": "N m", "torque_gain": "1", "joint_offset": "rad", "actuator_delay": "s",
+         "mass_scale": "true / model"}
 
 
 class GapError(ValueError):
@@ -354,8 +355,9 @@ def effect_summary(sel: Selection) -> list[dict]:
                       "pos_m": pos.tolist(), "pos_ci95_m": (1.96 * pos_se).tolist()})
         else:
             v = float(s.theta[0])
-            if c.kind == "torque_gain":
-                d.update({"value": 1.0 + v, "ci95": 1.96 * float(se[0]), "unit": "measured / true"})
+            if c.kind in ("torque_gain", "mass_scale"):   # fitted as the departure from 1
+                d.update({"value": 1.0 + v, "ci95": 1.96 * float(se[0]),
+                          "unit": "measured / true" if c.kind == "torque_gain" else UNITS[c.kind]})
             elif c.kind == "ft_bias":
                 d.update({"value": v, "ci95": 1.96 * float(se[0]),
                           "unit": "N" if c.location.endswith(("fx", "fy", "fz")) else "N m"})

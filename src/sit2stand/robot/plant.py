@@ -222,13 +222,10 @@ class Plant:
             return np.zeros(self.n)
         q = self.pin_configuration(self.data.qpos)
         q[7:] = self.q_ref
-        seated = self.data.qpos[2] < self.seated_base_z + 0.03 or self._feet_load_fraction() < 0.9
+        feet_fz = sum(self._ground_reaction(s)[2] for s in SIDES)
+        seated = feedforward_seated(self.data.qpos[2], self.seated_base_z, feet_fz, self.ctrl_mass)
         return contact_feedforward(self.ctrl, self.ctrl_data, q, self.qd_ref, self.qdd_ref,
                                    self.feedforward == "inverse_dynamics", seated)
-
-    def _feet_load_fraction(self) -> float:
-        fz = sum(self._ground_reaction(s)[2] for s in SIDES)
-        return fz / (self.ctrl_mass * G)
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics steps under the PD + feed-forward law (limp: zero torque)."""
@@ -243,9 +240,7 @@ class Plant:
                 # between commands the joint controller follows the reference's own velocity and acceleration
                 # (as a real one interpolates a trajectory point): a reference held still until the next message
                 # would make the torques jump at every update
-                age = min(max(float(self.data.time) - self._t_ref, 0.0), EXTRAPOLATE_MAX_S)
-                q_t = self.q_ref + age * self.qd_ref + 0.5 * age * age * self.qdd_ref
-                qd_t = self.qd_ref + age * self.qdd_ref
+                q_t, qd_t = reference_at(self.q_ref, self.qd_ref, self.qdd_ref, float(self.data.time) - self._t_ref)
                 ctrl_pd = q_t - self.q_offset + self.kd / self.kp * qd_t
                 ctrl_ff = np.clip(self._ff, -self.effort, self.effort)
             if self.delay_steps:
@@ -331,6 +326,20 @@ class Plant:
                 mujoco.mj_contactForce(self.model, self.data, i, f6)
                 total += abs((c.frame.reshape(3, 3).T @ f6[:3])[2])
         return total
+
+
+def reference_at(q_ref: np.ndarray, qd_ref: np.ndarray, qdd_ref: np.ndarray,
+                 age_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The joint controller's reference [rad, rad/s] ``age_s`` after its command: followed along the command's own
+    velocity and acceleration, for at most EXTRAPOLATE_MAX_S."""
+    age = min(max(age_s, 0.0), EXTRAPOLATE_MAX_S)
+    return q_ref + age * qd_ref + 0.5 * age * age * qdd_ref, qd_ref + age * qdd_ref
+
+
+def feedforward_seated(base_z_m: float, seated_base_z_m: float, feet_fz_n: float, mass_kg: float) -> bool:
+    """The controller's contact switch: the seat is taken to carry load while the pelvis is within 3 cm of its seated
+    height or the feet carry under 90 % of the (controller model's) weight."""
+    return base_z_m < seated_base_z_m + 0.03 or feet_fz_n / (mass_kg * G) < 0.9
 
 
 def contact_feedforward(model, data, q: np.ndarray, qd_ref: np.ndarray, qdd_ref: np.ndarray, dynamic: bool,
