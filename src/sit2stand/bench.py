@@ -326,6 +326,27 @@ def bench_gap(n_per_kind: int = 20, n_two: int = 10, workers: int = 2, progress:
     return out
 
 
+def _retarget_section(root: Path, env: dict[str, str]) -> dict:
+    print("retargeting: IK and plan player per frame on both demonstrations ...", flush=True)
+    out = bench_retarget(root)
+    print("retargeting: latency in the retarget and stand-up graphs on bags/elderly ...", flush=True)
+    out.update(bench_retarget_graphs(root, env))
+    return out
+
+
+def _gap_section(seeds: int) -> dict:
+    print(f"model gap: hidden-effect plants, {seeds} seeds per effect kind ...", flush=True)
+    return bench_gap(seeds)
+
+
+def _write(results: dict, out: Path, sections: list[str]) -> None:
+    """Print ``sections`` of ``results`` and write all of it to ``out``."""
+    _print_sections(results, sections)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(results, indent=2))
+    print(f"\nwritten to {out}")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sit2stand-bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results/bench.json"))
@@ -333,29 +354,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", choices=["gap", "retarget"], help="run one section and merge it into the JSON file")
     parser.add_argument("--gap-seeds", type=int, default=20, help="hidden-effect cases per effect kind")
     args = parser.parse_args(argv)
+    root = Path(__file__).resolve().parents[2]
+    env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "91"),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     if args.only:
         results = json.loads(args.out.read_text()) if args.out.exists() else {}
-        if args.only == "gap":
-            print(f"model gap: hidden-effect plants, {args.gap_seeds} seeds per effect kind ...", flush=True)
-            results["gap"] = bench_gap(args.gap_seeds)
-        else:
-            root = Path(__file__).resolve().parents[2]
-            env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "91"),
-                       ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-            print("retargeting: IK and plan player per frame on both demonstrations ...", flush=True)
-            results["retarget"] = bench_retarget(root)
-            print("retargeting: latency in the retarget and stand-up graphs on bags/elderly ...", flush=True)
-            results["retarget"].update(bench_retarget_graphs(root, env))
-        _print_sections(results, [args.only])
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(results, indent=2))
-        print(f"\nwritten to {args.out}")
+        results[args.only] = _gap_section(args.gap_seeds) if args.only == "gap" else _retarget_section(root, env)
+        _write(results, args.out, [args.only])
         return 0
 
     results: dict[str, object] = {"machine": {"python": sys.version.split()[0], "cpu_count": os.cpu_count(),
                                               "platform": platform.platform()}}
-    env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "91"),
-               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     with tempfile.TemporaryDirectory() as tmp:
         bag = Path(tmp) / "bench"
         print(f"bag write/read with {args.messages} messages ...", flush=True)
@@ -369,7 +378,7 @@ def main(argv: list[str] | None = None) -> int:
         results["replayer"] = {"top_rate_msg_per_s": alone, "top_rate_vs_bare_read": alone / bare,
                                "into_recorder_msg_per_s": into_recorder, "into_recorder_vs_bare_read": into_recorder / bare}
 
-    demo = Path(__file__).resolve().parents[2] / "bags" / "natural"
+    demo = root / "bags" / "natural"
     if demo.exists():
         print("human COM: streaming estimator and offline run on bags/natural ...", flush=True)
         results["human_com"] = bench_human_com(demo)
@@ -377,17 +386,9 @@ def main(argv: list[str] | None = None) -> int:
         results["human_com"].update(bench_human_com_graph(demo, env))
     print("robot: plant real-time factor, 88 postures, identification ...", flush=True)
     results["robot"] = bench_robot()
-    root = Path(__file__).resolve().parents[2]
-    print("retargeting: IK and plan player per frame on both demonstrations ...", flush=True)
-    results["retarget"] = bench_retarget(root)
-    print("retargeting: latency in the retarget and stand-up graphs on bags/elderly ...", flush=True)
-    results["retarget"].update(bench_retarget_graphs(root, env))
-    print("model gap: hidden-effect plants ...", flush=True)
-    results["gap"] = bench_gap(args.gap_seeds)
-    _print_sections(results, [s for s in ("bag", "replayer", "human_com", "robot", "retarget", "gap") if s in results])
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(results, indent=2))
-    print(f"\nwritten to {args.out}")
+    results["retarget"] = _retarget_section(root, env)
+    results["gap"] = _gap_section(args.gap_seeds)
+    _write(results, args.out, [s for s in ("bag", "replayer", "human_com", "robot", "retarget", "gap") if s in results])
     return 0
 
 
