@@ -9,6 +9,7 @@ import pytest
 
 from conftest import GRAPHS
 from sit2stand.io.bag import BagReader
+from sit2stand.retarget.report import analyse
 
 pytestmark = pytest.mark.graph
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,8 +40,15 @@ def test_the_robot_stands_up_live_from_the_shipped_elderly_demonstration(tmp_pat
         assert np.all(np.isfinite(pos))
         base = bag.read("/robot/base_pose")
         z = np.array([m.pose.position.z for _, m in base])
+        shift = np.array([[m.vector.x, m.vector.y] for _, m in bag.read("/robot/com_feedback")])
     assert z[0] < 0.65 and z[-1] > 0.85, f"pelvis from {z[0]:.2f} m to {z[-1]:.2f} m: did not stand up"
     assert "upright" in result.stdout and "FALLEN" not in result.stdout, log
+    # the COM feedback: one shift per command, none while the plan is seated, bounded; the robot's COM on the plan
+    assert len(shift) == len(cmds) and np.all(shift[:100] == 0.0)
+    assert 0.0 < np.abs(shift).max() <= 0.03 + 1e-9
+    assert "COM feedback largest shift" in result.stdout, log
+    summary = analyse(out, "elderly", None, ROOT / "ros_ws" / "plants" / "cad.yaml").summary
+    assert summary["stood_up"] and summary["com_tracking_rms_m"] < 0.02, summary
 
 
 def test_marker_frames_without_a_human_com_stop_the_retargeter_with_a_clear_error(tmp_path, run_node):

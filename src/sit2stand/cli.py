@@ -102,7 +102,7 @@ def _retarget(args: argparse.Namespace) -> int:
     try:
         summary = run(Path(args.bag), Path(args.out), params=args.params, plant=args.plant,
                       human_com_bag=args.human_com, margin_m=args.margin, time_scale=args.time_scale,
-                      simulate=args.simulate)
+                      simulate=args.simulate, com_feedback=not args.no_com_feedback)
     except (BagError, ValueError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
@@ -334,6 +334,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--margin", type=float, default=0.06, help="ZMP margin inside the feet [m]")
     p.add_argument("--time-scale", type=float, default=None, help="fixed time scale (default: adaptive)")
     p.add_argument("--simulate", action="store_true", help="execute the commands on the MuJoCo plant")
+    p.add_argument("--no-com-feedback", action="store_true",
+                   help="simulate the commands as planned, without the COM feedback the node applies")
     p.set_defaults(func=_retarget)
 
     p = sub.add_parser("drive", help="the simulated robot (the driver node), seated on its chair")

@@ -2,15 +2,17 @@
 
 Subscribes ``/mocap/markers`` (sit2stand_msgs/MocapFrame), ``/human/com`` (sit2stand_msgs/CenterOfMass, from the
 human COM estimator), ``/force_plate/chair`` (seat-off, if there is a chair plate), and, with ``wait_for_robot``,
-``/robot/joint_states`` and ``/robot/base_pose`` once (the robot's measured seated posture, which the calibration
-overlays the first human frame on). Per marker frame it runs :class:`sit2stand.retarget.stream.Retargeter` and
-:class:`sit2stand.retarget.stream.PlanPlayer` and publishes:
+``/robot/joint_states`` and ``/robot/base_pose`` (the robot's measured seated posture, which the calibration
+overlays the first human frame on; then, with ``com_feedback``, the measured COM). Per marker frame it runs
+:class:`sit2stand.retarget.stream.Retargeter` and :class:`sit2stand.retarget.stream.PlanPlayer`, corrects the command
+for the measured COM (:class:`sit2stand.retarget.stabiliser.ComStabiliser`, from the plan's seat-off) and publishes:
 
 * ``/robot/joint_command`` (trajectory_msgs/JointTrajectory, one point: positions, velocities, accelerations;
   stamped now: the driver applies it at once), one per marker frame, and on at the mocap rate after the markers stop
   until the (retimed) plan ends;
 * ``/robot/planned_com`` (sit2stand_msgs/CenterOfMass, source ``robot_plan``) and ``/robot/planned_zmp``
-  (geometry_msgs/PointStamped) of each command;
+  (geometry_msgs/PointStamped) of each command (as planned: the COM feedback's target);
+* ``/robot/com_feedback`` (geometry_msgs/Vector3Stamped): the COM shift the feedback put into each command [m];
 * ``/robot/retarget/ik`` (sensor_msgs/JointState, the raw IK pose per frame, base as root_* entries) and
   ``~/status`` (diagnostic_msgs/DiagnosticStatus: infeasible frames, time scale, latency p50/p99).
 
@@ -19,7 +21,9 @@ older (moved on by its velocity); otherwise the frame waits for it. Parameters: 
 (identified YAML; empty: CAD), ``margin_m`` (0.06), ``lookahead_s`` (0.8), ``smooth_frames`` (21), ``time_scale``
 (0: adaptive retiming; else fixed), ``rate_hz`` (100), ``wait_for_robot`` (true), ``marker_map`` (YAML to write the
 calibration to; empty: none), ``hold_s`` (3: the node exits this long after its plan ends; 0: never),
-``input_timeout_s`` (20: marker frames waiting this long for a human COM end the node with an error).
+``input_timeout_s`` (20: marker frames waiting this long for a human COM end the node with an error),
+``com_feedback`` (true), ``com_feedback_kp``, ``_ki``, ``_kd`` (the stabiliser's gains; defaults those of
+:class:`~sit2stand.retarget.stabiliser.StabiliserConfig`).
 """
 
 from __future__ import annotations
@@ -29,14 +33,16 @@ from collections import deque
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PointStamped, PoseStamped
+from geometry_msgs.msg import PointStamped, PoseStamped, Vector3Stamped
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, MocapFrame
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ..io.messages import MARKERS_TOPIC, plate_sample_from_cdr, plate_topic, stamp_ns
+from ..retarget.stabiliser import ComStabiliser, StabiliserConfig
 from ..retarget.stream import PlanPlayer, RetargetConfig, Retargeter, robot_model, robot_setup
 from .driver import DEFAULT_PLANT
 from .runtime import IdleDrain, NodeError, declare, node_main, qos_matching_publishers, scheduling_text
@@ -64,6 +70,13 @@ class RetargeterNode(Node):
         self.map_out = declare(self, "marker_map", "", "write the marker calibration YAML here")
         self.hold_s = declare(self, "hold_s", 3.0, "after the plan ends, exit after this long [s] (0: never)")
         self.input_timeout_s = declare(self, "input_timeout_s", 20.0, "marker frames may wait this long for a COM")
+        gains = StabiliserConfig()
+        self.com_feedback = declare(self, "com_feedback", True, "correct the commands for the measured robot COM")
+        self.stabiliser_cfg = StabiliserConfig(
+            kp=declare(self, "com_feedback_kp", gains.kp, "COM feedback: proportional gain [m/m]"),
+            ki=declare(self, "com_feedback_ki", gains.ki, "COM feedback: integral gain [1/s]"),
+            kd=declare(self, "com_feedback_kd", gains.kd, "COM feedback: velocity gain [s]"))
+        self.stabiliser: ComStabiliser | None = None
         self._first_wait: float | None = None
         self._robot_wait: float | None = None      # when a frame first waited for the robot's state
         self._done_at: float | None = None
@@ -79,19 +92,27 @@ class RetargeterNode(Node):
         self.create_subscription(ForcePlateSample, plate_topic("chair"), self._on_chair,
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
                                             reliability=ReliabilityPolicy.RELIABLE), raw=True)
-        # the robot's measured posture is needed once, for the calibration: these go once it is done
-        self.robot_subs = [self.create_subscription(JointState, "/robot/joint_states", self._on_joint_states, 10),
-                           self.create_subscription(PoseStamped, "/robot/base_pose", self._on_base_pose, 10)]
+        # the robot's measured posture: for the calibration, then for the COM feedback (else these go once the
+        # calibration is done). Kept as bytes (400 Hz, in the real-time thread); read when a command needs them
+        self.robot_subs = [self.create_subscription(JointState, "/robot/joint_states", self._on_joint_states, 10,
+                                                    raw=True),
+                           self.create_subscription(PoseStamped, "/robot/base_pose", self._on_base_pose, 10,
+                                                    raw=True)]
         self.cmd_pub = self.create_publisher(JointTrajectory, "/robot/joint_command", 100)
         self.com_pub = self.create_publisher(CenterOfMass, "/robot/planned_com", 100)
         self.zmp_pub = self.create_publisher(PointStamped, "/robot/planned_zmp", 100)
+        self.feedback_pub = self.create_publisher(Vector3Stamped, "/robot/com_feedback", 100)
         self.ik_pub = self.create_publisher(JointState, "/robot/retarget/ik", 100)
         self.status_pub = self.create_publisher(DiagnosticStatus, "~/status", 10)
         self.frames: deque = deque()          # (t_s, header, names, positions, valid, receipt time)
         self.coms: deque = deque(maxlen=400)  # (t_s, position, velocity)
         self.chair: deque = deque(maxlen=4000)
-        self.robot_js: JointState | None = None
-        self.robot_base: PoseStamped | None = None
+        self.robot_js: bytes | None = None        # the latest, serialized, and when it came (time.monotonic)
+        self.robot_base: bytes | None = None
+        self.robot_rx = (0.0, 0.0)
+        self._js_order: tuple[list[str], np.ndarray] | None = None
+        self.feedback_max_m = 0.0
+        self.state_stale = 0                      # on-feet commands sent uncorrected: no recent robot state
         self.retargeter: Retargeter | None = None
         self.player: PlanPlayer | None = None
         self.latencies: list[float] = []          # marker received -> its command published
@@ -120,11 +141,13 @@ class RetargeterNode(Node):
                                f"{self.params_file or 'CAD'}; waiting for {MARKERS_TOPIC} and /human/com")
 
     # -- inputs ------------------------------------------------------------------------------------------------
-    def _on_joint_states(self, msg: JointState) -> None:
-        self.robot_js = msg
+    def _on_joint_states(self, data: bytes) -> None:
+        self.robot_js = data
+        self.robot_rx = (time.monotonic(), self.robot_rx[1])
 
-    def _on_base_pose(self, msg: PoseStamped) -> None:
-        self.robot_base = msg
+    def _on_base_pose(self, data: bytes) -> None:
+        self.robot_base = data
+        self.robot_rx = (self.robot_rx[0], time.monotonic())
 
     def _on_chair(self, data: bytes) -> None:
         # 1 kHz, in the real-time process: read the stamp and Fz from the CDR bytes instead of building messages
@@ -188,7 +211,8 @@ class RetargeterNode(Node):
             if self.robot_js is None or self.robot_base is None:
                 self._robot_wait = self._robot_wait or time.monotonic()
                 return False
-            q_start, joint_names = self._robot_q(), list(self.robot_js.name)
+            js = deserialize_message(self.robot_js, JointState)
+            q_start, joint_names = self._robot_q(js), list(js.name)
         try:
             robot = robot_setup(q_start=q_start, start_joint_names=joint_names, prebuilt=self.robot_model)
             self.joint_names = robot.joint_names
@@ -202,22 +226,39 @@ class RetargeterNode(Node):
                                  lookahead_s=self.lookahead, smooth_frames=self.smooth, fixed_scale=self.fixed_scale,
                                  max_joint_speed=self.max_speed)
         self.names = names
-        for sub in self.robot_subs:     # 400 callbacks/s no longer needed, in the same thread as the frames
-            self.destroy_subscription(sub)
-        self.robot_subs = []
+        if self.com_feedback:
+            self.stabiliser = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, self.stabiliser_cfg)
+        else:        # 400 callbacks/s no longer needed, in the same thread as the frames
+            for sub in self.robot_subs:
+                self.destroy_subscription(sub)
+            self.robot_subs = []
         waited = f"; the first frames waited {time.monotonic() - self._robot_wait:.2f} s for the robot's state " \
                  "(they count in the latency)" if self._robot_wait else ""
         self.get_logger().info(f"calibrated on the first frame: {len(marker_map.links)} markers fixed to the robot; "
                                f"leg-length scale {self.retargeter.scale:.3f}{waited}")
         return True
 
-    def _robot_q(self) -> np.ndarray:
+    def _robot_q(self, js: JointState) -> np.ndarray:
         """The measured configuration: base pose (x y z, quaternion x y z w) and the joints in the JointState's
         order (``robot_setup`` maps them by name)."""
-        js, b = self.robot_js, self.robot_base.pose
+        b = deserialize_message(self.robot_base, PoseStamped).pose
         return np.concatenate([[b.position.x, b.position.y, b.position.z],
                                [b.orientation.x, b.orientation.y, b.orientation.z, b.orientation.w],
                                np.asarray(js.position, float)])
+
+    def _measured_q(self, max_age_s: float = 0.1) -> np.ndarray | None:
+        """The robot's measured configuration in the model's order, or None if its state is older than
+        ``max_age_s`` (or lacks a joint)."""
+        if self.robot_js is None or self.robot_base is None or \
+                time.monotonic() - min(self.robot_rx) > max_age_s:
+            return None
+        js = deserialize_message(self.robot_js, JointState)
+        if self._js_order is None or self._js_order[0] != list(js.name):
+            if not set(self.joint_names) <= set(js.name):
+                return None
+            self._js_order = (list(js.name), np.array([list(js.name).index(n) for n in self.joint_names]) + 7)
+        q = self._robot_q(js)
+        return np.concatenate([q[:7], q[self._js_order[1]]])
 
     def _process(self) -> None:
         while self.frames:
@@ -297,13 +338,19 @@ class RetargeterNode(Node):
     def _publish(self, cmd) -> float:
         """The joint command first (its send time is returned: the latency ends there), then the planned COM and
         ZMP."""
+        q, offset = cmd.q, None
+        if self.stabiliser is not None:
+            q_measured = self._measured_q()
+            self.state_stale += q_measured is None and cmd.on_feet
+            fix = self.stabiliser.correct(cmd.q, cmd.com, q_measured, cmd.on_feet, 1.0 / self.rate_hz)
+            q, offset = fix.q, fix.offset_m
         stamp = self.get_clock().now().to_msg()         # a command is for now: the driver applies it at once
         msg = JointTrajectory()
         msg.header.stamp = stamp
         msg.header.frame_id = "base_link"
         msg.joint_names = self.joint_names
         point = JointTrajectoryPoint()
-        point.positions = cmd.q[7:].tolist()
+        point.positions = q[7:].tolist()
         point.velocities = cmd.v[6:].tolist()
         point.accelerations = cmd.a[6:].tolist()
         msg.points = [point]
@@ -318,6 +365,12 @@ class RetargeterNode(Node):
         z.header.stamp, z.header.frame_id = stamp, "world"
         z.point.x, z.point.y, z.point.z = map(float, cmd.zmp)
         self.zmp_pub.publish(z)
+        if offset is not None:
+            f = Vector3Stamped()
+            f.header.stamp, f.header.frame_id = stamp, "world"
+            f.vector.x, f.vector.y = float(offset[0]), float(offset[1])
+            self.feedback_pub.publish(f)
+            self.feedback_max_m = max(self.feedback_max_m, float(np.abs(offset).max()))
         return sent
 
     def _publish_ik(self, header, q: np.ndarray) -> None:
@@ -339,7 +392,10 @@ class RetargeterNode(Node):
                 "latency_p50_ms": pct(lat, 50), "latency_p99_ms": pct(lat, 99),
                 "own_latency_p50_ms": pct(own, 50), "own_latency_p99_ms": pct(own, 99),
                 "in_step_frames": str(len(step)), "in_step_latency_p50_ms": pct(step, 50),
-                "in_step_latency_p99_ms": pct(step, 99), "scheduling": self.scheduling}
+                "in_step_latency_p99_ms": pct(step, 99), "scheduling": self.scheduling,
+                "com_feedback": "off" if not self.com_feedback else
+                f"largest shift {self.feedback_max_m * 100:.1f} cm; {self.state_stale} on-feet commands without a "
+                "recent robot state"}
 
     def _report(self) -> None:
         st = DiagnosticStatus(name=self.get_fully_qualified_name(), hardware_id="retargeter",
@@ -356,7 +412,8 @@ class RetargeterNode(Node):
               f"{s['latency_p50_ms']} ms p99 {s['latency_p99_ms']} ms (waiting for the human COM included); "
               f"COM->command p50 {s['own_latency_p50_ms']} ms p99 {s['own_latency_p99_ms']} ms; marker->command with the "
               f"COM stream in step ({s['in_step_frames']} frames) p50 {s['in_step_latency_p50_ms']} ms p99 "
-              f"{s['in_step_latency_p99_ms']} ms; scheduling {s['scheduling']}", flush=True)
+              f"{s['in_step_latency_p99_ms']} ms; scheduling {s['scheduling']}; COM feedback {s['com_feedback']}",
+              flush=True)
 
 
 main = node_main(RetargeterNode)

@@ -19,6 +19,7 @@ import pinocchio as pin
 from ..human.offline import read_trial
 from ..io.bag import BagReader
 from ..io.messages import stamp_ns
+from .stabiliser import ComStabiliser, StabiliserConfig
 from .stream import PlanPlayer, RetargetConfig, Retargeter, retarget_sequence, robot_setup
 
 
@@ -43,8 +44,11 @@ def human_com_series(bag: Path, human_com_bag: Path | None, trial) -> np.ndarray
 
 def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None = None,
         human_com_bag: Path | None = None, margin_m: float = 0.06, time_scale: float | None = None,
-        simulate: bool = False, config: RetargetConfig | None = None) -> dict:
-    """Retarget ``bag`` into ``out`` (see the module docstring); returns the summary."""
+        simulate: bool = False, config: RetargetConfig | None = None, com_feedback: bool = True,
+        stabiliser: StabiliserConfig | None = None) -> dict:
+    """Retarget ``bag`` into ``out`` (see the module docstring); returns the summary. ``com_feedback``: the
+    simulated robot's commands are corrected by :class:`~sit2stand.retarget.stabiliser.ComStabiliser` (gains
+    ``stabiliser``, default :class:`~sit2stand.retarget.stabiliser.StabiliserConfig`), as the node does."""
     out.mkdir(parents=True, exist_ok=True)
     trial = read_trial(bag)
     com_h = human_com_series(bag, human_com_bag, trial)
@@ -83,7 +87,9 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     }
     _write_bag(out / "retarget", cmds, robot.joint_names, float(trial.marker_t_s[0]), dt)
     if sim is not None:
-        summary.update(_simulate(sim, cmds, dt, out))
+        stab = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, stabiliser) if com_feedback else None
+        summary["com_feedback"] = bool(com_feedback)
+        summary.update(_simulate(sim, cmds, dt, out, stabiliser=stab))
     _figure(trial, com_h, frames, cmds, dt, out / "retarget.png", summary)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
@@ -113,23 +119,30 @@ def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float)
                     ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, "world"), point=M.point(*c.zmp)))
 
 
-def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0) -> dict:
+def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0, stabiliser=None) -> dict:
     """Drive the plant with the commands (PD + inverse-dynamics feed-forward), then hold the last one. Writes
     ``simulation.npy``: t, true COM (3), planned COM (3), COP (3), pelvis z, pelvis x, planned pelvis x, largest joint
     tracking error [rad] and its joint index, chair force [N], COM of the measured state with the controller's model
-    (3)."""
+    (3), COM feedback offset (x, y) [m]. ``stabiliser``: a :class:`~sit2stand.retarget.stabiliser.ComStabiliser`
+    correcting each command for the plant's measured state (None: the commands as planned)."""
     steps = max(1, int(round(dt / plant.cfg.timestep_s)))
     rows = []
-    for c in cmds + [None] * int(hold_s / dt):
-        if c is not None:
-            plant.command(c.q[7:], c.v[6:], c.a[6:], feedforward="inverse_dynamics")
+    offset = np.zeros(2)
+    for k in range(len(cmds) + int(hold_s / dt)):
+        c = cmds[min(k, len(cmds) - 1)]
+        if k < len(cmds):         # then the last one is held (as the driver does when the retargeter stops)
+            q = c.q
+            if stabiliser is not None:
+                fix = stabiliser.correct(c.q, c.com, plant.pin_configuration(plant.data.qpos), c.on_feet, dt)
+                q, offset = fix.q, fix.offset_m
+            plant.command(q[7:], c.v[6:], c.a[6:], feedforward="inverse_dynamics")
         plant.step(steps)
         s = plant.sensors()
         err = plant.data.qpos[plant.qadr] - plant.q_ref
-        rows.append([plant.t_s, *plant.true_com(), *(c.com if c is not None else cmds[-1].com),
-                     *s.cop_m, plant.data.qpos[2], plant.data.qpos[0], (c.q[0] if c is not None else cmds[-1].q[0]),
+        rows.append([plant.t_s, *plant.true_com(), *c.com,
+                     *s.cop_m, plant.data.qpos[2], plant.data.qpos[0], c.q[0],
                      float(np.abs(err).max()), float(np.argmax(np.abs(err))), plant.chair_force_n(),
-                     *pin.centerOfMass(plant.ctrl, plant.ctrl_data, plant.pin_configuration(plant.data.qpos))])
+                     *pin.centerOfMass(plant.ctrl, plant.ctrl_data, plant.pin_configuration(plant.data.qpos)), *offset])
         if plant.fallen:
             break
     arr = np.array(rows)
@@ -139,7 +152,8 @@ def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0) -> dict:
     err = arr[:, 1:4] - arr[:, 4:7]
     return {"stood_up": bool(stood), "fall": plant.status_text if plant.fallen else None,
             "pelvis_final_m": float(arr[-1, 10]), "pelvis_planned_final_m": stand_z,
-            "com_tracking_rms_m": float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1))))}
+            "com_tracking_rms_m": float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))),
+            "com_feedback_max_offset_m": float(np.abs(arr[:, 19:21]).max())}
 
 
 def _figure(trial, com_h, frames, cmds, dt: float, png: Path, summary: dict) -> None:
