@@ -74,6 +74,8 @@ def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | N
         cop = bag.read("/robot/cop")
         human = bag.read("/human/com") if "/human/com" in topics else []
         chair = bag.read("/force_plate/chair") if "/force_plate/chair" in topics else []
+        shift = [np.hypot(m.vector.x, m.vector.y) for _, m in bag.read("/robot/com_feedback")] \
+            if "/robot/com_feedback" in topics else []
     t_js, t_base = _stamps(js), _stamps(base)
     bp = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.x,
                     m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w] for _, m in base])
@@ -121,6 +123,7 @@ def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | N
                "robot_seat_off_s": seat_off, "human_seat_off_s": human_seat_off,
                "com_tracking_rms_m": track, "planned_final_com_z_m": z_plan,
                "duration_s": float(t[-1]),
+               "com_feedback_max_shift_m": float(max(shift)) if shift else None,
                "cad_vs_identified_com_rms_m": float(np.sqrt(np.mean(np.sum((com - com_cad)[:, [0, 2]] ** 2, axis=1))))}
     return RunAnalysis(name, t, q, com, com_cad, plan_t, plan_com, cop_t, cop_xyz, human_t, human_com,
                        human_seat_off, seat_off, summary)
