@@ -44,8 +44,19 @@ def test_no_error_no_shift_and_nothing_while_the_plan_is_seated(standing):
     off = stab.correct(q, com + [0.05, 0.0, 0.0], q, on_feet=False, dt_s=0.01)
     assert not off.active and off.q is q and np.all(off.offset_m == 0)
     same = stab.correct(q, com, q, on_feet=True, dt_s=0.01)
-    assert same.active
-    assert np.abs(pin.difference(robot.model, q, same.q)).max() < 1e-6
+    assert np.all(same.offset_m == 0) and np.abs(pin.difference(robot.model, q, same.q)).max() < 1e-6
+
+
+def test_without_a_recent_robot_state_the_last_shift_is_kept(standing):
+    robot, q = standing
+    stab = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, StabiliserConfig(ramp_s=0.0))
+    planned = _com(robot.model, q)
+    planned[0] += 0.01
+    assert not stab.correct(q, planned, None, on_feet=True, dt_s=0.01).active, "no state yet: nothing to correct"
+    first = stab.correct(q, planned, q, on_feet=True, dt_s=0.01)
+    held = stab.correct(q, planned, None, on_feet=True, dt_s=0.01)
+    assert first.active and held.active and np.all(held.offset_m == first.offset_m)
+    assert np.allclose(held.q, first.q)
 
 
 def test_an_error_shifts_the_commanded_com_by_the_gains_with_the_feet_fixed(standing):

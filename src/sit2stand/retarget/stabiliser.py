@@ -54,7 +54,7 @@ class Correction:
     q: np.ndarray                   # corrected configuration (Pinocchio, floating base)
     offset_m: np.ndarray            # COM shift applied (x, y) [m]
     error_m: np.ndarray             # planned - measured COM (x, y) [m]
-    active: bool
+    active: bool                    # the command was shifted
 
 
 class ComStabiliser:
@@ -79,6 +79,7 @@ class ComStabiliser:
                 mu[jt.idx_v:jt.idx_v + jt.nv] = self.cfg.held_weight
         self.ik = ComIk(model, sole_frames, velocity_limit=1e3, posture_weight=mu, damping=1e-6)
         self.integral = np.zeros(2)
+        self.offset = np.zeros(2)              # the COM shift in force [m]
         self.on_feet_s = 0.0
         self._last: tuple[np.ndarray, np.ndarray] | None = None     # (planned, measured) COM of the last call
         self.velocity_error = np.zeros(2)
@@ -89,6 +90,7 @@ class ComStabiliser:
 
     def reset(self) -> None:
         self.integral[:] = 0.0
+        self.offset[:] = 0.0
         self.on_feet_s = 0.0
         self._last = None
         self.velocity_error[:] = 0.0
@@ -96,27 +98,32 @@ class ComStabiliser:
     def correct(self, q_command: np.ndarray, com_planned_m: np.ndarray, q_measured: np.ndarray | None,
                 on_feet: bool, dt_s: float) -> Correction:
         """The command ``q_command`` (whose planned COM is ``com_planned_m``) corrected for the measured
-        configuration ``q_measured`` (None: not known, no correction); ``dt_s``: time since the last call [s]."""
+        configuration ``q_measured``; ``dt_s``: time since the last call [s]. ``q_measured`` None (no recent
+        state): the last shift is kept, not updated (dropping it would step the command by up to
+        ``max_offset_m``)."""
         cfg = self.cfg
-        if q_measured is None:
-            return Correction(q_command, np.zeros(2), np.zeros(2), False)
         if not on_feet:
             self.reset()
             return Correction(q_command, np.zeros(2), np.zeros(2), False)
-        plan, meas = np.asarray(com_planned_m, float)[:2], self.measured_com(q_measured)[:2]
-        err = plan - meas
-        if self._last is not None and dt_s > 0:
-            ev = ((plan - self._last[0]) - (meas - self._last[1])) / dt_s
-            alpha = dt_s / (dt_s + cfg.velocity_filter_s)
-            self.velocity_error += alpha * (ev - self.velocity_error)
-        self._last = (plan, meas)
-        self.on_feet_s += dt_s
-        fade = min(1.0, self.on_feet_s / cfg.ramp_s) if cfg.ramp_s > 0 else 1.0
-        bound = cfg.max_offset_m
-        self.integral = np.clip(self.integral + fade * cfg.ki * dt_s * err, -bound, bound)
-        offset = np.clip(fade * (cfg.kp * err + cfg.kd * self.velocity_error) + self.integral, -bound, bound)
+        err = np.zeros(2)
+        if q_measured is not None:
+            plan, meas = np.asarray(com_planned_m, float)[:2], self.measured_com(q_measured)[:2]
+            err = plan - meas
+            if self._last is not None and dt_s > 0:
+                ev = ((plan - self._last[0]) - (meas - self._last[1])) / dt_s
+                alpha = dt_s / (dt_s + cfg.velocity_filter_s)
+                self.velocity_error += alpha * (ev - self.velocity_error)
+            self._last = (plan, meas)
+            self.on_feet_s += dt_s
+            fade = min(1.0, self.on_feet_s / cfg.ramp_s) if cfg.ramp_s > 0 else 1.0
+            bound = cfg.max_offset_m
+            self.integral = np.clip(self.integral + fade * cfg.ki * dt_s * err, -bound, bound)
+            self.offset = np.clip(fade * (cfg.kp * err + cfg.kd * self.velocity_error) + self.integral,
+                                  -bound, bound)
+        if not np.any(self.offset):
+            return Correction(q_command, self.offset.copy(), err, False)
         target = self.measured_com(q_command)       # the command's own COM, shifted
-        target[:2] += offset
+        target[:2] += self.offset
         res = self.ik.solve(q_command, [], target, self.sole_targets, q_ref=q_command, com_axes=(0, 1),
                             max_iterations=cfg.iterations, tol=1e-9)
-        return Correction(res.q, offset, err, True)
+        return Correction(res.q, self.offset.copy(), err, True)
