@@ -196,13 +196,17 @@ def bench_retarget_graphs(root: Path, env: dict[str, str]) -> dict[str, float]:
     * ``retarget.yaml``: the demonstration merged with its offline human COM, replayer -> retargeter -> driver ->
       recorder, the retargeter at SCHED_FIFO 50 (the graph's default) and under the time-sharing scheduler;
     * ``standup.yaml`` as ``make demo`` runs it: the human COM estimator live (skeleton calibrated beforehand on
-      the first 50 frames), estimator, retargeter and the robot's loop at real-time priority."""
+      the first 50 frames), estimator, retargeter and the robot's loop at real-time priority.
+
+    Each run's COM tracking too: the measured robot COM against the planned one (RMS, with the COM feedback)."""
     import tempfile as _tmp
 
     from .human.offline import calibrate_from_bag
     from .human.offline import run as human_com_offline
     from .io.bag import merge_bags
+    from .retarget.report import analyse
 
+    cad = root / "ros_ws" / "plants" / "cad.yaml"
     pat = (r"latency p50 ([\d.]+) ms p99 ([\d.]+) ms .*COM->command p50 ([\d.]+) ms p99 ([\d.]+) ms; marker->command "
            r"with the COM stream in step \((\d+) frames\) p50 ([\w.]+) ms p99 ([\w.]+) ms; scheduling ([\w ]+)")
     out: dict[str, float | str] = {}
@@ -219,7 +223,7 @@ def bench_retarget_graphs(root: Path, env: dict[str, str]) -> dict[str, float]:
         for key, graph, bag_in, extra in runs:
             proc = subprocess.run([sys.executable, "-m", "sit2stand.cli", "launch", "--timeout", "300",
                                    str(root / "ros_ws" / "graphs" / graph), f"bag:={bag_in}", f"out:={tmp / key}",
-                                   f"plant:={root / 'ros_ws' / 'plants' / 'cad.yaml'}", *extra], env=env,
+                                   f"plant:={cad}", *extra], env=env,
                                   capture_output=True, text=True, timeout=400)
             m = re.search(pat, proc.stdout)
             if proc.returncode != 0 or not m:
@@ -230,6 +234,9 @@ def bench_retarget_graphs(root: Path, env: dict[str, str]) -> dict[str, float]:
             out[f"{key}_com_to_command_p99_ms"] = float(m.group(4))
             out[f"{key}_scheduling"] = m.group(8).strip()
             out[f"{key}_stood_up"] = float("upright" in proc.stdout and "FALLEN" not in proc.stdout)
+            track = analyse(tmp / key, "elderly", None, cad).summary["com_tracking_rms_m"]
+            out[f"{key}_com_tracking_rms_cm"] = round(track * 100, 2)      # measured robot COM vs its plan
+    out["standup_graph_com_tracking_vs_2cm_target"] = out["standup_graph_com_tracking_rms_cm"] / 2.0
     out["retarget_graph_p99_vs_10ms_target"] = out["retarget_graph_marker_to_command_p99_ms"] / 10.0
     out["standup_graph_p99_vs_10ms_target"] = out["standup_graph_marker_to_command_p99_ms"] / 10.0
     return out
