@@ -119,7 +119,8 @@ def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float)
                     ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, "world"), point=M.point(*c.zmp)))
 
 
-def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0, stabiliser=None) -> dict:
+def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0,
+              stabiliser: ComStabiliser | None = None) -> dict:
     """Drive the plant with the commands (PD + inverse-dynamics feed-forward), then hold the last one. Writes
     ``simulation.npy``: t, true COM (3), planned COM (3), COP (3), pelvis z, pelvis x, planned pelvis x, largest joint
     tracking error [rad] and its joint index, chair force [N], COM of the measured state with the controller's model

@@ -42,6 +42,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.signal import savgol_coeffs   # at import: a live node's first frames must not pay for it
 
+from ..robot.model import UPPER_LIMB_PREFIXES
 from .calibration import PELVIS_MARKERS, MarkerMap, calibrate_markers, marker_group
 from .feasibility import frame_time_scales, support_margin, support_polygon, zmp_at_scale
 from .ik import ComIk, IkResult
@@ -224,7 +225,7 @@ class Retargeter:
         lateral = ("torso_1_joint",) + tuple(f"leg_{s}_{i}_joint" for s in ("left", "right") for i in (1, 2, 6))
         for j in range(2, self.model.njoints):
             name, jt = self.model.names[j], self.model.joints[j]
-            w = self.cfg.upper_limb_weight if name.startswith(("arm_", "head_", "gripper_")) else \
+            w = self.cfg.upper_limb_weight if name.startswith(UPPER_LIMB_PREFIXES) else \
                 self.cfg.lateral_weight if name in lateral else None
             if w is not None:
                 mu[jt.idx_v:jt.idx_v + jt.nv] = w

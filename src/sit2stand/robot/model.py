@@ -25,6 +25,9 @@ import numpy as np
 import yaml
 
 SIDES = ("left", "right")
+# TALOS joints above the trunk (their names start so): the retargeter and its COM feedback hold them near a reference
+# rather than let them carry the COM (the heavy arms could otherwise meet a COM target by swinging)
+UPPER_LIMB_PREFIXES = ("arm_", "head_", "gripper_")
 LEG_JOINTS = [f"leg_{s}_{i}_joint" for s in SIDES for i in range(1, 7)]
 SOLE_OFFSET_M = 0.107
 """The sole is this far below the origin of ``leg_*_6_link`` (URDF ``*_sole_link``)."""
