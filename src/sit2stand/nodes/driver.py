@@ -40,7 +40,7 @@ from trajectory_msgs.msg import JointTrajectory
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
 from ..robot.plant import Plant
-from .runtime import NodeError, declare, node_main
+from .runtime import PUBLISH_DEPTH, NodeError, declare, node_main
 
 DEFAULT_PLANT = Path(__file__).resolve().parents[3] / "ros_ws" / "plants" / "default.yaml"
 SIM_EPOCH_S = 100.0      # simulated time starts here when the driver is the time source (0 reads as "unset")
@@ -74,10 +74,10 @@ class Driver(Node):
         self.names = self.plant.joint_names
         self.index = {n: i for i, n in enumerate(self.names)}
         fast = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.js_pub = self.create_publisher(JointState, "/robot/joint_states", 50)
-        self.ft_pubs = {s: self.create_publisher(WrenchStamped, f"/robot/ft/{s}", 50) for s in SIDES}
-        self.cop_pub = self.create_publisher(PointStamped, "/robot/cop", 50)
-        self.base_pub = self.create_publisher(PoseStamped, "/robot/base_pose", 50)
+        self.js_pub = self.create_publisher(JointState, "/robot/joint_states", PUBLISH_DEPTH)
+        self.ft_pubs = {s: self.create_publisher(WrenchStamped, f"/robot/ft/{s}", PUBLISH_DEPTH) for s in SIDES}
+        self.cop_pub = self.create_publisher(PointStamped, "/robot/cop", PUBLISH_DEPTH)
+        self.base_pub = self.create_publisher(PoseStamped, "/robot/base_pose", PUBLISH_DEPTH)
         self.status_pub = self.create_publisher(DiagnosticStatus, "/robot/status", 10)
         self.clock_pub = self.create_publisher(Clock, "/clock", fast) if self.publish_clock else None
         self.create_subscription(JointTrajectory, "/robot/joint_command", self._on_trajectory, 10)

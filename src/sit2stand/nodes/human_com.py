@@ -35,7 +35,7 @@ from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, InertialParameter
 from ..human.com import StreamCalibration, StreamingComEstimator, TooFewMarkers
 from ..human.skeleton import Subject
 from ..io.messages import FORCE_PLATE_PREFIX, MARKERS_TOPIC, plate_sample_from_cdr, stamp_ns
-from .runtime import IdleDrain, NodeError, declare, node_main
+from .runtime import PUBLISH_DEPTH, IdleDrain, NodeError, declare, node_main
 
 PENDING_PLATE_SAMPLES = 4000      # per plate, between two marker frames (4 s at 1 kHz; the estimator keeps ~2 s)
 ROOT_NAMES = ["pelvis_x", "pelvis_y", "pelvis_z", "pelvis_qx", "pelvis_qy", "pelvis_qz", "pelvis_qw"]
@@ -73,7 +73,8 @@ class HumanComNode(Node):
         self.create_subscription(MocapFrame, MARKERS_TOPIC, self._on_markers, deep)
         # transient-local with a deep history: a subscriber that matches late (a recorder still discovering the
         # topic when the first frames come) still gets every estimate
-        history = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+        history = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=PUBLISH_DEPTH,
+                             reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.com_pub = self.create_publisher(CenterOfMass, "/human/com", history)
         self.joint_pub = self.create_publisher(JointState, "/human/joint_states", history)

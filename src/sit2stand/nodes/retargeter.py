@@ -45,7 +45,8 @@ from ..io.messages import MARKERS_TOPIC, plate_sample_from_cdr, plate_topic, sta
 from ..retarget.stabiliser import ComStabiliser, StabiliserConfig
 from ..retarget.stream import PlanPlayer, RetargetConfig, Retargeter, robot_model, robot_setup
 from .driver import DEFAULT_PLANT
-from .runtime import IdleDrain, NodeError, declare, node_main, qos_matching_publishers, scheduling_text
+from .runtime import (PUBLISH_DEPTH, IdleDrain, NodeError, declare, node_main, qos_matching_publishers,
+                      scheduling_text)
 
 
 class RetargeterNode(Node):
@@ -98,11 +99,11 @@ class RetargeterNode(Node):
                                                     raw=True),
                            self.create_subscription(PoseStamped, "/robot/base_pose", self._on_base_pose, 10,
                                                     raw=True)]
-        self.cmd_pub = self.create_publisher(JointTrajectory, "/robot/joint_command", 100)
-        self.com_pub = self.create_publisher(CenterOfMass, "/robot/planned_com", 100)
-        self.zmp_pub = self.create_publisher(PointStamped, "/robot/planned_zmp", 100)
-        self.feedback_pub = self.create_publisher(Vector3Stamped, "/robot/com_feedback", 100)
-        self.ik_pub = self.create_publisher(JointState, "/robot/retarget/ik", 100)
+        self.cmd_pub = self.create_publisher(JointTrajectory, "/robot/joint_command", PUBLISH_DEPTH)
+        self.com_pub = self.create_publisher(CenterOfMass, "/robot/planned_com", PUBLISH_DEPTH)
+        self.zmp_pub = self.create_publisher(PointStamped, "/robot/planned_zmp", PUBLISH_DEPTH)
+        self.feedback_pub = self.create_publisher(Vector3Stamped, "/robot/com_feedback", PUBLISH_DEPTH)
+        self.ik_pub = self.create_publisher(JointState, "/robot/retarget/ik", PUBLISH_DEPTH)
         self.status_pub = self.create_publisher(DiagnosticStatus, "~/status", 10)
         self.frames: deque = deque()          # (t_s, header, names, positions, valid, receipt time)
         self.coms: deque = deque(maxlen=400)  # (t_s, position, velocity)

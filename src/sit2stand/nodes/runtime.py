@@ -98,7 +98,14 @@ def qos_to_bag(profile: QoSProfile):
     )
 
 
-def qos_from_bag(profiles, depth: int = 1000) -> QoSProfile:
+# History depth of the publishers whose topics are recorded: a publisher that catches up after a stall (the
+# retargeter after waiting for the human COM, the simulated robot after a late tick) sends a burst, and a reliable
+# writer drops its oldest samples the recorder has not yet acknowledged beyond this depth (seen at 50 and 100:
+# 7-13 samples missing from a bag)
+PUBLISH_DEPTH = 1000
+
+
+def qos_from_bag(profiles, depth: int = PUBLISH_DEPTH) -> QoSProfile:
     """An rclpy QoSProfile to replay a topic with the reliability/durability it was recorded with."""
     reliable, transient = True, False
     if profiles:
