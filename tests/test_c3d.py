@@ -47,7 +47,7 @@ def test_sit_to_stand_child_done_when():
     pelvis_z = np.nanmean(trial.markers.positions_m[:, idx, 2], axis=1)
     standing = pelvis_z >= pelvis_z.min() + 0.95 * (pelvis_z.max() - pelvis_z.min())
     t_stand = trial.markers.times_s[standing]
-    sel = (feet.times_s >= t_stand[0]) & (feet.times_s <= t_stand[-1])
+    sel = (feet.t_s >= t_stand[0]) & (feet.t_s <= t_stand[-1])
     ratio = feet.force_n[sel, 2].mean() / (trial.body_mass_kg * G)
     assert abs(ratio - 1.0) < 0.15, f"standing vertical force is {ratio:.3f} x m g"
     assert feet.cop_valid[sel].all()

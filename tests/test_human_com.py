@@ -1,16 +1,22 @@
 """sit2stand.human.com: COM from markers and plates, with COP-matched scaling, against the synthetic ground truth."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from sit2stand.human.com import (MarkerIK, StreamCalibration, StreamingComEstimator, TooFewMarkers, calibrate_stream,
-                                 estimate_com, plate_wrench_at, static_frames)
+from sit2stand.human.calibration import StreamCalibration, calibrate_stream, static_frames
+from sit2stand.human.com import estimate_com
+from sit2stand.human.com_stream import StreamingComEstimator
+from sit2stand.human.marker_ik import MarkerIK, TooFewMarkers
+from sit2stand.human.support import plate_wrench_at
+from sit2stand.io.forceplate import PlateSeries
 from sit2stand.human.skeleton import ExtraMass, Subject, build_human
 from sit2stand.human.synth import SynthConfig, synthesize
 
 
 def plates_of(demo):
-    return [dict(name=p.name, t_s=demo.t_s, force_n=p.force_n, moment_nm=p.moment_origin_nm) for p in demo.plates]
+    return list(demo.plates)
 
 
 def com_error_mm(demo, com):
@@ -77,8 +83,8 @@ def test_a_plate_that_drops_out_is_reported_not_zero():
     demo = synthesize(SynthConfig(seed=2, sit_before_s=0.3, stand_after_s=0.4))
     plates = plates_of(demo)
     cut = (demo.t_s > 1.0) & (demo.t_s < 1.3)
-    plates[1] = dict(plates[1], t_s=plates[1]["t_s"][~cut], force_n=plates[1]["force_n"][~cut],
-                     moment_nm=plates[1]["moment_nm"][~cut])
+    plates[1] = dataclasses.replace(plates[1], t_s=plates[1].t_s[~cut], force_n=plates[1].force_n[~cut],
+                                    moment_origin_nm=plates[1].moment_origin_nm[~cut])
     result = estimate_com(demo.marker_t_s, demo.marker_names, demo.markers_m, demo.marker_valid, plates,
                           Subject(1.75, demo.human.total_mass), calibrate=False)
     (name, start, end), = result.plate_gaps
@@ -91,7 +97,7 @@ def test_a_plate_that_drops_out_is_reported_not_zero():
 def test_plate_wrench_window_average():
     t = np.arange(0, 1, 0.001)
     f = np.c_[np.zeros_like(t), np.zeros_like(t), 100 + t]
-    force, moment, covered = plate_wrench_at(np.array([0.5]), [dict(name="p", t_s=t, force_n=f, moment_nm=f * 0)],
+    force, moment, covered = plate_wrench_at(np.array([0.5]), [PlateSeries("p", t, f, f * 0)],
                                              0.005)
     assert covered[0] and force[0, 2] == pytest.approx(100.5, abs=1e-3)
 

@@ -18,8 +18,8 @@ def elderly():
     trial = read_trial(ROOT / "bags" / "elderly")
     t, com = trial.truth
     com_h = np.stack([np.interp(trial.marker_t_s, t, com[:, i]) for i in range(3)], axis=1)
-    chair = next(p for p in trial.plates if p["name"] == "chair")
-    fz = np.interp(trial.marker_t_s, chair["t_s"], chair["force_n"][:, 2])
+    chair = next(p for p in trial.plates if p.name == "chair")
+    fz = np.interp(trial.marker_t_s, chair.t_s, chair.force_n[:, 2])
     return trial, com_h, fz
 
 

@@ -48,7 +48,7 @@ def human_gap(bag: str | Path, progress=None) -> HumanGap:
     trial = read_trial(bag)
     if trial.height_m is None or trial.mass_kg is None:
         raise BagError(f"{bag}: the subject's stature and mass are not in the bag's metadata")
-    chair = any(p["name"] == "chair" for p in trial.plates)
+    chair = any(p.name == "chair" for p in trial.plates)
     if progress:
         progress(f"  {bag}: fitting the skeleton to {len(trial.marker_t_s)} marker frames")
     res = estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,

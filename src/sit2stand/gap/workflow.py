@@ -41,6 +41,7 @@ from .recording import Recording, RecordingError, read_recording
 from .effects import FT_AXES, ft_location, unmodeled_dict, unmodeled_from
 from .residuals import Evaluation, body_link_names, evaluate, joint_columns
 from .select import Candidate, Selection, select
+from ..errors import Sit2StandError
 
 MOVED_RAD = 0.1              # a joint whose range in the data is below this did not move: its links are one body
 MOVING_RADPS = 0.05          # RMS speed above which a joint's friction can be seen
@@ -54,7 +55,7 @@ UNITS = {"extra_mass": ("kg", "m"), "viscous_friction": "N m s/rad", "coulomb_fr
          "mass_scale": "true / model"}
 
 
-class GapError(ValueError):
+class GapError(Sit2StandError, ValueError):
     """Input the workflow cannot use; the message names the file."""
 
 

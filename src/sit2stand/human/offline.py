@@ -37,7 +37,7 @@ class Trial:
     marker_names: list[str]
     positions: np.ndarray
     valid: np.ndarray
-    plates: list[dict]
+    plates: list[PlateSeries]
     height_m: float | None
     mass_kg: float | None
     sex: str
@@ -57,20 +57,9 @@ def read_trial(bag_path: str | Path) -> Trial:
         pos = np.full((len(frames), len(names), 3), np.nan)
         valid = np.zeros((len(frames), len(names)), bool)
         for k, (_, msg) in enumerate(frames):
-            fn, fp, fv = M.mocap_arrays(msg)
-            if fn == names:
-                pos[k], valid[k] = fp, fv
-            else:  # a frame with another marker list: map by name
-                for j, n in enumerate(fn):
-                    if n in names:
-                        pos[k, names.index(n)], valid[k, names.index(n)] = fp[j], fv[j]
-        plates = []
-        for topic in sorted(topics):
-            if topic.startswith(M.FORCE_PLATE_PREFIX):
-                msgs = bag.read(topic)
-                arr = M.plate_arrays([m for _, m in msgs])
-                plates.append({"name": topic[len(M.FORCE_PLATE_PREFIX):], "t_s": np.array([ts for ts, _ in msgs]) * 1e-9,
-                               "force_n": arr["force_n"], "moment_nm": arr["moment_nm"]})
+            pos[k], valid[k] = M.reorder_markers(*M.mocap_arrays(msg), names)
+        plates = [M.plate_series(topic[len(M.FORCE_PLATE_PREFIX):], bag.read(topic))
+                  for topic in sorted(topics) if topic.startswith(M.FORCE_PLATE_PREFIX)]
         custom = bag.custom_data
         truth = reference = None
         if GROUND_TRUTH_COM in topics:
@@ -230,7 +219,7 @@ def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg
         raise BagError(f"{bag_path}: the subject's {'height' if height is None else 'mass'} is not in the bag's "
                        f"metadata; give --height/--mass")
     subject = Subject(height, mass, sex or trial.sex)
-    chair = any(p["name"] == "chair" for p in trial.plates)
+    chair = any(p.name == "chair" for p in trial.plates)
 
     def progress(k: int, n: int) -> None:
         if not quiet and (k == n or k % max(1, n // 10) == 0):
@@ -238,7 +227,7 @@ def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg
 
     if not quiet:
         print(f"{bag_path}: {len(trial.marker_names)} markers x {len(trial.marker_t_s)} frames, plates "
-              f"{', '.join(p['name'] for p in trial.plates)}; subject {height:g} m, {mass:g} kg"
+              f"{', '.join(p.name for p in trial.plates)}; subject {height:g} m, {mass:g} kg"
               f"{'' if chair else ' (chair not on a plate: scaling uses frames after seat-off)'}", file=sys.stderr)
     result = estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,
                           subject, calibrate=calibrate, scale_masses=scale, chair_on_plate=chair, progress=progress,
@@ -266,7 +255,7 @@ def calibrate_from_bag(bag_path: str | Path, out_yaml: str | Path, frames: int =
     """The streaming estimator's skeleton calibration from a bag's first ``frames`` usable (seated, still) marker
     frames, as from a static trial recorded before the motion; written to ``out_yaml`` for the human_com node's
     ``calibration_file``. Returns the :class:`sit2stand.human.com.StreamCalibration`."""
-    from .com import calibrate_stream, static_frames
+    from .calibration import calibrate_stream, static_frames
 
     trial = read_trial(bag_path)
     height, mass = height_m or trial.height_m, mass_kg or trial.mass_kg

@@ -24,7 +24,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..dynamics import plan_derivatives
-from ..io.forceplate import center_of_pressure, point_in_polygon
+from ..io.forceplate import PlateSeries, center_of_pressure, point_in_polygon
 from .anthropometry import ankle_height_m
 from .skeleton import LENGTH_GROUPS, REFERENCE_STATURE_M, SEGMENTS, ExtraMass, HumanModel, Subject, build_human
 
@@ -72,17 +72,6 @@ class SynthConfig:
 
 
 @dataclass
-class Plate:
-    name: str
-    corners_m: np.ndarray                   # (4, 3), on the floor
-    force_n: np.ndarray                     # (K, 3)
-    moment_origin_nm: np.ndarray            # (K, 3)
-    cop_m: np.ndarray
-    cop_valid: np.ndarray
-    free_moment_nm: np.ndarray
-
-
-@dataclass
 class Demonstration:
     """A synthesised trial. Times [s] from the trial start; dynamics at the plate rate, markers at the marker rate."""
 
@@ -97,7 +86,7 @@ class Demonstration:
     marker_names: list[str]
     markers_m: np.ndarray                   # (N, M, 3), NaN where occluded
     marker_valid: np.ndarray                # (N, M)
-    plates: list[Plate]
+    plates: list[PlateSeries]
     seat_off_s: float
     rise_start_s: float
     rise_end_s: float
@@ -312,7 +301,7 @@ def synthesize(cfg: SynthConfig) -> Demonstration:
         m_c = m_o - np.cross(centre, f) + noise(f.shape, cfg.moment_noise_nm)   # sensor noise about its centre
         m_meas = m_c + np.cross(centre, f_meas)
         cop, ok, tau = center_of_pressure(f_meas, m_c, centre, np.array([0.0, 0.0, 1.0]))
-        plates.append(Plate(name, corners, f_meas, m_meas, cop, ok, tau))
+        plates.append(PlateSeries(name, t, f_meas, m_meas, cop, ok, tau, corners))
 
     warnings = []
     heel_x = human.geometry["foot_l"]["from"][0]
@@ -446,10 +435,6 @@ def write_demonstration_bag(demo: Demonstration, out) -> dict[str, int]:
                                                        "pelvis_qz", "pelvis_qw"] + joint_names,
                 position=q.astype(float), velocity=np.zeros(0), effort=np.zeros(0)))
         for plate in demo.plates:
-            topic = M.plate_topic(plate.name)
-            for k, ts in enumerate(demo.t_s):
-                t_ns = to_ns(ts)
-                bag.write(topic, t_ns, M.force_plate_sample(t_ns, plate.name, plate.force_n[k],
-                                                            plate.moment_origin_nm[k], plate.cop_m[k],
-                                                            bool(plate.cop_valid[k]), float(plate.free_moment_nm[k])))
+            for t_ns, msg in M.plate_messages(plate):
+                bag.write(M.plate_topic(plate.name), t_ns, msg)
         return dict(bag.counts)

@@ -23,10 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import Sit2StandError
 from .bag import BagWriter
-from .forceplate import DEFAULT_COP_THRESHOLD_N, center_of_pressure, plate_surface, shift_moment
+from .forceplate import DEFAULT_COP_THRESHOLD_N, PlateSeries, center_of_pressure, plate_surface, shift_moment
 from .messages import (COM_TYPE, MARKERS_TOPIC, MOCAP_TYPE, MODEL_POINTS_TOPIC, PLATE_TYPE, REFERENCE_COM_TOPIC,
-                       center_of_mass, force_plate_sample, mocap_frame, plate_topic)
+                       center_of_mass, mocap_frame, plate_messages, plate_topic)
 
 LENGTH_SCALE = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "dm": 0.1}
 NON_POSITION_GROUPS = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "REACTIONS", "SCALARS")
@@ -36,7 +37,7 @@ UNLABELLED = re.compile(r"^\*\d+$")
 AXES = {"+X": (0, 1.0), "-X": (0, -1.0), "+Y": (1, 1.0), "-Y": (1, -1.0), "+Z": (2, 1.0), "-Z": (2, -1.0)}
 
 
-class C3DError(ValueError):
+class C3DError(Sit2StandError, ValueError):
     """A C3D file that cannot be imported as asked; the message names the file and the problem."""
 
 
@@ -96,26 +97,6 @@ class PointSeries:
     @property
     def times_s(self) -> np.ndarray:
         return self.t0_s + np.arange(self.positions_m.shape[0]) / self.rate_hz
-
-
-@dataclass
-class PlateSeries:
-    """One force plate in the lab frame: reaction wrench on the body, about the lab origin; COP on its surface."""
-
-    index: int
-    name: str
-    rate_hz: float
-    t0_s: float
-    force_n: np.ndarray          # (K, 3)
-    moment_origin_nm: np.ndarray  # (K, 3), about the lab origin
-    cop_m: np.ndarray            # (K, 3), NaN where invalid
-    cop_valid: np.ndarray        # (K,)
-    free_moment_nm: np.ndarray   # (K,)
-    corners_m: np.ndarray        # (4, 3)
-
-    @property
-    def times_s(self) -> np.ndarray:
-        return self.t0_s + np.arange(len(self.force_n)) / self.rate_hz
 
 
 @dataclass
@@ -305,7 +286,8 @@ def read_c3d(path: str | Path, *, chair_plate: int | None = None, feet_plate: in
         loaded = np.count_nonzero(np.abs(force @ normal) > cop_threshold_n) >= max(1, 0.01 * len(force))
         if not loaded and i not in (chair_plate, feet_plate):
             continue  # unused plates are not published
-        plates.append(PlateSeries(i, name, analog_rate, t0, force, moment_o, cop, cop_valid, tau, corners))
+        t_s = t0 + np.arange(len(force)) / analog_rate
+        plates.append(PlateSeries(name, t_s, force, moment_o, cop, cop_valid, tau, corners, index=i))
 
     events = []
     ev_labels = list(_param(params, "EVENT", "LABELS", []) or [])
@@ -381,10 +363,10 @@ def _choose_axes(path: Path, params: dict, points: np.ndarray, labels: list[str]
     raise AssertionError("unreachable")
 
 
-def write_trial_bag(trial: C3DTrial, out: str | Path, start_offset_s: float = 0.0) -> dict[str, int]:
+def write_trial_bag(trial: C3DTrial, out: str | Path) -> dict[str, int]:
     """Write a :class:`C3DTrial` as a bag; returns message counts per topic.
 
-    Message times are the trial's own clock (first frame / rate) plus ``start_offset_s``.
+    Message times are the trial's own clock (first frame / rate).
     """
     custom = {
         "source": str(trial.path.name),
@@ -399,7 +381,9 @@ def write_trial_bag(trial: C3DTrial, out: str | Path, start_offset_s: float = 0.
         custom["height_m"] = f"{trial.height_m:g}"
     if trial.events:
         custom["events"] = "; ".join(f"{lab}@{t:.3f}s" for lab, _ctx, t in trial.events)
-    to_ns = lambda t: int(round((t + start_offset_s) * 1e9))  # noqa: E731
+    def to_ns(t: float) -> int:
+        return int(round(t * 1e9))
+
     with BagWriter(out, custom_data=custom) as bag:
         bag.add_topic(MARKERS_TOPIC, MOCAP_TYPE)
         m = trial.markers
@@ -425,8 +409,6 @@ def write_trial_bag(trial: C3DTrial, out: str | Path, start_offset_s: float = 0.
         for p in trial.plates:
             topic = plate_topic(p.name)
             bag.add_topic(topic, PLATE_TYPE)
-            for k, t in enumerate(p.times_s):
-                bag.write(topic, to_ns(t), force_plate_sample(to_ns(t), p.name, p.force_n[k], p.moment_origin_nm[k],
-                                                              p.cop_m[k], bool(p.cop_valid[k]),
-                                                              float(p.free_moment_nm[k])))
+            for t_ns, msg in plate_messages(p):
+                bag.write(topic, t_ns, msg)
         return dict(bag.counts)

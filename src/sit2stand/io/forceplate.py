@@ -13,10 +13,53 @@ plane about which the moment has no component in the plane:
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 DEFAULT_COP_THRESHOLD_N = 20.0
 """Normal force below which a plate counts as unloaded and its COP as undefined (Vicon Nexus' default)."""
+
+
+@dataclass
+class PlateSeries:
+    """One force plate's samples: the reaction wrench on the body in lab axes, its moment about the lab origin.
+
+    The one plate type of sit2stand: the C3D importer, the synthesiser, the bag reader, the COM estimators and the
+    nodes all pass plates as this. Optional fields are what a source may lack (a bag carries no plate corners).
+
+    Attributes:
+        name: the plate's role (``chair``, ``feet``) or ``plate<i>``; its topic is ``/force_plate/<name>``.
+        t_s: (K,) sample times [s].
+        force_n: (K, 3) force on the body [N].
+        moment_origin_nm: (K, 3) moment about the lab origin [N m], so that plates' wrenches add.
+        cop_m: (K, 3) centre of pressure on the plate surface [m], NaN where invalid.
+        cop_valid: (K,) the COP is defined (normal force above the threshold).
+        free_moment_nm: (K,) free moment about the surface normal [N m].
+        corners_m: (4, 3) the plate's corners in the lab [m].
+        index: 0-based index in the source file (C3D ``FORCE_PLATFORM``), -1 if it has none.
+    """
+
+    name: str
+    t_s: np.ndarray
+    force_n: np.ndarray
+    moment_origin_nm: np.ndarray
+    cop_m: np.ndarray | None = None
+    cop_valid: np.ndarray | None = None
+    free_moment_nm: np.ndarray | None = None
+    corners_m: np.ndarray | None = None
+    index: int = -1
+
+    @property
+    def rate_hz(self) -> float:
+        """Median sample rate [Hz] (to 1e-6 Hz: sample times carry float rounding)."""
+        return round(1.0 / float(np.median(np.diff(self.t_s))), 6) if len(self.t_s) > 1 else float("nan")
+
+    def between(self, t_from_s: float, t_to_s: float) -> PlateSeries:
+        """The wrench samples with ``t_from_s <= t < t_to_s`` (COP fields dropped)."""
+        lo, hi = np.searchsorted(self.t_s, [t_from_s, t_to_s])
+        return PlateSeries(self.name, self.t_s[lo:hi], self.force_n[lo:hi], self.moment_origin_nm[lo:hi],
+                           index=self.index)
 
 
 def shift_moment(moment_nm: np.ndarray, force_n: np.ndarray, from_point_m: np.ndarray,

@@ -7,10 +7,12 @@ the analysis agree on them.
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 
+from .forceplate import PlateSeries
 from .typestore import typestore
 
 MARKERS_TOPIC = "/mocap/markers"
@@ -72,6 +74,22 @@ def mocap_arrays(msg: Any) -> tuple[list[str], np.ndarray, np.ndarray]:
     return list(msg.marker_names), pos, valid
 
 
+def reorder_markers(names: list[str], positions_m: np.ndarray, valid: np.ndarray,
+                    target_names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (M', 3) [m] and validity (M',) in the order of ``target_names``, from a frame whose markers are
+    ``names`` (a capture system may drop or add labels mid-trial). Markers the frame lacks are NaN and invalid."""
+    if names == target_names:
+        return positions_m, valid
+    where = {n: i for i, n in enumerate(names)}
+    pos = np.full((len(target_names), 3), np.nan)
+    ok = np.zeros(len(target_names), bool)
+    for j, n in enumerate(target_names):
+        i = where.get(n)
+        if i is not None:
+            pos[j], ok[j] = positions_m[i], valid[i]
+    return pos, ok
+
+
 def force_plate_sample(t_ns: int, plate_name: str, force_n: np.ndarray, moment_origin_nm: np.ndarray,
                        cop_m: np.ndarray, cop_valid: bool, free_moment_nm: float,
                        frame_id: str = LAB_FRAME) -> Any:
@@ -99,14 +117,26 @@ def plate_sample_from_cdr(data: bytes | memoryview) -> tuple[float, float, float
     return ((sec * 1_000_000_000 + nsec) * 1e-9,) + struct.unpack_from(end + "6d", data, o)   # as stamp_ns() * 1e-9
 
 
-def plate_arrays(msgs: list[Any]) -> dict[str, np.ndarray]:
-    """Stack ForcePlateSamples: force (K, 3) [N], moment (K, 3) [N m] about the lab origin, cop (K, 3), cop_valid."""
+def plate_messages(plate: PlateSeries) -> Iterator[tuple[int, Any]]:
+    """(stamp [ns], ForcePlateSample) of each sample of ``plate``, for its topic :func:`plate_topic`."""
+    for k, t in enumerate(plate.t_s):
+        t_ns = int(round(float(t) * 1e9))
+        yield t_ns, force_plate_sample(t_ns, plate.name, plate.force_n[k], plate.moment_origin_nm[k],
+                                       plate.cop_m[k], bool(plate.cop_valid[k]), float(plate.free_moment_nm[k]))
+
+
+def plate_series(name: str, stamped: list[tuple[int, Any]]) -> PlateSeries:
+    """A :class:`~sit2stand.io.forceplate.PlateSeries` from (log time [ns], ForcePlateSample) pairs: force (K, 3)
+    [N], moment about the lab origin (K, 3) [N m], COP (K, 3) [m] and its validity, free moment (K,) [N m]."""
+    msgs = [m for _, m in stamped]
     force = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z] for m in msgs], float).reshape(-1, 3)
     moment = np.array([[m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z] for m in msgs],
                       float).reshape(-1, 3)
     cop = np.array([[m.cop.x, m.cop.y, m.cop.z] for m in msgs], float).reshape(-1, 3)
     valid = np.array([m.cop_valid for m in msgs], bool)
-    return {"force_n": force, "moment_nm": moment, "cop_m": cop, "cop_valid": valid}
+    free = np.array([m.free_moment_z for m in msgs], float)
+    t_s = np.array([t for t, _ in stamped], float) * 1e-9
+    return PlateSeries(name, t_s, force, moment, cop, valid, free)
 
 
 def center_of_mass(t_ns: int, position_m: np.ndarray, velocity_mps: np.ndarray, acceleration_mps2: np.ndarray,

@@ -32,9 +32,12 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import JointState
 from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, InertialParameters, MocapFrame
 
-from ..human.com import StreamCalibration, StreamingComEstimator, TooFewMarkers
+from ..human.calibration import StreamCalibration
+from ..human.com_stream import StreamingComEstimator
+from ..human.marker_ik import TooFewMarkers
 from ..human.skeleton import Subject
-from ..io.messages import FORCE_PLATE_PREFIX, MARKERS_TOPIC, plate_sample_from_cdr, stamp_ns
+from ..io.messages import (FORCE_PLATE_PREFIX, MARKERS_TOPIC, mocap_arrays, plate_sample_from_cdr, reorder_markers,
+                           stamp_ns)
 from .runtime import PUBLISH_DEPTH, IdleDrain, NodeError, declare, node_main
 
 PENDING_PLATE_SAMPLES = 4000      # per plate, between two marker frames (4 s at 1 kHz; the estimator keeps ~2 s)
@@ -140,14 +143,7 @@ class HumanComNode(Node):
                 self.exit_code, self.finished = 2, True
                 return
             self.names = names
-        pos = np.array([[p.x, p.y, p.z] for p in msg.positions], float).reshape(-1, 3)
-        valid = np.asarray(msg.valid, bool)
-        if names != self.names:  # a frame with another marker order: map by name
-            pos_m, valid_m = np.full((len(self.names), 3), np.nan), np.zeros(len(self.names), bool)
-            for j, n in enumerate(names):
-                if n in self.names:
-                    pos_m[self.names.index(n)], valid_m[self.names.index(n)] = pos[j], valid[j]
-            pos, valid = pos_m, valid_m
+        pos, valid = reorder_markers(*mocap_arrays(msg), self.names)
         t_s = stamp_ns(msg.header) * 1e-9
         self._flush_plates()
         out = self.estimator.update(t_s, pos, valid, defer_delayed=True)

@@ -19,9 +19,10 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from ..errors import Sit2StandError
 
 
-class NodeError(RuntimeError):
+class NodeError(Sit2StandError, RuntimeError):
     """A node cannot start or go on; the message names the parameter, file or topic at fault."""
 
 

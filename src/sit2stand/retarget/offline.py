@@ -52,7 +52,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     out.mkdir(parents=True, exist_ok=True)
     trial = read_trial(bag)
     com_h = human_com_series(bag, human_com_bag, trial)
-    chair = next((p for p in trial.plates if p["name"] == "chair"), None)
+    chair = next((p for p in trial.plates if p.name == "chair"), None)
     sim = None
     q_start = None
     if simulate:
@@ -69,7 +69,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     dt = float(np.median(np.diff(trial.marker_t_s)))
     rt.calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0]).save(out / "marker_map.yaml")
     player = PlanPlayer(robot.model, dt, robot.support_xy, margin_m=margin_m, fixed_scale=time_scale)
-    fz = None if chair is None else np.interp(trial.marker_t_s, chair["t_s"], chair["force_n"][:, 2])
+    fz = None if chair is None else np.interp(trial.marker_t_s, chair.t_s, chair.force_n[:, 2])
     frames, cmds = retarget_sequence(rt, player, trial.marker_t_s, trial.positions, trial.valid, com_h, fz)
     ik_ms = np.array([f.ik.seconds for f in frames]) * 1e3
     feasible = np.array([f.ik.feasible for f in frames])

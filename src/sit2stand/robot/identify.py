@@ -32,6 +32,7 @@ import yaml
 
 from ..optim import constrained_lsq
 from .model import SIDES, controller_model
+from ..errors import Sit2StandError
 
 PLANAR_LINKS = {
     # link: (frame body per side (a joint name) or a single joint, whether it is per leg)
@@ -44,7 +45,7 @@ PLANAR_LINKS = {
 PLANAR_JOINT_ROWS = ["torso_2_joint"] + [f"leg_{s}_{i}_joint" for s in SIDES for i in (3, 4, 5)]
 
 
-class IdentificationError(ValueError):
+class IdentificationError(Sit2StandError, ValueError):
     """Data that cannot identify the model; the message names the rank, the condition number or the file."""
 
 

@@ -23,6 +23,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import yaml
+from ..errors import Sit2StandError
 
 SIDES = ("left", "right")
 # TALOS joints above the trunk (their names start so): the retargeter and its COM feedback hold them near a reference
@@ -38,7 +39,7 @@ only 13.5 cm, which would leave a support polygon far smaller than the robot's, 
 COLLIDING = ("base_link",) + tuple(f"leg_{s}_{i}_link" for s in SIDES for i in range(1, 7))
 
 
-class PlantConfigError(ValueError):
+class PlantConfigError(Sit2StandError, ValueError):
     """A plant file that cannot be used; the message names the file and the field."""
 
 
@@ -88,7 +89,7 @@ class Unmodeled:
 
 @dataclass
 class PlantConfig:
-    """Everything about the simulated robot and its surroundings (see ``ros_ws/plants/default.yaml``)."""
+    """Everything about the simulated robot and its surroundings (see ``sit2stand/data/plants/default.yaml``)."""
 
     name: str = "default"
     robot: str = "talos_reduced"
@@ -119,12 +120,16 @@ class PlantConfig:
 
     @staticmethod
     def load(path: str | Path | None) -> PlantConfig:
-        """Read a plant YAML (None: the defaults, which carry no unmodeled effects)."""
+        """Read a plant YAML, a file or a packaged plant's name (``default``; None: the defaults, which carry no
+        unmodeled effects)."""
+        from ..data import DataFileNotFound, plant_path
+
         if path is None:
             return PlantConfig()
-        path = Path(path)
-        if not path.is_file():
-            raise PlantConfigError(f"{path}: no such plant file")
+        try:
+            path = plant_path(path)
+        except DataFileNotFound as err:
+            raise PlantConfigError(str(err)) from None
         try:
             doc = yaml.safe_load(path.read_text()) or {}
         except yaml.YAMLError as err:

@@ -1,0 +1,318 @@
+"""Frame-by-frame human COM estimation: the human_com node's core, plain Python so it is tested without ROS.
+
+Each marker frame is fitted (:class:`~sit2stand.human.marker_ik.MarkerIK`, warm-started), and its COM, velocity and
+acceleration come from a causal Savitzky-Golay fit over the last window. Half a window later the same frame's
+centred fit gives the model COP, the measured COP and, when the whole weight is on the plates, the rows of the
+COP-matched mass scaling (:mod:`sit2stand.human.mass_scaling`), re-solved every so many rows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from scipy.signal import savgol_coeffs   # at import time: the first frame must not pay for it
+
+from ..dynamics import G, model_cop
+from ..io.forceplate import PlateSeries, center_of_pressure
+from .calibration import CALIBRATION_MIN_MARKERS, StreamCalibration, calibrate_stream
+from .marker_ik import MarkerIK
+from .mass_scaling import FrameRows, MassScaling, apply_scaling, assemble_rows, frame_rows, solve_mass_scaling
+from .skeleton import Subject, build_human
+from .support import SupportRule, plate_wrench_at
+
+STREAM_FIT_STEPS = 3
+"""Gauss-Newton steps per streamed frame, warm-started from the last two fits. More moved the COM by < 0.01 mm on
+both shipped demonstrations while costing ~0.3 ms each (the first fit gets 40)."""
+PLATE_HISTORY_S = 2.0
+"""Plate samples kept behind the newest marker frame [s]."""
+
+
+class PlateBuffer:
+    """One plate's samples as they arrive: rows of (t [s], force (3) [N], moment about the lab origin (3) [N m]),
+    grown by doubling and trimmed to the last :data:`PLATE_HISTORY_S` when full."""
+
+    def __init__(self, name: str, capacity: int = 4096) -> None:
+        self.name = name
+        self.data = np.empty((capacity, 7))
+        self.n = 0
+
+    @property
+    def newest_t_s(self) -> float:
+        return float(self.data[self.n - 1, 0]) if self.n else -np.inf
+
+    def append(self, rows: np.ndarray, now_s: float) -> None:
+        if self.n + len(rows) > len(self.data):
+            live = self.data[:self.n]
+            keep = live[live[:, 0] > now_s - PLATE_HISTORY_S]
+            size = max(len(self.data), 2 * (len(keep) + len(rows)))
+            self.data = np.vstack([keep, np.empty((size - len(keep), 7))])
+            self.n = len(keep)
+        self.data[self.n:self.n + len(rows)] = rows
+        self.n += len(rows)
+
+    def between(self, t_from_s: float, t_to_s: float) -> PlateSeries:
+        """The samples in [t_from_s, t_to_s) as a :class:`PlateSeries`."""
+        t = self.data[:self.n, 0]
+        lo, hi = np.searchsorted(t, [t_from_s, t_to_s])
+        d = self.data[lo:hi]
+        return PlateSeries(self.name, d[:, 0], d[:, 1:4], d[:, 4:7])
+
+
+@dataclass
+class StreamOutput:
+    """What one frame yields: the COM now, and, half a window later, the model COP of an earlier frame."""
+
+    t_s: float
+    valid: bool
+    q: np.ndarray
+    com_m: np.ndarray
+    com_vel: np.ndarray
+    com_acc: np.ndarray
+    marker_rms_m: float
+    n_markers: int
+    delayed_t_s: float | None = None
+    model_cop_m: np.ndarray | None = None
+    measured_cop_m: np.ndarray | None = None
+    rescaled: bool = False
+
+
+class StreamingComEstimator:
+    """Frame-by-frame COM estimation with calibration at the start and COP-matched scaling as data arrive.
+
+    ``add_plate_samples`` takes force-plate samples as they come; ``update`` takes one marker frame and returns a
+    :class:`StreamOutput`. The first ``calibration_frames`` valid frames calibrate segment lengths and marker
+    placements (one pause of ~1-2 s, after which queued frames are processed at the normal rate), unless a
+    ``calibration`` made beforehand (:func:`calibrate_stream` on a static trial) is given. The COM
+    velocity/acceleration published are from a causal Savitzky-Golay fit over the last ``window`` frames; the
+    scaling uses the centred fit of the frame ``window // 2`` back, as the offline estimator does.
+    """
+
+    def __init__(self, subject: Subject, marker_names: list[str], *, rate_hz: float = 100.0, window: int = 31,
+                 calibration_frames: int = 50, rescale_every: int = 100, chair_on_plate: bool = True,
+                 min_frames_to_scale: int = 30, first_rescale: int = 100,
+                 calibration: StreamCalibration | None = None, defer_rescale: bool = False) -> None:
+        self.subject = subject
+        self.marker_names = list(marker_names)
+        self.dt = 1.0 / rate_hz
+        self.window = window | 1
+        self.calibration_frames = calibration_frames
+        self.rescale_every = rescale_every
+        self.chair_on_plate = chair_on_plate
+        self.min_frames_to_scale = min_frames_to_scale
+        self.first_rescale = first_rescale
+        self.human = build_human(subject)
+        self.ik = MarkerIK(self.human, self.marker_names)   # raises TooFewMarkers early
+        self.model = self.human.model
+        self.data = self.model.createData()
+        self.calibrated = calibration_frames <= 0
+        self._calib: list[tuple[np.ndarray, np.ndarray]] = []
+        self._t: list[float] = []
+        self._q: list[np.ndarray] = []
+        self._plates: dict[str, PlateBuffer] = {}
+        self.rows: list[FrameRows] = []
+        self._x: list[np.ndarray] = []       # tangent coordinates of each frame (see smooth_motion)
+        self._fitted: list[bool] = []        # False: the frame's markers could not be fitted, its pose was held
+        self.rows_skipped_unfitted = 0       # supported frames kept out of the scaling: held poses in their window
+        self._R0: np.ndarray | None = None
+        self.scaling: MassScaling | None = None
+        self.scaled_model = self.model
+        self.scaled_data = self.model.createData()
+        self.frames = 0
+        self.plate_gaps: dict[str, int] = {}
+        self.support = SupportRule(subject.mass_kg * G, chair_on_plate)
+        self._coeffs: dict[tuple[int, int], list[np.ndarray]] = {}
+        self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]] = []
+        # a re-solve of the masses costs ~10 ms: a live caller may defer it past the frame's publication
+        # (``rescale_pending``, then :meth:`rescale`); the frame's own COM never depends on it
+        self.defer_rescale = defer_rescale
+        self.rescale_pending = False
+        self.calibration: StreamCalibration | None = None
+        if calibration is not None:       # calibrated beforehand: no pause in the stream
+            self._use(calibration)
+
+    # -- inputs ------------------------------------------------------------------------------------------------
+    def expect_plate(self, name: str) -> None:
+        """Declare a plate that must have data for a frame to count (before its first sample arrives)."""
+        if name not in self._plates:
+            self._plates[name] = PlateBuffer(name)
+
+    def add_plate_samples(self, name: str, t_s: np.ndarray, force_n: np.ndarray, moment_nm: np.ndarray) -> None:
+        """Append force-plate samples (times [s], force [N] and moment about the lab origin [N m], (K, 3))."""
+        t = np.atleast_1d(np.asarray(t_s, float))
+        rows = np.hstack([t[:, None], np.atleast_2d(force_n), np.atleast_2d(moment_nm)])
+        buf = self._plates.get(name)
+        if buf is None:
+            buf = self._plates[name] = PlateBuffer(name, max(4096, 2 * len(rows)))
+        buf.append(rows, self._t[-1] if self._t else t[0])
+
+    def update(self, t_s: float, positions_m: np.ndarray, valid: np.ndarray,
+               defer_delayed: bool = False) -> StreamOutput:
+        """One marker frame (positions [m], validity, in the stream's marker order) at ``t_s`` [s]: the fit and the
+        causal COM, then the delayed work (the centred window half a window back: model and measured COP, scaling
+        rows). ``defer_delayed``: leave that to :meth:`process_delayed`, so that a live caller can publish the COM
+        first (its model/measured COP then come with that call)."""
+        if not self.calibrated:
+            if np.sum(valid) >= CALIBRATION_MIN_MARKERS:
+                self._calib.append((np.asarray(positions_m, float).copy(), np.asarray(valid, bool).copy()))
+            if len(self._calib) >= self.calibration_frames:
+                self._calibrate()
+        fit = self.ik.fit(positions_m, valid, max_iter=STREAM_FIT_STEPS if self.ik.q is not None else 40)
+        self.frames += 1
+        if not fit.ok and not self._q:
+            nan3 = np.full(3, np.nan)
+            return StreamOutput(t_s, False, fit.q, nan3, nan3, nan3, fit.rms_m, fit.n_markers)
+        q = fit.q if fit.ok else self._q[-1]
+        self._t.append(t_s)
+        self._q.append(q.copy())
+        self._x.append(self._coords(q))
+        self._fitted.append(fit.ok)
+        keep = 2 * self.window
+        if len(self._q) > keep:
+            del self._t[:-keep], self._q[:-keep], self._x[:-keep], self._fitted[:-keep]
+        com, vcom, acom = self._causal_com()
+        out = StreamOutput(t_s, fit.ok, q, com, vcom, acom, fit.rms_m, fit.n_markers)
+        if not defer_delayed:
+            self.process_delayed(out)
+        return out
+
+    def process_delayed(self, out: StreamOutput) -> StreamOutput:
+        """The delayed part of :meth:`update` for its output ``out`` (fills its COP fields; see ``update``)."""
+        self._delayed(out)
+        return out
+
+    # -- internals ----------------------------------------------------------------------------------------------
+    def _calibrate(self) -> None:
+        pos = np.array([p for p, _ in self._calib])
+        val = np.array([v for _, v in self._calib])
+        self._use(calibrate_stream(self.subject, self.marker_names, pos, val))
+
+    def _use(self, calibration: StreamCalibration) -> None:
+        self.calibration = calibration
+        subject, human = calibration.build(self.subject)
+        self.subject, self.human, self.model = subject, human, human.model
+        self.data = self.model.createData()
+        q_prev = self.ik.q
+        self.ik = MarkerIK(human, self.marker_names)
+        self.ik.q = q_prev
+        self.scaled_model, self.scaled_data = self.model, self.model.createData()
+        self._q.clear()
+        self._t.clear()
+        self._x.clear()
+        self._fitted.clear()
+        self.calibrated = True
+
+    def _coords(self, q: np.ndarray) -> np.ndarray:
+        """Decoupled coordinates of smooth_motion: base position, base rotation vector about R0, joint angles."""
+        R = pin.Quaternion(q[3:7]).normalized().matrix()
+        if self._R0 is None:
+            self._R0 = R
+        return np.concatenate([q[:3], pin.log3(self._R0.T @ R), q[7:]])
+
+    def _savgol(self, pos: int, length: int) -> list[np.ndarray]:
+        """Savitzky-Golay weights (position, first and second derivative) at sample ``pos`` of ``length``, cached."""
+        key = (pos, length)
+        if key not in self._coeffs:
+            order = min(4, length - 2)
+            self._coeffs[key] = [savgol_coeffs(length, order, deriv=d, pos=pos, use="dot") / self.dt**d
+                                 for d in (0, 1, 2)]
+        return self._coeffs[key]
+
+    def _derivatives_at(self, pos: int, length: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, v, a of the window's sample ``pos`` from a Savitzky-Golay fit of the last ``length`` frames."""
+        X = np.array(self._x[-length:])
+        xs, xd, xdd = (c @ X for c in self._savgol(pos, length))
+        r, rd, rdd = xs[3:6], xd[3:6], xdd[3:6]
+        R = self._R0 @ pin.exp3(r)
+        q = np.concatenate([xs[:3], pin.Quaternion(R).coeffs(), xs[6:]])
+        Jr = pin.Jexp3(r)
+        h = 1e-4
+        dJr = (pin.Jexp3(r + h * rd) - pin.Jexp3(r - h * rd)) / (2 * h)
+        w = Jr @ rd
+        v_lin = R.T @ xd[:3]
+        v = np.concatenate([v_lin, w, xd[6:]])
+        a = np.concatenate([R.T @ xdd[:3] - np.cross(w, v_lin), Jr @ rdd + dJr @ rd, xdd[6:]])
+        return q, v, a
+
+    def _causal_com(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        n = len(self._x)
+        if n < 7:
+            pin.centerOfMass(self.scaled_model, self.scaled_data, self._q[-1])
+            return self.scaled_data.com[0].copy(), np.zeros(3), np.zeros(3)
+        length = min(self.window, n - (1 - n % 2))
+        q, v, a = self._derivatives_at(length - 1, length)
+        pin.centerOfMass(self.scaled_model, self.scaled_data, self._q[-1], v, a)
+        return self.scaled_data.com[0].copy(), self.scaled_data.vcom[0].copy(), self.scaled_data.acom[0].copy()
+
+    def _delayed(self, out: StreamOutput) -> None:
+        """Queue the frame half a window back (its centred derivatives are known now) and process every queued
+        frame whose plate samples have all arrived (plates may lag the markers on a busy executor)."""
+        n, half = len(self._x), self.window // 2
+        if n >= self.window and self.calibrated:
+            q_k, v_k, a_k = self._derivatives_at(half, self.window)
+            times = np.array(self._t[-self.window:])
+            self._pending.append((times, q_k, v_k, a_k, all(self._fitted[-self.window:])))
+        while self._pending:
+            times, q_k, v_k, a_k, fitted = self._pending[0]
+            t_k = times[len(times) // 2]
+            newest = min((b.newest_t_s for b in self._plates.values()), default=-np.inf)
+            if newest < times[-1] + self.dt / 2 and self._t[-1] - t_k < 0.5 and self._plates:
+                break                      # plate samples for this window not all here yet
+            self._pending.pop(0)
+            self._process(out, times, q_k, v_k, a_k, fitted)
+
+    def _process(self, out: StreamOutput, times: np.ndarray, q_k: np.ndarray, v_k: np.ndarray,
+                 a_k: np.ndarray, fitted: bool) -> None:
+        t_k = times[len(times) // 2]
+        force, moment, covered = self._plate_wrench(times)
+        com, _, _, cop_model = model_cop(self.scaled_model, self.scaled_data, q_k, v_k, a_k)
+        out.delayed_t_s = t_k
+        out.model_cop_m = cop_model
+        if not covered:
+            return
+        cop, ok, _ = center_of_pressure(force, moment, np.zeros(3), np.array([0.0, 0.0, 1.0]), threshold_n=1.0)
+        out.measured_cop_m = cop if ok else None
+        if not self.support.step(force[2]) or not ok:
+            return
+        if not fitted:
+            # a held pose has no velocity or acceleration: its rows would pull every mass to a bound
+            self.rows_skipped_unfitted += 1
+            return
+        self.rows.append(frame_rows(self.human, q_k, v_k, a_k, force, moment, cop, self.subject.mass_kg, self.data))
+        n = len(self.rows)
+        if n >= self.min_frames_to_scale and (n == self.first_rescale or n % self.rescale_every == 0):
+            if self.defer_rescale:         # the caller solves it after publishing this frame (see __init__)
+                self.rescale_pending = True
+            else:
+                self.rescale()
+                out.rescaled = True
+
+    def rescale(self) -> MassScaling | None:
+        """Solve the scaling from all rows so far and switch the COM model to it."""
+        if len(self.rows) < self.min_frames_to_scale:
+            return None
+        A, b, w = assemble_rows(self.rows)
+        self.scaling = solve_mass_scaling(self.human, A, b, self.subject.mass_kg, weights=w)
+        self.scaled_model = apply_scaling(self.human, self.scaling)
+        self.scaled_data = self.scaled_model.createData()
+        return self.scaling
+
+    def _plate_wrench(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Summed plate wrench at the centre of the window's marker ``times``, smoothed by the same centred
+        Savitzky-Golay fit as the kinematics; covered is False if a plate has no sample there."""
+        # only the samples around the window (not the whole buffer)
+        plates = [b.between(times[0] - self.dt, times[-1] + self.dt) for b in self._plates.values()]
+        if not plates:
+            return np.zeros(3), np.zeros(3), False
+        force, moment, covered = plate_wrench_at(times, plates, self.dt / 2)
+        centre = len(times) // 2
+        if not covered[centre]:
+            for p in plates:
+                if not plate_wrench_at(times[centre:centre + 1], [p], self.dt / 2)[2][0]:
+                    self.plate_gaps[p.name] = self.plate_gaps.get(p.name, 0) + 1
+            return force[centre], moment[centre], False
+        if covered.all():
+            c = self._savgol(centre, len(times))[0]
+            return c @ force, c @ moment, True
+        return force[centre], moment[centre], True

@@ -1,0 +1,197 @@
+"""COP-matched segment-mass scaling: the skeleton's masses fitted to the force plates' wrench.
+
+Each supported frame gives six equations linear in the segment masses (and the torso's COM shift): the measured
+external wrench equals the floating-base rows of the joint-torque regressor Y(q, v, a) pi
+(:func:`mass_scaling_rows`). Quasi-static frames use two rows instead: the COM lies over the measured COP
+(:func:`static_rows`). :func:`solve_mass_scaling` solves the stack as constrained least squares: masses within
+plausible bounds, left = right, summing to the body mass, pulled weakly toward de Leva. Matching the wrench's
+moment is matching the COP. Units SI, lab frame REP-103.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from ..dynamics import G
+from ..optim import constrained_lsq   # imports proxsuite now: the first re-solve must not pay for it mid-stream
+from .skeleton import SEGMENTS, HumanModel
+
+MASS_GROUPS = ["pelvis", "torso", "head", "upper_arm", "forearm", "hand", "thigh", "shank", "foot", "toes"]
+"""Segment groups with one mass factor each (left and right segments share theirs)."""
+
+
+@dataclass
+class MassScaling:
+    """Segment masses [kg] (left = right), the torso's COM shift (x, y) [m, torso frame] and the fit's figures."""
+
+    masses: dict[str, float]
+    torso_com_shift_m: np.ndarray
+    prior_masses: dict[str, float]
+    cop_rms_before_m: float = float("nan")
+    cop_rms_after_m: float = float("nan")
+    condition_number: float = float("nan")
+    frames_used: int = 0
+
+    def factors(self) -> dict[str, float]:
+        return {g: self.masses[g] / self.prior_masses[g] for g in self.masses}
+
+
+def group_of(segment: str) -> str:
+    return segment[:-2] if segment[-2:] in ("_l", "_r") else segment
+
+
+def apply_scaling(human: HumanModel, scaling: MassScaling) -> pin.Model:
+    """A copy of the skeleton's model with the scaled masses (inertias scale with mass) and torso COM shift."""
+    model = human.model.copy()
+    for seg in SEGMENTS:
+        j = human.segment_joint[seg]
+        old = model.inertias[j]
+        k = scaling.masses[group_of(seg)] / scaling.prior_masses[group_of(seg)]
+        lever = old.lever.copy() + (scaling.torso_com_shift_m if seg == "torso" else 0.0)
+        model.inertias[j] = pin.Inertia(old.mass * k, lever, old.inertia * k)
+    return model
+
+
+def mass_scaling_rows(human: HumanModel, q: np.ndarray, v: np.ndarray, a: np.ndarray, force_n: np.ndarray,
+                      moment_origin_nm: np.ndarray, data: pin.Data | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Six equations A theta = b of one frame; theta = (group masses [kg] ..., torso m*dx, m*dy [kg m]).
+
+    The measured external wrench (lab axes, about the lab origin) is expressed in the pelvis frame and equated to
+    the floating-base rows of the joint-torque regressor, with each segment's parameters scaled by its mass.
+    """
+    model = human.model
+    data = data or model.createData()
+    Y = pin.computeJointTorqueRegressor(model, data, q, v, a)[:6]     # (6, 10 * (njoints - 1))
+    n_theta = len(MASS_GROUPS) + 2
+    A = np.zeros((6, n_theta))
+    for seg in SEGMENTS:
+        j = human.segment_joint[seg]
+        block = Y[:, 10 * (j - 1): 10 * j]
+        inertia = model.inertias[j]
+        pi_unit = inertia.toDynamicParameters() / inertia.mass
+        A[:, MASS_GROUPS.index(group_of(seg))] += block @ pi_unit
+        if seg == "torso":
+            A[:, -2] += block[:, 1]   # first moment along torso x (forward)
+            A[:, -1] += block[:, 2]   # first moment along torso y (left)
+    oMb = pin.SE3(pin.Quaternion(q[3:7]).normalized().matrix(), q[:3])
+    w = pin.Force(np.asarray(force_n, float), np.asarray(moment_origin_nm, float))
+    b = oMb.actInv(w).vector
+    return A, b
+
+
+def static_rows(human: HumanModel, q: np.ndarray, cop_xy: np.ndarray, body_mass_kg: float,
+                data: pin.Data | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Two equations (x, y) of a quasi-static frame: the COM lies above the measured COP, M g c = M g COP, in the
+    unknowns of :func:`mass_scaling_rows` (scaled by g to N m, like its moment rows). A tilted or cross-talking
+    plate force cannot bias these, unlike the full dynamic rows."""
+    model = human.model
+    data = data or model.createData()
+    pin.forwardKinematics(model, data, q)
+    A = np.zeros((2, len(MASS_GROUPS) + 2))
+    for seg in SEGMENTS:
+        j = human.segment_joint[seg]
+        c = data.oMi[j].act(model.inertias[j].lever)
+        A[:, MASS_GROUPS.index(group_of(seg))] += G * c[:2]
+        if seg == "torso":
+            R = data.oMi[j].rotation
+            A[:, -2] += G * R[:2, 0]
+            A[:, -1] += G * R[:2, 1]
+    return A, G * body_mass_kg * np.asarray(cop_xy, float)[:2]
+
+
+@dataclass
+class FrameRows:
+    """One supported frame's equations: the six dynamic rows, the quasi-static alternative (world vertical force
+    and COM over COP), and the COM acceleration [m/s^2] that decides between them."""
+
+    acc: float
+    dynamic: tuple[np.ndarray, np.ndarray]
+    static: tuple[np.ndarray, np.ndarray] | None
+
+
+def frame_rows(human: HumanModel, q: np.ndarray, v: np.ndarray, a: np.ndarray, force_n: np.ndarray,
+               moment_nm: np.ndarray, cop_m: np.ndarray, body_mass_kg: float,
+               data: pin.Data | None = None) -> FrameRows:
+    """The equations of one supported frame (see :class:`FrameRows`)."""
+    data = data or human.model.createData()
+    A6, b6 = mass_scaling_rows(human, q, v, a, force_n, moment_nm, data)
+    pin.centerOfMass(human.model, data, q, v, a)
+    acc = float(np.linalg.norm(data.acom[0]))
+    static = None
+    if np.all(np.isfinite(cop_m)):
+        R = pin.Quaternion(q[3:7]).normalized().matrix()
+        As, bs = static_rows(human, q, cop_m, body_mass_kg, data)
+        static = (np.vstack([(R[2] @ A6[:3])[None, :], As]), np.concatenate([[R[2] @ b6[:3]], bs]))
+    return FrameRows(acc, (A6, b6), static)
+
+
+def assemble_rows(rows: list[FrameRows], quasi_static_acc: float = 0.15, quiet_fraction: float = 0.4,
+                  force_sd_n: float = 5.0, moment_sd_nm: float = 2.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stack frames' equations with weights. Quasi-static frames use the static alternative: |a_com| below
+    ``quasi_static_acc``, or among the quietest ``quiet_fraction`` of all the frames given (a short recording may
+    never be quite still)."""
+    accs = np.array([r.acc for r in rows])
+    limit = max(quasi_static_acc, float(np.quantile(accs, quiet_fraction))) if len(accs) else quasi_static_acc
+    A_rows, b_rows, w_rows = [], [], []
+    for r in rows:
+        if r.acc <= limit and r.static is not None:
+            A_rows.append(r.static[0])
+            b_rows.append(r.static[1])
+            w_rows.append(np.array([1 / force_sd_n, 1 / moment_sd_nm, 1 / moment_sd_nm]))
+        else:
+            A_rows.append(r.dynamic[0])
+            b_rows.append(r.dynamic[1])
+            w_rows.append(np.array([1 / force_sd_n] * 3 + [1 / moment_sd_nm] * 3))
+    return np.vstack(A_rows), np.concatenate(b_rows), np.concatenate(w_rows)
+
+
+def solve_mass_scaling(human: HumanModel, A: np.ndarray, b: np.ndarray, body_mass_kg: float,
+                       bounds: tuple[float, float] = (0.5, 2.0), prior_sd: float = 0.2,
+                       max_torso_shift_m: float = 0.12, force_sd_n: float = 5.0,
+                       moment_sd_nm: float = 2.0, weights: np.ndarray | None = None) -> MassScaling:
+    """Constrained least squares for the group masses and torso COM shift (rows stacked from many frames).
+
+    ``weights`` (one per row) default to blocks of six dynamic rows: 1/force_sd_n for forces, 1/moment_sd_nm for
+    moments; :func:`assemble_rows` builds mixed dynamic / quasi-static rows with their weights.
+    """
+
+    prior = {g: 0.0 for g in MASS_GROUPS}
+    count = {g: 0 for g in MASS_GROUPS}
+    for seg in SEGMENTS:
+        g = group_of(seg)
+        prior[g] += human.model.inertias[human.segment_joint[seg]].mass
+        count[g] += 1
+    per_seg = np.array([prior[g] / count[g] for g in MASS_GROUPS])
+    mult = np.array([count[g] for g in MASS_GROUPS], float)
+    torso_m = per_seg[MASS_GROUPS.index("torso")]
+    # unknowns are per-segment masses of each group (left = right): A's group column is already the sum over
+    # the group's segments of their unit-mass contributions, so it multiplies the per-segment mass as it is
+    A_seg = A
+    x_prior = np.concatenate([per_seg, [0.0, 0.0]])
+    prior_w = np.concatenate([1.0 / (prior_sd * per_seg), [1.0 / (0.05 * torso_m)] * 2])
+    E = np.concatenate([mult, [0.0, 0.0]])[None, :]
+    # the torso COM may move forward/back (a backpack, a belly) and sideways (asymmetry, unmarked arms held to one
+    # side); its vertical shift would trade off against the masses and is not estimated
+    lb = np.concatenate([bounds[0] * per_seg, [-max_torso_shift_m * torso_m * 2] * 2])
+    ub = np.concatenate([bounds[1] * per_seg, [max_torso_shift_m * torso_m * 2] * 2])
+    if weights is None:
+        weights = np.tile([1 / force_sd_n] * 3 + [1 / moment_sd_nm] * 3, len(b) // 6)
+    res = constrained_lsq(A_seg, b, weights=weights, E=E, e=np.array([body_mass_kg]), lb=lb, ub=ub,
+                          prior=x_prior, prior_weights=prior_w)
+    masses = {g: float(res.x[i]) * mult[i] for i, g in enumerate(MASS_GROUPS)}
+    m_torso = res.x[MASS_GROUPS.index("torso")]
+    shift = np.array([res.x[-2] / m_torso, res.x[-1] / m_torso, 0.0])
+    return MassScaling(masses, shift, {g: prior[g] for g in MASS_GROUPS}, condition_number=res.condition_number,
+                       frames_used=int(np.sum(weights > 0) // 3))
+
+
+
+def prior_scaling(human: HumanModel) -> MassScaling:
+    """The unscaled skeleton's group masses (de Leva's), as a :class:`MassScaling` that changes nothing."""
+    prior: dict[str, float] = {}
+    for seg in SEGMENTS:
+        prior[group_of(seg)] = prior.get(group_of(seg), 0.0) + human.model.inertias[human.segment_joint[seg]].mass
+    return MassScaling(dict(prior), np.zeros(3), dict(prior))
