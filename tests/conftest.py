@@ -12,9 +12,11 @@ from pathlib import Path
 
 import pytest
 
+from sit2stand.data import folder
+
 ROOT = Path(__file__).resolve().parents[1]
 REAL = (ROOT / ".." / "shared" / "data" / "real").resolve()
-GRAPHS = ROOT / "ros_ws" / "graphs"
+GRAPHS = folder("graphs")       # the packaged graphs (sit2stand/data/graphs)
 
 
 def real_file(name: str) -> Path:

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import GRAPHS
+from sit2stand.data import plant_path
 from sit2stand.io.bag import BagReader
 from sit2stand.retarget.report import analyse
 
@@ -19,7 +20,7 @@ def test_the_robot_stands_up_live_from_the_shipped_elderly_demonstration(tmp_pat
     """The short end-to-end stand-up: CAD robot, CAD parameters (the consistent case), elderly-like rise."""
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(GRAPHS / "standup.yaml"),
-           f"bag:={ROOT / 'bags' / 'elderly'}", f"out:={out}", f"plant:={ROOT / 'ros_ws' / 'plants' / 'cad.yaml'}",
+           f"bag:={ROOT / 'bags' / 'elderly'}", f"out:={out}", f"plant:={plant_path('cad')}",
            f"marker_map:={tmp_path / 'markers.yaml'}"]
     result = subprocess.run(cmd, env=ros_env, capture_output=True, text=True, timeout=240)
     log = result.stdout[-4000:] + result.stderr[-2000:]
@@ -47,7 +48,7 @@ def test_the_robot_stands_up_live_from_the_shipped_elderly_demonstration(tmp_pat
     assert len(shift) == len(cmds) and np.all(shift[:100] == 0.0)
     assert 0.0 < np.abs(shift).max() <= 0.03 + 1e-9
     assert "COM feedback largest shift" in result.stdout, log
-    summary = analyse(out, "elderly", None, ROOT / "ros_ws" / "plants" / "cad.yaml").summary
+    summary = analyse(out, "elderly", None, plant_path("cad")).summary
     assert summary["stood_up"] and summary["com_tracking_rms_m"] < 0.02, summary
 
 

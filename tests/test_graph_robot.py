@@ -47,7 +47,7 @@ def test_identification_service_called_from_another_process(tmp_path, ros_env, r
 
     data = tmp_path / "postures"
     # the paper's protocol, arms still: planar5 lumps the arms into its rigid torso
-    collect_postures(PlantConfig.load("ros_ws/plants/default.yaml"), 12, data, progress=False, move_arms=False)
+    collect_postures(PlantConfig.load("default"), 12, data, progress=False, move_arms=False)
     server = run_node("sit2stand.nodes.identification")
     assert server.wait_for_output("ready", 30), server.output
     context = rclpy.Context()

@@ -14,7 +14,7 @@ TRUE_MASS = 90.272 + 26.0     # CAD + the default plant's hidden masses
 @pytest.fixture(scope="module")
 def postures(tmp_path_factory):
     out = tmp_path_factory.mktemp("postures") / "default"
-    counts = collect_postures(PlantConfig.load("ros_ws/plants/default.yaml"), 30, out, progress=False)
+    counts = collect_postures(PlantConfig.load("default"), 30, out, progress=False)
     assert counts["kept"] == 30
     return out
 
@@ -39,7 +39,7 @@ def test_the_identified_com_is_lower_and_further_back_than_cads(postures):
     from sit2stand.robot.postures import standing_qpos
 
     result = identify(postures, "full")
-    plant = Plant(PlantConfig.load("ros_ws/plants/default.yaml"), with_chair=False)
+    plant = Plant(PlantConfig.load("default"), with_chair=False)
     q = plant.pin_configuration(standing_qpos(plant, 0.0, 0.0, 0.0, 0.0))
     cad = controller_model()
     c_cad = pin.centerOfMass(cad, cad.createData(), q)
@@ -55,7 +55,7 @@ def test_parameters_yaml_loads_into_the_controller(postures, tmp_path):
     write_yaml(result, tmp_path / "p.yaml")
     doc = yaml.safe_load((tmp_path / "p.yaml").read_text())
     assert doc["eval_rms_m"] == pytest.approx(result.eval_rms_m) and "links" in doc
-    plant = Plant(PlantConfig.load("ros_ws/plants/default.yaml"), controller_params=doc["links"], with_chair=False)
+    plant = Plant(PlantConfig.load("default"), controller_params=doc["links"], with_chair=False)
     import pinocchio as pin
     assert pin.computeTotalMass(plant.ctrl) == pytest.approx(TRUE_MASS, rel=0.02)
 
@@ -95,7 +95,7 @@ def keep_first(src_path, dst_path, n):
 
 
 def test_a_plant_with_a_different_hidden_mass(tmp_path):
-    cfg = PlantConfig.load("ros_ws/plants/heavy_front.yaml")
+    cfg = PlantConfig.load("heavy_front")
     counts = collect_postures(cfg, 30, tmp_path / "heavy", progress=False)
     assert counts["kept"] == 30 and counts["home_com_bias_m"] > 0.01   # the payload is in front
     result = identify(tmp_path / "heavy", "full")

@@ -8,6 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from sit2stand.data import plant_path
 from sit2stand.retarget.offline import run
 from sit2stand.retarget.stabiliser import ComStabiliser, StabiliserConfig
 from sit2stand.retarget.stream import robot_setup
@@ -105,7 +106,7 @@ def test_closed_on_the_plant_the_feedback_brings_the_robot_com_onto_the_plan(tmp
     COM follows the plan several times closer with it (1.6 cm -> 0.3 cm when written)."""
     runs = {}
     for feedback in (False, True):
-        s = run(ROOT / "bags" / "elderly", tmp_path / str(feedback), plant=ROOT / "ros_ws" / "plants" / "cad.yaml",
+        s = run(ROOT / "bags" / "elderly", tmp_path / str(feedback), plant=plant_path("cad"),
                 simulate=True, com_feedback=feedback)
         assert s["stood_up"], f"feedback {feedback}: {s['fall']}"
         assert json.loads((tmp_path / str(feedback) / "summary.json").read_text())["com_feedback"] is feedback

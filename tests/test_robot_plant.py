@@ -9,7 +9,7 @@ from sit2stand.robot.model import PlantConfig, PlantConfigError, build_spec, con
 from sit2stand.robot.plant import Plant
 from sit2stand.robot.postures import standing_qpos
 
-DEFAULT = "ros_ws/plants/default.yaml"
+DEFAULT = "default"             # the packaged plant (sit2stand/data/plants/default.yaml)
 
 
 @pytest.fixture(scope="module")

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .data import graph_path, plant_path
 from .io import messages as M
 from .io.bag import BagReader, BagWriter
 
@@ -138,8 +139,7 @@ def bench_human_com_graph(bag: Path, env: dict[str, str]) -> dict[str, float]:
     with BagReader(bag) as b:
         meta = b.custom_data
     with _tmp.TemporaryDirectory() as tmp:
-        root = Path(__file__).resolve().parents[2]
-        out = subprocess.run([sys.executable, "-m", "sit2stand.cli", "launch", str(root / "ros_ws/graphs/human_com.yaml"),
+        out = subprocess.run([sys.executable, "-m", "sit2stand.cli", "launch", str(graph_path("human_com")),
                               f"bag:={bag}", f"out:={Path(tmp) / 'rec'}", f"height:={meta['height_m']}",
                               f"mass:={meta['body_mass_kg']}"], env=env, capture_output=True, text=True, timeout=300)
     m = re.search(r"(\d+) frames, \d+ skipped .*cost p50 ([\d.]+) ms p99 ([\d.]+) ms", out.stdout)
@@ -206,7 +206,7 @@ def bench_retarget_graphs(root: Path, env: dict[str, str]) -> dict[str, float]:
     from .io.bag import merge_bags
     from .retarget.report import analyse
 
-    cad = root / "ros_ws" / "plants" / "cad.yaml"
+    cad = plant_path("cad")
     pat = (r"latency p50 ([\d.]+) ms p99 ([\d.]+) ms .*COM->command p50 ([\d.]+) ms p99 ([\d.]+) ms; marker->command "
            r"with the COM stream in step \((\d+) frames\) p50 ([\w.]+) ms p99 ([\w.]+) ms; scheduling ([\w ]+)")
     out: dict[str, float | str] = {}
@@ -216,13 +216,13 @@ def bench_retarget_graphs(root: Path, env: dict[str, str]) -> dict[str, float]:
         human_com_offline(bag, tmp / "hc", quiet=True)
         merge_bags(tmp / "with_com", [bag, tmp / "hc" / "human_com"])
         calibrate_from_bag(bag, tmp / "calibration.yaml")
-        runs = (("retarget_graph", "retarget.yaml", tmp / "with_com", []),
-                ("retarget_graph_timesharing", "retarget.yaml", tmp / "with_com", ["rt_policy:=other"]),
-                ("standup_graph", "standup.yaml", bag, [f"calibration:={tmp / 'calibration.yaml'}",
-                                                       "estimator_policy:=fifo", "driver_policy:=fifo"]))
+        runs = (("retarget_graph", "retarget", tmp / "with_com", []),
+                ("retarget_graph_timesharing", "retarget", tmp / "with_com", ["rt_policy:=other"]),
+                ("standup_graph", "standup", bag, [f"calibration:={tmp / 'calibration.yaml'}",
+                                                  "estimator_policy:=fifo", "driver_policy:=fifo"]))
         for key, graph, bag_in, extra in runs:
             proc = subprocess.run([sys.executable, "-m", "sit2stand.cli", "launch", "--timeout", "300",
-                                   str(root / "ros_ws" / "graphs" / graph), f"bag:={bag_in}", f"out:={tmp / key}",
+                                   str(graph_path(graph)), f"bag:={bag_in}", f"out:={tmp / key}",
                                    f"plant:={cad}", *extra], env=env,
                                   capture_output=True, text=True, timeout=400)
             m = re.search(pat, proc.stdout)
@@ -251,7 +251,7 @@ def bench_robot(n_postures: int = 88) -> dict[str, float]:
     from .robot.plant import Plant
     from .robot.postures import collect_postures
 
-    cfg = PlantConfig.load(Path(__file__).resolve().parents[2] / "ros_ws" / "plants" / "default.yaml")
+    cfg = PlantConfig.load(plant_path("default"))
     plant = Plant(cfg)
     plant.step(200)
     t0 = time.perf_counter()

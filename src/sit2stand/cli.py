@@ -9,7 +9,7 @@
     sit2stand synth-human --style natural|elderly [--height M --mass KG ...] [--extra-mass SEG:KG[:x,y,z]] --out DIR
     sit2stand bag info DIR
     sit2stand bag recover DIR [--out DIR2]
-    sit2stand launch GRAPH.yaml [NAME:=VALUE ...] [--timeout S]
+    sit2stand launch GRAPH [NAME:=VALUE ...] [--timeout S]      (a graph file, or a packaged graph's name: standup)
     sit2stand replay DIR [--rate R] [--loop] [--topics T ...]      (runs the replayer node)
     sit2stand record --out DIR [--topics T ...] [--regex RE]       (runs the recorder node)
 
@@ -339,7 +339,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_retarget)
 
     p = sub.add_parser("drive", help="the simulated robot (the driver node), seated on its chair")
-    p.add_argument("--plant", type=Path, help="plant YAML (default: ros_ws/plants/default.yaml)")
+    p.add_argument("--plant", type=Path, help="plant YAML or a packaged plant: default (the default), heavy_front, cad")
     p.add_argument("--params", type=Path, help="identified parameters YAML for the controller (default: CAD)")
     p.add_argument("--rtf", type=float, default=1.0, help="real-time factor; 0 = as fast as possible")
     p.add_argument("--clock", action="store_true", help="publish /clock (the driver is the time source)")
@@ -347,7 +347,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_drive)
 
     p = sub.add_parser("collect-postures", help="hold the simulated robot in static postures and record its sensors")
-    p.add_argument("--plant", type=Path, help="plant YAML (default: ros_ws/plants/default.yaml)")
+    p.add_argument("--plant", type=Path, help="plant YAML or a packaged plant: default (the default), heavy_front, cad")
     p.add_argument("--n", type=int, default=88, help="postures to keep (the paper had 88)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, required=True)
@@ -362,7 +362,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_identify)
 
     p = sub.add_parser("excite", help="record an excitation run of the simulated robot (standing, stance to stance)")
-    p.add_argument("--plant", type=Path, help="plant YAML (default: ros_ws/plants/default.yaml)")
+    p.add_argument("--plant", type=Path, help="plant YAML or a packaged plant: default (the default), heavy_front, cad")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--moves", type=int, default=8)
     p.add_argument("--out", type=Path, required=True)
@@ -396,7 +396,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_bag_merge)
 
     p = sub.add_parser("launch", help="start a graph of nodes from a YAML graph file")
-    p.add_argument("graph", type=Path)
+    p.add_argument("graph", type=Path, help="graph YAML file, or a packaged graph's name (standup, human_com, "
+                   "retarget, robot_seated, roundtrip, identification)")
     p.add_argument("overrides", nargs="*", help="NAME:=VALUE for the graph's arguments")
     p.add_argument("--timeout", type=float, help="stop the graph after this many seconds")
     p.add_argument("--grace", type=float, default=10.0, help="seconds between SIGINT and SIGTERM at shutdown")
@@ -427,7 +428,9 @@ def main(argv: list[str] | None = None) -> int:
     from .launch import LaunchError
 
     if getattr(args, "plant", "unset") is None:
-        args.plant = Path(__file__).resolve().parents[2] / "ros_ws" / "plants" / "default.yaml"
+        from .data import plant_path
+
+        args.plant = plant_path("default")
     try:
         return int(args.func(args) or 0)
     except (BagError, C3DError, LaunchError, FileNotFoundError, ValueError, RuntimeError) as err:

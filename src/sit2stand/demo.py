@@ -4,11 +4,11 @@ For each shipped bag (``bags/natural``, ``bags/elderly``):
 
 1. the human COM offline (``sit2stand human-com``): skeleton fit, length and marker calibration, COP-matched mass
    scaling; COM error against the demonstration's ground truth; JSON + figure;
-2. the same live: replayer -> human_com node -> recorder over DDS (``ros_ws/graphs/human_com.yaml``); the
+2. the same live: replayer -> human_com node -> recorder over DDS (``sit2stand launch human_com``); the
    recorded ``/human/com`` against the ground truth, and the node's per-frame cost.
 
 3. the stand-up, live: replayer -> human_com -> retargeter -> driver (default plant, identified COM parameters) ->
-   recorder (``ros_ws/graphs/standup.yaml``), the estimator's skeleton calibrated beforehand on the first 0.5 s
+   recorder (``sit2stand launch standup``), the estimator's skeleton calibrated beforehand on the first 0.5 s
    (``sit2stand human-calibrate``), and it, the retargeter and the robot's loop at real-time priority; the run
    analysed (:mod:`sit2stand.retarget.report`): stood up or not, COM tracking, the paper's Fig. 6, and a strip of
    rendered frames.
@@ -37,6 +37,7 @@ import numpy as np
 
 from .human.offline import calibrate_from_bag
 from .human.offline import run as human_com_offline
+from .data import graph_path, plant_path
 from .io import messages as M
 from .io.bag import BagReader
 
@@ -55,7 +56,7 @@ def live(bag: Path, out: Path, rate: float) -> dict:
     with BagReader(bag) as b:
         meta = b.custom_data
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(ROOT / "ros_ws/graphs/human_com.yaml"),
+    cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(graph_path("human_com")),
            f"bag:={bag.resolve()}", f"out:={out.resolve()}", f"rate:={rate}",
            f"height:={meta.get('height_m', '1.75')}", f"mass:={meta.get('body_mass_kg', '75')}"]
     t0 = time.monotonic()
@@ -80,13 +81,13 @@ def standup(bag: Path, out: Path, params: Path) -> dict:
     with BagReader(bag) as b:
         meta = b.custom_data
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    plant = ROOT / "ros_ws" / "plants" / "default.yaml"
+    plant = plant_path("default")
     height, mass = meta.get("height_m", "1.75"), meta.get("body_mass_kg", "75")
     # the skeleton calibrated beforehand on the first 0.5 s (seated, still), as on a static trial: the live
     # estimator then has no calibration pause, and runs in real time below the retargeter
     calibration = (out / "skeleton_calibration.yaml").resolve()
     calibrate_from_bag(bag, calibration, 50, float(height), float(mass))
-    cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(ROOT / "ros_ws/graphs/standup.yaml"),
+    cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(graph_path("standup")),
            f"bag:={bag.resolve()}", f"out:={(out / 'standup').resolve()}", f"params:={params.resolve()}",
            f"plant:={plant}", f"height:={height}", f"mass:={mass}", f"calibration:={calibration}",
            "estimator_policy:=fifo", "driver_policy:=fifo", f"marker_map:={(out / 'marker_map.yaml').resolve()}"]
@@ -121,7 +122,7 @@ def robot_identification(out: Path, n_postures: int) -> dict:
 
     print(f"[robot] {n_postures} static postures of the simulated TALOS (default plant)", flush=True)
     out.mkdir(parents=True, exist_ok=True)
-    counts = collect_postures(PlantConfig.load(ROOT / "ros_ws" / "plants" / "default.yaml"), n_postures,
+    counts = collect_postures(PlantConfig.load(plant_path("default")), n_postures,
                               out / "postures", progress=False)
     result = identify(out / "postures", "full")
     print(f"      {result.summary()}", flush=True)
@@ -141,7 +142,7 @@ def model_gap(out: Path) -> dict:
     from .gap.workflow import describe
     from .robot.model import PlantConfig
 
-    plant = Path(__file__).resolve().parents[2] / "ros_ws" / "plants" / "default.yaml"
+    plant = plant_path("default")
     print("[gap] excitation run of the simulated TALOS (default plant), then sit2stand gap against CAD", flush=True)
     excite(PlantConfig.load(plant), out / "excite", seed=0)
     bags = [out / "excite"] + ([out.parent / "robot" / "postures"] if (out.parent / "robot" / "postures").exists()

@@ -9,8 +9,8 @@ A graph file::
     nodes:
       - name: recorder
         executable: recorder         # a sit2stand node (run as python -m sit2stand.nodes.<executable>) or a program on PATH
-        parameters:                  # ROS parameter YAML files (relative to the graph file) and/or inline maps
-          - params/recorder.yaml
+        parameters:                  # ROS parameter YAML files (relative to the graph file, or a packaged
+          - recorder                 # parameter file's name: recorder, replayer, human_com) and/or inline maps
           - {output: $(var out)}
         remappings: {/in: /out}
         arguments: []                # extra command-line arguments before --ros-args
@@ -24,6 +24,9 @@ A graph file::
         on_exit: shutdown
 
 Substitutions: ``$(var NAME)``, ``$(env NAME)`` / ``$(env NAME default)``, ``$(dirname)`` (the graph file's folder).
+
+The graph itself is a file or a packaged graph's name (``standup``: ``sit2stand/data/graphs/standup.yaml``, see
+:mod:`sit2stand.data`); a packaged graph names its parameter files and plant by name, so a copy of it runs anywhere.
 
 ``scheduling`` sets a node's Linux scheduling class before it starts (every thread it makes inherits it):
 ``policy`` ``other`` (the default time-sharing scheduler) with an optional ``nice`` (-20..19), or ``fifo`` / ``rr``
@@ -52,6 +55,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
+from .data import DataFileNotFound, graph_path
+from .data import folder as data_folder
+from .data import names as data_names
 
 OUR_NODES = {"replayer", "recorder", "human_com", "driver", "identification", "retargeter"}
 SUBST = re.compile(r"\$\((var|env|dirname)(?:\s+([^)\s]+))?(?:\s+([^)]*))?\)")
@@ -169,10 +175,12 @@ def _substitute(value, variables: dict[str, str], graph_dir: Path, where: str):
 
 
 def load_graph(path: str | Path, overrides: dict[str, str] | None = None) -> Graph:
-    """Parse a graph file into :class:`Graph` (commands resolved, inline parameters written to a temp folder)."""
-    path = Path(path)
-    if not path.is_file():
-        raise LaunchError(f"{path}: no such graph file")
+    """Parse a graph file, or a packaged graph's name, into :class:`Graph` (commands resolved, inline parameters
+    written to a temp folder)."""
+    try:
+        path = graph_path(path)
+    except DataFileNotFound as err:
+        raise LaunchError(str(err)) from None
     try:
         doc = yaml.safe_load(path.read_text()) or {}
     except yaml.YAMLError as err:
@@ -220,8 +228,12 @@ def _node_spec(spec: dict, name: str, where: str, graph_dir: Path, tmpdir: Path)
     for j, entry in enumerate(spec.get("parameters", []) or []):
         if isinstance(entry, str):
             file = Path(entry) if Path(entry).is_absolute() else graph_dir / entry
-            if not file.is_file():
-                raise LaunchError(f"{where} ({name}): parameter file {file} does not exist")
+            if not file.is_file():      # else a packaged parameter file's name ("recorder")
+                packaged = data_folder("params") / (entry if entry.endswith(".yaml") else f"{entry}.yaml")
+                if Path(entry).name != entry or not packaged.is_file():
+                    raise LaunchError(f"{where} ({name}): parameter file {file} does not exist, nor is {entry!r} a "
+                                      f"packaged one ({', '.join(data_names('params'))})")
+                file = packaged
             command += ["--params-file", str(file)]
         elif isinstance(entry, dict):
             file = tmpdir / f"{name}_{j}.yaml"

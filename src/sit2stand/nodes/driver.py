@@ -12,10 +12,10 @@ axes about the sole, frame ``sole_<side>``), ``/robot/cop`` (geometry_msgs/Point
 (geometry_msgs/PoseStamped, what a state estimator would give), ``/robot/status`` (diagnostic_msgs/DiagnosticStatus,
 10 Hz), and ``/clock`` when ``publish_clock`` is true (then every stamp is simulated time).
 
-Parameters: ``plant`` (YAML; default ros_ws/plants/default.yaml), ``controller_params`` (identified parameters YAML
-from ``sit2stand identify``; empty: CAD), ``feedforward`` (gravity | inverse_dynamics | none), ``real_time_factor``
-(1.0; 0 = as fast as it can), ``state_rate_hz``, ``publish_clock``, ``on_fall`` (limp | hold), ``settle_s`` (2:
-simulated seconds to come to rest on the chair before anything is published).
+Parameters: ``plant`` (YAML, or a packaged plant's name; default ``default``), ``controller_params`` (identified
+parameters YAML from ``sit2stand identify``; empty: CAD), ``feedforward`` (gravity | inverse_dynamics | none),
+``real_time_factor`` (1.0; 0 = as fast as it can), ``state_rate_hz``, ``publish_clock``, ``on_fall`` (limp | hold),
+``settle_s`` (2: simulated seconds to come to rest on the chair before anything is published).
 Service: ``~/reset`` (std_srvs/Trigger): back to sitting on the chair.
 Safety: torques clamped to the URDF efforts by the joints; a fall (pelvis below ``fall_pelvis_height_m`` or the base
 tilted past ``fall_tilt_rad``) is published on the status and the robot goes limp or holds its posture.
@@ -24,7 +24,6 @@ tilted past ``fall_tilt_rad``) is published on the status and the robot goes lim
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 from builtin_interfaces.msg import Time as BuiltinTime
@@ -37,12 +36,13 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from ..data import plant_path
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
 from ..robot.plant import Plant
 from .runtime import PUBLISH_DEPTH, NodeError, declare, node_main
 
-DEFAULT_PLANT = Path(__file__).resolve().parents[3] / "ros_ws" / "plants" / "default.yaml"
+DEFAULT_PLANT = plant_path("default")
 SIM_EPOCH_S = 100.0      # simulated time starts here when the driver is the time source (0 reads as "unset")
 
 
@@ -53,7 +53,7 @@ class Driver(Node):
 
     def __init__(self) -> None:
         super().__init__("driver")
-        plant_file = declare(self, "plant", "", "plant YAML") or str(DEFAULT_PLANT)
+        plant_file = declare(self, "plant", "", "plant YAML or packaged plant name") or str(DEFAULT_PLANT)
         params_file = declare(self, "controller_params", "", "identified parameters YAML (empty: CAD)")
         self.ff_mode = declare(self, "feedforward", "gravity", "gravity | inverse_dynamics | none")
         self.rtf = declare(self, "real_time_factor", 1.0, "1 = real time, 0 = as fast as possible")
