@@ -1,9 +1,9 @@
 """Message types for bags: the ROS 2 Jazzy type store of `rosbags`, plus our own interfaces from msgs/.
 
 rosbags (de)serialises CDR without a ROS install; it only needs each type's definition. Jazzy's standard types ship
-with rosbags; ours are parsed from the ``.msg`` files of ``sit2stand_msgs`` (the source tree's ``msgs/`` or the
-installed ``share/sit2stand_msgs/msg``). Any other type can be added from an installed package's ``share`` folder
-with :func:`ensure_type`.
+with rosbags; ours are parsed from the ``.msg`` files of ``sit2stand_msgs``: the installed
+``<prefix>/share/sit2stand_msgs/msg`` (the venv's, then each AMENT_PREFIX_PATH prefix's), else the source tree's
+``msgs/``. Any other type can be added from an installed package's ``share`` folder with :func:`ensure_type`.
 """
 
 from __future__ import annotations
@@ -32,7 +32,9 @@ class UnknownMessageType(KeyError):
 
 
 def _repo_msgs_dir() -> Path:
-    """msgs/ of the source tree this module lives in (src/sit2stand/io/typestore.py -> <repo>/msgs)."""
+    """msgs/ of the source tree this module lives in (src/sit2stand/io/typestore.py -> <repo>/msgs): the fallback
+    where sit2stand_msgs is not installed (an installed sit2stand has no such folder; the share/ copy is what the
+    colcon build of msgs/ generated the live nodes' types from, so it comes first)."""
     return Path(__file__).resolve().parents[3] / "msgs"
 
 
@@ -48,16 +50,15 @@ def _share_dirs() -> list[Path]:
 def _definition_file(msgtype: str) -> Path | None:
     """Where the ``.msg`` text of ``pkg/msg/Type`` is, or None."""
     pkg, kind, name = msgtype.split("/")
-    candidates = []
+    candidates = [d / pkg / kind / f"{name}.msg" for d in _share_dirs()]
     if pkg == OUR_PACKAGE:
         candidates.append(_repo_msgs_dir() / pkg / kind / f"{name}.msg")
-    candidates += [d / pkg / kind / f"{name}.msg" for d in _share_dirs()]
     return next((c for c in candidates if c.is_file()), None)
 
 
 def our_message_types() -> list[str]:
     """Names (``sit2stand_msgs/msg/X``) of the messages defined in msgs/ (or the installed copy)."""
-    for base in [_repo_msgs_dir() / OUR_PACKAGE / "msg"] + [d / OUR_PACKAGE / "msg" for d in _share_dirs()]:
+    for base in [d / OUR_PACKAGE / "msg" for d in _share_dirs()] + [_repo_msgs_dir() / OUR_PACKAGE / "msg"]:
         if base.is_dir():
             return sorted(f"{OUR_PACKAGE}/msg/{p.stem}" for p in base.glob("*.msg"))
     raise FileNotFoundError(f"no {OUR_PACKAGE}/msg folder in {_repo_msgs_dir()} or the share/ folders")
