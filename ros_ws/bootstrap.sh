@@ -98,7 +98,9 @@ if ! stamp_ok msgs "$msgs_hash" || ! "$VPY" -c 'import sit2stand_msgs.msg' 2>/de
 fi
 
 # --- 5. The project's Python package (editable) --------------------------------------------------------------------
-pkg_hash="$(hash_of "$ROOT/src/setup.py" "$ROOT/src/setup.cfg" "$ROOT/src/package.xml")"
+# pyproject.toml makes pip build an editable wheel (PEP 660) with the venv's setuptools (pinned; no download), so
+# the console scripts land in $VENV/bin whatever the pip version (setup.cfg's lib/sit2stand is for colcon only).
+pkg_hash="$(hash_of "$ROOT/src/pyproject.toml" "$ROOT/src/setup.py" "$ROOT/src/setup.cfg" "$ROOT/src/package.xml")"
 if ! stamp_ok package "$pkg_hash" || ! "$VPY" -c 'import sit2stand' 2>/dev/null; then
   say "installing the sit2stand package (editable, from src/)"
   "$VPY" -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation -e "$ROOT/src"

@@ -1,27 +1,15 @@
-"""ament_python packaging of sit2stand: `pip install -e src` for development, `colcon build` for a ROS workspace.
+"""colcon's ament_python build runs this file; everything else about the package is in pyproject.toml.
 
-Console scripts are the `sit2stand` command and one executable per node; on a ROS install (colcon) setup.cfg puts
-them in lib/sit2stand/ so that `ros2 run sit2stand replayer` finds them.
+It adds the two files an ament package installs besides its Python code: the marker in the ament index (so that
+`ros2 pkg` and `ros2 run` know the package) and package.xml. pip installs them too (<prefix>/share/...), which
+registers the package for tools that search AMENT_PREFIX_PATH.
 """
-from setuptools import find_packages, setup
-
-NODES = ["replayer", "recorder", "human_com", "driver", "identification", "retargeter"]
+from setuptools import setup
 
 setup(
-    name="sit2stand",
-    version="0.1.0",
-    packages=find_packages(include=["sit2stand", "sit2stand.*"]),
-    package_data={"sit2stand.nodes": ["*.xml"]},
+    python_requires=">=3.10,<3.13",   # the ros-jazzy-* wheels exist for 3.10..3.12 (see pyproject.toml's note)
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/sit2stand"]),
         ("share/sit2stand", ["package.xml"]),
     ],
-    install_requires=["setuptools"],
-    zip_safe=True,
-    description="Sit-to-stand from human demonstration on a humanoid robot (ROS 2 nodes and algorithms).",
-    license="Apache-2.0",
-    entry_points={
-        "console_scripts": ["sit2stand = sit2stand.cli:main"]
-        + [f"{n} = sit2stand.nodes.{n}:main" for n in NODES],
-    },
 )
