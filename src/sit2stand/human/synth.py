@@ -23,8 +23,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from ..io.topics import (COM_TYPE, GROUND_TRUTH_COM_TOPIC, GROUND_TRUTH_JOINTS_TOPIC, GROUND_TRUTH_PARAMETERS_TOPIC,
+                         MARKERS_TOPIC, MOCAP_TYPE, PLATE_TYPE, plate_topic)
 from ..dynamics import plan_derivatives
+from ..io import messages as M
+from ..io.bag import BagWriter
 from ..io.forceplate import PlateSeries, center_of_pressure, point_in_polygon
+from ..io.typestore import typestore
 from .anthropometry import ankle_height_m
 from .skeleton import LENGTH_GROUPS, REFERENCE_STATURE_M, SEGMENTS, ExtraMass, HumanModel, Subject, build_human
 
@@ -101,6 +106,7 @@ def _min_jerk(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
 
 
 def _random_subject(cfg: SynthConfig, rng: np.random.Generator) -> Subject:
+    """The configured subject, with random segment length and mass factors where ``cfg.vary_subject``."""
     lengths, masses = {}, {}
     if cfg.vary_subject:
         lengths = {g: float(np.clip(rng.normal(1.0, 0.03), 0.92, 1.08)) for g in LENGTH_GROUPS}
@@ -111,6 +117,11 @@ def _random_subject(cfg: SynthConfig, rng: np.random.Generator) -> Subject:
             masses[seg] = per_side[base] * float(np.clip(rng.normal(1.0, 0.01), 0.97, 1.03))
     body_mass = cfg.mass_kg
     return Subject(cfg.height_m, body_mass, cfg.sex, lengths, masses, list(cfg.extra))
+
+
+def _world_pitch(v: np.ndarray) -> np.ndarray:
+    """World pitch [rad] (about +y) of unit sagittal (x, z) directions: R_y(p) (0, 0, -1) = (-sin p, -cos p)."""
+    return np.arctan2(-v[:, 0], -v[:, 1])
 
 
 def _leg_ik(hip_xz: np.ndarray, ankle_xz: np.ndarray, l_th: float, l_sh: float) -> tuple[np.ndarray, np.ndarray]:
@@ -125,30 +136,101 @@ def _leg_ik(hip_xz: np.ndarray, ankle_xz: np.ndarray, l_th: float, l_sh: float) 
     th_dir = np.stack([u[:, 0] * np.cos(a) - u[:, 1] * np.sin(a), u[:, 0] * np.sin(a) + u[:, 1] * np.cos(a)], axis=1)
     knee = hip_xz + l_th * th_dir
     sh_dir = (ankle_xz - knee) / l_sh
-    pitch = lambda v: np.arctan2(-v[:, 0], -v[:, 1])  # noqa: E731 - R_y(p) (0,0,-1) = (-sin p, -cos p)
-    return pitch(th_dir), pitch(sh_dir)
+    return _world_pitch(th_dir), _world_pitch(sh_dir)
+
+
+PELVIS_SEATED_RAD = -0.12
+"""Pelvis pitch when sitting [rad] (about +y; negative: the posterior tilt of a seated pelvis)."""
+
+
+@dataclass
+class _Body:
+    """The true body and the sagittal geometry its rise is planned with (lengths [m], lab frame, (x, z) pairs)."""
+
+    human: HumanModel
+    data: pin.Data
+    jid: dict[str, int]                 # joint name -> index in q
+    q0: np.ndarray                      # neutral configuration
+    height_m: float
+    thigh_m: float
+    shank_m: float
+    ankle_xz: np.ndarray                # the fixed ankles: x = 0, z = ankle height
+    seat_m: float                       # seat height
+    hip_above_seat_m: float
+    hip_seated_xz: np.ndarray           # hips on the seat at the start
+    hip_standing_xz: np.ndarray         # hips when standing, knees almost straight
+
+    @property
+    def model(self) -> pin.Model:
+        """The body's Pinocchio model."""
+        return self.human.model
+
+
+@dataclass
+class _Timeline:
+    """Plate-rate time base and the rise's events, all [s] from the trial start."""
+
+    t: np.ndarray
+    dt: float
+    duration: float
+    rise_start: float
+    seat_off: float
+    rise_end: float
+    peak: float                         # trunk flexion peak, just after seat-off
+
+
+@dataclass
+class _Plan:
+    """The planned motion: configurations filled stage by stage, with the pelvis pitch [rad] and hip height [m]."""
+
+    q: np.ndarray                       # (K, nq)
+    pelvis_pitch: np.ndarray            # (K,)
+    hip_z: np.ndarray                   # (K,)
+
+
+@dataclass
+class _Centroidal:
+    """Whole-body COM motion and the total external wrench about the lab origin (SI)."""
+
+    com_m: np.ndarray                   # (K, 3)
+    com_vel: np.ndarray                 # (K, 3) [m/s]
+    com_acc: np.ndarray                 # (K, 3) [m/s^2]
+    force_n: np.ndarray                 # (K, 3)
+    moment_o_nm: np.ndarray             # (K, 3)
 
 
 def synthesize(cfg: SynthConfig) -> Demonstration:
     """Synthesise one sit-to-stand demonstration (see the module docstring)."""
     rng = np.random.default_rng(cfg.seed)
     style = STYLES[cfg.style]
+    body = _body(cfg, style, rng)
+    tl = _timeline(cfg, style)
+    plan = _trunk_and_arms(body, tl, style)
+    k_so, com_at_seat_off = _roll_forward_on_seat(body, plan, tl)
+    _track_com_path(body, plan, k_so, _com_path_after_seat_off(body, plan, tl, k_so, com_at_seat_off))
+    _check_limits(body.human, plan.q)
+    dyn = _centroidal(body, plan.q, tl.dt)
+    plates = _measure_plates(cfg, rng, body, tl.t, _share_loads(body, style, tl, plan.q, dyn))
+    warnings = _feet_cop_warnings(body.human, plates[1])
+    idx, markers, valid = _markers(cfg, rng, body, plan.q)
+    return Demonstration(cfg, body.human, tl.t, plan.q, dyn.com_m, dyn.com_vel, dyn.com_acc, tl.t[idx],
+                         body.human.marker_names, markers, valid, plates, tl.seat_off, tl.rise_start, tl.rise_end,
+                         body.seat_m, warnings)
+
+
+def _body(cfg: SynthConfig, style: dict, rng: np.random.Generator) -> _Body:
+    """Build the (randomised) subject, and place its hips on the seat and standing over the fixed ankles."""
     H = cfg.height_m
     human = build_human(_random_subject(cfg, rng))
     model, data = human.model, human.model.createData()
-    subj = human.subject
     jid = {name: model.joints[model.getJointId(name)].idx_q for name in model.names[2:]}
-
-    # geometry of this body
     q0 = pin.neutral(model)
     pin.framesForwardKinematics(model, data, q0)
     l_th = np.linalg.norm(model.jointPlacements[model.getJointId("knee_l_y")].translation)
     l_sh = np.linalg.norm(model.jointPlacements[model.getJointId("ankle_l_y")].translation)
-    h_a = ankle_height_m(H, cfg.sex) * subj.lengths.get("foot", 1.0)
+    h_a = ankle_height_m(H, cfg.sex) * human.subject.lengths.get("foot", 1.0)
     seat = cfg.seat_height_m if cfg.seat_height_m is not None else 0.26 * H
     hip_above_seat = 0.055 * H
-    duration = cfg.duration_s or style["duration"]
-
     # seated start: ankle at x = 0, shank tilted back, thigh from the knee to the hip on the seat
     beta = style["shank_tilt"]
     knee0 = np.array([l_sh * np.sin(beta), h_a + l_sh * np.cos(beta)])
@@ -158,8 +240,12 @@ def synthesize(cfg: SynthConfig) -> Demonstration:
         raise ValueError(f"seat height {seat:.3f} m cannot be reached with thigh length {l_th:.3f} m")
     hip0 = np.array([knee0[0] - np.sqrt(l_th**2 - dz**2), z_h0])
     hip1 = np.array([0.0, h_a + l_sh + l_th - 0.004])   # standing height, knees almost straight
+    return _Body(human, data, jid, q0, H, l_th, l_sh, np.array([0.0, h_a]), seat, hip_above_seat, hip0, hip1)
 
-    # time base
+
+def _timeline(cfg: SynthConfig, style: dict) -> _Timeline:
+    """The plate-rate time base and the rise's start, seat-off, trunk peak and end [s]."""
+    duration = cfg.duration_s or style["duration"]
     dt = 1.0 / cfg.plate_rate_hz
     t_total = cfg.sit_before_s + duration + cfg.stand_after_s
     t = np.arange(int(round(t_total / dt)) + 1) * dt
@@ -167,9 +253,14 @@ def synthesize(cfg: SynthConfig) -> Demonstration:
     t_so = t_rise0 + style["seat_off"] * duration
     t_rise1 = t_rise0 + duration
     t_peak = t_so + style["peak_after_seat_off"] * duration
+    return _Timeline(t, dt, duration, t_rise0, t_so, t_rise1, t_peak)
 
+
+def _trunk_and_arms(body: _Body, tl: _Timeline, style: dict) -> _Plan:
+    """Pelvis tilt, lumbar flexion, arms, head and hip height over time [rad, m]; the legs are set later."""
     # trunk: seated posterior pelvic tilt -> anterior tilt + lumbar flexion peaking just after seat-off -> upright
-    p_seated = -0.12
+    t, duration, t_rise0, t_peak, t_rise1 = tl.t, tl.duration, tl.rise_start, tl.peak, tl.rise_end
+    p_seated = PELVIS_SEATED_RAD
     pel = p_seated + (style["pelvis_tilt"] - p_seated) * _min_jerk(t, t_rise0, t_peak) \
         - style["pelvis_tilt"] * _min_jerk(t, t_peak, t_rise1)
     lum = style["lumbar"] * (_min_jerk(t, t_rise0, t_peak) - _min_jerk(t, t_peak + 0.05 * duration, t_rise1))
@@ -178,9 +269,11 @@ def synthesize(cfg: SynthConfig) -> Demonstration:
     trunk = pel + lum
     s_rise = np.clip((t - t_rise0) / duration, 0, 1)
     swing = 0.5 * (1 - np.cos(2 * np.pi * s_rise))   # 0 -> 1 -> 0 with zero slope at both ends
-    hz = hip0[1] + (hip1[1] - hip0[1]) * _min_jerk(t, t_so, t_rise1)   # hips leave the seat at seat-off
+    hip0, hip1 = body.hip_seated_xz, body.hip_standing_xz
+    hz = hip0[1] + (hip1[1] - hip0[1]) * _min_jerk(t, tl.seat_off, t_rise1)   # hips leave the seat at seat-off
 
-    q = np.tile(q0, (len(t), 1))
+    jid = body.jid
+    q = np.tile(body.q0, (len(t), 1))
     q[:, 2] = hz
     q[:, 4], q[:, 6] = np.sin(pel / 2), np.cos(pel / 2)   # quaternion (x, y, z, w) of R_y(pelvis pitch)
     for side in "lr":
@@ -191,68 +284,96 @@ def synthesize(cfg: SynthConfig) -> Demonstration:
     q[:, jid["neck_y"]] = -0.55 * trunk
     q[:, jid["neck_z"]] = 0.05 * np.sin(2 * np.pi * 0.4 * t)
     q[:, jid["lumbar_z"]] = 0.02 * swing
-    ankle_xz = np.array([0.0, h_a])
+    return _Plan(q, pel, hz)
 
-    def set_hips(rows: np.ndarray | slice, hx: np.ndarray) -> None:
-        """Place the hips at x = hx (z, pelvis pitch already set) and the legs by planar IK, feet flat."""
-        hip = np.stack([hx, q[rows, 2]], axis=1)
-        reach = (l_th + l_sh) * 0.9999
-        d = hip - ankle_xz
-        too_far = np.linalg.norm(d, axis=1) > reach
-        if too_far.any():
-            hip[too_far, 0] = np.sign(d[too_far, 0]) * np.sqrt(np.maximum(reach**2 - d[too_far, 1] ** 2, 0.0))
-        th, sh = _leg_ik(hip, np.zeros_like(hip) + ankle_xz, l_th, l_sh)
-        p = pel[rows]
-        q[rows, 0] = hip[:, 0]
-        for side in "lr":
-            q[rows, jid[f"hip_{side}_y"]] = th - p
-            q[rows, jid[f"knee_{side}_y"]] = sh - th
-            q[rows, jid[f"ankle_{side}_y"]] = -sh
 
-    def com_x(k: int) -> float:
-        return float(pin.centerOfMass(model, data, q[k])[0])
+def _set_hips(body: _Body, plan: _Plan, rows: np.ndarray | slice, hx: np.ndarray) -> None:
+    """Place the hips at x = hx [m] (z, pelvis pitch already set) and the legs by planar IK, feet flat."""
+    q, ankle_xz, l_th, l_sh = plan.q, body.ankle_xz, body.thigh_m, body.shank_m
+    hip = np.stack([hx, q[rows, 2]], axis=1)
+    reach = (l_th + l_sh) * 0.9999
+    d = hip - ankle_xz
+    too_far = np.linalg.norm(d, axis=1) > reach
+    if too_far.any():
+        hip[too_far, 0] = np.sign(d[too_far, 0]) * np.sqrt(np.maximum(reach**2 - d[too_far, 1] ** 2, 0.0))
+    th, sh = _leg_ik(hip, np.zeros_like(hip) + ankle_xz, l_th, l_sh)
+    p = plan.pelvis_pitch[rows]
+    q[rows, 0] = hip[:, 0]
+    for side in "lr":
+        q[rows, body.jid[f"hip_{side}_y"]] = th - p
+        q[rows, body.jid[f"knee_{side}_y"]] = sh - th
+        q[rows, body.jid[f"ankle_{side}_y"]] = -sh
 
+
+def _com_x(body: _Body, q: np.ndarray) -> float:
+    """Whole-body COM x [m] at configuration q."""
+    return float(pin.centerOfMass(body.model, body.data, q)[0])
+
+
+def _roll_forward_on_seat(body: _Body, plan: _Plan, tl: _Timeline) -> tuple[int, tuple[float, float, float]]:
+    """Legs before seat-off; the seat-off sample and the COM x, velocity, acceleration just before it [m, /s, /s^2]."""
     # before seat-off the pelvis rolls forward over the ischia: the hips move with the pelvic tilt
-    k_so = int(np.searchsorted(t, t_so))
+    dt = tl.dt
+    k_so = int(np.searchsorted(tl.t, tl.seat_off))
     pre = slice(0, k_so)
-    set_hips(pre, hip0[0] + hip_above_seat * (np.sin(pel[pre]) - np.sin(p_seated)))
-    xs = np.array([com_x(k) for k in range(k_so - 4, k_so)])   # one-sided 2nd-order differences at k_so - 1
+    _set_hips(body, plan, pre, body.hip_seated_xz[0]
+              + body.hip_above_seat_m * (np.sin(plan.pelvis_pitch[pre]) - np.sin(PELVIS_SEATED_RAD)))
+    xs = np.array([_com_x(body, plan.q[k]) for k in range(k_so - 4, k_so)])   # one-sided 2nd-order differences
     x0 = xs[-1]
     v0 = (3 * xs[-1] - 4 * xs[-2] + xs[-3]) / (2 * dt)
     a0 = (2 * xs[-1] - 5 * xs[-2] + 4 * xs[-3] - xs[-4]) / dt**2
+    return k_so, (x0, v0, a0)
 
-    # after seat-off the COM follows a designed path to standing over mid-foot; its duration is chosen for the
-    # largest margin of the (point-mass) ZMP inside the feet, and the hips are solved to realise it
+
+def _foot_span_x(human: HumanModel) -> tuple[float, float]:
+    """Heel and toe-tip x [m] of the (flat, fixed) feet in the lab frame."""
+    model = human.model
     heel_x = human.geometry["foot_l"]["from"][0]
     tip_x = model.jointPlacements[model.getJointId("toe_l_y")].translation[0] + human.geometry["toes_l"]["to"][0]
-    x1 = 0.035 * H / REFERENCE_STATURE_M
+    return heel_x, tip_x
+
+
+def _com_path_after_seat_off(body: _Body, plan: _Plan, tl: _Timeline, k_so: int,
+                             start: tuple[float, float, float]) -> np.ndarray:
+    """The COM x path [m] from seat-off to standing over mid-foot, timed for the widest point-mass ZMP margin."""
+    # its duration is chosen for the largest margin of the (point-mass) ZMP inside the feet
+    t, dt, hz = tl.t, tl.dt, plan.hip_z
+    heel_x, tip_x = _foot_span_x(body.human)
+    x1 = 0.035 * body.height_m / REFERENCE_STATURE_M
     post = np.arange(k_so, len(t))
     tp = t[post] - t[k_so - 1]   # the quintic starts where x0, v0, a0 were measured
-    z_c = hz[post] + (float(pin.centerOfMass(model, data, q[k_so - 1])[2]) - hz[k_so - 1])
+    z_c = hz[post] + (float(pin.centerOfMass(body.model, body.data, plan.q[k_so - 1])[2]) - hz[k_so - 1])
     az = np.gradient(np.gradient(z_c, dt), dt)
     best = None
-    for T in np.linspace(0.3, 1.0, 15) * (t_rise1 - t_so):
-        xc, _, ac = _quintic(tp, T, x0, v0, a0, x1)
+    for T in np.linspace(0.3, 1.0, 15) * (tl.rise_end - tl.seat_off):
+        xc, _, ac = _quintic(tp, T, *start, x1)
         zmp = xc - z_c * ac / (G + az)
         margin = min(np.min(zmp - heel_x), np.min(tip_x - zmp))
         if best is None or margin > best[0]:
             best = (margin, T, xc)
-    _, T_x, xc_target = best
-    hx = q[k_so - 1, 0]
-    for i, k in enumerate(post):
+    return best[2]
+
+
+def _track_com_path(body: _Body, plan: _Plan, k_so: int, xc_target: np.ndarray) -> None:
+    """Solve the hips x, sample by sample from seat-off, so that the COM x follows ``xc_target`` [m]."""
+    hx = plan.q[k_so - 1, 0]
+    for i, k in enumerate(np.arange(k_so, len(plan.q))):
         for _ in range(4):  # Newton on hip x: d(COM x)/d(hip x) is about 1 (a little less)
-            set_hips(slice(k, k + 1), np.array([hx]))
-            err = com_x(k) - xc_target[i]
+            _set_hips(body, plan, slice(k, k + 1), np.array([hx]))
+            err = _com_x(body, plan.q[k]) - xc_target[i]
             if abs(err) < 1e-7:
                 break
-            set_hips(slice(k, k + 1), np.array([hx + 1e-4]))
-            slope = (com_x(k) - err - xc_target[i]) / 1e-4
+            _set_hips(body, plan, slice(k, k + 1), np.array([hx + 1e-4]))
+            slope = (_com_x(body, plan.q[k]) - err - xc_target[i]) / 1e-4
             hx -= err / max(slope, 0.2)
-        set_hips(slice(k, k + 1), np.array([hx]))
-    _check_limits(human, q)
+        _set_hips(body, plan, slice(k, k + 1), np.array([hx]))
 
+
+def _centroidal(body: _Body, q: np.ndarray, dt: float) -> _Centroidal:
+    """COM motion and the external wrench F = m (a_com - g), M_O = c x F + dL_G/dt, by whole-body dynamics."""
     # velocities and accelerations by central differences (Pinocchio's tangent space)
-    n = len(t)
+    model, data = body.model, body.data
+    n = len(q)
     v, a = plan_derivatives(model, q, dt)
     com = np.zeros((n, 3))
     vcom = np.zeros((n, 3))
@@ -263,77 +384,91 @@ def synthesize(cfg: SynthConfig) -> Demonstration:
         com[k], vcom[k], acom[k] = data.com[0], data.vcom[0], data.acom[0]
         pin.computeCentroidalMomentumTimeVariation(model, data, q[k], v[k], a[k])
         dL[k] = data.dhg.angular
-    m_total = human.total_mass
-    force = m_total * (acom + np.array([0.0, 0.0, G]))
-    moment_o = np.cross(com, force) + dL
+    force = body.human.total_mass * (acom + np.array([0.0, 0.0, G]))
+    return _Centroidal(com, vcom, acom, force, np.cross(com, force) + dL)
 
-    # chair / feet sharing before seat-off: the static share that balances the COM between the seat contact and a
-    # feet COP target (mid-foot, moving toward the forefoot as the trunk flexes; ~75-80 % on the chair when
-    # sitting still), fading to zero over the unloading window that ends at seat-off. The chair COP moves within
-    # the buttock-thigh contact (ischia to mid-thigh) to take the trunk's dynamic moment; what it cannot take goes
-    # to the feet.
+
+def _share_loads(body: _Body, style: dict, tl: _Timeline, q: np.ndarray,
+                 dyn: _Centroidal) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """Split the external wrench between chair and feet: ((force [N], moment about O [N m]) of each)."""
+    # before seat-off: the static share that balances the COM between the seat contact and a feet COP target
+    # (mid-foot, moving toward the forefoot as the trunk flexes; ~75-80 % on the chair when sitting still), fading
+    # to zero over the unloading window that ends at seat-off. The chair COP moves within the buttock-thigh contact
+    # (ischia to mid-thigh) to take the trunk's dynamic moment; what it cannot take goes to the feet.
+    H, seat, t, t_so = body.height_m, body.seat_m, tl.t, tl.seat_off
+    force, moment_o = dyn.force_n, dyn.moment_o_nm
+    n = len(t)
     hx = q[:, 0]
-    x_feet = 0.06 * H / REFERENCE_STATURE_M + style["cop_forward"] * H / REFERENCE_STATURE_M * _min_jerk(t, t_rise0, t_so)
+    x_feet = 0.06 * H / REFERENCE_STATURE_M + style["cop_forward"] * H / REFERENCE_STATURE_M * _min_jerk(
+        t, tl.rise_start, t_so)
     x_contact = hx - 0.01
-    alpha = np.clip((x_feet - com[:, 0]) / (x_feet - x_contact), 0.05, 0.95)
+    alpha = np.clip((x_feet - dyn.com_m[:, 0]) / (x_feet - x_contact), 0.05, 0.95)
     alpha *= 1 - _min_jerk(t, t_so - style["unload"], t_so)
-    f_c = alpha[:, None] * force
+    f_chair = alpha[:, None] * force
     with np.errstate(divide="ignore", invalid="ignore"):
-        x_seat = (seat * f_c[:, 0] - x_feet * (force[:, 2] - f_c[:, 2]) - moment_o[:, 1]) / f_c[:, 2]
+        x_seat = (seat * f_chair[:, 0] - x_feet * (force[:, 2] - f_chair[:, 2]) - moment_o[:, 1]) / f_chair[:, 2]
     x_seat = np.clip(np.nan_to_num(x_seat, nan=0.0), hx - 0.12 * H / REFERENCE_STATURE_M,
                      hx + 0.15 * H / REFERENCE_STATURE_M)
     seat_point = np.stack([x_seat, np.zeros(n), np.full(n, seat)], axis=1)
-    f_chair = alpha[:, None] * force
     m_chair = np.cross(seat_point, f_chair)
-    f_feet, m_feet = force - f_chair, moment_o - m_chair
+    return (f_chair, m_chair), (force - f_chair, moment_o - m_chair)
 
-    # plates: chair plate under the seat, feet plate under the feet, both on the floor
-    scale = H / REFERENCE_STATURE_M
-    chair_plate = _rect(np.array([hip0[0] - 0.02 * scale, 0.0, 0.0]), 0.22 * scale, 0.25 * scale)
+
+def _measure_plates(cfg: SynthConfig, rng: np.random.Generator, body: _Body, t: np.ndarray,
+                    loads: tuple[tuple[np.ndarray, np.ndarray], ...]) -> list[PlateSeries]:
+    """The chair plate under the seat and the feet plate under the feet, on the floor, with sensor noise [N, N m]."""
+    scale = body.height_m / REFERENCE_STATURE_M
+    chair_plate = _rect(np.array([body.hip_seated_xz[0] - 0.02 * scale, 0.0, 0.0]), 0.22 * scale, 0.25 * scale)
     feet_plate = _rect(np.array([0.09 * scale, 0.0, 0.0]), 0.18 * scale, 0.25 * scale)
     if chair_plate[:, 0].max() >= feet_plate[:, 0].min():
         raise ValueError("chair and feet plates overlap; raise the seat or shorten the thighs")
-    noise = lambda shape, sd: rng.normal(0.0, sd, shape)  # noqa: E731
     plates = []
-    for name, corners, f, m_o in (("chair", chair_plate, f_chair, m_chair), ("feet", feet_plate, f_feet, m_feet)):
+    for name, corners, (f, m_o) in zip(("chair", "feet"), (chair_plate, feet_plate), loads):
         centre = corners.mean(axis=0)
-        f_meas = f + noise(f.shape, cfg.force_noise_n)
-        m_c = m_o - np.cross(centre, f) + noise(f.shape, cfg.moment_noise_nm)   # sensor noise about its centre
+        f_meas = f + rng.normal(0.0, cfg.force_noise_n, f.shape)
+        m_c = m_o - np.cross(centre, f) + rng.normal(0.0, cfg.moment_noise_nm, f.shape)   # noise about its centre
         m_meas = m_c + np.cross(centre, f_meas)
         cop, ok, tau = center_of_pressure(f_meas, m_c, centre, np.array([0.0, 0.0, 1.0]))
         plates.append(PlateSeries(name, t, f_meas, m_meas, cop, ok, tau, corners))
+    return plates
 
-    warnings = []
-    heel_x = human.geometry["foot_l"]["from"][0]
-    tip_x = model.jointPlacements[model.getJointId("toe_l_y")].translation[0] + human.geometry["toes_l"]["to"][0]
+
+def _feet_cop_warnings(human: HumanModel, feet: PlateSeries) -> list[str]:
+    """A warning where the feet plate's COP leaves the feet in more than 1 % of its loaded samples."""
+    heel_x, tip_x = _foot_span_x(human)
     feet_support = np.array([[heel_x, -0.15], [tip_x, -0.15], [tip_x, 0.15], [heel_x, 0.15]])
-    loaded = plates[1].cop_valid
-    outside = ~point_in_polygon(plates[1].cop_m[loaded, :2], feet_support)
+    outside = ~point_in_polygon(feet.cop_m[feet.cop_valid, :2], feet_support)
     if outside.mean() > 0.01:
-        warnings.append(f"feet COP leaves the feet in {outside.mean():.1%} of loaded samples (motion too fast?)")
+        return [f"feet COP leaves the feet in {outside.mean():.1%} of loaded samples (motion too fast?)"]
+    return []
 
-    # markers at the marker rate
+
+OCCLUDED_MARKERS = ("LASI", "RASI", "LHEE", "RHEE", "RFIN", "LWRB", "RWRB", "STRN", "LTHI", "RTIB")
+"""Markers that the synthesised occlusion gaps may hide."""
+
+
+def _markers(cfg: SynthConfig, rng: np.random.Generator, body: _Body,
+             q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Marker positions [m] at the marker rate: plate-rate sample indices, (N, M, 3) with NaN gaps, validity."""
+    human, data = body.human, body.data
     step = int(round(cfg.plate_rate_hz / cfg.marker_rate_hz))
-    idx = np.arange(0, n, step)
+    idx = np.arange(0, len(q), step)
     names = human.marker_names
     placement = rng.normal(0.0, cfg.marker_placement_sd_m, (len(names), 3))
     mk = np.zeros((len(idx), len(names), 3))
     for i, k in enumerate(idx):
-        pin.framesForwardKinematics(model, data, q[k])
+        pin.framesForwardKinematics(body.model, data, q[k])
         for j, mname in enumerate(names):
             mk[i, j] = data.oMf[human.marker_frames[mname]].act(placement[j])
     mk += rng.normal(0.0, cfg.marker_noise_m, mk.shape)
     valid = np.ones(mk.shape[:2], bool)
-    candidates = ["LASI", "RASI", "LHEE", "RHEE", "RFIN", "LWRB", "RWRB", "STRN", "LTHI", "RTIB"]
     for _ in range(cfg.occlusion_gaps):
-        j = names.index(candidates[rng.integers(len(candidates))])
+        j = names.index(OCCLUDED_MARKERS[rng.integers(len(OCCLUDED_MARKERS))])
         length = int(rng.integers(8, 40))
         start = int(rng.integers(0, len(idx) - length))
         valid[start:start + length, j] = False
     mk[~valid] = np.nan
-
-    return Demonstration(cfg, human, t, q, com, vcom, acom, t[idx], names, mk, valid, plates, t_so, t_rise0, t_rise1,
-                         seat, warnings)
+    return idx, mk, valid
 
 
 def _quintic(t: np.ndarray, T: float, x0: float, v0: float, a0: float, x1: float):
@@ -352,12 +487,14 @@ def _quintic(t: np.ndarray, T: float, x0: float, v0: float, a0: float, x1: float
 
 
 def _rect(centre: np.ndarray, half_x: float, half_y: float) -> np.ndarray:
+    """Corners (4, 3) [m] of a floor rectangle of the given half sizes [m] about ``centre``."""
     c = np.asarray(centre, float)
     return np.array([[c[0] + half_x, c[1] + half_y, 0.0], [c[0] - half_x, c[1] + half_y, 0.0],
                      [c[0] - half_x, c[1] - half_y, 0.0], [c[0] + half_x, c[1] - half_y, 0.0]])
 
 
 def _check_limits(human: HumanModel, q: np.ndarray) -> None:
+    """Raise ValueError naming the first joint whose synthesised angle [rad] leaves its range."""
     lo, hi = human.model.lowerPositionLimit[7:], human.model.upperPositionLimit[7:]
     bad = np.where((q[:, 7:] < lo - 1e-9) | (q[:, 7:] > hi + 1e-9))
     if len(bad[0]):
@@ -366,9 +503,6 @@ def _check_limits(human: HumanModel, q: np.ndarray) -> None:
                          f"({q[bad[0][0], int(j) + 7]:.3f} rad outside {lo[j]:.2f}..{hi[j]:.2f})")
 
 
-GROUND_TRUTH_COM = "/ground_truth/com"
-GROUND_TRUTH_JOINTS = "/ground_truth/joint_states"
-GROUND_TRUTH_PARAMETERS = "/ground_truth/inertial_parameters"
 START_TIME_S = 100.0
 """Bag time of the trial's first sample [s] (not 0: ROS nodes on /clock read time 0 as "not set yet")."""
 
@@ -388,19 +522,19 @@ def truth_parameters(human: HumanModel) -> tuple[list[str], list[float]]:
     return names, values
 
 
+def _to_ns(t_s: float) -> int:
+    """Bag time [ns] of a trial time [s] (the trial starts at :data:`START_TIME_S`)."""
+    return int(round((START_TIME_S + t_s) * 1e9))
+
+
 def write_demonstration_bag(demo: Demonstration, out) -> dict[str, int]:
     """Write a :class:`Demonstration` as a bag: what a lab would record, plus the truth on /ground_truth/*.
 
     The bag's metadata carries what a lab knows (stature, body mass from a scale, sex, seat height, events); the
     hidden extra masses appear only on the ground-truth topics, which estimators must not read.
     """
-    from ..io import messages as M
-    from ..io.bag import BagWriter
-    from ..io.typestore import typestore
-
     cfg = demo.config
     store = typestore().types
-    to_ns = lambda ts: int(round((START_TIME_S + ts) * 1e9))  # noqa: E731
     custom = {
         "source": "sit2stand synth-human", "style": cfg.style, "seed": str(cfg.seed),
         "height_m": f"{cfg.height_m:g}", "body_mass_kg": f"{demo.human.total_mass:.3f}", "sex": cfg.sex,
@@ -411,30 +545,31 @@ def write_demonstration_bag(demo: Demonstration, out) -> dict[str, int]:
     }
     joint_names = demo.human.joint_names()
     with BagWriter(out, custom_data=custom) as bag:
-        bag.add_topic(M.MARKERS_TOPIC, M.MOCAP_TYPE)
+        bag.add_topic(MARKERS_TOPIC, MOCAP_TYPE)
         for name in ("chair", "feet"):
-            bag.add_topic(M.plate_topic(name), M.PLATE_TYPE)
-        bag.add_topic(GROUND_TRUTH_COM, M.COM_TYPE)
-        bag.add_topic(GROUND_TRUTH_JOINTS, "sensor_msgs/msg/JointState")
-        bag.add_topic(GROUND_TRUTH_PARAMETERS, "sit2stand_msgs/msg/InertialParameters")
+            bag.add_topic(plate_topic(name), PLATE_TYPE)
+        bag.add_topic(GROUND_TRUTH_COM_TOPIC, COM_TYPE)
+        bag.add_topic(GROUND_TRUTH_JOINTS_TOPIC, "sensor_msgs/msg/JointState")
+        bag.add_topic(GROUND_TRUTH_PARAMETERS_TOPIC, "sit2stand_msgs/msg/InertialParameters")
         names, values = truth_parameters(demo.human)
-        bag.write(GROUND_TRUTH_PARAMETERS, to_ns(0.0), store["sit2stand_msgs/msg/InertialParameters"](
-            header=M.header(to_ns(0.0)), model="human_truth", names=names, values=np.array(values),
+        bag.write(GROUND_TRUTH_PARAMETERS_TOPIC, _to_ns(0.0), store["sit2stand_msgs/msg/InertialParameters"](
+            header=M.header(_to_ns(0.0)), model="human_truth", names=names, values=np.array(values),
             std_devs=np.zeros(len(values)), yaml_path=""))
         step = int(round(cfg.plate_rate_hz / cfg.marker_rate_hz))
         for i, ts in enumerate(demo.marker_t_s):
-            t_ns = to_ns(ts)
-            bag.write(M.MARKERS_TOPIC, t_ns, M.mocap_frame(t_ns, demo.marker_names, demo.markers_m[i],
-                                                           demo.marker_valid[i]))
+            t_ns = _to_ns(ts)
+            bag.write(MARKERS_TOPIC, t_ns, M.mocap_frame(t_ns, demo.marker_names, demo.markers_m[i],
+                                                         demo.marker_valid[i]))
             k = i * step
-            bag.write(GROUND_TRUTH_COM, t_ns, M.center_of_mass(t_ns, demo.com_m[k], demo.com_vel[k], demo.com_acc[k],
-                                                               source="ground_truth", n_markers=0))
+            bag.write(GROUND_TRUTH_COM_TOPIC, t_ns, M.center_of_mass(t_ns, demo.com_m[k], demo.com_vel[k],
+                                                                     demo.com_acc[k], source="ground_truth",
+                                                                     n_markers=0))
             q = demo.q[k]
-            bag.write(GROUND_TRUTH_JOINTS, t_ns, store["sensor_msgs/msg/JointState"](
+            bag.write(GROUND_TRUTH_JOINTS_TOPIC, t_ns, store["sensor_msgs/msg/JointState"](
                 header=M.header(t_ns, "pelvis"), name=["pelvis_x", "pelvis_y", "pelvis_z", "pelvis_qx", "pelvis_qy",
                                                        "pelvis_qz", "pelvis_qw"] + joint_names,
                 position=q.astype(float), velocity=np.zeros(0), effort=np.zeros(0)))
         for plate in demo.plates:
-            for t_ns, msg in M.plate_messages(plate):
-                bag.write(M.plate_topic(plate.name), t_ns, msg)
+            for t_ns, msg in M.plate_messages(plate, START_TIME_S):
+                bag.write(plate_topic(plate.name), t_ns, msg)
         return dict(bag.counts)
