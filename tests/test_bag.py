@@ -1,9 +1,9 @@
 """sit2stand.io.bag: bags we write read back (rosbags and mcap-ros2), follow rosbag2's layout, and fail clearly."""
 
+import itertools
 import math
 import os
 import signal
-
 
 import numpy as np
 import pytest
@@ -39,8 +39,8 @@ def test_round_trip_values_through_rosbags(tmp_path):
         assert names == ["LASI", "RASI"] and valid.tolist() == [True, False]
         assert pos[0] == pytest.approx([0.3, 0.2, 1.0])
         assert np.isnan(pos[1]).all(), "an occluded marker must be NaN, never a stale or zero position"
-        plates = M.plate_arrays([m for _, m in r.read(M.plate_topic("feet"))])
-        assert plates["force_n"][:, 2] == pytest.approx(600.0 + np.arange(50))
+        plate = M.plate_series("feet", r.read(M.plate_topic("feet")))
+        assert plate.force_n[:, 2] == pytest.approx(600.0 + np.arange(50))
         assert r.duration_s == pytest.approx(0.49)
 
 
@@ -117,9 +117,8 @@ def test_damaged_bags_fail_with_the_file_named(tmp_path, damage):
     else:
         bag = tmp_path / "nope"
         expect = "no such bag"
-    with pytest.raises(BagError, match=expect) as err:
-        with BagReader(bag) as r:
-            list(r.messages())
+    with pytest.raises(BagError, match=expect) as err, BagReader(bag) as r:
+        list(r.messages())
     assert str(bag) in str(err.value)
 
 
@@ -214,3 +213,166 @@ def test_plate_sample_read_from_cdr_bytes(frame_id, plate, little_endian):
     if little_endian:
         ros = deserialize_message(bytes(data), ForcePlateSample)
         assert (ros.wrench.force.z, ros.wrench.torque.x, ros.header.stamp.nanosec) == (700.25, 3.0, 123_456_789)
+
+
+# --- log-time order, chunk CRCs, corrupt chunks and recovery ------------------------------------------------------
+
+def float_bag(path, n=300, flush_every=100):
+    """/x: Float64 ``i`` at t = 1 s + i ms, flushed every ``flush_every`` messages (one chunk each).
+
+    Returns the path of the .mcap file."""
+    float64 = typestore().types["std_msgs/msg/Float64"]
+    with BagWriter(path) as bag:
+        bag.add_topic("/x", "std_msgs/msg/Float64")
+        for i in range(n):
+            bag.write("/x", 1_000_000_000 + i * 1_000_000, float64(data=float(i)))
+            if i % flush_every == flush_every - 1:
+                bag.flush()
+    return path / f"{path.name}.mcap"
+
+
+def chunk_indexes(mcap_file):
+    """The chunk indexes of an .mcap's summary, in file order."""
+    from mcap.reader import make_reader
+
+    with open(mcap_file, "rb") as f:
+        return sorted(make_reader(f).get_summary().chunk_indexes, key=lambda c: c.chunk_start_offset)
+
+
+def order_problems(mcap_file):
+    """What the MCAP CLI's ``doctor`` counts here, in file order: messages whose log time is below the latest one
+    before them, pairs of consecutive chunks that overlap in time, chunks without a CRC (a wrong CRC raises)."""
+    from mcap.records import Chunk, Message
+    from mcap.stream_reader import StreamReader, breakup_chunk
+
+    late = crcless = 0
+    latest = -1
+    with open(mcap_file, "rb") as f:
+        for rec in StreamReader(f, emit_chunks=True).records:
+            if isinstance(rec, Chunk):
+                crcless += rec.uncompressed_crc == 0
+            for m in breakup_chunk(rec, validate_crc=True) if isinstance(rec, Chunk) else [rec]:
+                if isinstance(m, Message):
+                    late += m.log_time < latest
+                    latest = max(latest, m.log_time)
+    idx = chunk_indexes(mcap_file)
+    overlapping = sum(b.message_start_time < a.message_end_time for a, b in itertools.pairwise(idx))
+    return {"late": late, "overlapping_chunks": overlapping, "chunks_without_crc": crcless}
+
+
+def damage(mcap_file, chunk_numbers, n_bytes=64):
+    """Invert ``n_bytes`` in the middle of each listed chunk (0-based) of an .mcap, in place."""
+    data = bytearray(mcap_file.read_bytes())
+    for k in chunk_numbers:
+        idx = chunk_indexes(mcap_file)[k]
+        mid = idx.chunk_start_offset + idx.chunk_length // 2
+        data[mid:mid + n_bytes] = bytes(b ^ 0xFF for b in data[mid:mid + n_bytes])
+    mcap_file.write_bytes(bytes(data))
+
+
+def test_an_offline_writer_gets_a_file_in_log_time_order_with_non_overlapping_chunks(tmp_path):
+    """Written topic after topic (as the importer and the synthesiser do), the file still comes out in log-time
+    order, in several chunks that do not overlap, each with its CRC."""
+    string = typestore().types["std_msgs/msg/String"]
+    with BagWriter(tmp_path / "b") as bag:
+        for topic in ("/a", "/b"):
+            bag.add_topic(topic, "std_msgs/msg/String")
+            for i in range(600):
+                bag.write(topic, 1_000 + 7 * i, string(data=f"{topic} {i} " + "x" * 2000))
+    assert bag.late_messages == 0
+    mcap_file = tmp_path / "b" / "b.mcap"
+    assert len(chunk_indexes(mcap_file)) >= 2
+    assert order_problems(mcap_file) == {"late": 0, "overlapping_chunks": 0, "chunks_without_crc": 0}
+    with BagReader(tmp_path / "b") as r:
+        assert [m.timestamp_ns for m in r.messages(["/b"])] == [1_000 + 7 * i for i in range(600)]
+
+
+def test_a_message_older_than_the_last_flush_is_kept_and_counted(tmp_path):
+    float64 = typestore().types["std_msgs/msg/Float64"]
+    with BagWriter(tmp_path / "b") as bag:
+        bag.add_topic("/x", "std_msgs/msg/Float64")
+        for t in (12, 10, 11):
+            bag.write("/x", t, float64(data=float(t)))
+        bag.flush()
+        bag.write("/x", 5, float64(data=5.0))   # arrives after a flush already wrote newer ones
+        bag.write("/x", 13, float64(data=13.0))
+    assert bag.late_messages == 1
+    with BagReader(tmp_path / "b") as r:
+        assert [t for t, _ in r.read("/x")] == [5, 10, 11, 12, 13]
+
+
+@pytest.mark.parametrize("name", ["natural", "elderly"])
+def test_shipped_bags_are_in_log_time_order_and_match_their_metadata(name):
+    from rosbags.rosbag2 import Reader
+
+    bag = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "bags", name)
+    mcap_file = os.path.join(bag, f"{name}.mcap")
+    assert order_problems(mcap_file) == {"late": 0, "overlapping_chunks": 0, "chunks_without_crc": 0}
+    with open(os.path.join(bag, "metadata.yaml")) as f:
+        meta = yaml.safe_load(f)["rosbag2_bagfile_information"]
+    assert meta["ros_distro"] == "jazzy"
+    with BagReader(bag) as r:
+        assert sum(1 for _ in r.messages()) == r.message_count == meta["message_count"]
+        assert {t: i.count for t, i in r.topics().items()} == {
+            t["topic_metadata"]["name"]: t["message_count"] for t in meta["topics_with_message_count"]}
+    with Reader(bag) as r:
+        assert sum(1 for _ in r.messages()) == meta["message_count"]
+
+
+def test_metadata_and_the_mcap_name_jazzy_as_the_ros_distro(tmp_path):
+    from mcap.reader import make_reader
+
+    bag = write_demo_bag(tmp_path / "b")
+    assert yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]["ros_distro"] == "jazzy"
+    with open(bag / "b.mcap", "rb") as f:
+        (record,) = make_reader(f).iter_metadata()
+    assert yaml.safe_load(record.metadata["serialized_metadata"])["ros_distro"] == "jazzy"
+
+
+def test_recover_a_file_cut_in_the_middle_of_its_third_chunk(tmp_path):
+    mcap_file = float_bag(tmp_path / "b")
+    third = chunk_indexes(mcap_file)[2]
+    mcap_file.write_bytes(mcap_file.read_bytes()[: third.chunk_start_offset + third.chunk_length // 2])
+    (tmp_path / "b" / "metadata.yaml").unlink()
+    report = recover_bag(tmp_path / "b", tmp_path / "out")
+    assert (report.messages, report.chunks, report.bad_chunks) == (200, 2, [])
+    assert "cut in the middle" in report.stopped_because
+    with BagReader(tmp_path / "out") as r:
+        assert [m.data for _, m in r.read("/x")] == [float(i) for i in range(200)]
+
+
+@pytest.mark.parametrize("killed", [False, True], ids=["complete", "killed_writer"])
+@pytest.mark.parametrize("corrupt", [(0,), (0, 2)], ids=["first_chunk", "first_and_last"])
+def test_recover_skips_corrupt_chunks_and_keeps_the_others(tmp_path, corrupt, killed):
+    """Damaged bytes inside a chunk (the first one holds the start of the recording): that chunk is skipped and
+    counted, every other chunk recovered, with or without the summary at the end of the file (a killed writer)."""
+    mcap_file = float_bag(tmp_path / "b")
+    last = chunk_indexes(mcap_file)[-1]
+    damage(mcap_file, corrupt)
+    if killed:  # the file ends after the last chunk and its message index: no summary, no metadata.yaml
+        end = last.chunk_start_offset + last.chunk_length + last.message_index_length
+        mcap_file.write_bytes(mcap_file.read_bytes()[:end])
+        (tmp_path / "b" / "metadata.yaml").unlink()
+    report = recover_bag(tmp_path / "b", tmp_path / "out")
+    kept = [k for k in range(3) if k not in corrupt]
+    assert len(report.bad_chunks) == len(corrupt) and report.chunks == len(kept)
+    assert all("CRC mismatch" in note or "decompress" in note for note in report.bad_chunks)
+    with BagReader(tmp_path / "out") as r:
+        assert [m.data for _, m in r.read("/x")] == [float(i) for k in kept for i in range(100 * k, 100 * k + 100)]
+
+
+def test_reading_a_corrupt_chunk_fails_naming_the_file_and_the_chunk(tmp_path):
+    mcap_file = float_bag(tmp_path / "b")
+    damage(mcap_file, [1])
+    for read in (lambda: bag_info(tmp_path / "b"), lambda: BagReader(tmp_path / "b").read("/x")):
+        with pytest.raises(BagError, match=r"b\.mcap: chunk 2 of 3 at byte \d+ \(log time 1\.100-1\.199 s\)"):
+            read()
+
+
+def test_reading_fewer_messages_than_the_metadata_counts_fails(tmp_path):
+    """A damaged chunk without a CRC (bags from other writers) can decode to fewer messages: that must not pass."""
+    float_bag(tmp_path / "b")
+    meta = tmp_path / "b" / "metadata.yaml"
+    meta.write_text(meta.read_text().replace("message_count: 300", "message_count: 301"))
+    with pytest.raises(BagError, match="read 300 messages where its metadata counts 301"):
+        list(BagReader(tmp_path / "b").messages())
