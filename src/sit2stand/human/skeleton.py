@@ -101,6 +101,7 @@ class HumanModel:
 
     @property
     def total_mass(self) -> float:
+        """Body mass [kg], extra masses included."""
         return float(sum(self.segment_mass.values()))
 
     def joint_names(self) -> list[str]:
@@ -109,6 +110,7 @@ class HumanModel:
 
 
 def _rev(axis: str) -> pin.JointModel:
+    """Revolute joint model about ``axis`` (x, y or z)."""
     return {"x": pin.JointModelRX(), "y": pin.JointModelRY(), "z": pin.JointModelRZ()}[axis]
 
 
@@ -130,16 +132,8 @@ def _limits(name: str) -> tuple[float, float]:
     return lo, hi
 
 
-def build_human(subject: Subject | None = None) -> HumanModel:
-    """Build the skeleton of ``subject`` (default: a 1.75 m, 75 kg average male)."""
-    subject = subject or Subject()
-    H, sex = subject.height_m, subject.sex
-    seg = segment_inertias(H, subject.mass_kg, sex)
-    s = H / REFERENCE_STATURE_M
-    L = {g: subject.lengths.get(g, 1.0) for g in LENGTH_GROUPS}
-    h_ankle = ankle_height_m(H, sex) * L["foot"]
-
-    # segment masses with factors, renormalised to the body mass (extra masses come on top)
+def _segment_masses(subject: Subject, seg: dict) -> dict[str, float]:
+    """Segment masses [kg] with the subject's factors, renormalised to the body mass (extra masses come on top)."""
     base_mass = {"pelvis": seg["pelvis"].mass_kg, "torso": seg["torso"].mass_kg, "head": seg["head"].mass_kg}
     for side in SIDES:
         for name in ("upper_arm", "forearm", "hand", "thigh", "shank"):
@@ -148,129 +142,187 @@ def build_human(subject: Subject | None = None) -> HumanModel:
         base_mass[f"toes_{side}"] = seg["foot"].mass_kg * TOE_MASS_FRACTION
     factored = {k: v * subject.masses.get(k, 1.0) for k, v in base_mass.items()}
     norm = subject.mass_kg / sum(factored.values())
-    mass = {k: v * norm for k, v in factored.items()}
+    return {k: v * norm for k, v in factored.items()}
 
-    def inertia_of(group: str, name: str) -> np.ndarray:
-        """Principal inertia scaled with mass and length^2 (about COM), foot/toes lying along x."""
-        ref = seg[group]
-        i = np.array(ref.inertia_kgm2) * mass[name] / (ref.mass_kg * (TOE_MASS_FRACTION if group == "toes" else 1))
-        i *= L.get(group, 1.0) ** 2
+
+@dataclass
+class _Builder:
+    """The skeleton under construction: joints, segment inertias, drawing geometry and marker offsets (SI units)."""
+
+    subject: Subject
+    seg: dict                              # de Leva segments (anthropometry.segment_inertias) of this body
+    mass: dict[str, float]                 # segment -> mass [kg]; extra masses added as segments are attached
+    L: dict[str, float]                    # length factor per group
+    s: float                               # stature / REFERENCE_STATURE_M
+    h_ankle: float                         # ankle height above the sole [m]
+    model: pin.Model = field(default_factory=pin.Model)
+    segment_joint: dict[str, int] = field(default_factory=dict)
+    segment_com: dict[str, np.ndarray] = field(default_factory=dict)
+    geometry: dict[str, dict] = field(default_factory=dict)
+    markers: dict[str, tuple[int, np.ndarray]] = field(default_factory=dict)
+    mm: float = field(init=False)          # 1 mm at the reference stature, scaled to this body [m]
+
+    def __post_init__(self) -> None:
+        self.model.name = "human"
+        self.mm = 1e-3 * self.s
+
+    def inertia_of(self, group: str, name: str) -> np.ndarray:
+        """Principal inertia [kg m^2] scaled with mass and length^2 (about COM), foot/toes lying along x."""
+        ref = self.seg[group]
+        i = np.array(ref.inertia_kgm2) * self.mass[name] / (ref.mass_kg * (TOE_MASS_FRACTION if group == "toes" else 1))
+        i *= self.L.get(group, 1.0) ** 2
         return i
 
-    model = pin.Model()
-    model.name = "human"
-    segment_joint: dict[str, int] = {}
-    segment_com: dict[str, np.ndarray] = {}
-    geometry: dict[str, dict] = {}
-    markers: dict[str, tuple[int, np.ndarray]] = {}
-
-    def add_chain(parent: int, joint: str, axes: str, origin) -> int:
+    def add_chain(self, parent: int, joint: str, axes: str, origin) -> int:
+        """Revolute joints ``<joint>_<axis>`` for each axis, the first at ``origin`` [m] in the parent; the last id."""
         jid = parent
         for k, axis in enumerate(axes):
             name = f"{joint}_{axis}"
             lo, hi = _limits(name)
             placement = pin.SE3(np.eye(3), np.asarray(origin, float) if k == 0 else np.zeros(3))
-            jid = model.addJoint(jid, _rev(axis), placement, name, np.array([200.0]), np.array([20.0]),
-                                 np.array([lo]), np.array([hi]))
+            jid = self.model.addJoint(jid, _rev(axis), placement, name, np.array([200.0]), np.array([20.0]),
+                                      np.array([lo]), np.array([hi]))
         return jid
 
-    def attach(jid: int, name: str, com, inertia_diag, from_xyz, to_xyz, radius) -> None:
+    def attach(self, jid: int, name: str, com, inertia_diag, from_xyz, to_xyz, radius) -> None:
+        """Segment ``name`` on joint ``jid``: COM [m], principal inertia [kg m^2], its extra masses, a capsule [m]."""
         com = np.asarray(com, float)
-        m = mass[name]
+        m = self.mass[name]
         inertia = pin.Inertia(m, com, np.diag(inertia_diag))
-        for extra in subject.extra:
+        for extra in self.subject.extra:
             if extra.segment == name:
                 inertia = inertia + pin.Inertia(extra.mass_kg, com + np.asarray(extra.offset_m), np.zeros((3, 3)))
-        model.appendBodyToJoint(jid, inertia, pin.SE3.Identity())
-        model.addFrame(pin.Frame(name, jid, pin.SE3.Identity(), pin.FrameType.BODY))
-        segment_joint[name] = jid
-        segment_com[name] = inertia.lever.copy()
-        mass[name] = inertia.mass
-        geometry[name] = {"from": np.asarray(from_xyz, float), "to": np.asarray(to_xyz, float), "radius": radius}
+        self.model.appendBodyToJoint(jid, inertia, pin.SE3.Identity())
+        self.model.addFrame(pin.Frame(name, jid, pin.SE3.Identity(), pin.FrameType.BODY))
+        self.segment_joint[name] = jid
+        self.segment_com[name] = inertia.lever.copy()
+        self.mass[name] = inertia.mass
+        self.geometry[name] = {"from": np.asarray(from_xyz, float), "to": np.asarray(to_xyz, float), "radius": radius}
 
-    def marker(jid: int, name: str, xyz_at_ref) -> None:
-        markers[name] = (jid, np.asarray(xyz_at_ref, float))
+    def marker(self, jid: int, name: str, xyz_at_ref) -> None:
+        """Marker ``name`` at ``xyz_at_ref`` [m] in joint ``jid``'s frame (framed at the end, in PLUG_IN_GAIT order)."""
+        self.markers[name] = (jid, np.asarray(xyz_at_ref, float))
 
-    mm = 1e-3 * s  # marker/landmark offsets in mm at the reference stature
+    def marker_frames(self) -> dict[str, int]:
+        """Add the markers as operational frames, in PLUG_IN_GAIT order; marker name -> frame id."""
+        frames = {}
+        for name in PLUG_IN_GAIT:
+            jid, xyz = self.markers[name]
+            frames[name] = self.model.addFrame(pin.Frame(name, jid, pin.SE3(np.eye(3), xyz), pin.FrameType.OP_FRAME))
+        return frames
 
-    # pelvis: floating base at the mid-hip point
-    root = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "pelvis")
+
+def build_human(subject: Subject | None = None) -> HumanModel:
+    """Build the skeleton of ``subject`` (default: a 1.75 m, 75 kg average male)."""
+    subject = subject or Subject()
+    H, sex = subject.height_m, subject.sex
+    seg = segment_inertias(H, subject.mass_kg, sex)
+    L = {g: subject.lengths.get(g, 1.0) for g in LENGTH_GROUPS}
+    b = _Builder(subject, seg, _segment_masses(subject, seg), L, H / REFERENCE_STATURE_M,
+                 ankle_height_m(H, sex) * L["foot"])
+    root = _add_pelvis(b)
+    torso = _add_torso_and_head(b, root)
+    for side, sy in (("l", 1.0), ("r", -1.0)):
+        _add_arm(b, torso, side, sy)
+        _add_leg(b, root, side, sy)
+    marker_frames = b.marker_frames()
+    return HumanModel(subject, b.model, list(PLUG_IN_GAIT), marker_frames, b.segment_joint, b.mass, b.segment_com,
+                      b.geometry)
+
+
+def _add_pelvis(b: _Builder) -> int:
+    """The pelvis: floating base at the mid-hip point, with its four markers; the root joint id."""
+    seg, L, s, mm = b.seg, b.L, b.s, b.mm
+    root = b.model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "pelvis")
     l_pel = seg["pelvis"].length_m * L["pelvis"]
-    hip_y = 0.048 * H * L["pelvis"]
-    attach(root, "pelvis", [0, 0, seg["pelvis"].com_from_proximal_m * L["pelvis"]], inertia_of("pelvis", "pelvis"),
-           [0, 0, 0], [0, 0, l_pel], 0.085 * s)
+    b.attach(root, "pelvis", [0, 0, seg["pelvis"].com_from_proximal_m * L["pelvis"]], b.inertia_of("pelvis", "pelvis"),
+             [0, 0, 0], [0, 0, l_pel], 0.085 * s)
     for name, xyz in {"LASI": (60, 120, 70), "RASI": (60, -120, 70), "LPSI": (-110, 45, 95),
                       "RPSI": (-110, -45, 95)}.items():
-        marker(root, name, np.array(xyz) * mm * np.array([1, L["pelvis"], L["pelvis"]]))
+        b.marker(root, name, np.array(xyz) * mm * np.array([1, L["pelvis"], L["pelvis"]]))
+    return root
 
-    # torso and head
+
+def _add_torso_and_head(b: _Builder, root: int) -> int:
+    """Lumbar joints, torso, neck joints and head, with their markers; the torso's joint id."""
+    seg, L, s, mm = b.seg, b.L, b.s, b.mm
+    l_pel = seg["pelvis"].length_m * L["pelvis"]
     l_to = seg["torso"].length_m * L["torso"]
-    torso = add_chain(root, "lumbar", "yxz", [0, 0, l_pel])
-    attach(torso, "torso", [0, 0, seg["torso"].com_from_proximal_m * L["torso"]], inertia_of("torso", "torso"),
-           [0, 0, 0], [0, 0, l_to], 0.12 * s)
+    torso = b.add_chain(root, "lumbar", "yxz", [0, 0, l_pel])
+    b.attach(torso, "torso", [0, 0, seg["torso"].com_from_proximal_m * L["torso"]], b.inertia_of("torso", "torso"),
+             [0, 0, 0], [0, 0, l_to], 0.12 * s)
     neck_z = l_to
     for name, xyz in {"C7": (-60, 0, 0), "T10": (-110, 0, -0.5 * l_to / mm), "CLAV": (60, 0, -40),
                       "STRN": (110, 0, -200), "RBAK": (-100, -80, -160), "LSHO": (0, 175, -25),
                       "RSHO": (0, -175, -25)}.items():
-        marker(torso, name, np.array([xyz[0] * mm, xyz[1] * mm, neck_z + xyz[2] * mm]))
+        b.marker(torso, name, np.array([xyz[0] * mm, xyz[1] * mm, neck_z + xyz[2] * mm]))
     l_head = seg["head"].length_m * L["head"]
-    head = add_chain(torso, "neck", "yxz", [0, 0, l_to])
-    attach(head, "head", [0.01 * s, 0, seg["head"].com_from_proximal_m * L["head"]], inertia_of("head", "head"),
-           [0.01 * s, 0, 0.05 * s], [0.01 * s, 0, l_head - 0.07 * s], 0.085 * s)
+    head = b.add_chain(torso, "neck", "yxz", [0, 0, l_to])
+    b.attach(head, "head", [0.01 * s, 0, seg["head"].com_from_proximal_m * L["head"]], b.inertia_of("head", "head"),
+             [0.01 * s, 0, 0.05 * s], [0.01 * s, 0, l_head - 0.07 * s], 0.085 * s)
     for name, xyz in {"LFHD": (90, 55, 150), "RFHD": (90, -55, 150), "LBHD": (-75, 55, 140),
                       "RBHD": (-75, -55, 140)}.items():
-        marker(head, name, np.array(xyz) * mm * np.array([1, 1, L["head"]]))
+        b.marker(head, name, np.array(xyz) * mm * np.array([1, 1, L["head"]]))
+    return torso
 
-    for side, sy in (("l", 1.0), ("r", -1.0)):
-        P = side.upper()
-        # arm
-        l_ua, l_fa, l_ha = (seg[g].length_m * L[g] for g in ("upper_arm", "forearm", "hand"))
-        shoulder = add_chain(torso, f"shoulder_{side}", "yxz", [0, sy * 0.095 * H, l_to - 0.04 * H])
-        attach(shoulder, f"upper_arm_{side}", [0, 0, -seg["upper_arm"].com_from_proximal_m * L["upper_arm"]],
-               inertia_of("upper_arm", f"upper_arm_{side}"), [0, 0, 0], [0, 0, -l_ua], 0.045 * s)
-        marker(shoulder, f"{P}ELB", [0, sy * 35 * mm, -l_ua + 10 * mm])
-        elbow = add_chain(shoulder, f"elbow_{side}", "y", [0, 0, -l_ua])
-        attach(elbow, f"forearm_{side}", [0, 0, -seg["forearm"].com_from_proximal_m * L["forearm"]],
-               inertia_of("forearm", f"forearm_{side}"), [0, 0, 0], [0, 0, -l_fa], 0.035 * s)
-        marker(elbow, f"{P}WRA", [30 * mm, 0, -l_fa])
-        marker(elbow, f"{P}WRB", [-30 * mm, 0, -l_fa])
-        wrist = add_chain(elbow, f"wrist_{side}", "yx", [0, 0, -l_fa])
-        attach(wrist, f"hand_{side}", [0, 0, -seg["hand"].com_from_proximal_m * L["hand"]],
-               inertia_of("hand", f"hand_{side}"), [0, 0, 0], [0, 0, -l_ha], 0.03 * s)
-        marker(wrist, f"{P}FIN", [10 * mm, sy * 15 * mm, -l_ha])
-        # leg
-        l_th, l_sh, l_ft = (seg[g].length_m * L[g] for g in ("thigh", "shank", "foot"))
-        hip = add_chain(root, f"hip_{side}", "yxz", [0, sy * hip_y, 0])
-        attach(hip, f"thigh_{side}", [0, 0, -seg["thigh"].com_from_proximal_m * L["thigh"]],
-               inertia_of("thigh", f"thigh_{side}"), [0, 0, 0], [0, 0, -l_th], 0.075 * s)
-        marker(hip, f"{P}THI", [15 * mm, sy * 75 * mm, -0.6 * l_th])
-        marker(hip, f"{P}KNE", [0, sy * 55 * mm, -l_th])
-        knee = add_chain(hip, f"knee_{side}", "y", [0, 0, -l_th])
-        attach(knee, f"shank_{side}", [0, 0, -seg["shank"].com_from_proximal_m * L["shank"]],
-               inertia_of("shank", f"shank_{side}"), [0, 0, 0], [0, 0, -l_sh], 0.055 * s)
-        marker(knee, f"{P}TIB", [15 * mm, sy * 55 * mm, -0.6 * l_sh])
-        marker(knee, f"{P}ANK", [0, sy * 40 * mm, -l_sh])
-        ankle = add_chain(knee, f"ankle_{side}", "yx", [0, 0, -l_sh])
-        heel_x, mtp_x, tip_x = -0.22 * l_ft, 0.52 * l_ft, 0.78 * l_ft
-        # hindfoot COM chosen so that foot + toes (at zero) has de Leva's COM (44.15 % heel -> tip for males)
-        com_total = np.array([heel_x + seg["foot"].com_from_proximal_m * L["foot"], 0, -0.5 * h_ankle])
-        toes_com_rel = np.array([0.5 * (tip_x - mtp_x), 0, 0.0])
-        mtp = np.array([mtp_x, 0, -h_ankle + 0.015 * s])
-        m_f, m_t = mass[f"foot_{side}"], mass[f"toes_{side}"]
-        foot_com = (com_total * (m_f + m_t) - (mtp + toes_com_rel) * m_t) / m_f
-        attach(ankle, f"foot_{side}", foot_com, inertia_of("foot", f"foot_{side}") * (1 - TOE_MASS_FRACTION),
-               [heel_x, 0, -h_ankle + 0.02 * s], [mtp_x, 0, -h_ankle + 0.02 * s], 0.035 * s)
-        marker(ankle, f"{P}HEE", [heel_x - 10 * mm, 0, -h_ankle + 25 * mm])
-        marker(ankle, f"{P}TOE", [mtp_x - 10 * mm, sy * 10 * mm, -h_ankle + 25 * mm])
-        toe = add_chain(ankle, f"toe_{side}", "y", mtp)
-        attach(toe, f"toes_{side}", toes_com_rel, inertia_of("foot", f"foot_{side}") * TOE_MASS_FRACTION,
-               [0, 0, 0.005 * s], [tip_x - mtp_x, 0, 0.005 * s], 0.02 * s)
 
-    marker_frames = {}
-    for name in PLUG_IN_GAIT:
-        jid, xyz = markers[name]
-        marker_frames[name] = model.addFrame(pin.Frame(name, jid, pin.SE3(np.eye(3), xyz), pin.FrameType.OP_FRAME))
-    return HumanModel(subject, model, list(PLUG_IN_GAIT), marker_frames, segment_joint, mass, segment_com, geometry)
+def _add_arm(b: _Builder, torso: int, side: str, sy: float) -> None:
+    """Shoulder, elbow and wrist joints with upper arm, forearm and hand of one side (sy: +1 left, -1 right)."""
+    seg, L, s, mm, H, P = b.seg, b.L, b.s, b.mm, b.subject.height_m, side.upper()
+    l_to = seg["torso"].length_m * L["torso"]
+    l_ua, l_fa, l_ha = (seg[g].length_m * L[g] for g in ("upper_arm", "forearm", "hand"))
+    shoulder = b.add_chain(torso, f"shoulder_{side}", "yxz", [0, sy * 0.095 * H, l_to - 0.04 * H])
+    b.attach(shoulder, f"upper_arm_{side}", [0, 0, -seg["upper_arm"].com_from_proximal_m * L["upper_arm"]],
+             b.inertia_of("upper_arm", f"upper_arm_{side}"), [0, 0, 0], [0, 0, -l_ua], 0.045 * s)
+    b.marker(shoulder, f"{P}ELB", [0, sy * 35 * mm, -l_ua + 10 * mm])
+    elbow = b.add_chain(shoulder, f"elbow_{side}", "y", [0, 0, -l_ua])
+    b.attach(elbow, f"forearm_{side}", [0, 0, -seg["forearm"].com_from_proximal_m * L["forearm"]],
+             b.inertia_of("forearm", f"forearm_{side}"), [0, 0, 0], [0, 0, -l_fa], 0.035 * s)
+    b.marker(elbow, f"{P}WRA", [30 * mm, 0, -l_fa])
+    b.marker(elbow, f"{P}WRB", [-30 * mm, 0, -l_fa])
+    wrist = b.add_chain(elbow, f"wrist_{side}", "yx", [0, 0, -l_fa])
+    b.attach(wrist, f"hand_{side}", [0, 0, -seg["hand"].com_from_proximal_m * L["hand"]],
+             b.inertia_of("hand", f"hand_{side}"), [0, 0, 0], [0, 0, -l_ha], 0.03 * s)
+    b.marker(wrist, f"{P}FIN", [10 * mm, sy * 15 * mm, -l_ha])
+
+
+def _add_leg(b: _Builder, root: int, side: str, sy: float) -> None:
+    """Hip and knee joints with thigh and shank of one side (sy: +1 left, -1 right), then its foot."""
+    seg, L, s, mm, P = b.seg, b.L, b.s, b.mm, side.upper()
+    hip_y = 0.048 * b.subject.height_m * L["pelvis"]
+    l_th, l_sh = (seg[g].length_m * L[g] for g in ("thigh", "shank"))
+    hip = b.add_chain(root, f"hip_{side}", "yxz", [0, sy * hip_y, 0])
+    b.attach(hip, f"thigh_{side}", [0, 0, -seg["thigh"].com_from_proximal_m * L["thigh"]],
+             b.inertia_of("thigh", f"thigh_{side}"), [0, 0, 0], [0, 0, -l_th], 0.075 * s)
+    b.marker(hip, f"{P}THI", [15 * mm, sy * 75 * mm, -0.6 * l_th])
+    b.marker(hip, f"{P}KNE", [0, sy * 55 * mm, -l_th])
+    knee = b.add_chain(hip, f"knee_{side}", "y", [0, 0, -l_th])
+    b.attach(knee, f"shank_{side}", [0, 0, -seg["shank"].com_from_proximal_m * L["shank"]],
+             b.inertia_of("shank", f"shank_{side}"), [0, 0, 0], [0, 0, -l_sh], 0.055 * s)
+    b.marker(knee, f"{P}TIB", [15 * mm, sy * 55 * mm, -0.6 * l_sh])
+    b.marker(knee, f"{P}ANK", [0, sy * 40 * mm, -l_sh])
+    _add_foot(b, knee, side, sy, l_sh)
+
+
+def _add_foot(b: _Builder, knee: int, side: str, sy: float, l_sh: float) -> None:
+    """Ankle and toe joints with hindfoot and toes of one side, below a shank of length ``l_sh`` [m]."""
+    seg, L, s, mm, h_ankle, P = b.seg, b.L, b.s, b.mm, b.h_ankle, side.upper()
+    l_ft = seg["foot"].length_m * L["foot"]
+    ankle = b.add_chain(knee, f"ankle_{side}", "yx", [0, 0, -l_sh])
+    heel_x, mtp_x, tip_x = -0.22 * l_ft, 0.52 * l_ft, 0.78 * l_ft
+    # hindfoot COM chosen so that foot + toes (at zero) has de Leva's COM (44.15 % heel -> tip for males)
+    com_total = np.array([heel_x + seg["foot"].com_from_proximal_m * L["foot"], 0, -0.5 * h_ankle])
+    toes_com_rel = np.array([0.5 * (tip_x - mtp_x), 0, 0.0])
+    mtp = np.array([mtp_x, 0, -h_ankle + 0.015 * s])
+    m_f, m_t = b.mass[f"foot_{side}"], b.mass[f"toes_{side}"]
+    foot_com = (com_total * (m_f + m_t) - (mtp + toes_com_rel) * m_t) / m_f
+    b.attach(ankle, f"foot_{side}", foot_com, b.inertia_of("foot", f"foot_{side}") * (1 - TOE_MASS_FRACTION),
+             [heel_x, 0, -h_ankle + 0.02 * s], [mtp_x, 0, -h_ankle + 0.02 * s], 0.035 * s)
+    b.marker(ankle, f"{P}HEE", [heel_x - 10 * mm, 0, -h_ankle + 25 * mm])
+    b.marker(ankle, f"{P}TOE", [mtp_x - 10 * mm, sy * 10 * mm, -h_ankle + 25 * mm])
+    toe = b.add_chain(ankle, f"toe_{side}", "y", mtp)
+    b.attach(toe, f"toes_{side}", toes_com_rel, b.inertia_of("foot", f"foot_{side}") * TOE_MASS_FRACTION,
+             [0, 0, 0.005 * s], [tip_x - mtp_x, 0, 0.005 * s], 0.02 * s)
 
 
 def standing_configuration(human: HumanModel) -> np.ndarray:
@@ -297,6 +349,7 @@ def to_mjcf(human: HumanModel, name: str = "human") -> str:
         sites.setdefault(frame.parentJoint, []).append((mname, frame.placement.translation))
 
     def fmt(v) -> str:
+        """Numbers as MJCF attribute text."""
         return " ".join(f"{x:.6g}" for x in np.asarray(v, float).ravel())
 
     lines = [f'<mujoco model="{name}">', '  <compiler angle="radian" autolimits="true"/>',
@@ -306,6 +359,7 @@ def to_mjcf(human: HumanModel, name: str = "human") -> str:
              '  <worldbody>']
 
     def body(jid: int, indent: str) -> None:
+        """The MJCF body of joint ``jid`` and, recursively, of its children."""
         joint = model.joints[jid]
         placement = model.jointPlacements[jid].translation
         jname = model.names[jid]
