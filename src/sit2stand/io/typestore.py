@@ -15,11 +15,12 @@ from pathlib import Path
 
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
+from ..errors import Sit2StandError
 
 OUR_PACKAGE = "sit2stand_msgs"
 
 
-class UnknownMessageType(KeyError):
+class UnknownMessageType(Sit2StandError, KeyError):
     """A message type whose definition is neither in the Jazzy store, nor in msgs/, nor in any share/ folder."""
 
     def __init__(self, msgtype: str, where: str = "") -> None:
@@ -61,7 +62,10 @@ def our_message_types() -> list[str]:
     for base in [d / OUR_PACKAGE / "msg" for d in _share_dirs()] + [_repo_msgs_dir() / OUR_PACKAGE / "msg"]:
         if base.is_dir():
             return sorted(f"{OUR_PACKAGE}/msg/{p.stem}" for p in base.glob("*.msg"))
-    raise FileNotFoundError(f"no {OUR_PACKAGE}/msg folder in {_repo_msgs_dir()} or the share/ folders")
+    raise FileNotFoundError(f"no {OUR_PACKAGE}/msg folder in the share/ folders "
+                            f"({', '.join(map(str, _share_dirs())) or 'none'}) nor in {_repo_msgs_dir()}: build msgs/ "
+                            f"of the source repository with colcon into {sys.prefix}, or put the prefix it is "
+                            f"installed in on AMENT_PREFIX_PATH")
 
 
 def ensure_type(store: Typestore, msgtype: str) -> None:
