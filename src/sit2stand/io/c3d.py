@@ -21,13 +21,15 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import ezc3d
 import numpy as np
 
+from .topics import (COM_TYPE, MARKERS_TOPIC, MOCAP_TYPE, MODEL_POINTS_TOPIC, PLATE_TYPE, REFERENCE_COM_TOPIC,
+                     plate_topic)
 from ..errors import Sit2StandError
 from .bag import BagWriter
 from .forceplate import DEFAULT_COP_THRESHOLD_N, PlateSeries, center_of_pressure, plate_surface, shift_moment
-from .messages import (COM_TYPE, MARKERS_TOPIC, MOCAP_TYPE, MODEL_POINTS_TOPIC, PLATE_TYPE, REFERENCE_COM_TOPIC,
-                       center_of_mass, mocap_frame, plate_messages, plate_topic)
+from .messages import (center_of_mass, mocap_frame, plate_messages)
 
 LENGTH_SCALE = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "dm": 0.1}
 NON_POSITION_GROUPS = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "REACTIONS", "SCALARS")
@@ -58,6 +60,7 @@ class LabAxes:
 
 
 def _axis_vector(name: str) -> np.ndarray:
+    """Unit vector of a signed file axis name (``+X``, ``-Y``, ``Z``...); C3DError on another name."""
     key = name.strip().upper()
     if key in ("X", "Y", "Z"):
         key = "+" + key
@@ -96,6 +99,7 @@ class PointSeries:
 
     @property
     def times_s(self) -> np.ndarray:
+        """Sample times [s] on the file's clock."""
         return self.t0_s + np.arange(self.positions_m.shape[0]) / self.rate_hz
 
 
@@ -132,6 +136,7 @@ def _zero_range(path: Path, params: dict, zero_frames, n_frames: int) -> tuple[i
 
 
 def _param(params: dict, group: str, name: str, default=None):
+    """The value of parameter GROUP:NAME, or ``default`` where the file lacks it."""
     try:
         return params[group][name]["value"]
     except (KeyError, TypeError):
@@ -139,6 +144,7 @@ def _param(params: dict, group: str, name: str, default=None):
 
 
 def _labels(params: dict, group: str, n: int) -> list[str]:
+    """The ``n`` labels of a group (LABELS, LABELS2, ...), stripped; ``*<i>`` for the missing ones."""
     labels: list[str] = list(_param(params, group, "LABELS", []) or [])
     k = 2
     while len(labels) < n and _param(params, group, f"LABELS{k}") is not None:
@@ -149,6 +155,7 @@ def _labels(params: dict, group: str, n: int) -> list[str]:
 
 
 def _group_labels(params: dict, names: tuple[str, ...]) -> set[str]:
+    """The point labels that POINT:<name>[2|3] lists (e.g. ANGLES): model outputs that are not positions."""
     out: set[str] = set()
     for name in names:
         for key in (name, name + "2", name + "3"):
@@ -157,11 +164,35 @@ def _group_labels(params: dict, names: tuple[str, ...]) -> set[str]:
 
 
 def _first_number(value) -> float | None:
+    """The first element of a parameter value as a positive finite number, else None."""
     try:
         v = float(np.asarray(value, float).ravel()[0])
     except (TypeError, ValueError, IndexError):
         return None
     return v if np.isfinite(v) and v > 0 else None
+
+
+@dataclass
+class _RawFile:
+    """A C3D file as read, before the lab frame: its parameters, points (4, M, N) in file units and point clock."""
+
+    path: Path
+    c3d: object                            # the ezc3d.c3d handle
+    params: dict
+    points: np.ndarray
+    rate_hz: float
+    t0_s: float
+    scale: float                           # file length unit -> m
+
+    @property
+    def n_points(self) -> int:
+        """Number of point trajectories (markers and model outputs)."""
+        return self.points.shape[1]
+
+    @property
+    def n_frames(self) -> int:
+        """Number of point frames."""
+        return self.points.shape[2]
 
 
 def read_c3d(path: str | Path, *, chair_plate: int | None = None, feet_plate: int | None = None,
@@ -183,9 +214,29 @@ def read_c3d(path: str | Path, *, chair_plate: int | None = None, feet_plate: in
         C3DError: unreadable file, no force plates (unless ``markers_only``), a plate index that does not exist,
             or unknown units; the message names the file.
     """
-    import ezc3d
+    raw = _open(Path(path))
+    params = raw.params
+    platforms = raw.c3d["data"].get("platform", []) or []
+    _check_plate_choice(raw, len(platforms), chair_plate, feet_plate, markers_only)
+    zero = _zero_range(raw.path, params, zero_frames, raw.n_frames)
+    raw_plates = [_file_plate(raw, i, pl, zero) for i, pl in enumerate(platforms)]
+    labels = _labels(params, "POINT", raw.n_points)
+    axes = _choose_axes(raw.path, params, raw.points, labels, raw_plates, forward, up, cop_threshold_n, raw.scale)
+    R = axes.rotation()
+    markers, model_points, skipped = _point_series(raw, labels, R)
+    analog_rate = _first_number(_param(params, "ANALOG", "RATE")) or float(raw.c3d["header"]["analogs"]["frame_rate"])
+    plates = _lab_plates(raw_plates, R, raw.t0_s, analog_rate, {chair_plate: "chair", feet_plate: "feet"},
+                         cop_threshold_n)
+    mass = _first_number(_param(params, "PROCESSING", "Bodymass"))
+    height = _first_number(_param(params, "PROCESSING", "Height"))
+    return C3DTrial(path=raw.path, markers=markers, model_points=model_points, plates=plates,
+                    all_plate_count=len(platforms), axes=axes, zero_frames=zero if raw_plates else None,
+                    body_mass_kg=mass, height_m=height * 1e-3 if height and height > 10 else height,
+                    events=_events(params), skipped_labels=skipped)
 
-    path = Path(path)
+
+def _open(path: Path) -> _RawFile:
+    """Read the file with ezc3d, with its point rate [Hz], start time [s] and length unit; C3DError if it cannot."""
     if not path.is_file():
         raise C3DError(f"{path}: no such file")
     try:
@@ -194,18 +245,18 @@ def read_c3d(path: str | Path, *, chair_plate: int | None = None, feet_plate: in
         raise C3DError(f"{path}: not a readable C3D file: {err}") from None
     params = c3d["parameters"]
     points = np.asarray(c3d["data"]["points"], float)  # (4, M, N), file units
-    n_points, n_frames = points.shape[1], points.shape[2]
     rate = _first_number(_param(params, "POINT", "RATE")) or float(c3d["header"]["points"]["frame_rate"])
     first_frame = int(c3d["header"]["points"]["first_frame"])
-    t0 = first_frame / rate
     units = str((_param(params, "POINT", "UNITS", ["mm"]) or ["mm"])[0]).strip().lower()
     if units not in LENGTH_SCALE:
         raise C3DError(f"{path}: POINT:UNITS {units!r} is not a length unit I know ({', '.join(LENGTH_SCALE)})")
-    scale = LENGTH_SCALE[units]
+    return _RawFile(path, c3d, params, points, rate, first_frame / rate, LENGTH_SCALE[units])
 
-    # ---- force plates (file frame) ----
-    platforms = c3d["data"].get("platform", []) or []
-    n_plates = len(platforms)
+
+def _check_plate_choice(raw: _RawFile, n_plates: int, chair_plate: int | None, feet_plate: int | None,
+                        markers_only: bool) -> None:
+    """C3DError on a chair/feet plate index the file lacks, the same plate twice, or no plates unless markers_only."""
+    path = raw.path
     for label, idx in (("--chair-plate", chair_plate), ("--feet-plate", feet_plate)):
         if idx is not None and not 0 <= idx < n_plates:
             have = f"it has {n_plates} (indices 0..{n_plates - 1})" if n_plates else "it has no force plates"
@@ -213,40 +264,39 @@ def read_c3d(path: str | Path, *, chair_plate: int | None = None, feet_plate: in
     if chair_plate is not None and chair_plate == feet_plate:
         raise C3DError(f"{path}: the chair and feet plates must differ (both are {chair_plate})")
     if n_plates == 0 and not markers_only:
-        used = _param(params, "FORCE_PLATFORM", "USED", [0])
+        used = _param(raw.params, "FORCE_PLATFORM", "USED", [0])
         raise C3DError(f"{path}: has no force plates (FORCE_PLATFORM:USED = {np.ravel(used)[0] if len(used) else 0});"
                        f" pass markers_only (--markers-only) to import the markers alone")
-    zero = _zero_range(path, params, zero_frames, n_frames)
-    raw_plates = []
-    for i, pl in enumerate(platforms):
-        f_scale = 1.0 if str(pl.get("unit_force", "N")).strip() == "N" else None
-        m_unit = str(pl.get("unit_moment", "Nmm")).strip()
-        p_unit = str(pl.get("unit_position", "mm")).strip().lower()
-        if f_scale is None or m_unit not in ("Nmm", "Nm") or p_unit not in LENGTH_SCALE:
-            raise C3DError(f"{path}: plate {i}: units force={pl.get('unit_force')} moment={m_unit} "
-                           f"position={p_unit} not supported")
-        m_scale = 1e-3 if m_unit == "Nmm" else 1.0
-        force = np.asarray(pl["force"], float).T                     # (K, 3) N, file axes
-        moment_c = np.asarray(pl["moment"], float).T * m_scale       # about the plate surface centre (ezc3d)
-        corners = np.asarray(pl["corners"], float).T * LENGTH_SCALE[p_unit]  # (4, 3)
-        if zero is not None:
-            analog_per_frame = max(1, int(round(len(force) / n_frames)))
-            a, b = (zero[0] - 1) * analog_per_frame, zero[1] * analog_per_frame
-            force = force - np.nanmean(force[a:b], axis=0)
-            moment_c = moment_c - np.nanmean(moment_c[a:b], axis=0)
-        raw_plates.append((i, force, moment_c, corners))
 
-    # ---- lab axes ----
-    axes = _choose_axes(path, params, points, _labels(params, "POINT", n_points), raw_plates, forward, up,
-                        cop_threshold_n, scale)
-    R = axes.rotation()
 
-    # ---- points: markers vs model outputs ----
-    labels = _labels(params, "POINT", n_points)
+def _file_plate(raw: _RawFile, i: int, pl: dict, zero: tuple[int, int] | None) -> tuple:
+    """Plate ``i`` in file axes: (i, force [N], moment about its surface centre [N m], corners [m]), baseline off."""
+    f_scale = 1.0 if str(pl.get("unit_force", "N")).strip() == "N" else None
+    m_unit = str(pl.get("unit_moment", "Nmm")).strip()
+    p_unit = str(pl.get("unit_position", "mm")).strip().lower()
+    if f_scale is None or m_unit not in ("Nmm", "Nm") or p_unit not in LENGTH_SCALE:
+        raise C3DError(f"{raw.path}: plate {i}: units force={pl.get('unit_force')} moment={m_unit} "
+                       f"position={p_unit} not supported")
+    m_scale = 1e-3 if m_unit == "Nmm" else 1.0
+    force = np.asarray(pl["force"], float).T                     # (K, 3) N, file axes
+    moment_c = np.asarray(pl["moment"], float).T * m_scale       # about the plate surface centre (ezc3d)
+    corners = np.asarray(pl["corners"], float).T * LENGTH_SCALE[p_unit]  # (4, 3)
+    if zero is not None:
+        analog_per_frame = max(1, int(round(len(force) / raw.n_frames)))
+        a, b = (zero[0] - 1) * analog_per_frame, zero[1] * analog_per_frame
+        force = force - np.nanmean(force[a:b], axis=0)
+        moment_c = moment_c - np.nanmean(moment_c[a:b], axis=0)
+    return i, force, moment_c, corners
+
+
+def _point_series(raw: _RawFile, labels: list[str],
+                  R: np.ndarray) -> tuple[PointSeries, PointSeries | None, list[str]]:
+    """Points in the lab frame [m], split into markers and model outputs; and the labels skipped."""
+    params, n_points, scale = raw.params, raw.n_points, raw.scale
     non_position = _group_labels(params, NON_POSITION_GROUPS)
     modelled = _group_labels(params, ("MODELED_MARKERS",))
-    residuals = np.asarray(c3d["data"]["meta_points"]["residuals"], float).reshape(n_points, n_frames)
-    xyz = points[:3].transpose(2, 1, 0) * scale                    # (N, M, 3) metres, file axes
+    residuals = np.asarray(raw.c3d["data"]["meta_points"]["residuals"], float).reshape(n_points, raw.n_frames)
+    xyz = raw.points[:3].transpose(2, 1, 0) * scale                # (N, M, 3) metres, file axes
     res = residuals.T                                               # (N, M)
     valid = np.all(np.isfinite(xyz), axis=2) & ~np.all(xyz == 0.0, axis=2) & ~(res < 0)
     xyz = xyz @ R.T
@@ -262,16 +312,18 @@ def read_c3d(path: str | Path, *, chair_plate: int | None = None, feet_plate: in
         else:
             marker_idx.append(j)
     if not marker_idx:
-        raise C3DError(f"{path}: no marker trajectories (all {n_points} points are model outputs or unlabelled)")
+        raise C3DError(f"{raw.path}: no marker trajectories (all {n_points} points are model outputs or unlabelled)")
 
     def series(idx: list[int]) -> PointSeries:
-        return PointSeries([labels[j] for j in idx], rate, t0, xyz[:, idx], valid[:, idx], res_m[:, idx])
+        """The points ``idx`` as a series."""
+        return PointSeries([labels[j] for j in idx], raw.rate_hz, raw.t0_s, xyz[:, idx], valid[:, idx], res_m[:, idx])
 
-    markers = series(marker_idx)
-    model_points = series(model_idx) if model_idx else None
+    return series(marker_idx), series(model_idx) if model_idx else None, skipped
 
-    # ---- plates in the lab frame ----
-    analog_rate = _first_number(_param(params, "ANALOG", "RATE")) or float(c3d["header"]["analogs"]["frame_rate"])
+
+def _lab_plates(raw_plates: list[tuple], R: np.ndarray, t0_s: float, analog_rate_hz: float, named: dict,
+                cop_threshold_n: float) -> list[PlateSeries]:
+    """The plates in lab axes, wrench about the lab origin, with their COP; unloaded unnamed plates left out."""
     up_lab = np.array([0.0, 0.0, 1.0])
     plates: list[PlateSeries] = []
     for i, force_f, moment_f, corners_f in raw_plates:
@@ -281,14 +333,17 @@ def read_c3d(path: str | Path, *, chair_plate: int | None = None, feet_plate: in
         moment_c = moment_f @ R.T
         cop, cop_valid, tau = center_of_pressure(force, moment_c, centre, normal, cop_threshold_n)
         moment_o = shift_moment(moment_c, force, centre, np.zeros(3))
-        named = {chair_plate: "chair", feet_plate: "feet"}
         name = named.get(i, f"plate{i}")
         loaded = np.count_nonzero(np.abs(force @ normal) > cop_threshold_n) >= max(1, 0.01 * len(force))
-        if not loaded and i not in (chair_plate, feet_plate):
+        if not loaded and i not in named:
             continue  # unused plates are not published
-        t_s = t0 + np.arange(len(force)) / analog_rate
+        t_s = t0_s + np.arange(len(force)) / analog_rate_hz
         plates.append(PlateSeries(name, t_s, force, moment_o, cop, cop_valid, tau, corners, index=i))
+    return plates
 
+
+def _events(params: dict) -> list[tuple[str, str, float]]:
+    """The file's events: (label, context, time [s])."""
     events = []
     ev_labels = list(_param(params, "EVENT", "LABELS", []) or [])
     ev_contexts = list(_param(params, "EVENT", "CONTEXTS", []) or [])
@@ -297,12 +352,7 @@ def read_c3d(path: str | Path, *, chair_plate: int | None = None, feet_plate: in
         for k, lab in enumerate(ev_labels[:ev_times.shape[1]]):
             ctx = str(ev_contexts[k]).strip() if k < len(ev_contexts) else ""
             events.append((str(lab).strip(), ctx, float(ev_times[0, k] * 60.0 + ev_times[1, k])))
-
-    mass = _first_number(_param(params, "PROCESSING", "Bodymass"))
-    height = _first_number(_param(params, "PROCESSING", "Height"))
-    return C3DTrial(path=path, markers=markers, model_points=model_points, plates=plates, all_plate_count=n_plates,
-                    axes=axes, zero_frames=zero if raw_plates else None, body_mass_kg=mass, height_m=height * 1e-3 if height and height > 10 else height,
-                    events=events, skipped_labels=skipped)
+    return events
 
 
 def _choose_axes(path: Path, params: dict, points: np.ndarray, labels: list[str], raw_plates: list,
@@ -363,6 +413,11 @@ def _choose_axes(path: Path, params: dict, points: np.ndarray, labels: list[str]
     raise AssertionError("unreachable")
 
 
+def _to_ns(t_s: float) -> int:
+    """Bag time [ns] of a time on the file's clock [s]."""
+    return int(round(t_s * 1e9))
+
+
 def write_trial_bag(trial: C3DTrial, out: str | Path) -> dict[str, int]:
     """Write a :class:`C3DTrial` as a bag; returns message counts per topic.
 
@@ -381,20 +436,17 @@ def write_trial_bag(trial: C3DTrial, out: str | Path) -> dict[str, int]:
         custom["height_m"] = f"{trial.height_m:g}"
     if trial.events:
         custom["events"] = "; ".join(f"{lab}@{t:.3f}s" for lab, _ctx, t in trial.events)
-    def to_ns(t: float) -> int:
-        return int(round(t * 1e9))
-
     with BagWriter(out, custom_data=custom) as bag:
         bag.add_topic(MARKERS_TOPIC, MOCAP_TYPE)
         m = trial.markers
         for k, t in enumerate(m.times_s):
-            bag.write(MARKERS_TOPIC, to_ns(t), mocap_frame(to_ns(t), m.names, m.positions_m[k], m.valid[k],
+            bag.write(MARKERS_TOPIC, _to_ns(t), mocap_frame(_to_ns(t), m.names, m.positions_m[k], m.valid[k],
                                                            m.residuals_m[k]))
         if trial.model_points is not None:
             mp = trial.model_points
             bag.add_topic(MODEL_POINTS_TOPIC, MOCAP_TYPE)
             for k, t in enumerate(mp.times_s):
-                bag.write(MODEL_POINTS_TOPIC, to_ns(t), mocap_frame(to_ns(t), mp.names, mp.positions_m[k],
+                bag.write(MODEL_POINTS_TOPIC, _to_ns(t), mocap_frame(_to_ns(t), mp.names, mp.positions_m[k],
                                                                     mp.valid[k], mp.residuals_m[k]))
             if "CentreOfMass" in mp.names:
                 j = mp.names.index("CentreOfMass")
@@ -403,8 +455,8 @@ def write_trial_bag(trial: C3DTrial, out: str | Path) -> dict[str, int]:
                 acc = np.gradient(vel, 1.0 / mp.rate_hz, axis=0) if len(pos) > 1 else np.zeros_like(pos)
                 bag.add_topic(REFERENCE_COM_TOPIC, COM_TYPE)
                 for k, t in enumerate(mp.times_s):
-                    bag.write(REFERENCE_COM_TOPIC, to_ns(t), center_of_mass(
-                        to_ns(t), pos[k], vel[k], acc[k], source=f"c3d:{trial.path.name}:CentreOfMass",
+                    bag.write(REFERENCE_COM_TOPIC, _to_ns(t), center_of_mass(
+                        _to_ns(t), pos[k], vel[k], acc[k], source=f"c3d:{trial.path.name}:CentreOfMass",
                         valid=bool(ok[k])))
         for p in trial.plates:
             topic = plate_topic(p.name)
