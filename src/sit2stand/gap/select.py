@@ -46,11 +46,14 @@ class Candidate:
 
     @property
     def key(self) -> str:
+        """``kind@location``, the candidate's name in reports."""
         return f"{self.kind}@{self.location}"
 
 
 @dataclass
 class Selected:
+    """A chosen effect: its candidate, estimate and covariance, and how it was chosen."""
+
     candidate: Candidate
     theta: np.ndarray
     cov: np.ndarray                  # (p, p) covariance of theta
@@ -61,6 +64,8 @@ class Selected:
 
 @dataclass
 class Selection:
+    """The outcome: chosen effects, sums of squares before and after, rows, effective rows and the step log."""
+
     effects: list[Selected]
     rss0: float
     rss: float
@@ -83,6 +88,7 @@ def effective_fraction(r: np.ndarray, series_id: np.ndarray | None) -> float:
 
 
 def _orth(X: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of the column space of X (numerically null directions left out)."""
     if X.shape[1] == 0:
         return X
     U, s, _ = np.linalg.svd(X, full_matrices=False)
@@ -99,6 +105,18 @@ def _gain(r: np.ndarray, Q: np.ndarray, X: np.ndarray) -> tuple[float, int]:
     return float(c @ c), U.shape[1]
 
 
+@dataclass
+class _Search:
+    """What the selection's passes share: the rows, the candidates, the indices chosen so far and the log."""
+
+    y: np.ndarray
+    candidates: list[Candidate]
+    series_id: np.ndarray | None
+    chosen: list[int] = field(default_factory=list)
+    gains: dict[int, tuple[float, float, list[str]]] = field(default_factory=dict)   # share, dBIC, alternatives
+    steps: list[dict] = field(default_factory=list)
+
+
 def select(y: np.ndarray, candidates: list[Candidate], series_id: np.ndarray | None = None,
            bic_threshold: float = 10.0, min_share: float = 0.02, max_effects: int = 40,
            ambiguity: float = 0.05, noise_rss: float | None = None, progress=None) -> Selection:
@@ -107,115 +125,148 @@ def select(y: np.ndarray, candidates: list[Candidate], series_id: np.ndarray | N
     n = len(y)
     noise_rss = float(n if noise_rss is None else noise_rss)
     rss0 = float(y @ y)
-    chosen: list[int] = []
-    gains: dict[int, tuple[float, float, list[str]]] = {}
+    search = _Search(y, candidates, series_id)
+    _forward(search, rss0, noise_rss, bic_threshold, min_share, max_effects, ambiguity, progress)
+    _backward(search, bic_threshold)
+    _drop_indistinct(search)
+    effects, rss, n_eff = _estimates(search, rss0)
+    return Selection(effects, rss0, rss, n, float(n_eff), search.steps)
+
+
+def _forward(s: _Search, rss0: float, noise_rss: float, bic_threshold: float, min_share: float, max_effects: int,
+             ambiguity: float, progress) -> None:
+    """Forward pass: keep adding the plausible candidate that lowers BIC most, while it lowers it enough and matters."""
+    y, candidates, n = s.y, s.candidates, len(s.y)
     Q = np.zeros((n, 0))
     r = y.copy()
-    steps = []
-    while len(chosen) < max_effects:
+    while len(s.chosen) < max_effects:
         rss = float(r @ r)
-        frac = effective_fraction(r, series_id)
+        frac = effective_fraction(r, s.series_id)
         n_eff = max(frac * n, 10.0)
-        scores = []
-        for k, cand in enumerate(candidates):
-            if k in chosen:
-                continue
-            g, p = _gain(r, Q, cand.X)
-            if p == 0:
-                continue
-            dbic = n_eff * np.log(max(rss - g, 1e-300) / rss) + p * np.log(n_eff)
-            scores.append((dbic, g, k))
-        scores.sort()
-        best, best_score, g_best = None, 0.0, 0.0
-        X_sel = [candidates[k].X for k in chosen]
-        for dbic, g, k in scores[:10]:
-            if dbic > -bic_threshold:
-                break
-            cand = candidates[k]
-            if cand.plausible is not None:
-                theta, *_ = np.linalg.lstsq(np.hstack(X_sel + [cand.X]), y, rcond=None)
-                if not cand.plausible(theta[-cand.X.shape[1]:]):
-                    steps.append({"step": len(chosen) + 1, "implausible": cand.key, "delta_bic": float(dbic)})
-                    continue
-            best, best_score, g_best = k, dbic, g
-            break
+        scores = _scores(s, r, Q, rss, n_eff)
+        best, best_score, g_best = _first_plausible(s, scores, bic_threshold)
         if best is None:
-            steps.append({"step": len(chosen) + 1, "stop": "no candidate lowers BIC by more than "
-                          f"{bic_threshold:g}" + (f" (best {candidates[scores[0][2]].key}: {scores[0][0]:.1f})"
-                                                  if scores else "")})
+            s.steps.append({"step": len(s.chosen) + 1, "stop": "no candidate lowers BIC by more than "
+                            f"{bic_threshold:g}" + (f" (best {candidates[scores[0][2]].key}: {scores[0][0]:.1f})"
+                                                    if scores else "")})
             break
         share = g_best / max(noise_rss, 1e-12)
-        steps.append({"step": len(chosen) + 1, "best": candidates[best].key, "delta_bic": float(best_score),
-                      "share_of_noise": float(share), "n_eff": float(n_eff)})
+        s.steps.append({"step": len(s.chosen) + 1, "best": candidates[best].key, "delta_bic": float(best_score),
+                        "share_of_noise": float(share), "n_eff": float(n_eff)})
         if share < min_share:
-            steps[-1]["stop"] = f"explains under {100 * min_share:g} % of the noise level"
+            s.steps[-1]["stop"] = f"explains under {100 * min_share:g} % of the noise level"
             break
         alts = [candidates[k].key for d, g, k in sorted(scores) if k != best and g >= (1 - ambiguity) * g_best]
-        chosen.append(best)
-        gains[best] = (g_best / max(rss0, 1e-12), float(best_score), alts)
+        s.chosen.append(best)
+        s.gains[best] = (g_best / max(rss0, 1e-12), float(best_score), alts)
         Q = _orth(np.hstack([Q, candidates[best].X]))
         r = y - Q @ (Q.T @ y)
         if progress:
-            progress(f"  chose {candidates[best].key} ({100 * gains[best][0]:.1f} % of the residual, "
+            progress(f"  chose {candidates[best].key} ({100 * s.gains[best][0]:.1f} % of the residual, "
                      f"dBIC {best_score:.0f})")
-    # backward: drop what later choices made redundant
+
+
+def _scores(s: _Search, r: np.ndarray, Q: np.ndarray, rss: float, n_eff: float) -> list[tuple[float, float, int]]:
+    """(delta BIC, drop of the sum of squares, index) of every remaining candidate against ``r``, lowest BIC first."""
+    scores = []
+    for k, cand in enumerate(s.candidates):
+        if k in s.chosen:
+            continue
+        g, p = _gain(r, Q, cand.X)
+        if p == 0:
+            continue
+        dbic = n_eff * np.log(max(rss - g, 1e-300) / rss) + p * np.log(n_eff)
+        scores.append((dbic, g, k))
+    scores.sort()
+    return scores
+
+
+def _first_plausible(s: _Search, scores: list[tuple[float, float, int]],
+                     bic_threshold: float) -> tuple[int | None, float, float]:
+    """Of the ten best, the first that lowers BIC by more than the threshold with a plausible estimate: (index,
+    delta BIC, drop of the sum of squares); (None, 0, 0) if none."""
+    X_sel = [s.candidates[k].X for k in s.chosen]
+    for dbic, g, k in scores[:10]:
+        if dbic > -bic_threshold:
+            break
+        cand = s.candidates[k]
+        if cand.plausible is not None:
+            theta, *_ = np.linalg.lstsq(np.hstack(X_sel + [cand.X]), s.y, rcond=None)
+            if not cand.plausible(theta[-cand.X.shape[1]:]):
+                s.steps.append({"step": len(s.chosen) + 1, "implausible": cand.key, "delta_bic": float(dbic)})
+                continue
+        return k, dbic, g
+    return None, 0.0, 0.0
+
+
+def _backward(s: _Search, bic_threshold: float) -> None:
+    """Backward pass: drop, one at a time, a chosen effect that later choices made redundant (BIC)."""
+    y, candidates, chosen, n = s.y, s.candidates, s.chosen, len(s.y)
     changed = True
     while changed and len(chosen) > 1:
         changed = False
         X_all = [candidates[k].X for k in chosen]
         full_rss = _rss(y, np.hstack(X_all))
-        n_eff = max(effective_fraction(y - _fit(y, np.hstack(X_all)), series_id) * n, 10.0)
+        n_eff = max(effective_fraction(y - _fit(y, np.hstack(X_all)), s.series_id) * n, 10.0)
         for i, k in enumerate(chosen):
             rest = np.hstack([X for j, X in enumerate(X_all) if j != i])
             dbic = n_eff * np.log(_rss(y, rest) / full_rss) - candidates[k].X.shape[1] * np.log(n_eff)
             if dbic < bic_threshold:
-                steps.append({"dropped": candidates[k].key, "delta_bic": float(-dbic)})
+                s.steps.append({"dropped": candidates[k].key, "delta_bic": float(-dbic)})
                 chosen.pop(i)
                 changed = True
                 break
-    # an effect whose leading parameter is not distinguishable from zero in the joint fit (|theta| < 1.96 standard
-    # errors: two effects trading off along a direction the data cannot see) is dropped, the weakest first
+
+
+def _joint_fit(s: _Search) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Least squares of y on all chosen signatures: theta, its covariance (scaled by n / n_eff), residual, n_eff / n."""
+    X = np.hstack([s.candidates[k].X for k in s.chosen])
+    theta, *_ = np.linalg.lstsq(X, s.y, rcond=None)
+    res = s.y - X @ theta
+    frac = effective_fraction(res, s.series_id)
+    s2 = float(res @ res) / max(len(s.y) - X.shape[1], 1)
+    cov = s2 * np.linalg.pinv(X.T @ X) / max(frac, 1e-3)
+    return theta, cov, res, frac
+
+
+def _drop_indistinct(s: _Search) -> None:
+    """Drop, weakest first, an effect whose leading parameter is within 1.96 standard errors of zero in the joint fit."""
+    # (two effects trading off along a direction the data cannot see)
+    chosen = s.chosen
     while chosen:
-        X = np.hstack([candidates[k].X for k in chosen])
-        theta, *_ = np.linalg.lstsq(X, y, rcond=None)
-        res = y - X @ theta
-        frac = effective_fraction(res, series_id)
-        cov = float(res @ res) / max(n - X.shape[1], 1) * np.linalg.pinv(X.T @ X) / max(frac, 1e-3)
-        starts = np.cumsum([0] + [candidates[k].X.shape[1] for k in chosen])[:-1]
+        theta, cov, _, _ = _joint_fit(s)
+        starts = np.cumsum([0] + [s.candidates[k].X.shape[1] for k in chosen])[:-1]
         t = np.array([abs(theta[i]) / max(np.sqrt(max(cov[i, i], 0.0)), 1e-300) for i in starts])
         if t.min() >= 1.96:
             break
         i = int(np.argmin(t))
-        steps.append({"dropped": candidates[chosen[i]].key, "t": float(t[i]), "why": "not distinguishable from 0"})
+        s.steps.append({"dropped": s.candidates[chosen[i]].key, "t": float(t[i]), "why": "not distinguishable from 0"})
         chosen.pop(i)
+
+
+def _estimates(s: _Search, rss0: float) -> tuple[list[Selected], float, float]:
+    """The chosen effects with their joint estimates and covariances; the residual sum of squares and n_eff."""
+    n = len(s.y)
+    if not s.chosen:
+        return [], rss0, effective_fraction(s.y, s.series_id) * n
+    theta, cov, res, frac = _joint_fit(s)
     effects = []
-    if chosen:
-        X = np.hstack([candidates[k].X for k in chosen])
-        theta, *_ = np.linalg.lstsq(X, y, rcond=None)
-        res = y - X @ theta
-        frac = effective_fraction(res, series_id)
-        dof = max(n - X.shape[1], 1)
-        s2 = float(res @ res) / dof
-        cov = s2 * np.linalg.pinv(X.T @ X) / max(frac, 1e-3)
-        i = 0
-        for k in chosen:
-            p = candidates[k].X.shape[1]
-            share, dbic, alts = gains.get(k, (0.0, 0.0, []))
-            effects.append(Selected(candidates[k], theta[i:i + p], cov[i:i + p, i:i + p], share, dbic, alts))
-            i += p
-        rss = float(res @ res)
-        n_eff = frac * n
-    else:
-        rss = rss0
-        n_eff = effective_fraction(y, series_id) * n
-    return Selection(effects, rss0, rss, n, float(n_eff), steps)
+    i = 0
+    for k in s.chosen:
+        p = s.candidates[k].X.shape[1]
+        share, dbic, alts = s.gains.get(k, (0.0, 0.0, []))
+        effects.append(Selected(s.candidates[k], theta[i:i + p], cov[i:i + p, i:i + p], share, dbic, alts))
+        i += p
+    return effects, float(res @ res), frac * n
 
 
 def _fit(y: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """Least-squares fit of y by the columns of X."""
     theta, *_ = np.linalg.lstsq(X, y, rcond=None)
     return X @ theta
 
 
 def _rss(y: np.ndarray, X: np.ndarray) -> float:
+    """Residual sum of squares of y after its least-squares fit by X."""
     r = y - _fit(y, X)
     return float(r @ r)
