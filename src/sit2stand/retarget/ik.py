@@ -18,6 +18,7 @@ Units SI; frames by Pinocchio frame id; positions in the world frame (REP-103).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +41,24 @@ class IkResult:
     step_norm: float           # size of the last Gauss-Newton step (small at a local optimum)
     kkt_dual_residual: float   # dual (stationarity) residual of the last QP
     seconds: float
+
+
+@dataclass
+class _Frame:
+    """One frame's targets: markers (frame ids, positions [m], weights), the COM [m] on ``axes``, the soles, the
+    posture reference, the previous frame and the base holds (x, z [m]; pitch [rad])."""
+
+    fids: list[int]
+    targets: np.ndarray
+    weights: np.ndarray
+    com_target: np.ndarray
+    axes: list[int]
+    sole_targets: list[pin.SE3]
+    q_ref: np.ndarray
+    q_prev: np.ndarray | None
+    base_xz: np.ndarray | None
+    base_weight: float | None
+    base_pitch_min: float | None
 
 
 class ComIk:
@@ -74,6 +93,7 @@ class ComIk:
         self.points = PointJacobians(model)
 
     def _solve_qp(self, H, g, A, b, lo, hi):
+        """min 1/2 dq' H dq + g' dq s.t. A dq = b, lo <= dq <= hi (warm proxsuite QP per shape): dq, solved, dual res."""
         key = (A.shape[0], len(lo))
         qp = self._qp.get(key)
         if qp is None:
@@ -98,92 +118,122 @@ class ComIk:
         the first frame). ``base_xz``: hold the floating base's world x and z at these values [m] (e.g. the hips on
         a seat): two more equality rows, or, with ``base_weight``, a soft task of that weight. ``base_pitch_min``
         [rad]: the base may not pitch back beyond this (a pelvis on a seat cannot roll back about its hips)."""
-        import time
-
         t0 = time.perf_counter()
-        model, data, nv = self.model, self.data, self.nv
+        frame = _Frame([int(m[0]) for m in markers], np.array([m[1] for m in markers], float).reshape(-1, 3),
+                       np.array([m[2] for m in markers], float), com_target, list(com_axes), sole_targets,
+                       q0 if q_ref is None else q_ref, q_prev, base_xz, base_weight, base_pitch_min)
         q = q0.copy()
-        q_ref = q0 if q_ref is None else q_ref
-        axes = list(com_axes)
-        fids = [int(m[0]) for m in markers]
-        targets = np.array([m[1] for m in markers], float).reshape(-1, 3)
-        w = np.array([m[2] for m in markers], float)
         feasible, dua = True, 0.0
         step = np.inf
         it = 0
         for it in range(1, max_iterations + 1):
-            pin.computeJointJacobians(model, data, q)
-            pin.updateFramePlacements(model, data)
-            Jc = pin.jacobianCenterOfMass(model, data, False)
-            com = data.com[0].copy()
-            # markers: sum w ||J dq + e||^2
-            P, J = self.points(data, fids)
-            Jr = J.reshape(-1, nv)
-            wr = np.repeat(w, 3)
-            H = (Jr.T * wr) @ Jr
-            g = Jr.T @ (wr * (P - targets).ravel())
-            post = pin.difference(model, q_ref, q)
-            post[:6] = 0.0
-            H[np.diag_indices(nv)] += self.mu + self.damping
-            g += self.mu * post
-            # feet: J_sole dq = -log(X_target^-1 X), COM: J_com dq = c* - c
-            rows, rhs = [], []
-            for fid, target in zip(self.soles, sole_targets):
-                err = pin.log6(target.actInv(data.oMf[fid])).vector
-                rows.append(pin.getFrameJacobian(model, data, fid, pin.LOCAL))
-                rhs.append(-err)
-            if base_xz is not None:     # base linear velocity is in the base frame: world rows are R[[0, 2]]
-                rb = np.zeros((2, nv))
-                rb[:, :3] = data.oMi[1].rotation[[0, 2]]
-                eb = (np.asarray(base_xz, float) - q[:3])[[0, 2]]
-                if base_weight is None:
-                    rows.append(rb)
-                    rhs.append(eb)
-                else:
-                    H += base_weight * rb.T @ rb
-                    g -= base_weight * rb.T @ eb
-            A_feet, b_feet = np.vstack(rows), np.concatenate(rhs)
-            A = np.vstack([A_feet, Jc[axes]])
-            b = np.concatenate([b_feet, (com_target - com)[axes]])
-            lo = np.full(nv, -1e20)
-            hi = np.full(nv, 1e20)
-            qj = q[7:]
-            lo[6:], hi[6:] = self.q_lo - qj, self.q_hi - qj
-            if q_prev is not None:     # speed limits: from the previous frame, over all of this frame's iterations
-                lo[6:] = np.maximum(lo[6:], q_prev[7:] - self.v_max * self.dt - qj)
-                hi[6:] = np.minimum(hi[6:], q_prev[7:] + self.v_max * self.dt - qj)
-            if base_pitch_min is not None:
-                R = data.oMi[1].rotation
-                lo[4] = min(0.0, base_pitch_min - np.arctan2(R[0, 2], R[2, 2]))
-            lo[6:] = np.minimum(lo[6:], 0.0)   # a configuration just past a limit may always move back inside
-            hi[6:] = np.maximum(hi[6:], 0.0)
-            dq, ok, dua = self._solve_qp(H, g, A, b, lo, hi)
-            if not ok:
-                # COM infeasible with the feet fixed and the limits: COM as a heavily weighted soft task
-                feasible = False
-                Hs = H + 1e4 * Jc[axes].T @ Jc[axes]
-                gs = g - 1e4 * Jc[axes].T @ (com_target - com)[axes]
-                dq, ok, dua = self._solve_qp(Hs, gs, A_feet, b_feet, lo, hi)
-                if not ok:     # not even the feet: everything soft; the box alone is always feasible (0 is inside)
-                    Hs += 1e6 * A_feet.T @ A_feet
-                    gs -= 1e6 * A_feet.T @ b_feet
-                    dq, ok, dua = self._solve_qp(Hs, gs, np.zeros((0, nv)), np.zeros(0), lo, hi)
-                    if not ok:
-                        dq = np.zeros(nv)
-            q = pin.integrate(model, q, dq)
-            q[7:] = np.clip(q[7:], self.q_lo, self.q_hi)      # exact limits, whatever the QP's tolerance
-            if q_prev is not None:
-                q[7:] = np.clip(q[7:], q_prev[7:] - self.v_max * self.dt, q_prev[7:] + self.v_max * self.dt)
+            dq, com_held, dua = self._step(q, frame)
+            feasible = feasible and com_held
+            q = self._integrate(q, dq, q_prev)
             step = float(np.linalg.norm(dq))
             if step < tol:
                 break
+        return self._result(q, frame, feasible, it, step, dua, t0)
+
+    def _step(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, bool, float]:
+        """One Gauss-Newton step dq (tangent) from q; whether the COM equality was kept; the QP's dual residual."""
+        model, data = self.model, self.data
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        Jc = pin.jacobianCenterOfMass(model, data, False)
+        com = data.com[0].copy()
+        H, g = self._soft_tasks(q, f)
+        A_feet, b_feet = self._hard_rows(q, f, H, g)
+        A = np.vstack([A_feet, Jc[f.axes]])
+        b = np.concatenate([b_feet, (f.com_target - com)[f.axes]])
+        lo, hi = self._bounds(q, f)
+        dq, ok, dua = self._solve_qp(H, g, A, b, lo, hi)
+        if ok:
+            return dq, True, dua
+        # COM infeasible with the feet fixed and the limits: COM as a heavily weighted soft task
+        Hs = H + 1e4 * Jc[f.axes].T @ Jc[f.axes]
+        gs = g - 1e4 * Jc[f.axes].T @ (f.com_target - com)[f.axes]
+        dq, ok, dua = self._solve_qp(Hs, gs, A_feet, b_feet, lo, hi)
+        if not ok:     # not even the feet: everything soft; the box alone is always feasible (0 is inside)
+            Hs += 1e6 * A_feet.T @ A_feet
+            gs -= 1e6 * A_feet.T @ b_feet
+            dq, ok, dua = self._solve_qp(Hs, gs, np.zeros((0, self.nv)), np.zeros(0), lo, hi)
+            if not ok:
+                dq = np.zeros(self.nv)
+        return dq, False, dua
+
+    def _soft_tasks(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, np.ndarray]:
+        """Hessian and gradient of the markers, sum w ||J dq + e||^2 [m^2], and the posture prior, at q."""
+        nv = self.nv
+        P, J = self.points(self.data, f.fids)
+        Jr = J.reshape(-1, nv)
+        wr = np.repeat(f.weights, 3)
+        H = (Jr.T * wr) @ Jr
+        g = Jr.T @ (wr * (P - f.targets).ravel())
+        post = pin.difference(self.model, f.q_ref, q)
+        post[:6] = 0.0
+        H[np.diag_indices(nv)] += self.mu + self.damping
+        g += self.mu * post
+        return H, g
+
+    def _hard_rows(self, q: np.ndarray, f: _Frame, H: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Equality rows A dq = b of the feet (J_sole dq = -log(X_target^-1 X)) and a held base x, z; a soft base
+        hold (``base_weight``) goes into H and g instead, in place."""
+        data = self.data
+        rows, rhs = [], []
+        for fid, target in zip(self.soles, f.sole_targets):
+            err = pin.log6(target.actInv(data.oMf[fid])).vector
+            rows.append(pin.getFrameJacobian(self.model, data, fid, pin.LOCAL))
+            rhs.append(-err)
+        if f.base_xz is not None:     # base linear velocity is in the base frame: world rows are R[[0, 2]]
+            rb = np.zeros((2, self.nv))
+            rb[:, :3] = data.oMi[1].rotation[[0, 2]]
+            eb = (np.asarray(f.base_xz, float) - q[:3])[[0, 2]]
+            if f.base_weight is None:
+                rows.append(rb)
+                rhs.append(eb)
+            else:
+                H += f.base_weight * rb.T @ rb
+                g -= f.base_weight * rb.T @ eb
+        return np.vstack(rows), np.concatenate(rhs)
+
+    def _bounds(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, np.ndarray]:
+        """Step bounds from the joint limits, the speed limits from the previous frame and the base pitch [rad]."""
+        nv = self.nv
+        lo = np.full(nv, -1e20)
+        hi = np.full(nv, 1e20)
+        qj = q[7:]
+        lo[6:], hi[6:] = self.q_lo - qj, self.q_hi - qj
+        if f.q_prev is not None:     # speed limits: from the previous frame, over all of this frame's iterations
+            lo[6:] = np.maximum(lo[6:], f.q_prev[7:] - self.v_max * self.dt - qj)
+            hi[6:] = np.minimum(hi[6:], f.q_prev[7:] + self.v_max * self.dt - qj)
+        if f.base_pitch_min is not None:
+            R = self.data.oMi[1].rotation
+            lo[4] = min(0.0, f.base_pitch_min - np.arctan2(R[0, 2], R[2, 2]))
+        lo[6:] = np.minimum(lo[6:], 0.0)   # a configuration just past a limit may always move back inside
+        hi[6:] = np.maximum(hi[6:], 0.0)
+        return lo, hi
+
+    def _integrate(self, q: np.ndarray, dq: np.ndarray, q_prev: np.ndarray | None) -> np.ndarray:
+        """q (+) dq, clipped exactly to the joint limits and the speed limits from ``q_prev``."""
+        q = pin.integrate(self.model, q, dq)
+        q[7:] = np.clip(q[7:], self.q_lo, self.q_hi)      # exact limits, whatever the QP's tolerance
+        if q_prev is not None:
+            q[7:] = np.clip(q[7:], q_prev[7:] - self.v_max * self.dt, q_prev[7:] + self.v_max * self.dt)
+        return q
+
+    def _result(self, q: np.ndarray, f: _Frame, feasible: bool, it: int, step: float, dua: float,
+                t0: float) -> IkResult:
+        """The solution with its COM, sole and marker errors; FloatingPointError if q is not finite."""
+        model, data = self.model, self.data
         if not np.all(np.isfinite(q)):
             raise FloatingPointError("IK produced a non-finite configuration")
         pin.framesForwardKinematics(model, data, q)        # the result's errors (no Jacobians needed)
         com = pin.centerOfMass(model, data, q, False)
-        marker_sq = np.sum((positions(data, fids) - targets) ** 2, axis=1)
-        sole_err = max(np.linalg.norm(pin.log6(t.actInv(data.oMf[f])).vector) for f, t in zip(self.soles, sole_targets))
-        com_err = float(np.linalg.norm((com - com_target)[axes]))
+        marker_sq = np.sum((positions(data, f.fids) - f.targets) ** 2, axis=1)
+        sole_err = max(np.linalg.norm(pin.log6(t.actInv(data.oMf[fid])).vector)
+                       for fid, t in zip(self.soles, f.sole_targets))
+        com_err = float(np.linalg.norm((com - f.com_target)[f.axes]))
         return IkResult(q, feasible and com_err < 1e-3, com_err, float(sole_err),
                         float(np.sqrt(np.mean(marker_sq))) if len(marker_sq) else 0.0, it, step, dua,
                         time.perf_counter() - t0)
