@@ -1,21 +1,21 @@
 """sit2stand.io.c3d: the real lab files import in SI units and a REP-103 frame; bad input fails clearly."""
 
+import ezc3d
 import numpy as np
 import pytest
 
 from conftest import real_file
+from sit2stand.io.topics import MARKERS_TOPIC, REFERENCE_COM_TOPIC, plate_topic
 from sit2stand.io.bag import BagReader
 from sit2stand.io.c3d import C3DError, read_c3d, write_trial_bag
 from sit2stand.io.forceplate import point_in_polygon
-from sit2stand.io.messages import MARKERS_TOPIC, REFERENCE_COM_TOPIC, plate_topic
+
 
 G = 9.81
 
 
 def synthetic_c3d(path, *, with_gaps=True):
     """A small marker-only C3D: heel/toe markers pointing along file +X, z up, one marker with gaps."""
-    import ezc3d
-
     c3d = ezc3d.c3d()
     c3d["parameters"]["POINT"]["RATE"]["value"] = [100]
     c3d["parameters"]["POINT"]["LABELS"]["value"] = ("LHEE", "LTOE", "RHEE", "RTOE", "C7")
@@ -115,8 +115,6 @@ def write_trial_bag_path(trial, path):
 
 
 def test_negative_residual_marks_a_marker_invalid():
-    import ezc3d
-
     path = real_file("walk_amti_eb015pi.c3d")
     trial = read_c3d(path)
     residual = ezc3d.c3d(str(path))["data"]["meta_points"]["residuals"][0]  # (points, frames)

@@ -13,8 +13,16 @@ import numpy as np
 import pytest
 import yaml
 
+from sit2stand.gap.excite import excite
 from sit2stand.gap.hidden import Hidden, draw, plant_with, run_case, score
+from sit2stand.gap.human import human_gap
 from sit2stand.gap.select import Candidate, select
+from sit2stand.human.skeleton import ExtraMass
+from sit2stand.human.synth import SynthConfig, synthesize, write_demonstration_bag
+from sit2stand.robot.identify import read_link_parameters
+from sit2stand.robot.model import PlantConfig
+from sit2stand.robot.plant import Plant
+from sit2stand.robot.postures import collect_postures
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -67,8 +75,6 @@ def test_implausible_winner_is_skipped():
 
 
 def test_hidden_mass_sits_at_its_stated_offset():
-    from sit2stand.robot.plant import Plant
-
     cfg = plant_with([Hidden("extra_mass", "torso_2_link", 5.0, (-0.1, 0.02, 0.1))])
     p = Plant(cfg, with_chair=False)
     body, parent = p.model.body("hidden_0"), p.model.body("torso_2_link")
@@ -113,13 +119,6 @@ def test_score_counts_group_members_and_extras():
 def test_gap_command_report_and_augmented_model(tmp_path):
     """The command on a hidden-bias bag: report files; the augmented model re-analysed leaves no discrepancy, and the
     driver's plant loads its links as controller parameters."""
-    from sit2stand.gap.excite import excite
-    from sit2stand.robot.identify import read_link_parameters
-    from sit2stand.robot.model import PlantConfig
-    from sit2stand.robot.plant import Plant
-
-    from sit2stand.robot.postures import collect_postures
-
     bag = tmp_path / "bias"
     hidden = [Hidden("torque_bias", "leg_left_4_joint", 4.0), Hidden("extra_mass", "base_link", 6.0, (-0.1, 0, -0.05))]
     excite(plant_with(hidden), bag, seed=5, n_moves=6)
@@ -159,10 +158,6 @@ def test_not_a_robot_bag_is_named(tmp_path):
 
 def test_human_side_names_a_hidden_trunk_mass(tmp_path):
     """A digital human with 8 kg hidden on the trunk (inside the scale mass): the extra mass is named on the torso."""
-    from sit2stand.gap.human import human_gap
-    from sit2stand.human.skeleton import ExtraMass
-    from sit2stand.human.synth import SynthConfig, synthesize, write_demonstration_bag
-
     cfg = SynthConfig(style="elderly", seed=1, extra=[ExtraMass.parse("trunk:8")])
     bag = tmp_path / "trunk8"
     write_demonstration_bag(synthesize(cfg), bag)

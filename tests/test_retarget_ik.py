@@ -16,7 +16,11 @@ MARKER_LINKS = ("torso_2_link", "head_2_link", "arm_left_4_link", "arm_right_4_l
 def scene():
     model = controller_model()
     data = model.createData()
-    idx = lambda n: model.joints[model.getJointId(n)].idx_q  # noqa: E731
+
+    def idx(name: str) -> int:
+        """Index in q of joint ``name``."""
+        return model.joints[model.getJointId(name)].idx_q
+
     q = pin.neutral(model)
     for s in ("left", "right"):
         q[idx(f"leg_{s}_3_joint")], q[idx(f"leg_{s}_4_joint")], q[idx(f"leg_{s}_5_joint")] = -0.6, 1.1, -0.5
