@@ -230,7 +230,7 @@ def _joint_fit(s: _Search) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
 
 
 def _drop_indistinct(s: _Search) -> None:
-    """Drop, weakest first, an effect whose leading parameter is within 1.96 standard errors of zero in the joint fit."""
+    """Drop, weakest first, each effect whose leading parameter is within 1.96 standard errors of 0 in the joint fit."""
     # (two effects trading off along a direction the data cannot see)
     chosen = s.chosen
     while chosen:

@@ -93,7 +93,7 @@ class ComIk:
         self.points = PointJacobians(model)
 
     def _solve_qp(self, H, g, A, b, lo, hi):
-        """min 1/2 dq' H dq + g' dq s.t. A dq = b, lo <= dq <= hi (warm proxsuite QP per shape): dq, solved, dual res."""
+        """min 1/2 dq' H dq + g' dq s.t. A dq = b, lo <= dq <= hi (a warm QP per shape): dq, solved, dual residual."""
         key = (A.shape[0], len(lo))
         qp = self._qp.get(key)
         if qp is None:

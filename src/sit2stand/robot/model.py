@@ -14,6 +14,7 @@ Facts and pitfalls: ``../shared/notes/robot-talos.md``.
 
 from __future__ import annotations
 
+import fnmatch
 import re
 import sys
 import tempfile
@@ -22,6 +23,7 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+import pinocchio as pin
 import yaml
 from ..errors import Sit2StandError
 
@@ -161,10 +163,12 @@ class PlantConfig:
         return cfg
 
     def total_extra_mass(self) -> float:
+        """Sum of the unmodeled extra masses [kg]."""
         return sum(m.mass_kg for m in self.unmodeled.masses)
 
 
 def _six(values, what: str) -> tuple[float, ...]:
+    """Six floats (a wrench: force [N], torque [N m]); ValueError naming ``what`` otherwise."""
     out = tuple(float(v) for v in values)
     if len(out) != 6:
         raise ValueError(f"{what}: needs 6 values (fx fy fz [N], tx ty tz [N m]), got {len(out)}")
@@ -173,8 +177,6 @@ def _six(values, what: str) -> tuple[float, ...]:
 
 def expand(pattern_values: dict[str, float], joint_names: list[str]) -> dict[str, float]:
     """Joint-name globs (``leg_*_4_joint``) to per-joint values; later patterns win."""
-    import fnmatch
-
     out: dict[str, float] = {}
     for pattern, value in pattern_values.items():
         matches = fnmatch.filter(joint_names, pattern)
@@ -197,8 +199,18 @@ def build_spec(cfg: PlantConfig, *, plant: bool) -> mujoco.MjSpec:
     spec.option.impratio = 10.0
     root = spec.worldbody.first_body()
     root.add_freejoint(name="root")
+    names = _add_joint_actuators(spec, cfg)
+    _add_soles(spec)
+    root.add_site(name="pelvis", pos=[0, 0, 0])
+    _add_contacts_and_floor(spec, cfg)
+    if plant:
+        _add_unmodeled(spec, cfg, names)
+    return spec
+
+
+def _add_joint_actuators(spec: mujoco.MjSpec, cfg: PlantConfig) -> list[str]:
+    """Per joint: armature, no friction, a PD position servo, a torque motor [N m] and a torque sensor; the names."""
     joints = [j for j in spec.joints if j.type != mujoco.mjtJoint.mjJNT_FREE]
-    names = [j.name for j in joints]
     for j in joints:
         j.armature = cfg.armature
         j.damping = [0.0, 0.0, 0.0]                  # friction is an unmodeled effect, given below for the plant
@@ -221,6 +233,11 @@ def build_spec(cfg: PlantConfig, *, plant: bool) -> mujoco.MjSpec:
         ff.ctrlrange = [-effort, effort]
         spec.add_sensor(name=f"tau_{j.name}", type=mujoco.mjtSensor.mjSENS_JOINTACTFRC,
                         objtype=mujoco.mjtObj.mjOBJ_JOINT, objname=j.name)
+    return [j.name for j in joints]
+
+
+def _add_soles(spec: mujoco.MjSpec) -> None:
+    """Per foot: the sole box that makes contact, the F/T and sole sites, and the force [N] and torque [N m] sensors."""
     for side in SIDES:
         body = spec.body(f"leg_{side}_6_link")
         for geom in body.geoms:            # the foot mesh stays for drawing; the sole box does the contact
@@ -235,7 +252,10 @@ def build_spec(cfg: PlantConfig, *, plant: bool) -> mujoco.MjSpec:
                         objtype=mujoco.mjtObj.mjOBJ_SITE, objname=f"ft_{side}")
         spec.add_sensor(name=f"torque_{side}", type=mujoco.mjtSensor.mjSENS_TORQUE,
                         objtype=mujoco.mjtObj.mjOBJ_SITE, objname=f"ft_{side}")
-    root.add_site(name="pelvis", pos=[0, 0, 0])
+
+
+def _add_contacts_and_floor(spec: mujoco.MjSpec, cfg: PlantConfig) -> None:
+    """Which robot geoms collide (with the environment only), their friction, and the floor plane."""
     for geom in spec.geoms:
         body_name = geom.parent.name if hasattr(geom.parent, "name") else ""
         collide = body_name in COLLIDING and (not body_name.endswith("_6_link") or geom.name.startswith("sole_box"))
@@ -246,25 +266,27 @@ def build_spec(cfg: PlantConfig, *, plant: bool) -> mujoco.MjSpec:
                                     rgba=[0.8, 0.8, 0.8, 1])
     floor.contype, floor.conaffinity = 2, 1
     floor.friction = [cfg.floor_friction, 0.005, 0.0001]
-    if plant:
-        um = cfg.unmodeled
-        for extra in um.masses:
-            try:
-                parent = spec.body(extra.link)
-            except Exception:  # noqa: BLE001 - mujoco raises a generic error for a missing name
-                parent = None
-            if parent is None:
-                raise PlantConfigError(f"{cfg.source or 'plant'}: unmodeled mass on unknown link {extra.link!r}")
-            b = parent.add_body(name=extra.name or f"extra_{extra.link}", pos=list(extra.pos_m))
-            b.mass = extra.mass_kg
-            b.ipos = [0.0, 0.0, 0.0]         # the mass sits at the body's origin (MjSpec copies pos into ipos)
-            b.inertia = [1e-4 * extra.mass_kg] * 3
-            b.explicitinertial = True
-        for name, value in expand(um.viscous_friction, names).items():
-            spec.joint(name).damping = [value, 0.0, 0.0]
-        for name, value in expand(um.coulomb_friction, names).items():
-            spec.joint(name).frictionloss = value
-    return spec
+
+
+def _add_unmodeled(spec: mujoco.MjSpec, cfg: PlantConfig, names: list[str]) -> None:
+    """The plant's unmodeled effects: extra point masses [kg], viscous [N m s/rad] and Coulomb [N m] friction."""
+    um = cfg.unmodeled
+    for extra in um.masses:
+        try:
+            parent = spec.body(extra.link)
+        except Exception:  # noqa: BLE001 - mujoco raises a generic error for a missing name
+            parent = None
+        if parent is None:
+            raise PlantConfigError(f"{cfg.source or 'plant'}: unmodeled mass on unknown link {extra.link!r}")
+        b = parent.add_body(name=extra.name or f"extra_{extra.link}", pos=list(extra.pos_m))
+        b.mass = extra.mass_kg
+        b.ipos = [0.0, 0.0, 0.0]         # the mass sits at the body's origin (MjSpec copies pos into ipos)
+        b.inertia = [1e-4 * extra.mass_kg] * 3
+        b.explicitinertial = True
+    for name, value in expand(um.viscous_friction, names).items():
+        spec.joint(name).damping = [value, 0.0, 0.0]
+    for name, value in expand(um.coulomb_friction, names).items():
+        spec.joint(name).frictionloss = value
 
 
 def add_chair(spec: mujoco.MjSpec, cfg: PlantConfig, seat_top_z: float, front_x: float) -> None:
@@ -276,14 +298,13 @@ def add_chair(spec: mujoco.MjSpec, cfg: PlantConfig, seat_top_z: float, front_x:
     g.friction = [cfg.chair_friction, 0.005, 0.0001]
 
 
-def controller_model(cfg: PlantConfig | None = None):
-    """The controller's Pinocchio model of the robot: the URDF ("CAD") inertias, the plant's joint order.
+def controller_model(cfg: PlantConfig | None = None, link_parameters: dict | None = None):
+    """The controller's Pinocchio model of the robot: the URDF ("CAD") inertias, or the identified
+    ``link_parameters`` (:func:`apply_link_parameters`), in the plant's joint order.
 
     Built from the MJCF that MuJoCo compiles from the same spec (without chair, floor or unmodeled effects);
     Pinocchio's free-flyer quaternion is (x, y, z, w), MuJoCo's (w, x, y, z).
     """
-    import pinocchio as pin
-
     cfg = cfg or PlantConfig()
     spec = build_spec(cfg, plant=False)
     spec.compile()
@@ -301,9 +322,24 @@ def controller_model(cfg: PlantConfig | None = None):
         model.addFrame(pin.Frame(f"sole_{side}", jid, pin.SE3(np.eye(3), np.array([0, 0, -SOLE_OFFSET_M])),
                                  pin.FrameType.OP_FRAME))
         model.addFrame(pin.Frame(f"ft_{side}", jid, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
+    if link_parameters:
+        apply_link_parameters(model, link_parameters)
     return model
 
 
 def actuated_joint_names(model) -> list[str]:
     """Names of the actuated joints of a Pinocchio model (all but the universe and the free flyer)."""
     return list(model.names[2:])
+
+
+def apply_link_parameters(model, params: dict) -> None:
+    """Set link masses [kg] and COMs [m, link frame] of a Pinocchio model from ``{link_joint: {mass, com}}``
+    (``sit2stand identify --model full``'s ``links``, :func:`sit2stand.robot.identify.read_link_parameters`): the
+    one way identified parameters enter a model. Rotational inertias scale with the mass."""
+    for joint, p in params.items():
+        jid = model.getJointId(joint)
+        old = model.inertias[jid]
+        mass = float(p["mass"])
+        com = np.asarray(p.get("com", old.lever), float)
+        scale = mass / old.mass if old.mass > 0 else 1.0
+        model.inertias[jid] = pin.Inertia(mass, com, old.inertia * scale)
