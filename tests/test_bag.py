@@ -11,19 +11,20 @@ import yaml
 
 from sit2stand.io import messages as M
 from sit2stand.io.bag import BagError, BagReader, BagWriter, bag_info, recover_bag
+from sit2stand.io.topics import MARKERS_TOPIC, MOCAP_TYPE, PLATE_TYPE, plate_topic
 from sit2stand.io.typestore import typestore
 
 
 def write_demo_bag(path, n=50):
     """A bag with markers (one occluded) and force-plate samples with known values."""
     with BagWriter(path) as bag:
-        bag.add_topic(M.MARKERS_TOPIC, M.MOCAP_TYPE)
-        bag.add_topic(M.plate_topic("feet"), M.PLATE_TYPE)
+        bag.add_topic(MARKERS_TOPIC, MOCAP_TYPE)
+        bag.add_topic(plate_topic("feet"), PLATE_TYPE)
         for i in range(n):
             t = 1_000_000_000 + i * 10_000_000
             pos = np.array([[0.1 * i, 0.2, 1.0], [9.0, 9.0, 9.0]])
-            bag.write(M.MARKERS_TOPIC, t, M.mocap_frame(t, ["LASI", "RASI"], pos, np.array([True, i % 2 == 0])))
-            bag.write(M.plate_topic("feet"), t, M.force_plate_sample(
+            bag.write(MARKERS_TOPIC, t, M.mocap_frame(t, ["LASI", "RASI"], pos, np.array([True, i % 2 == 0])))
+            bag.write(plate_topic("feet"), t, M.force_plate_sample(
                 t, "feet", np.array([1.0, 2.0, 600.0 + i]), np.array([3.0, 4.0, 5.0]), np.array([0.1, 0.0, 0.0]),
                 True, 0.5))
     return path
@@ -33,13 +34,13 @@ def test_round_trip_values_through_rosbags(tmp_path):
     bag = write_demo_bag(tmp_path / "b")
     with BagReader(bag) as r:
         topics = r.topics()
-        assert topics[M.MARKERS_TOPIC].count == 50 and topics[M.plate_topic("feet")].count == 50
-        frames = r.read(M.MARKERS_TOPIC)
+        assert topics[MARKERS_TOPIC].count == 50 and topics[plate_topic("feet")].count == 50
+        frames = r.read(MARKERS_TOPIC)
         names, pos, valid = M.mocap_arrays(frames[3][1])
         assert names == ["LASI", "RASI"] and valid.tolist() == [True, False]
         assert pos[0] == pytest.approx([0.3, 0.2, 1.0])
         assert np.isnan(pos[1]).all(), "an occluded marker must be NaN, never a stale or zero position"
-        plate = M.plate_series("feet", r.read(M.plate_topic("feet")))
+        plate = M.plate_series("feet", r.read(plate_topic("feet")))
         assert plate.force_n[:, 2] == pytest.approx(600.0 + np.arange(50))
         assert r.duration_s == pytest.approx(0.49)
 
@@ -53,10 +54,10 @@ def test_bag_reads_back_with_mcap_ros2(tmp_path):
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         got = [(channel.topic, msg) for _s, channel, _m, msg in reader.iter_decoded_messages()]
     assert len(got) == 100
-    markers = [msg for topic, msg in got if topic == M.MARKERS_TOPIC]
+    markers = [msg for topic, msg in got if topic == MARKERS_TOPIC]
     assert list(markers[4].marker_names) == ["LASI", "RASI"]
     assert markers[4].positions[0].x == pytest.approx(0.4)
-    plate = [msg for topic, msg in got if topic == M.plate_topic("feet")]
+    plate = [msg for topic, msg in got if topic == plate_topic("feet")]
     assert plate[7].wrench.force.z == pytest.approx(607.0) and plate[7].plate_name == "feet"
 
 
@@ -66,11 +67,11 @@ def test_metadata_follows_rosbag2_version_9(tmp_path):
     assert meta["version"] == 9 and meta["storage_identifier"] == "mcap"
     assert meta["relative_file_paths"] == ["b.mcap"] and meta["message_count"] == 100
     topics = {t["topic_metadata"]["name"]: t for t in meta["topics_with_message_count"]}
-    assert topics[M.MARKERS_TOPIC]["message_count"] == 50
-    tm = topics[M.MARKERS_TOPIC]["topic_metadata"]
-    assert tm["type"] == M.MOCAP_TYPE and tm["serialization_format"] == "cdr"
+    assert topics[MARKERS_TOPIC]["message_count"] == 50
+    tm = topics[MARKERS_TOPIC]["topic_metadata"]
+    assert tm["type"] == MOCAP_TYPE and tm["serialization_format"] == "cdr"
     # the type hash must be the one rosidl generates for our interface (what ros2 bag checks)
-    assert tm["type_description_hash"] == typestore().hash_rihs01(M.MOCAP_TYPE)
+    assert tm["type_description_hash"] == typestore().hash_rihs01(MOCAP_TYPE)
     assert tm["offered_qos_profiles"][0]["reliability"] == "reliable"
     assert meta["duration"]["nanoseconds"] == 490_000_000
 
@@ -91,7 +92,7 @@ def test_rosidl_and_rosbags_agree_on_our_type_hashes():
 
 def test_bag_info_lists_counts_and_rates(tmp_path):
     text = bag_info(write_demo_bag(tmp_path / "b"))
-    line = next(x for x in text.splitlines() if x.startswith(M.MARKERS_TOPIC))
+    line = next(x for x in text.splitlines() if x.startswith(MARKERS_TOPIC))
     assert "50" in line.split() and "100.00" in line.split()
 
 
@@ -202,7 +203,7 @@ def test_plate_sample_read_from_cdr_bytes(frame_id, plate, little_endian):
     msg = M.force_plate_sample(t_ns, plate, np.array([1.5, -2.0, 700.25]), np.array([3.0, 4.0, -5.0]),
                                np.array([0.1, 0.2, 0.0]), True, 0.5)
     msg.header.frame_id = frame_id
-    data = typestore().serialize_cdr(msg, M.PLATE_TYPE, little_endian=little_endian)
+    data = typestore().serialize_cdr(msg, PLATE_TYPE, little_endian=little_endian)
     t_s, *wrench = M.plate_sample_from_cdr(data)
     assert t_s == M.stamp_ns(msg.header) * 1e-9
     assert wrench == [1.5, -2.0, 700.25, 3.0, 4.0, -5.0]

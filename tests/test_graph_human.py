@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from conftest import GRAPHS
+from sit2stand.io.topics import MARKERS_TOPIC, MOCAP_TYPE
 from sit2stand.human.synth import SynthConfig, synthesize, write_demonstration_bag
 from sit2stand.io import messages as M
 from sit2stand.io.bag import BagReader, BagWriter
@@ -45,10 +46,10 @@ def test_live_human_com_in_a_graph(tmp_path, ros_env):
 
 def test_too_few_markers_stop_the_node_with_a_clear_error(tmp_path, ros_env, run_node):
     with BagWriter(tmp_path / "few") as bag:
-        bag.add_topic(M.MARKERS_TOPIC, M.MOCAP_TYPE)
+        bag.add_topic(MARKERS_TOPIC, MOCAP_TYPE)
         for k in range(50):
             t = 10_000_000_000 + k * 10_000_000
-            bag.write(M.MARKERS_TOPIC, t, M.mocap_frame(t, ["LASI", "RASI", "LPSI", "FOO", "BAR"], np.ones((5, 3)),
+            bag.write(MARKERS_TOPIC, t, M.mocap_frame(t, ["LASI", "RASI", "LPSI", "FOO", "BAR"], np.ones((5, 3)),
                                                         np.ones(5, bool)))
     node = run_node("sit2stand.nodes.human_com")
     assert node.wait_for_output("waiting for", 20)

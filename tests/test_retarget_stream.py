@@ -8,7 +8,8 @@ import pytest
 
 from sit2stand.human.offline import read_trial
 from sit2stand.retarget.feasibility import plan_zmp, zmp_at_scale
-from sit2stand.retarget.stream import PlanPlayer, Retargeter, retarget_sequence, robot_setup
+from sit2stand.retarget.player import PlanPlayer
+from sit2stand.retarget.stream import Retargeter, retarget_sequence, robot_setup
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -83,7 +84,7 @@ def test_the_player_retimes_until_the_zmp_keeps_its_margin(retargeted, elderly):
     robot, rt, frames, cmds, player = retargeted
     on_feet = [c for c in cmds if c.on_feet]
     assert on_feet and min(c.margin_m for c in on_feet) >= 0.06 - 1e-3
-    assert player.s > 1.0, "the human's timing is too fast for the robot: the plan must be slowed"
+    assert player.time_scale > 1.0, "the human's timing is too fast for the robot: the plan must be slowed"
     scales = np.array([c.time_scale for c in cmds])
     assert np.all(np.diff(scales) >= -1e-12) and np.all(np.diff(scales) <= 1.5 * 0.01 + 1e-9)
     # the human's own timing would need the ZMP outside the margin somewhere on the feet

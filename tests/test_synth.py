@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from sit2stand.human.skeleton import ExtraMass
-from sit2stand.human.synth import (GROUND_TRUTH_COM, GROUND_TRUTH_PARAMETERS, SynthConfig, synthesize,
-                                   write_demonstration_bag)
+from sit2stand.human.synth import SynthConfig, synthesize, write_demonstration_bag
+from sit2stand.io.topics import GROUND_TRUTH_COM_TOPIC, GROUND_TRUTH_PARAMETERS_TOPIC, MARKERS_TOPIC, plate_topic
 from sit2stand.io.bag import BagReader
 from sit2stand.io.forceplate import point_in_polygon
-from sit2stand.io.messages import MARKERS_TOPIC, plate_topic
+
 
 G = 9.81
 
@@ -75,8 +75,8 @@ def test_bag_hides_the_extra_mass_except_on_ground_truth_topics(tmp_path):
         meta = bag.custom_data
         assert float(meta["body_mass_kg"]) == pytest.approx(83.0, abs=0.01)   # what a scale would say
         assert not any("extra" in v or "trunk" in v for v in meta.values())
-        assert {MARKERS_TOPIC, plate_topic("chair"), plate_topic("feet"), GROUND_TRUTH_COM} <= set(bag.topics())
-        (_, params), = bag.read(GROUND_TRUTH_PARAMETERS)
+        assert {MARKERS_TOPIC, plate_topic("chair"), plate_topic("feet"), GROUND_TRUTH_COM_TOPIC} <= set(bag.topics())
+        (_, params), = bag.read(GROUND_TRUTH_PARAMETERS_TOPIC)
         assert "extra0.torso.mass" in list(params.names)
 
 

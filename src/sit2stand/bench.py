@@ -20,14 +20,31 @@ import re
 import subprocess
 import sys
 import tempfile
+import tempfile as _tmp
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from rosbags.rosbag2 import Reader
 
 from .data import graph_path, plant_path
+from .gap.hidden import KINDS, draw, run_case
+from .human.com import estimate_com
+from .human.com_stream import StreamingComEstimator
+from .human.offline import calibrate_from_bag, read_trial
+from .human.offline import run as human_com_offline
+from .human.skeleton import Subject
 from .io import messages as M
-from .io.bag import BagReader, BagWriter
+from .io.bag import BagReader, BagWriter, merge_bags
+from .io.topics import MARKERS_TOPIC, MOCAP_TYPE, PLATE_TYPE, plate_topic
+from .retarget.player import PlanPlayer
+from .retarget.report import analyse
+from .retarget.stream import Retargeter, robot_setup
+from .robot.identify import identify
+from .robot.model import PlantConfig
+from .robot.plant import Plant
+from .robot.postures import collect_postures
 
 
 def _rate(n: int, seconds: float) -> float:
@@ -44,14 +61,14 @@ def bench_write(path: Path, n: int) -> dict[str, float]:
               for i in range(n // 2)]
     t0 = time.perf_counter()
     with BagWriter(path) as bag:
-        bag.add_topic(M.plate_topic("feet"), M.PLATE_TYPE)
-        bag.add_topic(M.MARKERS_TOPIC, M.MOCAP_TYPE)
+        bag.add_topic(plate_topic("feet"), PLATE_TYPE)
+        bag.add_topic(MARKERS_TOPIC, MOCAP_TYPE)
         t1 = time.perf_counter()
         for i, msg in enumerate(plates):
-            bag.write(M.plate_topic("feet"), i * 500_000, msg)
+            bag.write(plate_topic("feet"), i * 500_000, msg)
         t2 = time.perf_counter()
         for i, msg in enumerate(frames):
-            bag.write(M.MARKERS_TOPIC, i * 10_000_000, msg)
+            bag.write(MARKERS_TOPIC, i * 10_000_000, msg)
         t3 = time.perf_counter()
     t4 = time.perf_counter()
     return {"write_plate_msg_per_s": _rate(len(plates), t2 - t1), "write_mocap40_msg_per_s": _rate(len(frames), t3 - t2),
@@ -59,7 +76,6 @@ def bench_write(path: Path, n: int) -> dict[str, float]:
 
 
 def bench_read(path: Path) -> dict[str, float]:
-    from rosbags.rosbag2 import Reader
 
     t0 = time.perf_counter()
     with Reader(path) as reader:
@@ -103,9 +119,6 @@ def _replayer_rate(bag: Path, env: dict[str, str], record_to: Path | None) -> fl
 def bench_human_com(bag: Path) -> dict[str, float]:
     """Per-frame cost of the streaming human COM estimator (the node's core) over a shipped demonstration, and
     the offline estimator's throughput. Calibration (one frame, once) and re-solves are included in the tails."""
-    from .human.com import StreamingComEstimator, estimate_com
-    from .human.offline import read_trial
-    from .human.skeleton import Subject
 
     trial = read_trial(bag)
     subject = Subject(trial.height_m, trial.mass_kg, trial.sex)
@@ -115,8 +128,8 @@ def bench_human_com(bag: Path) -> dict[str, float]:
     costs = []
     for k, t in enumerate(trial.marker_t_s):
         for i, p in enumerate(plates):
-            j = np.searchsorted(p["t_s"], t, side="right")
-            est.add_plate_samples(p["name"], p["t_s"][idx[i]:j], p["force_n"][idx[i]:j], p["moment_nm"][idx[i]:j])
+            j = np.searchsorted(p.t_s, t, side="right")
+            est.add_plate_samples(p.name, p.t_s[idx[i]:j], p.force_n[idx[i]:j], p.moment_origin_nm[idx[i]:j])
             idx[i] = j
         t0 = time.perf_counter()
         est.update(t, trial.positions[k], trial.valid[k])
@@ -134,7 +147,6 @@ def bench_human_com(bag: Path) -> dict[str, float]:
 
 def bench_human_com_graph(bag: Path, env: dict[str, str]) -> dict[str, float]:
     """The human_com node's own per-frame cost (p50/p99) in a real-time graph: replayer -> node -> recorder."""
-    import tempfile as _tmp
 
     with BagReader(bag) as b:
         meta = b.custom_data
@@ -152,8 +164,6 @@ def bench_human_com_graph(bag: Path, env: dict[str, str]) -> dict[str, float]:
 def bench_retarget(root: Path) -> dict[str, float]:
     """Per-frame cost of the retargeting IK and of the plan player on the shipped demonstrations (no ROS), and the
     same IK without the COM and seat constraints (markers and feet only) for comparison."""
-    from .human.offline import read_trial
-    from .retarget.stream import PlanPlayer, Retargeter, robot_setup
 
     robot = robot_setup()
     ik_ms, player_ms, free_ms, rms_c, rms_free = [], [], [], [], []
@@ -161,8 +171,8 @@ def bench_retarget(root: Path) -> dict[str, float]:
         trial = read_trial(root / "bags" / name)
         t, com = trial.truth
         com_h = np.stack([np.interp(trial.marker_t_s, t, com[:, i]) for i in range(3)], axis=1)
-        chair = next(p for p in trial.plates if p["name"] == "chair")
-        fz = np.interp(trial.marker_t_s, chair["t_s"], chair["force_n"][:, 2])
+        chair = next(p for p in trial.plates if p.name == "chair")
+        fz = np.interp(trial.marker_t_s, chair.t_s, chair.force_n[:, 2])
         rt = Retargeter(robot)
         rt.calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0])
         player = PlanPlayer(robot.model, 0.01, robot.support_xy)
@@ -199,12 +209,7 @@ def bench_retarget_graphs(root: Path, env: dict[str, str]) -> dict[str, float]:
       the first 50 frames), estimator, retargeter and the robot's loop at real-time priority.
 
     Each run's COM tracking too: the measured robot COM against the planned one (RMS, with the COM feedback)."""
-    import tempfile as _tmp
 
-    from .human.offline import calibrate_from_bag
-    from .human.offline import run as human_com_offline
-    from .io.bag import merge_bags
-    from .retarget.report import analyse
 
     cad = plant_path("cad")
     pat = (r"latency p50 ([\d.]+) ms p99 ([\d.]+) ms .*COM->command p50 ([\d.]+) ms p99 ([\d.]+) ms; marker->command "
@@ -244,12 +249,7 @@ def bench_retarget_graphs(root: Path, env: dict[str, str]) -> dict[str, float]:
 
 def bench_robot(n_postures: int = 88) -> dict[str, float]:
     """Plant real-time factor at 1 kHz (seated, PD + gravity feed-forward), and identification time."""
-    import tempfile as _tmp
 
-    from .robot.identify import identify
-    from .robot.model import PlantConfig
-    from .robot.plant import Plant
-    from .robot.postures import collect_postures
 
     cfg = PlantConfig.load(plant_path("default"))
     plant = Plant(cfg)
@@ -286,9 +286,7 @@ def bench_gap(n_per_kind: int = 20, n_two: int = 10, workers: int = 2, progress:
     """Hit rates of the model-gap workflow on hidden-effect plants: ``n_per_kind`` seeds per effect kind, as many
     plants with nothing hidden, and ``n_two`` with two effects of different kinds. A hit names the hidden effect's
     kind and location with its magnitude within 20 %; "clean" also names nothing else."""
-    from concurrent.futures import ProcessPoolExecutor
 
-    from .gap.hidden import KINDS, draw, run_case
 
     cases = [(kind, [draw(kind, seed)], seed) for kind in KINDS for seed in range(n_per_kind)]
     cases += [("none", [], seed) for seed in range(n_per_kind)]

@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .io.topics import GROUND_TRUTH_COM_TOPIC, HUMAN_COM_TOPIC
 from .human.offline import calibrate_from_bag
 from .human.offline import run as human_com_offline
 from .data import graph_path, plant_path
@@ -65,8 +66,8 @@ def live(bag: Path, out: Path, rate: float) -> dict:
         raise RuntimeError(f"the human_com graph failed on {bag} (exit {proc.returncode}):\n{proc.stdout[-4000:]}")
     cost = re.search(r"cost p50 ([\d.]+) ms p99 ([\d.]+) ms", proc.stdout)
     with BagReader(out) as rec:
-        t, com = _series(rec, "/human/com")
-        tg, truth = _series(rec, "/ground_truth/com")
+        t, com = _series(rec, HUMAN_COM_TOPIC)
+        tg, truth = _series(rec, GROUND_TRUTH_COM_TOPIC)
     truth_i = np.array([np.interp(t, tg, truth[:, i]) for i in range(3)]).T
     err = np.linalg.norm(com - truth_i, axis=1)
     return {"wall_s": round(time.monotonic() - t0, 2), "frames": int(len(t)),
@@ -170,9 +171,9 @@ def com_paths_figure(runs: dict[str, tuple[Path, Path]], png: Path) -> None:
     fig, ax = plt.subplots(figsize=(7, 5.5))
     for (name, (run_dir, bag)), color in zip(runs.items(), ("tab:blue", "tab:red", "tab:green")):
         with BagReader(run_dir / "human_com") as b:
-            _, com = _series(b, "/human/com")
+            _, com = _series(b, HUMAN_COM_TOPIC)
         with BagReader(bag) as b:
-            _, truth = _series(b, "/ground_truth/com")
+            _, truth = _series(b, GROUND_TRUTH_COM_TOPIC)
         ax.plot(truth[:, 0], truth[:, 2], color=color, lw=1, ls="--", label=f"{name}: true COM")
         ax.plot(com[:, 0], com[:, 2], color=color, lw=2, label=f"{name}: estimated (skeleton + COP scaling)")
         ax.plot(com[0, 0], com[0, 2], "o", color=color)

@@ -11,6 +11,7 @@ import numpy as np
 from scipy.signal import savgol_filter
 import pinocchio as pin
 
+from .errors import InputError
 from .io.forceplate import center_of_pressure
 
 G = 9.81
@@ -56,7 +57,7 @@ def smooth_motion(model: pin.Model, qs: np.ndarray, dt: float, window: int = 31,
     n = len(qs)
     window = min(window, n - (1 - n % 2))
     if window <= order:
-        raise ValueError(f"{n} frames are too few to smooth (need more than {order + 1})")
+        raise InputError(f"{n} frames are too few to smooth (need more than {order + 1})")
     R0 = pin.Quaternion(qs[0][3:7]).normalized().matrix()
     rot = np.array([pin.log3(R0.T @ pin.Quaternion(q[3:7]).normalized().matrix()) for q in qs])
     x = np.hstack([qs[:, :3], rot, qs[:, 7:]])

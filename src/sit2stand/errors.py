@@ -11,3 +11,7 @@ from __future__ import annotations
 
 class Sit2StandError(Exception):
     """Base class of every sit2stand domain error."""
+
+
+class InputError(Sit2StandError, ValueError):
+    """A value, option or file content that cannot be used; the message names it and what would do."""

@@ -58,12 +58,13 @@ import yaml
 from .data import DataFileNotFound, graph_path
 from .data import folder as data_folder
 from .data import names as data_names
+from .errors import Sit2StandError
 
 OUR_NODES = {"replayer", "recorder", "human_com", "driver", "identification", "retargeter"}
 SUBST = re.compile(r"\$\((var|env|dirname)(?:\s+([^)\s]+))?(?:\s+([^)]*))?\)")
 
 
-class LaunchError(ValueError):
+class LaunchError(Sit2StandError, ValueError):
     """A graph file that cannot be launched; the message names the file and the field."""
 
 

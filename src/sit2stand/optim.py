@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import proxsuite   # at import (~0.1 s), not inside a live node's first solve
+from .errors import InputError
 
 
 @dataclass
@@ -38,7 +39,7 @@ def constrained_lsq(A: np.ndarray, b: np.ndarray, *, weights: np.ndarray | None 
     b = np.asarray(b, float).ravel()
     m, n = A.shape
     if b.shape != (m,):
-        raise ValueError(f"b has shape {b.shape}, expected ({m},)")
+        raise InputError(f"b has shape {b.shape}, expected ({m},)")
     w = np.ones(m) if weights is None else np.asarray(weights, float)
     Aw, bw = A * w[:, None], b * w
     H = Aw.T @ Aw
@@ -66,7 +67,7 @@ def constrained_lsq(A: np.ndarray, b: np.ndarray, *, weights: np.ndarray | None 
     qp.solve()
     status = str(qp.results.info.status).split(".")[-1]
     if "SOLVED" not in status or "INACCURATE" in status:
-        raise ValueError(f"constrained least squares: QP solver status {status}")
+        raise InputError(f"constrained least squares: QP solver status {status}")
     x = qp.results.x / scale
     resid = Aw @ x - bw
     active = 0

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io.topics import ROBOT_JOINT_COMMAND_TOPIC
 from ..io import messages as M
 from ..io.bag import BagWriter
 from ..robot.model import SIDES, PlantConfig
@@ -57,7 +58,7 @@ def excite(cfg: PlantConfig, out: str | Path, seed: int = 0, n_moves: int = 8, m
                                      "joint_names": ",".join(plant.joint_names)}) as bag:
         for topic, msgtype in M.ROBOT_STATE_TOPICS.items():
             bag.add_topic(topic, msgtype)
-        bag.add_topic("/robot/joint_command", "trajectory_msgs/msg/JointTrajectory")
+        bag.add_topic(ROBOT_JOINT_COMMAND_TOPIC, "trajectory_msgs/msg/JointTrajectory")
         for k in range(steps):
             # the joint controller interpolates the reference at every physics step, as a real one does; the
             # bag gets it at rate_hz (a reference held for a whole output period makes the forces jump at each
@@ -70,7 +71,7 @@ def excite(cfg: PlantConfig, out: str | Path, seed: int = 0, n_moves: int = 8, m
             plant.command(q, qd, qdd, refresh=False)
             if k % every == 0:
                 t_ns = t0_ns + int(round(t * 1e9))
-                bag.write("/robot/joint_command", t_ns, M.joint_trajectory_point(t_ns, plant.joint_names, q, qd, qdd))
+                bag.write(ROBOT_JOINT_COMMAND_TOPIC, t_ns, M.joint_trajectory_point(t_ns, plant.joint_names, q, qd, qdd))
                 sens = plant.sensors()
                 for topic, msg in M.robot_state(t_ns, plant.joint_names, sens.q, sens.qd, sens.tau,
                                                 sens.wrench_world, sens.cop_m, sens.base_pose):

@@ -9,12 +9,18 @@ on any link of the rigid group named), its magnitude within ``tolerance`` (20 %)
 
 from __future__ import annotations
 
+import shutil
+import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..robot.model import PlantConfig
 from .effects import FT_AXES, unmodeled_from
+from .excite import excite
+from .workflow import run
 
 KINDS = ("extra_mass", "viscous_friction", "coulomb_friction", "torque_bias", "torque_gain", "joint_offset",
          "ft_bias", "actuator_delay")
@@ -75,7 +81,7 @@ def draw(kind: str, seed: int) -> Hidden:
         return Hidden(kind, f"ft_{side}/{axis}", float(sign * size))
     if kind == "actuator_delay":
         return Hidden(kind, "all joints", float(rng.uniform(0.005, 0.025)))
-    raise ValueError(f"unknown effect kind {kind!r} (known: {', '.join(KINDS)})")
+    raise InputError(f"unknown effect kind {kind!r} (known: {', '.join(KINDS)})")
 
 
 def plant_with(effects: list[Hidden], seed: int = 0) -> PlantConfig:
@@ -131,12 +137,7 @@ def score(hidden: list[Hidden], named: list[dict]) -> Score:
 
 def run_case(hidden: list[Hidden], seed: int, workdir: str, n_moves: int = 8) -> dict:
     """Build the plant, record its excitation bag, run the workflow on the bag alone and score it."""
-    import shutil
-    import time
-    from pathlib import Path
 
-    from .excite import excite
-    from .workflow import run
 
     bag = Path(workdir) / f"case_{seed}_{'_'.join(h.kind for h in hidden) or 'none'}"
     shutil.rmtree(bag, ignore_errors=True)

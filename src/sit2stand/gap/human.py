@@ -21,6 +21,10 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from ..human.com import estimate_com
+from ..human.offline import read_trial
+from ..human.skeleton import SEGMENTS, Subject, build_human
+from ..io.bag import BagError
 from .residuals import base_to_world
 from .select import Candidate, Selection, select
 from .workflow import SIGNIFICANT_Z, _mass_within_reach, effect_summary, fast_part_floor
@@ -40,10 +44,6 @@ class HumanGap:
 
 def human_gap(bag: str | Path, progress=None) -> HumanGap:
     """Run the workflow on a human demonstration bag (markers + force plates + the subject's stature and mass)."""
-    from ..human.com import estimate_com
-    from ..human.offline import read_trial
-    from ..human.skeleton import SEGMENTS, Subject, build_human
-    from ..io.bag import BagError
 
     trial = read_trial(bag)
     if trial.height_m is None or trial.mass_kg is None:

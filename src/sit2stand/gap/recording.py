@@ -19,9 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io.topics import (ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC,
+                         ROBOT_JOINT_COMMAND_TOPIC, ROBOT_JOINT_STATES_TOPIC, ft_topic)
 from ..dynamics import savgol_series, smooth_motion
 from ..io.bag import BagError, BagReader
-from ..io.messages import stamp_ns
+from ..io.messages import (stamp_ns)
 from ..robot.model import SIDES
 
 STATIC_PERIOD_S = 0.2     # samples further apart than this are held postures, not a run
@@ -115,7 +117,7 @@ def read_recording(path: str | Path, model, rate_hz: float = 100.0, window_s: fl
     """Read a robot bag (see the module docstring) at most ``rate_hz``; ``model`` is the Pinocchio robot model used to
     differentiate the base motion. Raises :class:`RecordingError` naming the bag and topic on missing or bad data."""
     path = Path(path)
-    need = ["/robot/joint_states", "/robot/ft/left", "/robot/ft/right", "/robot/base_pose"]
+    need = [ROBOT_JOINT_STATES_TOPIC, ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC, ROBOT_BASE_POSE_TOPIC]
     try:
         reader = BagReader(path)
     except BagError as err:
@@ -125,11 +127,11 @@ def read_recording(path: str | Path, model, rate_hz: float = 100.0, window_s: fl
         missing = [t for t in need if t not in topics]
         if missing:
             raise RecordingError(f"{path}: not a robot recording: no {', '.join(missing)}")
-        js = _by_stamp(bag.read("/robot/joint_states"))
-        ft = {s: _by_stamp(bag.read(f"/robot/ft/{s}")) for s in SIDES}
-        base = _by_stamp(bag.read("/robot/base_pose"))
-        cop = _by_stamp(bag.read("/robot/cop")) if "/robot/cop" in topics else {}
-        cmd_msgs = bag.read("/robot/joint_command") if "/robot/joint_command" in topics else []
+        js = _by_stamp(bag.read(ROBOT_JOINT_STATES_TOPIC))
+        ft = {s: _by_stamp(bag.read(ft_topic(s))) for s in SIDES}
+        base = _by_stamp(bag.read(ROBOT_BASE_POSE_TOPIC))
+        cop = _by_stamp(bag.read(ROBOT_COP_TOPIC)) if ROBOT_COP_TOPIC in topics else {}
+        cmd_msgs = bag.read(ROBOT_JOINT_COMMAND_TOPIC) if ROBOT_JOINT_COMMAND_TOPIC in topics else []
     stamps, ft, base, cop = _join(js, ft, base, cop)
     if len(stamps) < 5:
         raise RecordingError(f"{path}: only {len(stamps)} samples have joint states, both feet's wrenches and a base "
@@ -155,7 +157,7 @@ def read_recording(path: str | Path, model, rate_hz: float = 100.0, window_s: fl
                   for m in (base[s] for s in stamps)])
     cp = np.array([[cop[s].point.x, cop[s].point.y, cop[s].point.z] if s in cop else [np.nan] * 3 for s in stamps])
     for label, arr in (("/robot/joint_states position", q), ("/robot/joint_states effort", tau),
-                       ("/robot/base_pose", b), *((f"/robot/ft/{s}", w) for s, w in wrench.items())):
+                       (ROBOT_BASE_POSE_TOPIC, b), *((ft_topic(s), w) for s, w in wrench.items())):
         bad = ~np.all(np.isfinite(arr), axis=1)
         if bad.all():
             raise RecordingError(f"{path}: {label}: no finite sample")

@@ -18,8 +18,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
 
+from ..robot.model import PlantConfig
+from .resimulate import compare, plant_from_effects, simulate
 from .workflow import GapResult, describe, load_nominal, run, write_augmented, write_json
 
 PHASE_COLOURS = {"seated": "#dde8f5", "seat-off": "#f5dcc8", "rising": "#f7f0c8", "standing": "#ddf2dd",
@@ -27,10 +31,8 @@ PHASE_COLOURS = {"seated": "#dde8f5", "seat-off": "#f5dcc8", "rising": "#f7f0c8"
 
 
 def _plt():
-    import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     return plt
 
@@ -220,10 +222,8 @@ def markdown(result: GapResult) -> str:
 
 def replay_all(result: GapResult, progress=None) -> list[dict]:
     """Re-simulate each run that carries its commands, in the nominal model (CAD) and with the named effects added
-    (see :mod:`sit2stand.gap.replay`); identified nominal models are not re-simulated (their per-link masses are not a
+    (see :mod:`sit2stand.gap.resimulate`); identified nominal models are not re-simulated (their per-link masses are not a
     plant file)."""
-    from .replay import compare, plant_from_effects, simulate
-    from ..robot.model import PlantConfig
 
     out = []
     if result.model_source != "cad":

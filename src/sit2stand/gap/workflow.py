@@ -35,7 +35,6 @@ import yaml
 from ..dynamics import savgol_series
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import PlantConfig, controller_model
-from ..robot.plant import apply_parameters
 from .control import control_law
 from .recording import Recording, RecordingError, read_recording
 from .effects import FT_AXES, ft_location, unmodeled_dict, unmodeled_from
@@ -63,11 +62,10 @@ class GapError(Sit2StandError, ValueError):
 def load_nominal(path: str | Path | None) -> tuple[pin.Model, str, list[dict]]:
     """The nominal model: CAD (None or "cad"), identified parameters (``sit2stand identify`` YAML) or an augmented
     model written by this workflow (its ``links``, and its joint and sensor ``effects``, returned third)."""
-    model = controller_model(PlantConfig())
     if path is None or str(path) == "cad":
-        return model, "cad", []
+        return controller_model(PlantConfig()), "cad", []
     try:
-        apply_parameters(model, read_link_parameters(path))
+        model = controller_model(PlantConfig(), read_link_parameters(path))
         doc = yaml.safe_load(Path(path).read_text())
     except (IdentificationError, OSError, KeyError, ValueError, yaml.YAMLError) as err:
         raise GapError(f"{path}: not a usable model file: {err}") from None

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from ..errors import InputError
 
 STATURE_MM = {"male": 1741.0, "female": 1735.0}
 
@@ -69,11 +70,11 @@ class SegmentInertia:
 def check_subject(height_m: float, mass_kg: float, sex: str) -> None:
     """Raise ValueError for a subject outside what these tables describe (with the value named)."""
     if sex not in DE_LEVA:
-        raise ValueError(f"sex must be 'male' or 'female', not {sex!r}")
+        raise InputError(f"sex must be 'male' or 'female', not {sex!r}")
     if not 0.8 <= height_m <= 2.3:
-        raise ValueError(f"height {height_m:g} m is outside 0.8..2.3 m")
+        raise InputError(f"height {height_m:g} m is outside 0.8..2.3 m")
     if not 10.0 <= mass_kg <= 250.0:
-        raise ValueError(f"body mass {mass_kg:g} kg is outside 10..250 kg")
+        raise InputError(f"body mass {mass_kg:g} kg is outside 10..250 kg")
 
 
 def vertical_length_factor(sex: str) -> float:

@@ -11,22 +11,34 @@ horizontal distance to the measured COP.
 from __future__ import annotations
 
 import json
+import shutil
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
 
+from ..errors import InputError
 from ..io import messages as M
 from ..io.bag import BagError, BagReader, BagWriter
+from ..io.forceplate import PlateSeries
+from ..io.topics import (
+    COM_TYPE,
+    FORCE_PLATE_PREFIX,
+    GROUND_TRUTH_COM_TOPIC,
+    HUMAN_COM_TOPIC,
+    HUMAN_JOINTS_TOPIC,
+    HUMAN_MODEL_COP_TOPIC,
+    HUMAN_SCALING_TOPIC,
+    MARKERS_TOPIC,
+    REFERENCE_COM_TOPIC,
+)
+from ..io.typestore import typestore
+from .calibration import calibrate_stream, static_frames
 from .com import ComResult, estimate_com
-from .skeleton import Subject
-from .synth import GROUND_TRUTH_COM
-
-HUMAN_COM_TOPIC = "/human/com"
-HUMAN_MODEL_COP_TOPIC = "/human/model_cop"
-HUMAN_JOINTS_TOPIC = "/human/joint_states"
-HUMAN_SCALING_TOPIC = "/human/scaling"
+from .skeleton import Subject, build_human
 
 
 @dataclass
@@ -49,25 +61,25 @@ def read_trial(bag_path: str | Path) -> Trial:
     """Load markers, plates and metadata of a bag (names the bag and topic on any problem)."""
     with BagReader(bag_path) as bag:
         topics = bag.topics()
-        if M.MARKERS_TOPIC not in topics:
-            raise BagError(f"{bag_path}: no {M.MARKERS_TOPIC} topic (it has {', '.join(sorted(topics))})")
-        frames = bag.read(M.MARKERS_TOPIC)
+        if MARKERS_TOPIC not in topics:
+            raise BagError(f"{bag_path}: no {MARKERS_TOPIC} topic (it has {', '.join(sorted(topics))})")
+        frames = bag.read(MARKERS_TOPIC)
         names = list(frames[0][1].marker_names)
         t = np.array([ts for ts, _ in frames]) * 1e-9
         pos = np.full((len(frames), len(names), 3), np.nan)
         valid = np.zeros((len(frames), len(names)), bool)
         for k, (_, msg) in enumerate(frames):
             pos[k], valid[k] = M.reorder_markers(*M.mocap_arrays(msg), names)
-        plates = [M.plate_series(topic[len(M.FORCE_PLATE_PREFIX):], bag.read(topic))
-                  for topic in sorted(topics) if topic.startswith(M.FORCE_PLATE_PREFIX)]
+        plates = [M.plate_series(topic[len(FORCE_PLATE_PREFIX):], bag.read(topic))
+                  for topic in sorted(topics) if topic.startswith(FORCE_PLATE_PREFIX)]
         custom = bag.custom_data
         truth = reference = None
-        if GROUND_TRUTH_COM in topics:
-            msgs = bag.read(GROUND_TRUTH_COM)
+        if GROUND_TRUTH_COM_TOPIC in topics:
+            msgs = bag.read(GROUND_TRUTH_COM_TOPIC)
             truth = (np.array([ts for ts, _ in msgs]) * 1e-9,
                      np.array([[m.position.x, m.position.y, m.position.z] for _, m in msgs]))
-        if M.REFERENCE_COM_TOPIC in topics:
-            msgs = bag.read(M.REFERENCE_COM_TOPIC)
+        if REFERENCE_COM_TOPIC in topics:
+            msgs = bag.read(REFERENCE_COM_TOPIC)
             reference = (np.array([ts for ts, _ in msgs]) * 1e-9,
                          np.array([[m.position.x, m.position.y, m.position.z] for _, m in msgs]),
                          np.array([m.valid for _, m in msgs]))
@@ -130,10 +142,8 @@ def evaluate(trial: Trial, result: ComResult) -> dict:
 
 def figure(trial: Trial, result: ComResult, png: Path, title: str) -> None:
     """COM (forward and vertical) and the COPs against time, plus the sagittal COM path."""
-    import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     t = result.t_s - result.t_s[0]
     fig, axes = plt.subplots(2, 2, figsize=(12, 7.5))
@@ -176,15 +186,13 @@ def figure(trial: Trial, result: ComResult, png: Path, title: str) -> None:
 
 
 def write_result_bag(result: ComResult, out: Path, joint_names: list[str]) -> None:
-    from ..io.typestore import typestore
 
     store = typestore().types
     with BagWriter(out) as bag:
-        bag.add_topic(HUMAN_COM_TOPIC, M.COM_TYPE)
+        bag.add_topic(HUMAN_COM_TOPIC, COM_TYPE)
         bag.add_topic(HUMAN_MODEL_COP_TOPIC, "geometry_msgs/msg/PointStamped")
         bag.add_topic(HUMAN_JOINTS_TOPIC, "sensor_msgs/msg/JointState")
         bag.add_topic(HUMAN_SCALING_TOPIC, "sit2stand_msgs/msg/InertialParameters")
-        factors = result.scaling.factors()
         t0 = int(round(result.t_s[0] * 1e9))
         bag.write(HUMAN_SCALING_TOPIC, t0, store["sit2stand_msgs/msg/InertialParameters"](
             header=M.header(t0), model="human_scaling",
@@ -239,12 +247,9 @@ def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     figure(trial, result, out_dir / "human_com.png", f"Human COM: {Path(bag_path).name}")
-    from .skeleton import build_human
 
     res_bag = out_dir / "human_com"
     if res_bag.exists():
-        import shutil
-
         shutil.rmtree(res_bag)
     write_result_bag(result, res_bag, build_human(result.subject).joint_names())
     return summary
@@ -255,16 +260,15 @@ def calibrate_from_bag(bag_path: str | Path, out_yaml: str | Path, frames: int =
     """The streaming estimator's skeleton calibration from a bag's first ``frames`` usable (seated, still) marker
     frames, as from a static trial recorded before the motion; written to ``out_yaml`` for the human_com node's
     ``calibration_file``. Returns the :class:`sit2stand.human.com.StreamCalibration`."""
-    from .calibration import calibrate_stream, static_frames
 
     trial = read_trial(bag_path)
     height, mass = height_m or trial.height_m, mass_kg or trial.mass_kg
     if height is None or mass is None:
-        raise ValueError(f"{bag_path}: no subject height_m/body_mass_kg in its metadata; give them")
+        raise InputError(f"{bag_path}: no subject height_m/body_mass_kg in its metadata; give them")
     subject = Subject(height, mass, sex or trial.sex)
     pos, valid = static_frames(trial.positions, trial.valid, frames)
     if len(pos) < frames:
-        raise ValueError(f"{bag_path}: only {len(pos)} frames with enough markers, {frames} asked")
+        raise InputError(f"{bag_path}: only {len(pos)} frames with enough markers, {frames} asked")
     cal = calibrate_stream(subject, trial.marker_names, pos, valid)
     Path(out_yaml).parent.mkdir(parents=True, exist_ok=True)
     cal.save(out_yaml)

@@ -14,6 +14,7 @@ Timestamps are integer nanoseconds (ROS time). Bags follow rosbag2's metadata ve
 from __future__ import annotations
 
 import contextlib
+import heapq
 import re
 import shutil
 import struct
@@ -37,6 +38,7 @@ from rosbags.interfaces import (
     QosTime,
 )
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.metadata import parse_qos
 from rosbags.rosbag2.storage_mcap import McapWriter
@@ -187,8 +189,6 @@ class BagWriter:
         self.store = typestore()
         self._writer = _RosbagsWriter(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
         if compress:
-            from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
-
             self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         for key, value in (custom_data or {}).items():
             self._writer.set_custom_data(key, str(value))
@@ -431,7 +431,6 @@ def merge_bags(out: str | Path, inputs: list[str | Path]) -> dict[str, int]:
     """Write the messages of several bags into one, in time order (e.g. a demonstration and the human COM computed
     from it offline). A topic present in more than one input is taken from the first that has it; the custom data
     (metadata) are the first bag's. Returns the message count per topic."""
-    import heapq
 
     readers = [BagReader(p) for p in inputs]
     try:

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from ..errors import InputError
 
 DEFAULT_COP_THRESHOLD_N = 20.0
 """Normal force below which a plate counts as unloaded and its COP as undefined (Vicon Nexus' default)."""
@@ -76,12 +77,12 @@ def plate_surface(corners_m: np.ndarray, up: np.ndarray = np.array([0.0, 0.0, 1.
     """Centre [m] and unit normal (pointing along ``up``) of a plate's top surface from its 4 corners (4, 3)."""
     corners = np.asarray(corners_m, float)
     if corners.shape != (4, 3):
-        raise ValueError(f"plate corners must have shape (4, 3), got {corners.shape}")
+        raise InputError(f"plate corners must have shape (4, 3), got {corners.shape}")
     centre = corners.mean(axis=0)
     normal = np.cross(corners[2] - corners[0], corners[3] - corners[1])
     norm = np.linalg.norm(normal)
     if norm < 1e-12:
-        raise ValueError(f"plate corners are degenerate (collinear or repeated): {corners.tolist()}")
+        raise InputError(f"plate corners are degenerate (collinear or repeated): {corners.tolist()}")
     normal /= norm
     if normal @ np.asarray(up, float) < 0:
         normal = -normal

@@ -1,7 +1,6 @@
 """Build our bag messages (rosbags objects) from arrays, and read arrays back out of them.
 
-Topic names and types used across sit2stand are defined here so that the importer, the synthesiser, the nodes and
-the analysis agree on them.
+Topic names, types and frame ids are in :mod:`sit2stand.io.topics`.
 """
 
 from __future__ import annotations
@@ -12,22 +11,11 @@ from typing import Any
 
 import numpy as np
 
+from .topics import (COM_TYPE, LAB_FRAME, MOCAP_TYPE, PLATE_TYPE, ROBOT_BASE_POSE_TOPIC,
+                     ROBOT_COP_TOPIC, ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC, ROBOT_JOINT_STATES_TOPIC, ft_topic)
 from .forceplate import PlateSeries
 from .typestore import typestore
 
-MARKERS_TOPIC = "/mocap/markers"
-MODEL_POINTS_TOPIC = "/mocap/model_points"
-REFERENCE_COM_TOPIC = "/mocap/reference_com"
-FORCE_PLATE_PREFIX = "/force_plate/"
-MOCAP_TYPE = "sit2stand_msgs/msg/MocapFrame"
-PLATE_TYPE = "sit2stand_msgs/msg/ForcePlateSample"
-COM_TYPE = "sit2stand_msgs/msg/CenterOfMass"
-LAB_FRAME = "lab"
-
-
-def plate_topic(name: str) -> str:
-    """Topic of the force plate called ``name`` (e.g. ``/force_plate/feet``)."""
-    return FORCE_PLATE_PREFIX + name
 
 
 def stamp(t_ns: int) -> Any:
@@ -117,10 +105,11 @@ def plate_sample_from_cdr(data: bytes | memoryview) -> tuple[float, float, float
     return ((sec * 1_000_000_000 + nsec) * 1e-9,) + struct.unpack_from(end + "6d", data, o)   # as stamp_ns() * 1e-9
 
 
-def plate_messages(plate: PlateSeries) -> Iterator[tuple[int, Any]]:
-    """(stamp [ns], ForcePlateSample) of each sample of ``plate``, for its topic :func:`plate_topic`."""
+def plate_messages(plate: PlateSeries, offset_s: float = 0.0) -> Iterator[tuple[int, Any]]:
+    """(stamp [ns], ForcePlateSample) of each sample of ``plate``, stamped ``offset_s`` after its own times, for
+    its topic :func:`~sit2stand.io.topics.plate_topic`."""
     for k, t in enumerate(plate.t_s):
-        t_ns = int(round(float(t) * 1e9))
+        t_ns = int(round((offset_s + float(t)) * 1e9))
         yield t_ns, force_plate_sample(t_ns, plate.name, plate.force_n[k], plate.moment_origin_nm[k],
                                        plate.cop_m[k], bool(plate.cop_valid[k]), float(plate.free_moment_nm[k]))
 
@@ -150,11 +139,11 @@ def center_of_mass(t_ns: int, position_m: np.ndarray, velocity_mps: np.ndarray, 
 
 
 ROBOT_STATE_TOPICS = {
-    "/robot/joint_states": "sensor_msgs/msg/JointState",
-    "/robot/ft/left": "geometry_msgs/msg/WrenchStamped",
-    "/robot/ft/right": "geometry_msgs/msg/WrenchStamped",
-    "/robot/cop": "geometry_msgs/msg/PointStamped",
-    "/robot/base_pose": "geometry_msgs/msg/PoseStamped",
+    ROBOT_JOINT_STATES_TOPIC: "sensor_msgs/msg/JointState",
+    ROBOT_FT_LEFT_TOPIC: "geometry_msgs/msg/WrenchStamped",
+    ROBOT_FT_RIGHT_TOPIC: "geometry_msgs/msg/WrenchStamped",
+    ROBOT_COP_TOPIC: "geometry_msgs/msg/PointStamped",
+    ROBOT_BASE_POSE_TOPIC: "geometry_msgs/msg/PoseStamped",
 }
 """What the robot driver publishes per state sample (and what robot bags written offline carry)."""
 
@@ -167,18 +156,18 @@ def robot_state(t_ns: int, joint_names: list[str], q: np.ndarray, qd: np.ndarray
     ``@x,y,z`` of the sole point appended when ``sole_m`` is given), COP (NaN when unloaded) and the base pose
     (``base_pose`` in MuJoCo order x y z qw qx qy qz)."""
     s = typestore().types
-    out: list[tuple[str, Any]] = [("/robot/joint_states", s["sensor_msgs/msg/JointState"](
+    out: list[tuple[str, Any]] = [(ROBOT_JOINT_STATES_TOPIC, s["sensor_msgs/msg/JointState"](
         header=header(t_ns, "base_link"), name=list(joint_names), position=np.asarray(q, float),
         velocity=np.zeros(0) if qd is None else np.asarray(qd, float), effort=np.asarray(tau, float)))]
     for side, w in wrench_world.items():
         frame = f"sole_{side}" if sole_m is None else \
             f"sole_{side}@{sole_m[side][0]:.6f},{sole_m[side][1]:.6f},{sole_m[side][2]:.6f}"
-        out.append((f"/robot/ft/{side}", s["geometry_msgs/msg/WrenchStamped"](
+        out.append((ft_topic(side), s["geometry_msgs/msg/WrenchStamped"](
             header=header(t_ns, frame), wrench=s["geometry_msgs/msg/Wrench"](force=_vector(w[:3]),
                                                                              torque=_vector(w[3:])))))
-    out.append(("/robot/cop", s["geometry_msgs/msg/PointStamped"](header=header(t_ns, "world"), point=point(*cop_m))))
+    out.append((ROBOT_COP_TOPIC, s["geometry_msgs/msg/PointStamped"](header=header(t_ns, "world"), point=point(*cop_m))))
     b = base_pose
-    out.append(("/robot/base_pose", s["geometry_msgs/msg/PoseStamped"](
+    out.append((ROBOT_BASE_POSE_TOPIC, s["geometry_msgs/msg/PoseStamped"](
         header=header(t_ns, "world"), pose=s["geometry_msgs/msg/Pose"](
             position=point(*b[:3]), orientation=s["geometry_msgs/msg/Quaternion"](
                 x=float(b[4]), y=float(b[5]), z=float(b[6]), w=float(b[3]))))))

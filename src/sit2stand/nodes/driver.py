@@ -36,6 +36,8 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from ..io.topics import (CLOCK_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_JOINT_COMMAND_TOPIC,
+                         ROBOT_JOINT_STATES_TOPIC, ROBOT_JOINT_STATE_COMMAND_TOPIC, ROBOT_STATUS_TOPIC, ft_topic)
 from ..data import plant_path
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
@@ -74,14 +76,14 @@ class Driver(Node):
         self.names = self.plant.joint_names
         self.index = {n: i for i, n in enumerate(self.names)}
         fast = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.js_pub = self.create_publisher(JointState, "/robot/joint_states", PUBLISH_DEPTH)
-        self.ft_pubs = {s: self.create_publisher(WrenchStamped, f"/robot/ft/{s}", PUBLISH_DEPTH) for s in SIDES}
-        self.cop_pub = self.create_publisher(PointStamped, "/robot/cop", PUBLISH_DEPTH)
-        self.base_pub = self.create_publisher(PoseStamped, "/robot/base_pose", PUBLISH_DEPTH)
-        self.status_pub = self.create_publisher(DiagnosticStatus, "/robot/status", 10)
-        self.clock_pub = self.create_publisher(Clock, "/clock", fast) if self.publish_clock else None
-        self.create_subscription(JointTrajectory, "/robot/joint_command", self._on_trajectory, 10)
-        self.create_subscription(JointState, "/robot/joint_state_command", self._on_command, 10)
+        self.js_pub = self.create_publisher(JointState, ROBOT_JOINT_STATES_TOPIC, PUBLISH_DEPTH)
+        self.ft_pubs = {s: self.create_publisher(WrenchStamped, ft_topic(s), PUBLISH_DEPTH) for s in SIDES}
+        self.cop_pub = self.create_publisher(PointStamped, ROBOT_COP_TOPIC, PUBLISH_DEPTH)
+        self.base_pub = self.create_publisher(PoseStamped, ROBOT_BASE_POSE_TOPIC, PUBLISH_DEPTH)
+        self.status_pub = self.create_publisher(DiagnosticStatus, ROBOT_STATUS_TOPIC, 10)
+        self.clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, fast) if self.publish_clock else None
+        self.create_subscription(JointTrajectory, ROBOT_JOINT_COMMAND_TOPIC, self._on_trajectory, 10)
+        self.create_subscription(JointState, ROBOT_JOINT_STATE_COMMAND_TOPIC, self._on_command, 10)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self._wall0 = time.monotonic()
         self._sim0 = self.plant.t_s

@@ -31,13 +31,22 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, InertialParameters, MocapFrame
+from std_msgs.msg import Header
 
 from ..human.calibration import StreamCalibration
 from ..human.com_stream import StreamingComEstimator
 from ..human.marker_ik import TooFewMarkers
 from ..human.skeleton import Subject
-from ..io.messages import (FORCE_PLATE_PREFIX, MARKERS_TOPIC, mocap_arrays, plate_sample_from_cdr, reorder_markers,
-                           stamp_ns)
+from ..io.messages import mocap_arrays, plate_sample_from_cdr, reorder_markers, stamp_ns
+from ..io.topics import (
+    FORCE_PLATE_PREFIX,
+    HUMAN_COM_TOPIC,
+    HUMAN_JOINTS_TOPIC,
+    HUMAN_MEASURED_COP_TOPIC,
+    HUMAN_MODEL_COP_TOPIC,
+    HUMAN_SCALING_TOPIC,
+    MARKERS_TOPIC,
+)
 from .runtime import PUBLISH_DEPTH, IdleDrain, NodeError, declare, node_main
 
 PENDING_PLATE_SAMPLES = 4000      # per plate, between two marker frames (4 s at 1 kHz; the estimator keeps ~2 s)
@@ -79,12 +88,12 @@ class HumanComNode(Node):
         history = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=PUBLISH_DEPTH,
                              reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.com_pub = self.create_publisher(CenterOfMass, "/human/com", history)
-        self.joint_pub = self.create_publisher(JointState, "/human/joint_states", history)
-        self.model_cop_pub = self.create_publisher(PointStamped, "/human/model_cop", history)
-        self.measured_cop_pub = self.create_publisher(PointStamped, "/human/measured_cop", history)
+        self.com_pub = self.create_publisher(CenterOfMass, HUMAN_COM_TOPIC, history)
+        self.joint_pub = self.create_publisher(JointState, HUMAN_JOINTS_TOPIC, history)
+        self.model_cop_pub = self.create_publisher(PointStamped, HUMAN_MODEL_COP_TOPIC, history)
+        self.measured_cop_pub = self.create_publisher(PointStamped, HUMAN_MEASURED_COP_TOPIC, history)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.scaling_pub = self.create_publisher(InertialParameters, "/human/scaling", latched)
+        self.scaling_pub = self.create_publisher(InertialParameters, HUMAN_SCALING_TOPIC, latched)
         self.stats_pub = self.create_publisher(DiagnosticStatus, "~/stats", 10)
         self.plate_subs: dict[str, object] = {}
         self._pending_plates: dict[str, list[tuple]] = {}   # samples received since the last marker frame
@@ -217,8 +226,6 @@ class HumanComNode(Node):
 
     def close(self) -> None:
         if self.estimator is not None and self.estimator.rescale() is not None:   # a last solve with all rows
-            from std_msgs.msg import Header
-
             header = Header(frame_id="lab")
             header.stamp = self.get_clock().now().to_msg()
             self._publish_scaling(header)

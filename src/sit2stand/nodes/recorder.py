@@ -24,6 +24,7 @@ from pathlib import Path
 
 from rclpy.node import Node
 
+from ..io.topics import CLOCK_TOPIC
 from ..io.bag import BagError, BagWriter
 from .runtime import IdleDrain, NodeError, declare, message_class, node_main, qos_matching_publishers, qos_to_bag
 
@@ -75,7 +76,7 @@ class Recorder(Node):
         self._discover()
 
     def _wanted(self, topic: str) -> bool:
-        if topic == "/clock" and not self.include_clock:
+        if topic == CLOCK_TOPIC and not self.include_clock:
             return False
         if self.exclude is not None and self.exclude.search(topic) and topic not in self.topics:
             return False

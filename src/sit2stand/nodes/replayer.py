@@ -37,8 +37,9 @@ from rcl_interfaces.msg import SetParametersResult
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool
 
+from ..io.topics import CLOCK_TOPIC
 from ..io.bag import BagError, BagReader
-from ..replay import PlaybackClock, check_rate
+from ..io.playback import PlaybackClock, check_rate
 from .runtime import NodeError, declare, message_class, node_main, qos_from_bag
 
 # Reliable writers heartbeat every 5 ms instead of Fast DDS's 3 s, so acknowledgements (and with them the unpaced
@@ -97,7 +98,7 @@ class Replayer(Node):
             raise NodeError(f"{self.bag_path}: nothing to play")
         self.total = sum(bag_topics[t].count for t in self.pubs)
         self.clock_pub = self.create_publisher(
-            Clock, "/clock", QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
+            Clock, CLOCK_TOPIC, QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
                                         durability=DurabilityPolicy.VOLATILE)) if self.publish_clock else None
         self.progress_pub = self.create_publisher(DiagnosticStatus, "~/progress", 10)
         self.create_service(SetBool, "~/pause", self._on_pause)

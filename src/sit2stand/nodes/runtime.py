@@ -15,10 +15,15 @@ import time
 from collections.abc import Callable
 
 import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
 from ..errors import Sit2StandError
 
 
@@ -51,8 +56,6 @@ def declare(node: Node, name: str, default, description: str = ""):
 
     ``default`` None means a required string; an empty list means a string array.
     """
-    from rcl_interfaces.msg import ParameterDescriptor
-    from rclpy.parameter import Parameter
 
     if isinstance(default, list) and not default:
         value = node.declare_parameter(name, Parameter.Type.STRING_ARRAY,
@@ -78,7 +81,6 @@ def declare(node: Node, name: str, default, description: str = ""):
 
 def qos_to_bag(profile: QoSProfile):
     """rosbags Qos (for bag metadata) of an rclpy QoSProfile."""
-    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 
     def t(d) -> QosTime:
         ns = d.nanoseconds
@@ -160,8 +162,6 @@ def _make_executor(kind: str):
     """SingleThreadedExecutor, or rclpy's EventsExecutor (about 3x the message rate in one process; never publish
     from another thread while it spins: that was seen to deadlock)."""
     if kind == "events":
-        from rclpy.experimental import EventsExecutor
-
         return EventsExecutor()
     return SingleThreadedExecutor()
 

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import yaml
+from ..errors import InputError
 
 PELVIS_MARKERS = ("LASI", "RASI", "LPSI", "RPSI")
 
@@ -131,7 +132,7 @@ def calibrate_markers(model: pin.Model, q_robot: np.ndarray, names: list[str], p
     pin.forwardKinematics(model, data, q_robot)
     pel = [i for i, n in enumerate(names) if n in PELVIS_MARKERS and valid[i]]
     if len(pel) < 3:
-        raise ValueError(f"calibration frame: {len(pel)} of {', '.join(PELVIS_MARKERS)} valid; need 3")
+        raise InputError(f"calibration frame: {len(pel)} of {', '.join(PELVIS_MARKERS)} valid; need 3")
     scale = robot_thigh_m / human_thigh_m
     human_pelvis = positions_m[pel].mean(axis=0)
     robot_pelvis = data.oMi[1].translation

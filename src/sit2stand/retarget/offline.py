@@ -13,14 +13,25 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
 import pinocchio as pin
 
+from ..human.com import estimate_com
 from ..human.offline import read_trial
-from ..io.bag import BagReader
+from ..human.skeleton import Subject
+from ..io import messages as M
+from ..io.bag import BagReader, BagWriter
 from ..io.messages import stamp_ns
+from ..io.topics import HUMAN_COM_TOPIC, ROBOT_JOINT_COMMAND_TOPIC, ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC
+from ..io.typestore import typestore
+from ..robot.identify import read_link_parameters
+from ..robot.model import PlantConfig
+from ..robot.plant import Plant
+from .player import DEFAULT_MAX_TIME_SCALE, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig
-from .stream import PlanPlayer, RetargetConfig, Retargeter, retarget_sequence, robot_setup
+from .stream import RetargetConfig, Retargeter, retarget_sequence, robot_model, robot_setup
 
 
 def human_com_series(bag: Path, human_com_bag: Path | None, trial) -> np.ndarray:
@@ -29,13 +40,11 @@ def human_com_series(bag: Path, human_com_bag: Path | None, trial) -> np.ndarray
         if source is None:
             continue
         with BagReader(source) as b:
-            if "/human/com" in b.topics():
-                msgs = b.read("/human/com")
+            if HUMAN_COM_TOPIC in b.topics():
+                msgs = b.read(HUMAN_COM_TOPIC)
                 t = np.array([stamp_ns(m.header) for _, m in msgs]) * 1e-9     # the markers' own time
                 c = np.array([[m.position.x, m.position.y, m.position.z] for _, m in msgs])
                 return np.stack([np.interp(trial.marker_t_s, t, c[:, i]) for i in range(3)], axis=1)
-    from ..human.com import estimate_com
-    from ..human.skeleton import Subject
 
     subject = Subject(trial.height_m or 1.75, trial.mass_kg or 75.0, trial.sex)
     return estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,
@@ -44,31 +53,29 @@ def human_com_series(bag: Path, human_com_bag: Path | None, trial) -> np.ndarray
 
 def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None = None,
         human_com_bag: Path | None = None, margin_m: float = 0.06, time_scale: float | None = None,
-        simulate: bool = False, config: RetargetConfig | None = None, com_feedback: bool = True,
-        stabiliser: StabiliserConfig | None = None) -> dict:
+        max_time_scale: float = DEFAULT_MAX_TIME_SCALE, simulate: bool = False, config: RetargetConfig | None = None,
+        com_feedback: bool = True, stabiliser: StabiliserConfig | None = None) -> dict:
     """Retarget ``bag`` into ``out`` (see the module docstring); returns the summary. ``com_feedback``: the
     simulated robot's commands are corrected by :class:`~sit2stand.retarget.stabiliser.ComStabiliser` (gains
-    ``stabiliser``, default :class:`~sit2stand.retarget.stabiliser.StabiliserConfig`), as the node does."""
+    ``stabiliser``, default :class:`~sit2stand.retarget.stabiliser.StabiliserConfig`), as the node does.
+    ``time_scale``: play the plan this many times slower than the human (None: adapt, up to ``max_time_scale``)."""
     out.mkdir(parents=True, exist_ok=True)
     trial = read_trial(bag)
     com_h = human_com_series(bag, human_com_bag, trial)
     chair = next((p for p in trial.plates if p.name == "chair"), None)
     sim = None
     q_start = None
+    links = read_link_parameters(params) if params else None     # read once: the plan's model and the robot's
     if simulate:
-        from ..robot.identify import read_link_parameters
-        from ..robot.model import PlantConfig
-        from ..robot.plant import Plant
-
-        links = read_link_parameters(params) if params else None
         sim = Plant(PlantConfig.load(plant), controller_params=links)
         sim.settle(2.0)     # at rest on the chair, as the driver starts; the calibration overlays this posture
         q_start = sim.pin_configuration(sim.data.qpos)
-    robot = robot_setup(plant, params, q_start=q_start)
+    robot = robot_setup(plant, params, q_start=q_start, prebuilt=robot_model(plant, params, links))
     rt = Retargeter(robot, config or RetargetConfig())
     dt = float(np.median(np.diff(trial.marker_t_s)))
     rt.calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0]).save(out / "marker_map.yaml")
-    player = PlanPlayer(robot.model, dt, robot.support_xy, margin_m=margin_m, fixed_scale=time_scale)
+    player = PlanPlayer(robot.model, dt, robot.support_xy, margin_m=margin_m, fixed_time_scale=time_scale,
+                         max_time_scale=max_time_scale)
     fz = None if chair is None else np.interp(trial.marker_t_s, chair.t_s, chair.force_n[:, 2])
     frames, cmds = retarget_sequence(rt, player, trial.marker_t_s, trial.positions, trial.valid, com_h, fz)
     ik_ms = np.array([f.ik.seconds for f in frames]) * 1e3
@@ -80,7 +87,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         "infeasible_frames": int((~feasible).sum()),
         "com_equality_max_error_mm_feasible": float(com_err[feasible].max() * 1e3) if feasible.any() else None,
         "ik_ms_p50": float(np.percentile(ik_ms, 50)), "ik_ms_p99": float(np.percentile(ik_ms, 99)),
-        "time_scale": float(player.s), "commands": len(cmds), "plan_duration_s": len(cmds) * dt,
+        "time_scale": float(player.time_scale), "commands": len(cmds), "plan_duration_s": len(cmds) * dt,
         "min_zmp_margin_on_feet_m": float(min(c.margin_m for c in on_feet)) if on_feet else None,
         "human_seat_off_frame": next((i for i, f in enumerate(frames) if f.human_seat_off), None),
         "robot_seat_off_frame": next((i for i, f in enumerate(frames) if not f.seated), None),
@@ -96,26 +103,23 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
 
 
 def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float) -> None:
-    from ..io import messages as M
-    from ..io.bag import BagWriter
-    from ..io.typestore import typestore
 
     ts = typestore().types
     with BagWriter(path) as w:
-        w.add_topic("/robot/joint_command", "trajectory_msgs/msg/JointTrajectory")
-        w.add_topic("/robot/planned_com", "geometry_msgs/msg/PointStamped")
-        w.add_topic("/robot/planned_zmp", "geometry_msgs/msg/PointStamped")
+        w.add_topic(ROBOT_JOINT_COMMAND_TOPIC, "trajectory_msgs/msg/JointTrajectory")
+        w.add_topic(ROBOT_PLANNED_COM_TOPIC, "geometry_msgs/msg/PointStamped")
+        w.add_topic(ROBOT_PLANNED_ZMP_TOPIC, "geometry_msgs/msg/PointStamped")
         for k, c in enumerate(cmds):
             t_ns = int(round((t0_s + k * dt) * 1e9))
             point = ts["trajectory_msgs/msg/JointTrajectoryPoint"](
                 positions=c.q[7:].copy(), velocities=c.v[6:].copy(), accelerations=c.a[6:].copy(),
                 effort=np.zeros(0), time_from_start=ts["builtin_interfaces/msg/Duration"](sec=0, nanosec=0))
-            w.write("/robot/joint_command", t_ns,
+            w.write(ROBOT_JOINT_COMMAND_TOPIC, t_ns,
                     ts["trajectory_msgs/msg/JointTrajectory"](header=M.header(t_ns, "base_link"),
                                                             joint_names=list(joint_names), points=[point]))
-            w.write("/robot/planned_com", t_ns,
+            w.write(ROBOT_PLANNED_COM_TOPIC, t_ns,
                     ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, "world"), point=M.point(*c.com)))
-            w.write("/robot/planned_zmp", t_ns,
+            w.write(ROBOT_PLANNED_ZMP_TOPIC, t_ns,
                     ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, "world"), point=M.point(*c.zmp)))
 
 
@@ -158,10 +162,8 @@ def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0,
 
 
 def _figure(trial, com_h, frames, cmds, dt: float, png: Path, summary: dict) -> None:
-    import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     t = trial.marker_t_s - trial.marker_t_s[0]
     fig, ax = plt.subplots(2, 1, figsize=(9, 7), sharex=False)

@@ -17,18 +17,32 @@ and above ``stand_fraction`` of the highest it reached for the whole last ``hold
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import matplotlib
+import matplotlib.pyplot as plt
+import mujoco
 import numpy as np
 import pinocchio as pin
 
+from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_COM_FEEDBACK_TOPIC,
+                         ROBOT_COP_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_PLANNED_COM_TOPIC)
 from ..io.bag import BagReader
 from ..io.messages import stamp_ns
+from ..robot.identify import read_link_parameters
+from ..robot.model import PlantConfig, controller_model
+from ..robot.plant import Plant
 
 
 @dataclass
 class RunAnalysis:
+    """One stand-up run analysed: robot states and COMs, the plan, COP, the human's COM, seat-offs and the verdict."""
+
     name: str
     t: np.ndarray                   # robot state times [s] from the run's start
     q: np.ndarray                   # (N, nq) measured configurations (Pinocchio)
@@ -45,38 +59,87 @@ class RunAnalysis:
     summary: dict
 
 
+@dataclass
+class _RunMessages:
+    """The messages of a stand-up bag that the analysis reads, as (receive time [ns], message) pairs."""
+
+    joint_states: list
+    base_pose: list
+    planned_com: list
+    cop: list
+    human_com: list
+    chair: list
+    com_feedback_shift_m: list[float]     # horizontal size of each COM feedback correction
+
+
 def _stamps(msgs) -> np.ndarray:
     """Header stamps [s]: the robot side is stamped by the driver and the retargeter on one clock, the human side
     in the demonstration's own time (the recorder's receive times would mis-pair states that arrive in bursts)."""
     return np.array([stamp_ns(m.header) for _, m in msgs]) * 1e-9
 
 
+def _xyz(msgs, field: str) -> np.ndarray:
+    """(N, 3) [m] of the point or vector ``field`` of each message."""
+    return np.array([[getattr(m, field).x, getattr(m, field).y, getattr(m, field).z] for _, m in msgs])
+
+
 def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | None = None,
             hold_s: float = 2.0, stand_fraction: float = 0.9, every: int = 5) -> RunAnalysis:
     """Analyse the stand-up bag ``run`` (see the module docstring); ``every``: use every n-th robot state."""
-    from ..robot.identify import read_link_parameters
-    from ..robot.model import PlantConfig, controller_model
-    from ..robot.plant import apply_parameters
-
     cfg = PlantConfig.load(plant_yaml)
     cad = controller_model(cfg)
-    ident = pin.Model(cad)
-    if params_yaml:
-        apply_parameters(ident, read_link_parameters(params_yaml))
+    ident = controller_model(cfg, read_link_parameters(params_yaml) if params_yaml else None)
+    msgs = _read_run(run, every)
+    t_js = _stamps(msgs.joint_states)
+    q = _measured_configurations(msgs, t_js, cad)
+    dc, di = cad.createData(), ident.createData()
+    com_cad = np.array([pin.centerOfMass(cad, dc, qk) for qk in q])
+    com = np.array([pin.centerOfMass(ident, di, qk) for qk in q])
+    t0 = t_js[0]
+    plan_t = _stamps(msgs.planned_com) - t0
+    plan_com = _xyz(msgs.planned_com, "position")
+    human_t = _stamps(msgs.human_com) if msgs.human_com else np.zeros(0)
+    human_com = _xyz(msgs.human_com, "position").reshape(-1, 3)
+    human_seat_off = _human_seat_off(msgs.chair)
+    if len(human_t):
+        human_t = human_t - human_t[0]
+    t = t_js - t0
+    z = q[:, 2]
+    rise = np.flatnonzero(z > z[0] + 0.02)
+    seat_off = float(t[rise[0]]) if len(rise) else None
+    fallen, stood = _stood_up(cfg, t, z, hold_s, stand_fraction)
+    shift = msgs.com_feedback_shift_m
+    summary = {"stood_up": bool(stood), "fallen": fallen, "pelvis_start_m": float(z[0]), "pelvis_final_m": float(z[-1]),
+               "robot_seat_off_s": seat_off, "human_seat_off_s": human_seat_off,
+               "com_tracking_rms_m": _tracking_rms(t, com, plan_t, plan_com),
+               "planned_final_com_z_m": float(plan_com[-1, 2]) if len(plan_com) else None,
+               "duration_s": float(t[-1]),
+               "com_feedback_max_shift_m": float(max(shift)) if shift else None,
+               "cad_vs_identified_com_rms_m": float(np.sqrt(np.mean(np.sum((com - com_cad)[:, [0, 2]] ** 2, axis=1))))}
+    return RunAnalysis(name, t, q, com, com_cad, plan_t, plan_com, _stamps(msgs.cop) - t0, _xyz(msgs.cop, "point"),
+                       human_t, human_com, human_seat_off, seat_off, summary)
+
+
+def _read_run(run: Path, every: int) -> _RunMessages:
+    """Read the run's topics (every ``every``-th joint state); ValueError if it is not a stand-up run."""
     with BagReader(run) as bag:
         topics = bag.topics()
-        for needed in ("/robot/joint_states", "/robot/base_pose", "/robot/planned_com"):
+        for needed in (ROBOT_JOINT_STATES_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_PLANNED_COM_TOPIC):
             if needed not in topics:
                 raise ValueError(f"{run}: no {needed} topic: not a stand-up run")
-        js = bag.read("/robot/joint_states")[::every]
-        base = bag.read("/robot/base_pose")
-        plan = bag.read("/robot/planned_com")
-        cop = bag.read("/robot/cop")
-        human = bag.read("/human/com") if "/human/com" in topics else []
-        chair = bag.read("/force_plate/chair") if "/force_plate/chair" in topics else []
-        shift = [np.hypot(m.vector.x, m.vector.y) for _, m in bag.read("/robot/com_feedback")] \
-            if "/robot/com_feedback" in topics else []
-    t_js, t_base = _stamps(js), _stamps(base)
+        return _RunMessages(
+            bag.read(ROBOT_JOINT_STATES_TOPIC)[::every], bag.read(ROBOT_BASE_POSE_TOPIC),
+            bag.read(ROBOT_PLANNED_COM_TOPIC), bag.read(ROBOT_COP_TOPIC),
+            bag.read(HUMAN_COM_TOPIC) if HUMAN_COM_TOPIC in topics else [],
+            bag.read(CHAIR_PLATE_TOPIC) if CHAIR_PLATE_TOPIC in topics else [],
+            [np.hypot(m.vector.x, m.vector.y) for _, m in bag.read(ROBOT_COM_FEEDBACK_TOPIC)]
+            if ROBOT_COM_FEEDBACK_TOPIC in topics else [])
+
+
+def _measured_configurations(msgs: _RunMessages, t_js: np.ndarray, cad: pin.Model) -> np.ndarray:
+    """(N, nq) configurations: each joint state with the base pose received at or just after it."""
+    js, base = msgs.joint_states, msgs.base_pose
+    t_base = _stamps(base)
     bp = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.x,
                     m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w] for _, m in base])
     names = list(js[0][1].name)
@@ -86,56 +149,43 @@ def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | N
         i = min(np.searchsorted(t_base, t_js[k]), len(t_base) - 1)
         q[k, :7] = bp[i]
         q[k, 7:] = np.asarray(m.position)[order]
-    dc, di = cad.createData(), ident.createData()
-    com_cad = np.array([pin.centerOfMass(cad, dc, qk) for qk in q])
-    com = np.array([pin.centerOfMass(ident, di, qk) for qk in q])
-    t0 = t_js[0]
-    plan_t = _stamps(plan) - t0
-    plan_com = np.array([[m.position.x, m.position.y, m.position.z] for _, m in plan])
-    cop_t = _stamps(cop) - t0
-    cop_xyz = np.array([[m.point.x, m.point.y, m.point.z] for _, m in cop])
-    human_t = _stamps(human) if human else np.zeros(0)
-    human_com = np.array([[m.position.x, m.position.y, m.position.z] for _, m in human]).reshape(-1, 3)
-    human_seat_off = None
-    if chair:
-        fz = np.array([m.wrench.force.z for _, m in chair])
-        tc = _stamps(chair)
-        loaded = np.flatnonzero(fz > 60.0)
-        if len(loaded):
-            off = np.flatnonzero((fz < 30.0) & (np.arange(len(fz)) > loaded[0]))
-            human_seat_off = float(tc[off[0]] - tc[0]) if len(off) else None
-    if len(human_t):
-        human_t = human_t - human_t[0]
-    t = t_js - t0
-    z = q[:, 2]
-    rise = np.flatnonzero(z > z[0] + 0.02)
-    seat_off = float(t[rise[0]]) if len(rise) else None
-    z_plan = float(plan_com[-1, 2]) if len(plan_com) else None
+    return q
+
+
+def _human_seat_off(chair: list) -> float | None:
+    """The human's seat-off [s from the chair plate's first sample]: the chair unloaded (< 30 N) after a load > 60 N."""
+    if not chair:
+        return None
+    fz = np.array([m.wrench.force.z for _, m in chair])
+    tc = _stamps(chair)
+    loaded = np.flatnonzero(fz > 60.0)
+    if not len(loaded):
+        return None
+    off = np.flatnonzero((fz < 30.0) & (np.arange(len(fz)) > loaded[0]))
+    return float(tc[off[0]] - tc[0]) if len(off) else None
+
+
+def _stood_up(cfg: PlantConfig, t: np.ndarray, z: np.ndarray, hold_s: float,
+              stand_fraction: float) -> tuple[bool, bool]:
+    """(fallen, stood up) from the pelvis height z [m] over time t [s] (see the module docstring)."""
     last = t > t[-1] - hold_s
     fallen = bool(np.any(z < cfg.fall_pelvis_height_m))
     stood = (not fallen) and bool(np.all(z[last] > stand_fraction * max(z.max(), 1e-9))) and z[-1] > z[0] + 0.2
-    track = np.nan
-    if len(plan_t) > 1:
-        inside = (plan_t >= t[0]) & (plan_t <= t[-1])
-        meas = np.stack([np.interp(plan_t[inside], t, com[:, i]) for i in range(3)], axis=1)
-        track = float(np.sqrt(np.mean(np.sum((meas[:, :2] - plan_com[inside, :2]) ** 2, axis=1))))
-    summary = {"stood_up": bool(stood), "fallen": fallen, "pelvis_start_m": float(z[0]), "pelvis_final_m": float(z[-1]),
-               "robot_seat_off_s": seat_off, "human_seat_off_s": human_seat_off,
-               "com_tracking_rms_m": track, "planned_final_com_z_m": z_plan,
-               "duration_s": float(t[-1]),
-               "com_feedback_max_shift_m": float(max(shift)) if shift else None,
-               "cad_vs_identified_com_rms_m": float(np.sqrt(np.mean(np.sum((com - com_cad)[:, [0, 2]] ** 2, axis=1))))}
-    return RunAnalysis(name, t, q, com, com_cad, plan_t, plan_com, cop_t, cop_xyz, human_t, human_com,
-                       human_seat_off, seat_off, summary)
+    return fallen, stood
+
+
+def _tracking_rms(t: np.ndarray, com: np.ndarray, plan_t: np.ndarray, plan_com: np.ndarray) -> float:
+    """RMS horizontal distance [m] of the measured from the planned COM, over the plan within the run; NaN: none."""
+    if len(plan_t) <= 1:
+        return np.nan
+    inside = (plan_t >= t[0]) & (plan_t <= t[-1])
+    meas = np.stack([np.interp(plan_t[inside], t, com[:, i]) for i in range(3)], axis=1)
+    return float(np.sqrt(np.mean(np.sum((meas[:, :2] - plan_com[inside, :2]) ** 2, axis=1))))
 
 
 def figure_6(a: RunAnalysis, png: Path) -> None:
     """Forward COM of the human, planned and measured robot COM and robot COP against time, seat-off marked."""
-    import matplotlib
-
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     fig, ax = plt.subplots(2, 1, figsize=(9, 7))
     if len(a.human_t):
         ax[0].plot(a.human_t, a.human_com[:, 0], label="human COM (estimated)")
@@ -166,11 +216,7 @@ def figure_6(a: RunAnalysis, png: Path) -> None:
 def figure_7(runs: list[RunAnalysis], png: Path) -> None:
     """Sagittal COM paths: natural against elderly-like, the robot's measured COM with identified and CAD
     parameters, and the human's."""
-    import matplotlib
-
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     fig, ax = plt.subplots(1, 2, figsize=(11, 5))
     for a, color in zip(runs, ("tab:blue", "tab:red", "tab:green")):
         ax[0].plot(a.com[:, 0], a.com[:, 2], color=color, lw=2, label=f"{a.name}: identified parameters")
@@ -193,11 +239,6 @@ def render_strip(a: RunAnalysis, plant_yaml: Path | None, png: Path, frames: int
     """A strip of offscreen-rendered frames of the run; returns None, or why nothing was rendered. MuJoCo picks its GL
     backend when it is imported, so each backend (``MUJOCO_GL`` if set, else egl then osmesa) is tried in a process
     of its own."""
-    import os
-    import subprocess
-    import sys
-    import tempfile
-
     with tempfile.TemporaryDirectory() as tmp:
         states = Path(tmp) / "states.npz"
         np.savez(states, q=a.q, t=a.t, name=a.name)
@@ -215,20 +256,14 @@ def render_strip(a: RunAnalysis, plant_yaml: Path | None, png: Path, frames: int
 
 
 def _render_file(states: str, plant_yaml: str, png: str, frames: str) -> None:
+    """:func:`_render` of the states saved by :func:`render_strip` (command-line arguments as strings)."""
     d = np.load(states)
     _render(d["q"], d["t"], str(d["name"]), Path(plant_yaml) if plant_yaml else None, Path(png), int(frames))
 
 
 def _render(qs: np.ndarray, ts: np.ndarray, name: str, plant_yaml: Path | None, png: Path, frames: int) -> None:
-    import matplotlib
-
+    """Render ``frames`` evenly spaced configurations of the run in MuJoCo, side by side, into ``png``."""
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import mujoco
-
-    from ..robot.model import PlantConfig
-    from ..robot.plant import Plant
-
     plant = Plant(PlantConfig.load(plant_yaml))
     model, data = plant.model, plant.data
     renderer = mujoco.Renderer(model, 360, 270)

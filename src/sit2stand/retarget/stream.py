@@ -21,14 +21,7 @@
 3. **IK** (:class:`sit2stand.retarget.ik.ComIk`): markers soft (weights by body part), COM and feet hard, joint and
    speed limits; warm-started from the previous frame.
 
-:class:`PlanPlayer` (the dynamic-feasibility stage): smooths the poses (Savitzky-Golay on the tangent coordinates,
-``smooth_frames`` wide), computes each pose's ZMP from the centroidal dynamics, and plays the plan back ``s`` times
-slower, with ``s`` the smallest factor that keeps the ZMP ``margin_m`` inside the feet wherever the robot is off the
-chair, and the joint speeds under ``max_joint_speed``, evaluated over the poses already known ``lookahead_s`` ahead
-of the playback point; at the robot's seat-off it dwells ``seat_off_dwell_s`` (the COM settles over the feet before
-the hips lift). ``s`` only grows and at a
-bounded rate, so the command stays smooth; each command carries positions, velocities and accelerations (time-warp
-included). Live, the commands lag the human by ``lookahead_s`` + half the smoothing window, plus the stretching.
+The poses go on to :class:`sit2stand.retarget.player.PlanPlayer`, which turns them into joint commands.
 
 Units SI; world frame REP-103 (x forward, y left, z up).
 """
@@ -40,12 +33,23 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-from scipy.signal import savgol_coeffs   # at import: a live node's first frames must not pay for it
 
-from ..robot.model import UPPER_LIMB_PREFIXES
+from ..errors import InputError
+from ..robot.identify import read_link_parameters
+from ..robot.model import (
+    SIDES,
+    SOLE_CENTRE_X_M,
+    SOLE_HALF_SIZE_M,
+    UPPER_LIMB_PREFIXES,
+    PlantConfig,
+    build_spec,
+    controller_model,
+)
+from ..robot.plant import seated_configuration
 from .calibration import PELVIS_MARKERS, MarkerMap, calibrate_markers, marker_group
-from .feasibility import frame_time_scales, support_margin, support_polygon, zmp_at_scale
+from .feasibility import support_polygon
 from .ik import ComIk, IkResult
+from .player import Command, PlanPlayer
 
 FOOT_MARKERS = ("LANK", "RANK", "LHEE", "RHEE", "LTOE", "RTOE")
 
@@ -67,22 +71,18 @@ class RobotSetup:
     parameters: str                      # "CAD" or the identified YAML
 
 
-def robot_model(plant_yaml: str | Path | None = None,
-                params_yaml: str | Path | None = None) -> tuple[pin.Model, np.ndarray, str]:
+def robot_model(plant_yaml: str | Path | None = None, params_yaml: str | Path | None = None,
+                link_parameters: dict | None = None) -> tuple[pin.Model, np.ndarray, str]:
     """The retargeter's robot model (TALOS with the identified COM parameters of ``params_yaml``, ``sit2stand
     identify --model full`` output, or CAD's), its nominal seated configuration from the plant file (Pinocchio
     order; only the posture and chair, never ``unmodeled``), and the parameters' label. The slow part of
-    :func:`robot_setup` (~0.6 s): a node builds it before the stream starts."""
-    from ..robot.identify import read_link_parameters
-    from ..robot.model import PlantConfig, build_spec, controller_model
-    from ..robot.plant import apply_parameters, seated_configuration
+    :func:`robot_setup` (~0.6 s): a node builds it before the stream starts. ``link_parameters``: those of
+    ``params_yaml`` when the caller has read them already."""
 
     cfg = PlantConfig.load(plant_yaml)
-    model = controller_model(cfg)
-    label = "CAD"
-    if params_yaml:
-        apply_parameters(model, read_link_parameters(params_yaml))     # IdentificationError is a ValueError
-        label = str(params_yaml)
+    links = link_parameters or (read_link_parameters(params_yaml) if params_yaml else None)
+    model = controller_model(cfg, links)
+    label = str(params_yaml) if params_yaml else "CAD"
     qpos = seated_configuration(build_spec(cfg, plant=False).compile(), cfg)
     q = qpos.copy()
     q[3:7] = [qpos[4], qpos[5], qpos[6], qpos[3]]
@@ -97,19 +97,18 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
     configuration (Pinocchio order), as the paper calibrates on the robot's measured sitting posture; default: the
     plant file's nominal one. ``start_joint_names``: the joint of each of ``q_start[7:]`` when they come in another
     order (e.g. a JointState's)."""
-    from ..robot.model import SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M
 
     model, q, label = prebuilt if prebuilt is not None else robot_model(plant_yaml, params_yaml)
     q = q.copy()
     if q_start is not None:
         if np.shape(q_start) != q.shape or not np.all(np.isfinite(q_start)):
-            raise ValueError(f"start configuration: {np.shape(q_start)} values (finite), expected {q.shape}")
+            raise InputError(f"start configuration: {np.shape(q_start)} values (finite), expected {q.shape}")
         q = np.asarray(q_start, float).copy()
         if start_joint_names is not None:
             by_name = dict(zip(start_joint_names, q_start[7:]))
             missing = [n for n in model.names[2:] if n not in by_name]
             if missing:
-                raise ValueError(f"start configuration: no position for {', '.join(missing[:5])}")
+                raise InputError(f"start configuration: no position for {', '.join(missing[:5])}")
             q[7:] = [by_name[n] for n in model.names[2:]]
     data = model.createData()
     pin.framesForwardKinematics(model, data, q)
@@ -203,10 +202,10 @@ class Retargeter:
         need = ("LKNE", "LANK", "LHEE")
         missing = [m for m in need if m not in idx or not valid[idx[m]]]
         if missing:
-            raise ValueError(f"calibration frame: marker(s) {', '.join(missing)} missing")
+            raise InputError(f"calibration frame: marker(s) {', '.join(missing)} missing")
         pel = [idx[m] for m in PELVIS_MARKERS if m in idx and valid[idx[m]]]
         if len(pel) < 3:
-            raise ValueError(f"calibration frame: {len(pel)} of {', '.join(PELVIS_MARKERS)} valid; need 3")
+            raise InputError(f"calibration frame: {len(pel)} of {', '.join(PELVIS_MARKERS)} valid; need 3")
         pelvis = positions_m[pel].mean(axis=0)
         knee, ankle, heel = (positions_m[idx[m]] for m in need)
         self.human_thigh = float(np.linalg.norm(knee - pelvis))
@@ -245,7 +244,7 @@ class Retargeter:
         h = [self.scale * (human_com_m[0] - ax), self.scale * (heel[0] - ax), 0.0]
         r = [self.com_seated[0] - rx, self.robot.heel_x_m + self.cfg.seat_off_fraction * foot - rx, 0.0]
         if not (h[0] < h[1] < h[2]) or not (r[0] < r[1] <= r[2] + 0.05):
-            raise ValueError(f"calibration frame: the human's seated COM ({human_com_m[0]:.3f} m), heel "
+            raise InputError(f"calibration frame: the human's seated COM ({human_com_m[0]:.3f} m), heel "
                              f"({heel[0]:.3f} m) and ankle ({ax:.3f} m) are not in that order along x: not seated")
         self.knots_h, self.knots_r = np.array(h), np.array(r)
         self.human_ankle_x, self.robot_ankle_x = ax, rx
@@ -323,169 +322,6 @@ class Retargeter:
         pin.centerOfMass(self.model, self.data, self.q)
         return RetargetFrame(t_s, res.q, target, axes, self.data.com[0].copy(), self.seated, self.human_seat_off, res,
                              markers)
-
-
-@dataclass
-class Command:
-    """One joint command of the played plan."""
-
-    t_plan_s: float              # the human time it plays
-    q: np.ndarray                # full Pinocchio configuration
-    v: np.ndarray                # (nv,) [rad/s, m/s]
-    a: np.ndarray                # (nv,)
-    time_scale: float
-    com: np.ndarray              # planned COM [m]
-    zmp: np.ndarray              # planned ZMP [m] on the floor at this time scale
-    margin_m: float              # ZMP distance inside the feet (negative: outside); inf while seated
-    on_feet: bool
-
-
-class PlanPlayer:
-    """Smooths, checks and retimes a stream of IK poses (see the module docstring).
-
-    ``push`` one pose per human frame (period ``dt``); ``pull`` once per output tick (same period) returns the next
-    command, or None while the look-ahead fills. ``fixed_scale`` set: no adaptation (1.0: the human's timing)."""
-
-    def __init__(self, model: pin.Model, dt: float, polygon_xy: np.ndarray, *, margin_m: float = 0.06,
-                 lookahead_s: float = 0.8, smooth_frames: int = 21, max_scale: float = 4.0,
-                 max_scale_rate: float = 1.5, fixed_scale: float | None = None,
-                 max_joint_speed: float = 0.6, seat_off_dwell_s: float = 1.0) -> None:
-        self.model, self.data = model, model.createData()
-        self.dt = dt
-        self.polygon = polygon_xy
-        self.margin_m = margin_m
-        self.lookahead = max(0, int(round(lookahead_s / dt)))
-        self.half = max(0, smooth_frames // 2)
-        self.max_scale = max_scale
-        self.max_rate = max_scale_rate
-        self.fixed = fixed_scale
-        self.max_speed = max_joint_speed
-        self.dwell_pulls = int(round(seat_off_dwell_s / dt))
-        self._dwelt = 0
-        self.s = 1.0 if fixed_scale is None else float(fixed_scale)
-        self.s_goal = self.s
-        self.mass = float(pin.computeTotalMass(model))
-        self._raw_q: list[np.ndarray] = []
-        self._raw_feet: list[bool] = []
-        self._q: list[np.ndarray] = []         # smoothed poses
-        self._v: list[np.ndarray] = []
-        self._a: list[np.ndarray] = []
-        self._feet: list[bool] = []
-        self._dyn: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []    # (com, com acc, dL/dt) at s = 1
-        self.u = 0.0              # playback point, in frames of the plan
-        self.started = False
-        self.finished = False
-        self._coef_cache: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self._s_req: list[float] = []          # each frame's own smallest time scale
-
-    # -- input -------------------------------------------------------------------------------------------------
-    def push(self, q: np.ndarray, on_feet: bool) -> None:
-        self._raw_q.append(np.asarray(q, float).copy())
-        self._raw_feet.append(bool(on_feet))
-        self._smooth_available(final=False)
-
-    def close(self) -> None:
-        """No more poses: the tail is smoothed with what there is and played to the end."""
-        self._smooth_available(final=True)
-        self.finished = True
-
-    def _smooth_available(self, final: bool) -> None:
-        """Savitzky-Golay fit (cubic) of the poses' tangent coordinates around each frame once its window is
-        known: the smoothed pose and its velocity and acceleration from the same fit; then the frame's dynamics."""
-        n = len(self._raw_q)
-        model, dt = self.model, self.dt
-        while len(self._q) < n and (final or len(self._q) + self.half < n):
-            k = len(self._q)
-            half = min(self.half, k, n - 1 - k)
-            ref = self._raw_q[k]
-            if half >= 2:
-                X = np.array([pin.difference(model, ref, self._raw_q[j]) for j in range(k - half, k + half + 1)])
-                c0, c1, c2 = self._coefs(half)
-                q, v, a = pin.integrate(model, ref, c0 @ X), c1 @ X / dt, c2 @ X / dt**2
-            else:        # the ends of a closed plan: at rest
-                q, v, a = ref, np.zeros(model.nv), np.zeros(model.nv)
-            self._q.append(q)
-            self._v.append(v)
-            self._a.append(a)
-            self._feet.append(self._raw_feet[k])
-            pin.centerOfMass(model, self.data, q, v, a)
-            com, acom = self.data.com[0].copy(), self.data.acom[0].copy()
-            pin.computeCentroidalMomentumTimeVariation(model, self.data, q, v, a)
-            # dL/dt's velocity-product and acceleration parts both scale with 1/s^2 when played s x slower
-            self._dyn.append((com, acom, self.data.dhg.angular.copy()))
-            self._s_req.append(self.frame_scale(len(self._dyn) - 1))
-
-    def _coefs(self, half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        c = self._coef_cache.get(half)
-        if c is None:
-            order = min(3, 2 * half)
-            c = tuple(savgol_coeffs(2 * half + 1, order, deriv=d, use="dot") for d in (0, 1, 2))
-            self._coef_cache[half] = c
-        return c
-
-    # -- output ------------------------------------------------------------------------------------------------
-    def frame_scale(self, k: int) -> float:
-        """Smallest time scale (grid of 0.02, at most ``max_scale``) keeping frame ``k``'s ZMP ``margin_m`` inside the
-        feet (none while the robot is on the chair) and its joint speeds under ``max_joint_speed`` [rad/s]."""
-        speed = float(np.abs(self._v[k][6:]).max()) / self.max_speed if self.max_speed > 0 else 1.0
-        s = 1.0
-        if self._feet[k]:
-            com, acc, dl = self._dyn[k]
-            s = float(frame_time_scales(com, acc, dl, self.mass, self.polygon, self.margin_m, self.max_scale)[0])
-        return min(max(s, speed), self.max_scale)
-
-    def required_scale(self, frames: range) -> float:
-        """Smallest time scale keeping the ZMP ``margin_m`` inside the feet on all of ``frames`` (known ones)."""
-        ks = [k for k in frames if k < len(self._s_req)]
-        return max((self._s_req[k] for k in ks), default=1.0)
-
-    def ready(self) -> bool:
-        known = len(self._v)
-        return self.finished or known >= self.lookahead + 2
-
-    def pull(self) -> Command | None:
-        known = len(self._v)
-        if known < 1 or (not self.started and not self.ready()):
-            return None
-        self.started = True
-        if self.fixed is None:
-            ahead = range(int(self.u), min(known, int(self.u) + self.lookahead + 1))
-            self.s_goal = max(self.s_goal, self.required_scale(ahead))
-        s_prev = self.s
-        self.s = min(self.s_goal, self.s + self.max_rate * self.dt)
-        s_dot = (self.s - s_prev) / self.dt
-        k = int(np.floor(self.u))
-        if k >= known - 1:          # starved (live input late) or at the end: hold the last pose
-            k, frac = known - 1, 0.0
-            self.u = float(k)
-            hold = True
-        elif self._feet[k] and self._dwelt < self.dwell_pulls:
-            # at the robot's seat-off: wait, so that the COM settles over the feet before the hips lift
-            frac, hold = 0.0, True
-            self.u = float(k)
-            self._dwelt += 1
-        else:
-            frac = self.u - k
-            hold = False
-        q = pin.interpolate(self.model, self._q[k], self._q[min(k + 1, known - 1)], frac)
-        v_plan = (1 - frac) * self._v[k] + frac * self._v[min(k + 1, known - 1)]
-        a_plan = (1 - frac) * self._a[k] + frac * self._a[min(k + 1, known - 1)]
-        u_dot = 0.0 if hold else 1.0 / self.s
-        u_ddot = 0.0 if hold else -s_dot / self.s**2
-        v = v_plan * u_dot
-        a = a_plan * u_dot**2 + v_plan * u_ddot
-        com, acom, dl = self._dyn[k]
-        zmp = zmp_at_scale(com[None], acom[None], dl[None], self.mass, self.s)[0] if not hold else \
-            np.array([com[0], com[1], 0.0])
-        on_feet = self._feet[k]
-        margin = float(support_margin(zmp[None, :2], self.polygon)[0]) if on_feet else np.inf
-        if not hold:
-            self.u += u_dot
-        return Command(k * self.dt + frac * self.dt, q, v, a, self.s, com, zmp, margin, on_feet)
-
-    @property
-    def done(self) -> bool:
-        return self.finished and self.u >= len(self._v) - 1
 
 
 def retarget_sequence(retargeter: Retargeter, player: PlanPlayer, t_s: np.ndarray, positions_m: np.ndarray,

@@ -5,11 +5,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
 import pinocchio as pin
 
+from ..errors import InputError
 from .identify import IdentificationResult, PostureData, com_x, controller_model, split, with_parameters
 from .model import PlantConfig
+from .plant import Plant
+from .postures import standing_qpos
 
 
 def identified_model(result: IdentificationResult) -> pin.Model:
@@ -17,16 +22,14 @@ def identified_model(result: IdentificationResult) -> pin.Model:
     model = controller_model()
     if result.model_name == "full":
         return with_parameters(model, result.values)
-    raise ValueError("only the full model gives per-link parameters for a whole-body COM path")
+    raise InputError("only the full model gives per-link parameters for a whole-body COM path")
 
 
 def posture_figure(result: IdentificationResult, data: PostureData, png: Path, eval_fraction: float = 0.1,
                    seed: int = 0) -> None:
     """Measured COP x against predicted COM x (CAD and identified) for every posture, evaluation ones marked."""
-    import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     cad = controller_model()
     train, ev = split(len(data), eval_fraction, seed)
@@ -71,13 +74,9 @@ def posture_figure(result: IdentificationResult, data: PostureData, png: Path, e
 def com_path_figure(result: IdentificationResult, png: Path, cfg: PlantConfig | None = None) -> None:
     """Sagittal COM path of a sit-to-stand-like joint motion (seated -> standing, feet fixed) with CAD and with the
     identified parameters: as in the paper, the identified COM is lower and further back."""
-    import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    from .plant import Plant
-    from .postures import standing_qpos
 
     cfg = cfg or PlantConfig()
     plant = Plant(cfg, with_chair=False)

@@ -30,9 +30,18 @@ import numpy as np
 import pinocchio as pin
 import yaml
 
+from ..errors import Sit2StandError
+from ..io.bag import BagError, BagReader
+from ..io.topics import (
+    ROBOT_BASE_POSE_TOPIC,
+    ROBOT_COP_TOPIC,
+    ROBOT_FT_LEFT_TOPIC,
+    ROBOT_FT_RIGHT_TOPIC,
+    ROBOT_JOINT_STATES_TOPIC,
+    ft_topic,
+)
 from ..optim import constrained_lsq
 from .model import SIDES, controller_model
-from ..errors import Sit2StandError
 
 PLANAR_LINKS = {
     # link: (frame body per side (a joint name) or a single joint, whether it is per leg)
@@ -67,28 +76,27 @@ class PostureData:
 
 def read_postures(path: str | Path) -> PostureData:
     """Load the postures written by ``collect-postures`` (names the bag and the topic on any problem)."""
-    from ..io.bag import BagError, BagReader
 
     with BagReader(path) as bag:
         topics = bag.topics()
-        need = ["/robot/joint_states", "/robot/ft/left", "/robot/ft/right", "/robot/cop", "/robot/base_pose"]
+        need = [ROBOT_JOINT_STATES_TOPIC, ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC, ROBOT_COP_TOPIC, ROBOT_BASE_POSE_TOPIC]
         missing = [t for t in need if t not in topics]
         if missing:
             raise BagError(f"{path}: not a static-posture bag: no {', '.join(missing)}")
-        js = bag.read("/robot/joint_states")
+        js = bag.read(ROBOT_JOINT_STATES_TOPIC)
         names = list(js[0][1].name)
         q = np.array([m.position for _, m in js])
         tau = np.array([m.effort for _, m in js])
         wrench, sole = {}, {}
         for side in SIDES:
-            msgs = bag.read(f"/robot/ft/{side}")
+            msgs = bag.read(ft_topic(side))
             wrench[side] = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z, m.wrench.torque.x,
                                       m.wrench.torque.y, m.wrench.torque.z] for _, m in msgs])
             sole[side] = np.array([[float(v) for v in m.header.frame_id.split("@")[1].split(",")] for _, m in msgs])
-        cop = np.array([[m.point.x, m.point.y, m.point.z] for _, m in bag.read("/robot/cop")])
+        cop = np.array([[m.point.x, m.point.y, m.point.z] for _, m in bag.read(ROBOT_COP_TOPIC)])
         base = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.w,
                           m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z]
-                         for _, m in bag.read("/robot/base_pose")])
+                         for _, m in bag.read(ROBOT_BASE_POSE_TOPIC)])
     return PostureData(names, q, tau, wrench, sole, cop, base)
 
 
@@ -327,7 +335,7 @@ def identify(path: str | Path, model: str = "full", eval_fraction: float = 0.1, 
 
 def read_link_parameters(path: str | Path) -> dict:
     """The per-link parameters (``{joint: {mass, com}}``) of a YAML written by :func:`write_yaml`, for
-    ``plant.apply_parameters``.
+    ``model.apply_link_parameters``.
 
     Raises:
         IdentificationError: the file is not valid YAML or has no ``links`` (only ``--model full`` writes them).
@@ -343,7 +351,7 @@ def read_link_parameters(path: str | Path) -> dict:
 
 
 def write_yaml(result: IdentificationResult, path: str | Path, source: str = "") -> None:
-    """The parameters for the retargeter and the analysis (``plant.apply_parameters`` loads ``links``)."""
+    """The parameters for the retargeter and the analysis (``model.apply_link_parameters`` loads ``links``)."""
     doc = {"model": result.model_name, "source": source, "total_mass_kg": result.total_mass_kg,
            "cad_mass_kg": result.cad_mass_kg, "eval_rms_m": result.eval_rms_m, "cad_eval_rms_m": result.cad_eval_rms_m,
            "train_rms_m": result.train_rms_m, "cad_train_rms_m": result.cad_train_rms_m,

@@ -25,6 +25,7 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
+from ..errors import InputError
 from ..io.forceplate import DEFAULT_COP_THRESHOLD_N
 from .model import SIDES, PlantConfig, add_chair, build_spec, controller_model, expand
 
@@ -128,18 +129,16 @@ class Plant:
             self.q_offset[self.joint_names.index(name)] = value
         bad = set(um.ft_bias) - set(SIDES)
         if bad:
-            raise ValueError(f"{cfg.source or 'plant'}: ft_bias for unknown side(s) {sorted(bad)} (sides: {SIDES})")
+            raise InputError(f"{cfg.source or 'plant'}: ft_bias for unknown side(s) {sorted(bad)} (sides: {SIDES})")
         both = np.concatenate([um.ft_force_bias_n, um.ft_torque_bias_nm])
         self.ft_bias = {s: both + np.asarray(um.ft_bias.get(s, np.zeros(6)), float) for s in SIDES}
         self.delay_steps = int(round(um.actuator_delay_s / cfg.timestep_s))
         self._tau_queue: deque[np.ndarray] = deque()
         # the controller's model (CAD unless identified parameters are given)
-        self.ctrl = controller_model(cfg)
+        self.ctrl = controller_model(cfg, controller_params)
         # where the seat supports the pelvis when seated: on the seat surface, a little behind the hip joints
         self.ctrl.addFrame(pin.Frame("seat", 1, pin.SE3(np.eye(3), np.array(
             [-0.05, 0.0, self.seat_height_m - float(self.q_seated[2])])), pin.FrameType.OP_FRAME))
-        if controller_params:
-            apply_parameters(self.ctrl, controller_params)
         self.ctrl_data = self.ctrl.createData()
         self.ctrl_mass = float(pin.computeTotalMass(self.ctrl))
         self.kp = self.model.actuator_gainprm[self.pd_ids, 0].copy()
@@ -200,7 +199,7 @@ class Plant:
         keeps the feed-forward's own refresh rate (for references interpolated at every physics step)."""
         q = np.asarray(q, float)
         if q.shape != (self.n,):
-            raise ValueError(f"joint command has {q.shape} positions, the robot has {self.n} joints")
+            raise InputError(f"joint command has {q.shape} positions, the robot has {self.n} joints")
         self.q_ref = q.copy()
         self.qd_ref = np.zeros(self.n) if qd is None else np.asarray(qd, float).copy()
         self.qdd_ref = np.zeros(self.n) if qdd is None else np.asarray(qdd, float).copy()
@@ -364,14 +363,3 @@ def contact_feedforward(model, data, q: np.ndarray, qd_ref: np.ndarray, qdd_ref:
         J = np.vstack([J, pin.getFrameJacobian(model, data, model.getFrameId("seat"), pin.LOCAL_WORLD_ALIGNED)[:3]])
     lam = np.linalg.lstsq(J[:, :6].T, tau[:6], rcond=None)[0]
     return tau[6:] - J[:, 6:].T @ lam
-
-
-def apply_parameters(model, params: dict) -> None:
-    """Set link masses [kg] and COMs [m, link frame] of a Pinocchio model from ``{link_joint: {mass, com}}``."""
-    for joint, p in params.items():
-        jid = model.getJointId(joint)
-        old = model.inertias[jid]
-        mass = float(p["mass"])
-        com = np.asarray(p.get("com", old.lever), float)
-        scale = mass / old.mass if old.mass > 0 else 1.0
-        model.inertias[jid] = pin.Inertia(mass, com, old.inertia * scale)

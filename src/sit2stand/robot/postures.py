@@ -16,13 +16,17 @@ estimator).
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import pinocchio as pin
 
+from ..io import messages as M
+from ..io.bag import BagWriter
+from ..io.topics import GROUND_TRUTH_ROBOT_COM_TOPIC
+from ..io.typestore import typestore
 from .model import SIDES, PlantConfig
 from .plant import Plant, lowest_point
 
@@ -187,11 +191,7 @@ def home_com_bias(plant: Plant) -> float:
 def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, progress: bool = True,
                      move_arms: bool = True) -> dict:
     """Plan, hold and record ``n`` postures into a bag (see the module docstring); returns counts."""
-    from ..io import messages as M
-    from ..io.bag import BagWriter
-    from ..io.typestore import typestore
 
-    from dataclasses import replace
 
     # squats tilt the pelvis far forward: only a pelvis near the floor or unloaded feet count as a fall here
     plant = Plant(replace(cfg, fall_tilt_rad=np.pi), with_chair=False)
@@ -203,7 +203,7 @@ def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, p
                                      "joint_names": ",".join(plant.joint_names)}) as bag:
         for topic, msgtype in M.ROBOT_STATE_TOPICS.items():
             bag.add_topic(topic, msgtype)
-        bag.add_topic("/ground_truth/robot_com", "geometry_msgs/msg/PointStamped")
+        bag.add_topic(GROUND_TRUTH_ROBOT_COM_TOPIC, "geometry_msgs/msg/PointStamped")
         for qpos in planned:
             if kept >= n:
                 break
@@ -219,7 +219,7 @@ def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, p
             for topic, msg in M.robot_state(t_ns, plant.joint_names, sample.q, None, sample.tau, sample.wrench,
                                             sample.cop, sample.base_pose, sole_m=sample.sole):
                 bag.write(topic, t_ns, msg)
-            bag.write("/ground_truth/robot_com", t_ns, store["geometry_msgs/msg/PointStamped"](
+            bag.write(GROUND_TRUTH_ROBOT_COM_TOPIC, t_ns, store["geometry_msgs/msg/PointStamped"](
                 header=M.header(t_ns, "world"), point=M.point(*sample.true_com)))
             if progress and kept % 10 == 0:
                 print(f"  {kept}/{n} postures held ({dropped} tipped and dropped)", file=sys.stderr, flush=True)

@@ -1,8 +1,8 @@
-"""sit2stand.replay: bag time -> wall time with rate, pause and rate changes, on a fake clock."""
+"""sit2stand.io.playback: bag time -> wall time with rate, pause and rate changes, on a fake clock."""
 
 import pytest
 
-from sit2stand.replay import PlaybackClock, check_rate
+from sit2stand.io.playback import PlaybackClock, check_rate
 
 
 class FakeTime:

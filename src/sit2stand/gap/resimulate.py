@@ -14,6 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..errors import InputError
 from ..robot.model import SIDES, PlantConfig
 from ..robot.plant import Plant
 from .effects import unmodeled_from
@@ -31,7 +32,7 @@ def simulate(cfg: PlantConfig, rec: Recording, seated: bool) -> dict[str, np.nda
     """Replay ``rec``'s commands in the plant ``cfg``; returns the simulated measured torque (N, n), feet vertical
     force (N,), COP x (N,) and whether the simulated robot fell, at ``rec.t_s``."""
     if rec.commands is None:
-        raise ValueError(f"{rec.source}: no /robot/joint_command to replay")
+        raise InputError(f"{rec.source}: no /robot/joint_command to replay")
     plant = Plant(replace(cfg, fall_tilt_rad=np.pi), with_chair=seated)
     if seated:
         plant.reset()

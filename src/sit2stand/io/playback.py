@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from ..errors import InputError
 
 MIN_RATE = 0.1
 MAX_RATE = 50.0
@@ -17,7 +18,7 @@ def check_rate(rate: float) -> float:
     """A replay rate: 0 (as fast as the subscribers take it) or 0.1x..50x real time."""
     rate = float(rate)
     if rate != 0.0 and not MIN_RATE <= rate <= MAX_RATE:
-        raise ValueError(f"rate {rate:g} is outside {MIN_RATE:g}..{MAX_RATE:g} (or 0 for as fast as possible)")
+        raise InputError(f"rate {rate:g} is outside {MIN_RATE:g}..{MAX_RATE:g} (or 0 for as fast as possible)")
     return rate
 
 

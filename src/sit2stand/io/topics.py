@@ -1,0 +1,72 @@
+"""Every topic and service name of the sit2stand graph, with the message types and frame ids that go with them.
+
+The one home of these names: nodes, offline tools, the importer and the synthesiser take them from here. Names are
+absolute (a leading ``/``); node-private services (``~/pause``, ``~/status``) stay with their nodes. Frames follow
+REP-103 (x forward, y left, z up). ``lab`` is the capture volume's frame, in which markers, plates and the human COM
+are given; ``world`` is the robot simulation's frame.
+"""
+
+from __future__ import annotations
+
+# --- frames -------------------------------------------------------------------------------------------------------
+LAB_FRAME = "lab"
+WORLD_FRAME = "world"
+
+# --- message types of our interface package -----------------------------------------------------------------------
+MOCAP_TYPE = "sit2stand_msgs/msg/MocapFrame"
+PLATE_TYPE = "sit2stand_msgs/msg/ForcePlateSample"
+COM_TYPE = "sit2stand_msgs/msg/CenterOfMass"
+
+# --- capture: replayer (from a bag) or a capture-system bridge ------------------------------------------------------
+MARKERS_TOPIC = "/mocap/markers"                     # sit2stand_msgs/MocapFrame, lab frame
+MODEL_POINTS_TOPIC = "/mocap/model_points"           # MocapFrame: the capture software's modelled points
+REFERENCE_COM_TOPIC = "/mocap/reference_com"         # CenterOfMass: the capture software's own COM
+FORCE_PLATE_PREFIX = "/force_plate/"                 # + plate name: ForcePlateSample, lab axes
+CLOCK_TOPIC = "/clock"                               # rosgraph_msgs/Clock
+
+# --- human COM estimator ------------------------------------------------------------------------------------------
+HUMAN_COM_TOPIC = "/human/com"                       # CenterOfMass, lab frame
+HUMAN_MODEL_COP_TOPIC = "/human/model_cop"           # geometry_msgs/PointStamped
+HUMAN_MEASURED_COP_TOPIC = "/human/measured_cop"     # geometry_msgs/PointStamped
+HUMAN_JOINTS_TOPIC = "/human/joint_states"           # sensor_msgs/JointState: the fitted skeleton
+HUMAN_SCALING_TOPIC = "/human/scaling"               # sit2stand_msgs/InertialParameters
+
+# --- robot: driver (simulated TALOS) ------------------------------------------------------------------------------
+ROBOT_JOINT_STATES_TOPIC = "/robot/joint_states"     # sensor_msgs/JointState
+ROBOT_BASE_POSE_TOPIC = "/robot/base_pose"           # geometry_msgs/PoseStamped, world frame
+ROBOT_COP_TOPIC = "/robot/cop"                       # geometry_msgs/PointStamped, world frame
+ROBOT_FT_LEFT_TOPIC = "/robot/ft/left"               # geometry_msgs/WrenchStamped
+ROBOT_FT_RIGHT_TOPIC = "/robot/ft/right"             # geometry_msgs/WrenchStamped
+ROBOT_STATUS_TOPIC = "/robot/status"                 # diagnostic_msgs/DiagnosticStatus
+ROBOT_JOINT_COMMAND_TOPIC = "/robot/joint_command"   # trajectory_msgs/JointTrajectory (one point)
+ROBOT_JOINT_STATE_COMMAND_TOPIC = "/robot/joint_state_command"   # sensor_msgs/JointState (positions only)
+
+# --- robot: retargeter --------------------------------------------------------------------------------------------
+ROBOT_PLANNED_COM_TOPIC = "/robot/planned_com"       # CenterOfMass, world frame
+ROBOT_PLANNED_ZMP_TOPIC = "/robot/planned_zmp"       # geometry_msgs/PointStamped, world frame
+ROBOT_COM_FEEDBACK_TOPIC = "/robot/com_feedback"     # geometry_msgs/Vector3Stamped [m], world frame
+ROBOT_RETARGET_IK_TOPIC = "/robot/retarget/ik"       # sensor_msgs/JointState: the raw IK pose per frame
+
+# --- robot: identification service --------------------------------------------------------------------------------
+IDENTIFY_COM_SERVICE = "/robot/identify_com"         # sit2stand_msgs/srv/IdentifyCom
+ROBOT_INERTIAL_PARAMETERS_TOPIC = "/robot/inertial_parameters"   # InertialParameters (transient local)
+
+# --- ground truth written by simulations (synthesised humans, the plant) --------------------------------------------
+GROUND_TRUTH_COM_TOPIC = "/ground_truth/com"
+GROUND_TRUTH_JOINTS_TOPIC = "/ground_truth/joint_states"
+GROUND_TRUTH_PARAMETERS_TOPIC = "/ground_truth/inertial_parameters"
+GROUND_TRUTH_ROBOT_COM_TOPIC = "/ground_truth/robot_com"
+
+
+def plate_topic(name: str) -> str:
+    """Topic of the force plate called ``name`` (e.g. ``/force_plate/feet``)."""
+    return FORCE_PLATE_PREFIX + name
+
+
+CHAIR_PLATE_TOPIC = plate_topic("chair")
+FEET_PLATE_TOPIC = plate_topic("feet")
+
+
+def ft_topic(side: str) -> str:
+    """Topic of the robot's ankle force/torque sensor on ``side`` (``left`` or ``right``)."""
+    return {"left": ROBOT_FT_LEFT_TOPIC, "right": ROBOT_FT_RIGHT_TOPIC}[side]

@@ -1,0 +1,301 @@
+"""Live retargeting without ROS: matching each marker frame to its human COM, pacing the commands, latency figures.
+
+The retargeter node is a thin shell around :class:`LiveRetargeting`: it feeds marker frames, human COM estimates,
+chair-plate forces and the robot's measured state in as they arrive, and publishes the commands that come out.
+
+* **COM by stamp** (:class:`HumanComTrack`): a frame uses the estimator's estimate for its own stamp; between two
+  estimates (the frame's own was invalid) their interpolation; after the newest one, that one moved on by its
+  velocity if it is at most ``com_wait_s`` old; otherwise the frame waits.
+* **Pacing** (:class:`CommandPacer`): one command per period of wall time, sent as soon as a frame brings it, so a
+  burst of queued frames (after the COM estimator's calibration pause, say) does not play the plan faster; when
+  frames are late, the timer keeps the commands at the mocap rate.
+* **Latency** (:class:`LatencyLog`): marker received -> its command sent; the same from when the frame's human COM
+  was also there (the retargeter's own share); and over the frames whose COM kept in step with the markers.
+
+Times: stamps [s] of the capture clock; wall times [s] from ``time.monotonic`` / ``time.perf_counter``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..io.messages import reorder_markers
+from .player import Command, PlanPlayer
+from .stabiliser import ComStabiliser, StabiliserConfig
+from .stream import RetargetConfig, Retargeter, RobotSetup
+
+STAMP_TOLERANCE_S = 1e-6
+"""Two stamps this close are the same frame's."""
+
+
+class HumanComTrack:
+    """The human COM stream, kept by stamp (see the module docstring)."""
+
+    def __init__(self, com_wait_s: float = 0.03, keep: int = 400) -> None:
+        self.com_wait_s = com_wait_s
+        self.samples: deque[tuple[float, np.ndarray, np.ndarray]] = deque(maxlen=keep)
+        self.invalid = 0
+
+    def add(self, t_s: float, position_m: np.ndarray, velocity_mps: np.ndarray, valid: bool) -> None:
+        """One estimate; an invalid one (flagged, or not finite) is counted and left out."""
+        if not valid or not np.all(np.isfinite(position_m)):
+            self.invalid += 1
+            return
+        self.samples.append((t_s, np.asarray(position_m, float),
+                             np.where(np.isfinite(velocity_mps), velocity_mps, 0.0)))
+
+    def at(self, t_s: float) -> np.ndarray | None:
+        """The human COM [m] for the frame stamped ``t_s``, or None: wait for it."""
+        after = None
+        for tc, p, v in reversed(self.samples):
+            if abs(tc - t_s) < STAMP_TOLERANCE_S:
+                return p
+            if tc > t_s:
+                after = (tc, p)
+                continue
+            if after is not None:
+                w = (t_s - tc) / (after[0] - tc)
+                return (1.0 - w) * p + w * after[1]
+            return p + v * (t_s - tc) if t_s - tc <= self.com_wait_s else None
+        return None
+
+    def began_after(self, t_s: float) -> bool:
+        """The COM stream's first estimate kept is later than ``t_s``: that frame will never get one."""
+        return bool(self.samples) and self.samples[0][0] > t_s + STAMP_TOLERANCE_S
+
+
+class ChairForceTrack:
+    """The chair plate's vertical force [N] by stamp (the latest sample at or before a frame)."""
+
+    def __init__(self, keep: int = 4000) -> None:
+        self.samples: deque[tuple[float, float]] = deque(maxlen=keep)
+
+    def add(self, t_s: float, force_z_n: float) -> None:
+        self.samples.append((t_s, force_z_n))
+
+    def at(self, t_s: float) -> float | None:
+        """None without a chair plate; the first sample for frames before it."""
+        if not self.samples:
+            return None
+        for tc, fz in reversed(self.samples):
+            if tc <= t_s:
+                return fz
+        return self.samples[0][1]
+
+
+class CommandPacer:
+    """One command per period ``1 / rate_hz`` of wall time (see the module docstring)."""
+
+    def __init__(self, rate_hz: float) -> None:
+        self.period_s = 1.0 / rate_hz
+        self.next_due_s: float | None = None
+
+    def due(self, now_s: float) -> bool:
+        """A frame arrived at ``now_s``: may it send a command?"""
+        return self.next_due_s is None or now_s >= self.next_due_s - 0.5 * self.period_s
+
+    def sent(self, now_s: float) -> None:
+        """A frame's command went out at ``now_s``: the next one is due a period later (not in the past)."""
+        self.next_due_s = max(self.next_due_s or now_s, now_s - 0.5 * self.period_s) + self.period_s
+
+    def late(self, now_s: float) -> bool:
+        """The timer at ``now_s``: frames are late and a command is overdue."""
+        return self.next_due_s is not None and now_s > self.next_due_s + 0.5 * self.period_s
+
+    def sent_late(self) -> None:
+        """The timer sent an overdue command."""
+        self.next_due_s += self.period_s
+
+
+def percentile_text(values_s: list[float], q: float) -> str:
+    """The ``q``-th percentile of ``values_s`` [s] in ms with two decimals, or ``nan`` without values."""
+    return f"{np.percentile(np.asarray(values_s) * 1e3, q):.2f}" if len(values_s) else "nan"
+
+
+@dataclass
+class LatencyLog:
+    """Per-command latencies [s] and per-frame IK costs [s] (see the module docstring)."""
+
+    in_step_s: float = 0.02
+    marker_to_command: list[float] = field(default_factory=list)
+    com_to_command: list[float] = field(default_factory=list)
+    in_step: list[float] = field(default_factory=list)
+    ik: list[float] = field(default_factory=list)
+
+    def command(self, received_s: float, ready_s: float, sent_s: float) -> None:
+        """A frame received at ``received_s``, with its human COM at ``ready_s``, whose command went at ``sent_s``."""
+        self.marker_to_command.append(sent_s - received_s)
+        self.com_to_command.append(sent_s - ready_s)
+        if ready_s - received_s <= self.in_step_s:
+            self.in_step.append(sent_s - received_s)
+
+    def figures(self) -> dict[str, str]:
+        """p50 / p99 of each series in ms, as text (``nan`` when empty)."""
+        out = {"in_step_frames": str(len(self.in_step))}
+        for key, values in (("ik", self.ik), ("latency", self.marker_to_command),
+                            ("own_latency", self.com_to_command), ("in_step_latency", self.in_step)):
+            out[f"{key}_p50_ms"], out[f"{key}_p99_ms"] = percentile_text(values, 50), percentile_text(values, 99)
+        return out
+
+
+@dataclass
+class MarkerFrame:
+    """One marker frame as received: stamp [s], positions (M, 3) [m], validity, and when it came (perf_counter)."""
+
+    t_s: float
+    names: list[str]
+    positions_m: np.ndarray
+    valid: np.ndarray
+    received_s: float
+    header: object = None          # the message header, handed back with the frame's IK pose
+
+
+@dataclass
+class LiveConfig:
+    """The live retargeting's settings (the node's parameters)."""
+
+    rate_hz: float = 100.0
+    margin_m: float = 0.06
+    lookahead_s: float = 0.8
+    smooth_frames: int = 21
+    max_joint_speed: float = 0.6
+    fixed_time_scale: float | None = None
+    max_time_scale: float = 4.0
+    com_wait_s: float = 0.03
+    com_feedback: bool = True
+    stabiliser: StabiliserConfig = field(default_factory=StabiliserConfig)
+
+
+class LiveRetargeting:
+    """Marker frames and human COMs in, paced joint commands out (see the module docstring).
+
+    Args:
+        cfg: the settings.
+        send: publishes a command (the feedback's offset [m] or None) and returns when it went
+            (``time.perf_counter``).
+        measured_q: the robot's measured configuration in the model's order, or None when not recent.
+    """
+
+    def __init__(self, cfg: LiveConfig, send: Callable[[Command, np.ndarray | None], float],
+                 measured_q: Callable[[], np.ndarray | None]) -> None:
+        self.cfg = cfg
+        self.send, self.measured_q = send, measured_q
+        self.frames: deque[MarkerFrame] = deque()
+        self.coms = HumanComTrack(cfg.com_wait_s)
+        self.chair = ChairForceTrack()
+        self.pacer = CommandPacer(cfg.rate_hz)
+        self.latency = LatencyLog()
+        self.retargeter: Retargeter | None = None
+        self.player: PlanPlayer | None = None
+        self.stabiliser: ComStabiliser | None = None
+        self.names: list[str] = []
+        self.infeasible = self.skipped = self.processed = self.state_stale = 0
+        self.feedback_max_m = 0.0
+        self.last_frame_s = 0.0       # time.monotonic of the last frame processed
+
+    def start(self, robot: RobotSetup, frame: MarkerFrame, com_m: np.ndarray):
+        """Calibrate on ``frame`` (the human seated) over the robot's start posture; returns the marker map.
+
+        Raises:
+            InputError: the frame cannot be overlaid on the robot (a missing marker, not seated).
+        """
+        self.retargeter = Retargeter(robot, RetargetConfig())
+        marker_map = self.retargeter.calibrate(frame.names, frame.positions_m, frame.valid, com_m)
+        c = self.cfg
+        self.player = PlanPlayer(robot.model, 1.0 / c.rate_hz, robot.support_xy, margin_m=c.margin_m,
+                                 lookahead_s=c.lookahead_s, smooth_frames=c.smooth_frames,
+                                 fixed_time_scale=c.fixed_time_scale, max_time_scale=c.max_time_scale,
+                                 max_joint_speed=c.max_joint_speed)
+        if c.com_feedback:
+            self.stabiliser = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, c.stabiliser)
+        self.names = frame.names
+        return marker_map
+
+    def next_ready(self) -> tuple[MarkerFrame, np.ndarray] | None:
+        """The oldest queued frame and its human COM once that COM is known (frames that can never get one are
+        dropped and counted); None: wait."""
+        while self.frames:
+            frame = self.frames[0]
+            com = self.coms.at(frame.t_s)
+            if com is not None:
+                return frame, com
+            if not self.coms.began_after(frame.t_s):
+                return None
+            self.frames.popleft()
+            self.skipped += 1
+        return None
+
+    def step(self, frame: MarkerFrame, com_m: np.ndarray) -> np.ndarray:
+        """Retarget the ready ``frame`` (popped from the queue), push its pose to the player, send a command if one
+        is due; returns the frame's IK pose."""
+        self.frames.popleft()
+        ready = time.perf_counter()         # marker and COM both here: the retargeter's own latency starts
+        pos, valid = reorder_markers(frame.names, frame.positions_m, frame.valid, self.names)
+        result = self.retargeter.step(frame.t_s, pos, valid, com_m, self.chair.at(frame.t_s))
+        self.latency.ik.append(result.ik.seconds)
+        self.infeasible += not result.ik.feasible
+        self.player.push(result.q, not result.seated)
+        now = time.monotonic()
+        if self.pacer.due(now):
+            sent = self.pull_and_send()
+            if sent is not None:
+                self.pacer.sent(now)
+                self.latency.command(frame.received_s, ready, sent)
+        self.processed += 1
+        self.last_frame_s = time.monotonic()
+        return result.q
+
+    def pull_and_send(self) -> float | None:
+        """Send the plan's next command (corrected by the COM feedback), if it has one; returns when it went."""
+        cmd = self.player.pull()
+        if cmd is None:
+            return None
+        offset = None
+        if self.stabiliser is not None:
+            q_measured = self.measured_q()
+            self.state_stale += q_measured is None and cmd.on_feet
+            fix = self.stabiliser.correct(cmd.q, cmd.com, q_measured, cmd.on_feet, 1.0 / self.cfg.rate_hz)
+            cmd = Command(cmd.t_plan_s, fix.q, cmd.v, cmd.a, cmd.time_scale, cmd.com, cmd.zmp, cmd.margin_m,
+                          cmd.on_feet)
+            offset = fix.offset_m
+            self.feedback_max_m = max(self.feedback_max_m, float(np.abs(offset).max()))
+        return self.send(cmd, offset)
+
+    def tick(self, now_s: float) -> bool:
+        """The timer: keep commands at the mocap rate when frames are late; after the markers stop, close the plan
+        and play the rest. Returns True once the whole plan has been played."""
+        if self.player is None:
+            return False
+        if self.pacer.late(now_s) and not self.player.done and self.pull_and_send() is not None:
+            self.pacer.sent_late()
+        if self.frames or now_s - self.last_frame_s < 3.0 * self.pacer.period_s:
+            return False
+        if not self.player.finished:
+            self.player.close()
+        return self.player.done
+
+    def figures(self) -> dict[str, str]:
+        """The run's figures as text, for the node's status and summary line."""
+        feedback = "off" if not self.cfg.com_feedback else (
+            f"largest shift {self.feedback_max_m * 100:.1f} cm; {self.state_stale} on-feet commands without a "
+            "recent robot state")
+        return {"frames": str(self.processed), "infeasible_frames": str(self.infeasible),
+                "skipped_frames": str(self.skipped),
+                "time_scale": f"{self.player.time_scale:.2f}" if self.player else "nan",
+                **self.latency.figures(), "com_feedback": feedback}
+
+
+def summary_line(f: dict[str, str]) -> str:
+    """One line of a run's :meth:`LiveRetargeting.figures` (the node prints it when it stops)."""
+    return (f"{f['frames']} frames, {f['infeasible_frames']} infeasible, {f['skipped_frames']} without a human COM; "
+            f"time scale {f['time_scale']}; IK p50 {f['ik_p50_ms']} ms p99 {f['ik_p99_ms']} ms; marker->command "
+            f"latency p50 {f['latency_p50_ms']} ms p99 {f['latency_p99_ms']} ms (waiting for the human COM "
+            f"included); COM->command p50 {f['own_latency_p50_ms']} ms p99 {f['own_latency_p99_ms']} ms; "
+            f"marker->command with the COM stream in step ({f['in_step_frames']} frames) p50 "
+            f"{f['in_step_latency_p50_ms']} ms p99 {f['in_step_latency_p99_ms']} ms; scheduling "
+            f"{f.get('scheduling', '?')}; COM feedback {f['com_feedback']}")

@@ -1,0 +1,91 @@
+"""sit2stand.retarget.pacing: COM by stamp, command pacing and latency accounting of the live retargeter."""
+
+import numpy as np
+import pytest
+
+from sit2stand.retarget.pacing import (ChairForceTrack, CommandPacer, HumanComTrack, LatencyLog, LiveConfig,
+                                       LiveRetargeting, MarkerFrame, percentile_text, summary_line)
+
+
+def test_a_frame_uses_its_own_com_estimate():
+    track = HumanComTrack(com_wait_s=0.03)
+    track.add(1.00, np.array([0.1, 0.0, 0.8]), np.zeros(3), True)
+    track.add(1.01, np.array([0.2, 0.0, 0.8]), np.zeros(3), True)
+    assert track.at(1.00) == pytest.approx([0.1, 0.0, 0.8])
+    assert track.at(1.01) == pytest.approx([0.2, 0.0, 0.8])
+
+
+def test_between_two_estimates_the_com_is_interpolated():
+    track = HumanComTrack()
+    track.add(1.00, np.array([0.0, 0.0, 0.8]), np.zeros(3), True)
+    track.add(1.02, np.array([0.2, 0.0, 0.8]), np.zeros(3), True)
+    assert track.at(1.01) == pytest.approx([0.1, 0.0, 0.8])
+
+
+def test_after_the_newest_estimate_it_moves_on_by_its_velocity_until_too_old():
+    track = HumanComTrack(com_wait_s=0.03)
+    track.add(1.00, np.array([0.0, 0.0, 0.8]), np.array([1.0, 0.0, 0.0]), True)
+    assert track.at(1.02) == pytest.approx([0.02, 0.0, 0.8])
+    assert track.at(1.05) is None, "an estimate older than com_wait_s must make the frame wait"
+
+
+def test_invalid_estimates_are_counted_and_left_out():
+    track = HumanComTrack()
+    track.add(1.00, np.array([np.nan, 0.0, 0.8]), np.zeros(3), True)
+    track.add(1.01, np.array([0.0, 0.0, 0.8]), np.zeros(3), False)
+    assert track.invalid == 2 and not track.samples
+    assert not track.began_after(0.5)
+    track.add(1.02, np.array([0.0, 0.0, 0.8]), np.zeros(3), True)
+    assert track.began_after(1.0) and not track.began_after(1.02)
+
+
+def test_chair_force_is_the_latest_sample_at_or_before_the_frame():
+    chair = ChairForceTrack()
+    assert chair.at(1.0) is None, "no chair plate: no force"
+    chair.add(1.000, 400.0)
+    chair.add(1.001, 300.0)
+    assert chair.at(0.5) == 400.0 and chair.at(1.0005) == 400.0 and chair.at(2.0) == 300.0
+
+
+def test_a_burst_of_frames_sends_one_command_per_period():
+    pacer = CommandPacer(rate_hz=100.0)
+    sent = 0
+    for _ in range(10):                    # ten frames arrive at once
+        if pacer.due(5.0):
+            pacer.sent(5.0)
+            sent += 1
+    assert sent == 1
+    assert not pacer.due(5.004) and pacer.due(5.006)
+
+
+def test_the_timer_catches_up_when_frames_are_late():
+    pacer = CommandPacer(rate_hz=100.0)
+    assert not pacer.late(1.0), "nothing sent yet: nothing overdue"
+    pacer.sent(1.0)
+    assert not pacer.late(1.012) and pacer.late(1.016)
+    pacer.sent_late()
+    assert pacer.next_due_s == pytest.approx(1.02)
+
+
+def test_latency_log_separates_waiting_for_the_com_from_the_retargeters_own_share():
+    log = LatencyLog(in_step_s=0.02)
+    log.command(received_s=0.0, ready_s=0.001, sent_s=0.003)    # COM in step
+    log.command(received_s=1.0, ready_s=1.05, sent_s=1.052)     # waited 50 ms for its COM
+    f = log.figures()
+    assert f["in_step_frames"] == "1"
+    assert float(f["latency_p99_ms"]) == pytest.approx(3 + 0.99 * 49, abs=0.01)
+    assert float(f["own_latency_p50_ms"]) == pytest.approx(2.0, abs=0.01)
+    assert f["ik_p50_ms"] == "nan"
+    assert percentile_text([0.001, 0.003], 50) == "2.00"
+
+
+def test_frames_before_the_com_stream_began_are_dropped_and_counted():
+    live = LiveRetargeting(LiveConfig(), send=lambda cmd, offset: 0.0, measured_q=lambda: None)
+    for t in (0.98, 0.99, 1.00):
+        live.frames.append(MarkerFrame(t, ["LASI"], np.zeros((1, 3)), np.ones(1, bool), 0.0))
+    assert live.next_ready() is None, "no COM yet: wait"
+    live.coms.add(1.00, np.array([0.0, 0.0, 0.8]), np.zeros(3), True)
+    frame, com = live.next_ready()
+    assert frame.t_s == 1.00 and live.skipped == 2
+    assert com == pytest.approx([0.0, 0.0, 0.8])
+    assert "2 without a human COM" in summary_line(live.figures())
