@@ -6,7 +6,7 @@ PY    := $(VENV)/bin/python
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export RCUTILS_COLORIZED_OUTPUT ?= 0
 
-.PHONY: setup demo test test-fast bench bench-gap bench-retarget lock clean
+.PHONY: setup demo test test-fast lint bench bench-gap bench-retarget lock clean
 
 setup:            ## create .venv (pinned wheels, ROS 2 Jazzy), build msgs/, install src/ (idempotent)
 	@ros_ws/bootstrap.sh
@@ -14,8 +14,11 @@ setup:            ## create .venv (pinned wheels, ROS 2 Jazzy), build msgs/, ins
 demo: setup       ## the main job on the shipped demonstration (writes runs/demo/)
 	@$(PY) -m sit2stand.demo --out runs/demo
 
-test: setup       ## the whole test suite: unit tests and graph tests with real node processes
+test: setup lint  ## lint, then the whole test suite: unit tests and graph tests with real node processes
 	@$(PY) -m pytest -q tests
+
+lint: setup       ## ruff (ruff.toml): zero findings
+	@$(VENV)/bin/ruff check
 
 test-fast: setup  ## unit tests only (no node processes)
 	@$(PY) -m pytest -q tests -m "not graph"

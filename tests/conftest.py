@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from sit2stand.data import folder
+from sit2stand.io.c3d import read_c3d, write_trial_bag
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL = (ROOT / ".." / "shared" / "data" / "real").resolve()
@@ -100,7 +101,6 @@ def run_node(tmp_path, ros_env):
 @pytest.fixture(scope="session")
 def sts_bag(tmp_path_factory) -> Path:
     """../shared/data/real/sts_child_vicon_01.c3d imported into a bag (once per session)."""
-    from sit2stand.io.c3d import read_c3d, write_trial_bag
 
     src = real_file("sts_child_vicon_01.c3d")
     out = tmp_path_factory.mktemp("imported") / "sts_child"

@@ -1,18 +1,30 @@
 """sit2stand.io.bag: bags we write read back (rosbags and mcap-ros2), follow rosbag2's layout, and fail clearly."""
 
 import itertools
+import json
 import math
 import os
 import signal
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from mcap.reader import make_reader
+from mcap.records import Chunk, Message
+from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap_ros2.decoder import DecoderFactory
+from rclpy.serialization import deserialize_message
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from sit2stand.io import messages as M
-from sit2stand.io.bag import BagError, BagReader, BagWriter, bag_info, recover_bag
+from sit2stand.io.bag import BagError, BagReader, BagWriter, bag_info, merge_bags
+from sit2stand.io.recover import recover_bag
 from sit2stand.io.topics import MARKERS_TOPIC, MOCAP_TYPE, PLATE_TYPE, plate_topic
 from sit2stand.io.typestore import typestore
+from sit2stand_msgs.msg import ForcePlateSample
 
 
 def write_demo_bag(path, n=50):
@@ -46,8 +58,6 @@ def test_round_trip_values_through_rosbags(tmp_path):
 
 
 def test_bag_reads_back_with_mcap_ros2(tmp_path):
-    from mcap.reader import make_reader
-    from mcap_ros2.decoder import DecoderFactory
 
     bag = write_demo_bag(tmp_path / "b")
     with open(bag / "b.mcap", "rb") as f:
@@ -77,9 +87,6 @@ def test_metadata_follows_rosbag2_version_9(tmp_path):
 
 
 def test_rosidl_and_rosbags_agree_on_our_type_hashes():
-    import json
-    import sys
-    from pathlib import Path
 
     share = Path(sys.prefix) / "share" / "sit2stand_msgs" / "msg"
     if not share.is_dir():
@@ -163,8 +170,6 @@ def test_recover_a_cut_in_the_middle_of_a_chunk(tmp_path):
 
 
 def test_unknown_type_in_a_foreign_bag_reads_as_bytes_and_deserializes_from_its_own_definition(tmp_path):
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     store = get_typestore(Stores.ROS2_JAZZY)
     store.register(get_types_from_msg("float64 pressure_pa\nstring site", "lab_msgs/msg/Barometer"))
@@ -178,7 +183,6 @@ def test_unknown_type_in_a_foreign_bag_reads_as_bytes_and_deserializes_from_its_
 
 
 def test_merge_puts_two_bags_in_time_order_and_keeps_the_first_bags_metadata(tmp_path):
-    from sit2stand.io.bag import merge_bags
 
     a, b = tmp_path / "a", tmp_path / "b"
     store = typestore().types
@@ -208,8 +212,6 @@ def test_plate_sample_read_from_cdr_bytes(frame_id, plate, little_endian):
     assert t_s == M.stamp_ns(msg.header) * 1e-9
     assert wrench == [1.5, -2.0, 700.25, 3.0, 4.0, -5.0]
     # and as rclpy itself would build it from the same bytes
-    from rclpy.serialization import deserialize_message
-    from sit2stand_msgs.msg import ForcePlateSample
 
     if little_endian:
         ros = deserialize_message(bytes(data), ForcePlateSample)
@@ -234,7 +236,6 @@ def float_bag(path, n=300, flush_every=100):
 
 def chunk_indexes(mcap_file):
     """The chunk indexes of an .mcap's summary, in file order."""
-    from mcap.reader import make_reader
 
     with open(mcap_file, "rb") as f:
         return sorted(make_reader(f).get_summary().chunk_indexes, key=lambda c: c.chunk_start_offset)
@@ -243,8 +244,6 @@ def chunk_indexes(mcap_file):
 def order_problems(mcap_file):
     """What the MCAP CLI's ``doctor`` counts here, in file order: messages whose log time is below the latest one
     before them, pairs of consecutive chunks that overlap in time, chunks without a CRC (a wrong CRC raises)."""
-    from mcap.records import Chunk, Message
-    from mcap.stream_reader import StreamReader, breakup_chunk
 
     late = crcless = 0
     latest = -1
@@ -304,7 +303,6 @@ def test_a_message_older_than_the_last_flush_is_kept_and_counted(tmp_path):
 
 @pytest.mark.parametrize("name", ["natural", "elderly"])
 def test_shipped_bags_are_in_log_time_order_and_match_their_metadata(name):
-    from rosbags.rosbag2 import Reader
 
     bag = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "bags", name)
     mcap_file = os.path.join(bag, f"{name}.mcap")
@@ -321,7 +319,6 @@ def test_shipped_bags_are_in_log_time_order_and_match_their_metadata(name):
 
 
 def test_metadata_and_the_mcap_name_jazzy_as_the_ros_distro(tmp_path):
-    from mcap.reader import make_reader
 
     bag = write_demo_bag(tmp_path / "b")
     assert yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]["ros_distro"] == "jazzy"

@@ -3,8 +3,7 @@
 import numpy as np
 import pytest
 
-from sit2stand.io.forceplate import (center_of_pressure, combined_cop, plate_surface, point_in_polygon,
-                                     shift_moment)
+from sit2stand.io.forceplate import center_of_pressure, combined_cop, plate_surface, point_in_polygon, shift_moment
 
 Z = np.array([0.0, 0.0, 1.0])
 

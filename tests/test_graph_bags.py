@@ -7,6 +7,7 @@ per topic); the recorder survives SIGKILL up to its last flush; bad bags make th
 from __future__ import annotations
 
 import dataclasses
+import shutil
 import signal
 import subprocess
 import sys
@@ -14,10 +15,18 @@ import time
 
 import numpy as np
 import pytest
-
+import rclpy
 from conftest import GRAPHS, real_file
-from sit2stand.io.bag import BagReader, BagWriter, recover_bag
+from diagnostic_msgs.msg import DiagnosticStatus
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosgraph_msgs.msg import Clock
+from std_srvs.srv import SetBool
+
+from sit2stand.io.bag import BagReader, BagWriter
 from sit2stand.io.c3d import read_c3d, write_trial_bag
+from sit2stand.io.recover import recover_bag
+from sit2stand_msgs.msg import MocapFrame
 
 pytestmark = pytest.mark.graph
 
@@ -130,11 +139,6 @@ def test_recorder_closes_cleanly_on_sigterm_and_picks_up_late_topics(sts_bag, ro
 
 
 def test_pause_resume_progress_and_clock(sts_bag, ros_env, tmp_path, run_node):
-    import rclpy
-    from diagnostic_msgs.msg import DiagnosticStatus
-    from rosgraph_msgs.msg import Clock
-    from sit2stand_msgs.msg import MocapFrame
-    from std_srvs.srv import SetBool
 
     play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={sts_bag}", "-p", "start_paused:=true",
                     "-p", "topics:=['/mocap/markers']", "-p", "at_end:=idle")
@@ -201,7 +205,6 @@ def replayer_cli(ros_env, *params):
 
 
 def test_replayer_rejects_a_truncated_bag(sts_bag, ros_env, tmp_path):
-    import shutil
 
     bad = tmp_path / "cut"
     shutil.copytree(sts_bag, bad)
@@ -213,8 +216,6 @@ def test_replayer_rejects_a_truncated_bag(sts_bag, ros_env, tmp_path):
 
 
 def test_replayer_rejects_a_bag_with_an_unknown_type(ros_env, tmp_path):
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     store = get_typestore(Stores.ROS2_JAZZY)
     store.register(get_types_from_msg("float64 pressure_pa", "lab_msgs/msg/Barometer"))

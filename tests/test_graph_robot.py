@@ -3,15 +3,16 @@ from another process."""
 
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
-
+import rclpy
 from conftest import GRAPHS
+
 from sit2stand.io.bag import BagReader
 from sit2stand.robot.model import PlantConfig
 from sit2stand.robot.postures import collect_postures
+from sit2stand_msgs.srv import IdentifyCom
 
 pytestmark = pytest.mark.graph
 
@@ -42,8 +43,6 @@ def test_driver_in_a_graph_sits_still_on_the_chair(tmp_path, ros_env):
 
 
 def test_identification_service_called_from_another_process(tmp_path, ros_env, run_node):
-    import rclpy
-    from sit2stand_msgs.srv import IdentifyCom
 
     data = tmp_path / "postures"
     # the paper's protocol, arms still: planar5 lumps the arms into its rigid torso

@@ -1,12 +1,22 @@
 """sit2stand.robot.identify: the hidden mass of the plant is found from static postures; bad data fails clearly."""
 
 import numpy as np
+import pinocchio as pin
 import pytest
 import yaml
 
-from sit2stand.robot.identify import IdentificationError, identify, read_postures, write_yaml
+from sit2stand.io.bag import BagReader, BagWriter
+from sit2stand.robot.identify import (
+    IdentificationError,
+    controller_model,
+    identify,
+    read_postures,
+    with_parameters,
+    write_yaml,
+)
 from sit2stand.robot.model import PlantConfig
-from sit2stand.robot.postures import collect_postures
+from sit2stand.robot.plant import Plant
+from sit2stand.robot.postures import collect_postures, standing_qpos
 
 TRUE_MASS = 90.272 + 26.0     # CAD + the default plant's hidden masses
 
@@ -32,11 +42,7 @@ def test_identification_recovers_the_hidden_mass_and_predicts_the_com(postures, 
 
 
 def test_the_identified_com_is_lower_and_further_back_than_cads(postures):
-    import pinocchio as pin
 
-    from sit2stand.robot.identify import controller_model, with_parameters
-    from sit2stand.robot.plant import Plant
-    from sit2stand.robot.postures import standing_qpos
 
     result = identify(postures, "full")
     plant = Plant(PlantConfig.load("default"), with_chair=False)
@@ -49,19 +55,16 @@ def test_the_identified_com_is_lower_and_further_back_than_cads(postures):
 
 
 def test_parameters_yaml_loads_into_the_controller(postures, tmp_path):
-    from sit2stand.robot.plant import Plant
 
     result = identify(postures, "full")
     write_yaml(result, tmp_path / "p.yaml")
     doc = yaml.safe_load((tmp_path / "p.yaml").read_text())
     assert doc["eval_rms_m"] == pytest.approx(result.eval_rms_m) and "links" in doc
     plant = Plant(PlantConfig.load("default"), controller_params=doc["links"], with_chair=False)
-    import pinocchio as pin
     assert pin.computeTotalMass(plant.ctrl) == pytest.approx(TRUE_MASS, rel=0.02)
 
 
 def test_too_few_or_identical_postures_are_refused_with_rank_and_condition(postures, tmp_path):
-    from sit2stand.io.bag import BagReader, BagWriter
 
     data = read_postures(postures)
     with pytest.raises(IdentificationError, match="need at least 6"):
@@ -82,7 +85,6 @@ def test_too_few_or_identical_postures_are_refused_with_rank_and_condition(postu
 
 
 def keep_first(src_path, dst_path, n):
-    from sit2stand.io.bag import BagReader, BagWriter
 
     with BagReader(src_path) as src, BagWriter(dst_path) as dst:
         counts = {}

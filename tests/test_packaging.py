@@ -12,11 +12,11 @@ import zipfile
 from pathlib import Path
 
 import pytest
-
 from conftest import ROOT
+
 from sit2stand.data import DataFileNotFound, folder, graph_path, names, params_path, plant_path
 from sit2stand.errors import Sit2StandError
-from sit2stand.launch import OUR_NODES
+from sit2stand.launch import OUR_NODES, load_graph
 
 SRC = ROOT / "src"
 COPY_IGNORE = shutil.ignore_patterns("*.egg-info", "__pycache__", "build", "dist")
@@ -137,7 +137,6 @@ def test_packaged_files_are_found_by_name_or_path(tmp_path):
 
 
 def test_packaged_graphs_name_their_parameter_files_and_plant():
-    from sit2stand.launch import load_graph
 
     for name in names("graphs"):
         text = graph_path(name).read_text()

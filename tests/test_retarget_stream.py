@@ -7,7 +7,7 @@ import pinocchio as pin
 import pytest
 
 from sit2stand.human.offline import read_trial
-from sit2stand.retarget.feasibility import plan_zmp, zmp_at_scale
+from sit2stand.retarget.feasibility import plan_dynamics, plan_zmp, support_margin, zmp_at_scale
 from sit2stand.retarget.player import PlanPlayer
 from sit2stand.retarget.stream import Retargeter, retarget_sequence, robot_setup
 
@@ -91,7 +91,6 @@ def test_the_player_retimes_until_the_zmp_keeps_its_margin(retargeted, elderly):
     qs = np.array([f.q for f in frames])
     feet = np.array([not f.seated for f in frames])
     zmp, _ = plan_zmp(rt.model, qs, 0.01)
-    from sit2stand.retarget.feasibility import support_margin
 
     assert support_margin(zmp[feet, :2], robot.support_xy).min() < 0.06
     for c in cmds:
@@ -103,9 +102,8 @@ def test_zmp_at_scale_equals_the_zmp_of_the_slowed_plan():
     model = robot.model
     rng = np.random.default_rng(0)
     q0 = robot.q_seated
-    qs = np.array([pin.integrate(model, q0, np.r_[np.zeros(6), 0.2 * np.sin(0.05 * k + rng.uniform(0, 1, model.nv - 6))])
-                   for k in range(60)])
-    from sit2stand.retarget.feasibility import plan_dynamics
+    wiggle = [np.r_[np.zeros(6), 0.2 * np.sin(0.05 * k + rng.uniform(0, 1, model.nv - 6))] for k in range(60)]
+    qs = np.array([pin.integrate(model, q0, dq) for dq in wiggle])
 
     com, acc, dl = plan_dynamics(model, qs, 0.01)
     mass = float(pin.computeTotalMass(model))

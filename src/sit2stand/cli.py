@@ -171,7 +171,7 @@ def _bag_merge(args: argparse.Namespace) -> int:
 
 
 def _bag_recover(args: argparse.Namespace) -> int:
-    from .io.bag import recover_bag
+    from .io.recover import recover_bag
 
     print(recover_bag(args.dir, args.out))
     return 0

@@ -23,7 +23,7 @@ from ..io.topics import (ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_FT_LEFT_T
                          ROBOT_JOINT_COMMAND_TOPIC, ROBOT_JOINT_STATES_TOPIC, ft_topic)
 from ..dynamics import savgol_series, smooth_motion
 from ..io.bag import BagError, BagReader
-from ..io.messages import (stamp_ns)
+from ..io.messages import stamp_ns
 from ..robot.model import SIDES
 
 STATIC_PERIOD_S = 0.2     # samples further apart than this are held postures, not a run
@@ -68,6 +68,7 @@ class Recording:
 
     @property
     def feet_force_z_n(self) -> np.ndarray:
+        """(N,) total vertical ground reaction on the feet [N]."""
         return sum(self.wrench[s][:, 2] for s in SIDES)
 
     def subset(self, keep: np.ndarray) -> Recording:
@@ -79,6 +80,7 @@ class Recording:
 
 
 def _by_stamp(msgs: list[tuple[int, object]]) -> dict[int, object]:
+    """Messages by their header stamp [ns]."""
     return {stamp_ns(m.header): m for _, m in msgs}
 
 
@@ -113,10 +115,48 @@ def _join(js: dict, ft: dict, base: dict, cop: dict):
     return stamps, {"left": remapped[0], "right": remapped[1]}, remapped[2], remapped[3]
 
 
+@dataclass
+class _Samples:
+    """The joined samples of a recording, before smoothing (plant joint order; SI units)."""
+
+    q: np.ndarray                       # (N, n) [rad]
+    qd: np.ndarray                      # (N, n) [rad/s], zero where not recorded
+    tau: np.ndarray                     # (N, n) [N m]
+    wrench: dict[str, np.ndarray]       # side -> (N, 6) [N, N m]
+    base_pose: np.ndarray               # (N, 7) x y z qw qx qy qz
+    cop: np.ndarray                     # (N, 3) [m], NaN where not recorded
+
+
 def read_recording(path: str | Path, model, rate_hz: float = 100.0, window_s: float = 0.15) -> Recording:
     """Read a robot bag (see the module docstring) at most ``rate_hz``; ``model`` is the Pinocchio robot model used to
     differentiate the base motion. Raises :class:`RecordingError` naming the bag and topic on missing or bad data."""
     path = Path(path)
+    js, ft, base, cop, cmd_msgs = _read_topics(path)
+    stamps, ft, base, cop = _join(js, ft, base, cop)
+    if len(stamps) < 5:
+        raise RecordingError(f"{path}: only {len(stamps)} samples have joint states, both feet's wrenches and a base "
+                             "pose with the same stamp (need 5)")
+    names = list(js[stamps[0]].name)
+    stamps, t, static = _time_base(stamps, rate_hz)
+    s = _sample_arrays(path, names, stamps, js, ft, base, cop)
+    ok = _finite_samples(path, s)
+    notes = []
+    if not ok.all():
+        notes.append(f"{int((~ok).sum())} samples with NaN dropped")
+    rec = Recording(str(path), names, t[ok], s.q[ok], s.qd[ok], np.zeros_like(s.q[ok]), s.tau[ok],
+                    {side: w[ok] for side, w in s.wrench.items()}, s.cop[ok], s.base_pose[ok],
+                    np.zeros((ok.sum(), 6)), np.zeros((ok.sum(), 6)), static, notes=notes)
+    if not static:
+        _smooth(rec, model, window_s)
+    if cmd_msgs:
+        rec.commands = _commands(cmd_msgs, names, stamps[0], path)
+    if len(names) != model.nv - 6:
+        raise RecordingError(f"{path}: /robot/joint_states has {len(names)} joints, the model {model.nv - 6}")
+    return rec
+
+
+def _read_topics(path: Path) -> tuple[dict, dict, dict, dict, list]:
+    """Joint states, feet wrenches (per side), base poses and COPs by stamp [ns], and the command messages."""
     need = [ROBOT_JOINT_STATES_TOPIC, ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC, ROBOT_BASE_POSE_TOPIC]
     try:
         reader = BagReader(path)
@@ -132,18 +172,23 @@ def read_recording(path: str | Path, model, rate_hz: float = 100.0, window_s: fl
         base = _by_stamp(bag.read(ROBOT_BASE_POSE_TOPIC))
         cop = _by_stamp(bag.read(ROBOT_COP_TOPIC)) if ROBOT_COP_TOPIC in topics else {}
         cmd_msgs = bag.read(ROBOT_JOINT_COMMAND_TOPIC) if ROBOT_JOINT_COMMAND_TOPIC in topics else []
-    stamps, ft, base, cop = _join(js, ft, base, cop)
-    if len(stamps) < 5:
-        raise RecordingError(f"{path}: only {len(stamps)} samples have joint states, both feet's wrenches and a base "
-                             "pose with the same stamp (need 5)")
-    first = js[stamps[0]]
-    names = list(first.name)
+    return js, ft, base, cop, cmd_msgs
+
+
+def _time_base(stamps: list[int], rate_hz: float) -> tuple[list[int], np.ndarray, bool]:
+    """A run's stamps thinned to at most ``rate_hz``, their times [s] from the first, and whether they are postures."""
     t = (np.array(stamps, np.int64) - stamps[0]) * 1e-9
     static = bool(np.median(np.diff(t)) > STATIC_PERIOD_S)
     if not static:     # thin to at most rate_hz
         step = max(1, int(round(1.0 / (rate_hz * float(np.median(np.diff(t)))))))
         stamps = stamps[::step]
         t = t[::step]
+    return stamps, t, static
+
+
+def _sample_arrays(path: Path, names: list[str], stamps: list[int], js: dict, ft: dict, base: dict,
+                   cop: dict) -> _Samples:
+    """The messages of each stamp as arrays; RecordingError where the efforts are not one per joint."""
     q = np.array([js[s].position for s in stamps], float)
     tau = np.array([js[s].effort for s in stamps], float)
     if tau.shape != q.shape:
@@ -156,27 +201,18 @@ def read_recording(path: str | Path, model, rate_hz: float = 100.0, window_s: fl
                    m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z]
                   for m in (base[s] for s in stamps)])
     cp = np.array([[cop[s].point.x, cop[s].point.y, cop[s].point.z] if s in cop else [np.nan] * 3 for s in stamps])
-    for label, arr in (("/robot/joint_states position", q), ("/robot/joint_states effort", tau),
-                       (ROBOT_BASE_POSE_TOPIC, b), *((ft_topic(s), w) for s, w in wrench.items())):
+    return _Samples(q, qd, tau, wrench, b, cp)
+
+
+def _finite_samples(path: Path, s: _Samples) -> np.ndarray:
+    """(N,) samples finite in every measured quantity; RecordingError naming a quantity with no finite sample."""
+    for label, arr in (("/robot/joint_states position", s.q), ("/robot/joint_states effort", s.tau),
+                       (ROBOT_BASE_POSE_TOPIC, s.base_pose), *((ft_topic(side), w) for side, w in s.wrench.items())):
         bad = ~np.all(np.isfinite(arr), axis=1)
         if bad.all():
             raise RecordingError(f"{path}: {label}: no finite sample")
-    ok = np.all(np.isfinite(q), 1) & np.all(np.isfinite(tau), 1) & np.all(np.isfinite(b), 1) & \
-        np.all(np.isfinite(wrench["left"]), 1) & np.all(np.isfinite(wrench["right"]), 1)
-    notes = []
-    if not ok.all():
-        notes.append(f"{int((~ok).sum())} samples with NaN dropped")
-    n = len(names)
-    rec = Recording(str(path), names, t[ok], q[ok], qd[ok], np.zeros_like(q[ok]), tau[ok],
-                    {s: w[ok] for s, w in wrench.items()}, cp[ok], b[ok], np.zeros((ok.sum(), 6)),
-                    np.zeros((ok.sum(), 6)), static, notes=notes)
-    if not static:
-        _smooth(rec, model, window_s)
-    if cmd_msgs:
-        rec.commands = _commands(cmd_msgs, names, stamps[0], path)
-    if n != model.nv - 6:
-        raise RecordingError(f"{path}: /robot/joint_states has {n} joints, the model {model.nv - 6}")
-    return rec
+    return np.all(np.isfinite(s.q), 1) & np.all(np.isfinite(s.tau), 1) & np.all(np.isfinite(s.base_pose), 1) & \
+        np.all(np.isfinite(s.wrench["left"]), 1) & np.all(np.isfinite(s.wrench["right"]), 1)
 
 
 def _smooth(rec: Recording, model, window_s: float) -> None:
@@ -212,6 +248,7 @@ def _joint_index(model, names: list[str]) -> np.ndarray:
 
 
 def _commands(msgs, names: list[str], t0_ns: int, path: Path) -> Commands | None:
+    """The recorded joint commands (held per joint between messages) in ``names`` order; None if there are none."""
     index = {n: i for i, n in enumerate(names)}
     ts, qs, qds, qdds = [], [], [], []
     q = np.full(len(names), np.nan)

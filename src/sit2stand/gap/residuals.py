@@ -8,8 +8,9 @@ row by row along the measured state (q, v, a):
 e is zero, up to noise, when the model is right. Its rows are the **channels**: the six base rows (the whole body's
 external wrench: expressed here in world axes about the midpoint of the soles, as force [N] and moment [N m]) and one
 row per actuated joint [N m]. While the robot sits, the seat pushes on the pelvis and thighs unmeasured: the base
-rows and the hip rows (``leg_*_1..3``) are then excluded; the knees, ankles, torso, arms and head still hold. A joint at its position
-limit is held by its hard stop, whose torque the joint's sensor does not measure: its row is excluded there.
+rows and the hip rows (``leg_*_1..3``) are then excluded; the knees, ankles, torso, arms and head still hold. A
+joint at its position limit is held by its hard stop, whose torque the joint's sensor does not measure: its row is
+excluded there.
 
 Every candidate physical effect enters e linearly, to first order, through a **signature** (columns d e / d theta):
 
@@ -64,6 +65,7 @@ class Evaluation:
 
     @property
     def n_joints(self) -> int:
+        """Number of actuated joints n."""
         return self.tau_model.shape[1]
 
     def add_control(self, law: np.ndarray, delay: np.ndarray, ok: np.ndarray, tau_meas: np.ndarray,
@@ -80,6 +82,7 @@ class Evaluation:
 
     @property
     def joint_channels(self) -> slice:
+        """The channels after the six base rows (joint torques, then controller channels)."""
         return slice(6, len(self.channels))
 
 
@@ -93,6 +96,7 @@ def body_link_names(model: pin.Model) -> list[str]:
 
 
 def _pin_q(model: pin.Model, rec: Recording, k: int, idx_v: np.ndarray) -> np.ndarray:
+    """Pinocchio configuration of sample ``k`` (base quaternion reordered to x, y, z, w)."""
     q = pin.neutral(model)
     b = rec.base_pose[k]
     q[:3] = b[:3]
@@ -109,6 +113,7 @@ class _Rows:
         self.soles = {s: model.getFrameId(f"sole_{s}") for s in SIDES}
 
     def residual(self, q, v, a, tau_full, wrench: dict[str, np.ndarray]) -> tuple[np.ndarray, dict]:
+        """e = tau + sum_feet J^T w - RNEA(q, v, a) (v order) and the soles' Jacobians (side -> 6 x nv)."""
         m, d = self.model, self.data
         pin.computeJointJacobians(m, d, q)
         pin.updateFramePlacements(m, d)
@@ -130,6 +135,36 @@ def base_to_world(q: np.ndarray, centre: np.ndarray) -> np.ndarray:
     return T
 
 
+@dataclass
+class _Sample:
+    """One recorded sample in the model's terms: q, v, a (Pinocchio order), joint torques [N m] (v order), and the
+    feet's wrenches (side -> [N, N m])."""
+
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    tau_full: np.ndarray
+    wrench: dict[str, np.ndarray]
+
+
+def _sample(model: pin.Model, rec: Recording, k: int, idx_v: np.ndarray) -> _Sample:
+    """Sample ``k`` of ``rec`` as Pinocchio state, torques and wrenches."""
+    q = _pin_q(model, rec, k, idx_v)
+    v = np.concatenate([rec.base_v[k], np.zeros(model.nv - 6)])
+    a = np.concatenate([rec.base_a[k], np.zeros(model.nv - 6)])
+    v[idx_v], a[idx_v] = rec.qd[k], rec.qdd[k]
+    tau_full = np.zeros(model.nv)
+    tau_full[idx_v] = rec.tau[k]
+    return _Sample(q, v, a, tau_full, {s: rec.wrench[s][k] for s in SIDES})
+
+
+def _to_channels(x: np.ndarray, perm: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Rows of the model's v order (leading axis) -> channel order, base rows to world about the centre (T)."""
+    out = x[perm].copy()
+    out[:6] = np.tensordot(T, x[:6], axes=(1, 0))
+    return out
+
+
 def evaluate(model: pin.Model, rec: Recording, seated: np.ndarray | None = None,
              offsets: bool = True) -> Evaluation:
     """Evaluate ``model`` along ``rec`` (see the module docstring); ``seated`` (N,) marks samples with the seat
@@ -149,55 +184,57 @@ def evaluate(model: pin.Model, rec: Recording, seated: np.ndarray | None = None,
     centre = np.zeros((N, 3))
     sole = {s: np.zeros((N, 3)) for s in SIDES}
     for k in range(N):
-        q = _pin_q(model, rec, k, idx_v)
-        v = np.concatenate([rec.base_v[k], np.zeros(model.nv - 6)])
-        a = np.concatenate([rec.base_a[k], np.zeros(model.nv - 6)])
-        v[idx_v], a[idx_v] = rec.qd[k], rec.qdd[k]
-        tau_full = np.zeros(model.nv)
-        tau_full[idx_v] = rec.tau[k]
-        wrench = {s: rec.wrench[s][k] for s in SIDES}
-        r, J = rows.residual(q, v, a, tau_full, wrench)
+        smp = _sample(model, rec, k, idx_v)
+        r, J = rows.residual(smp.q, smp.v, smp.a, smp.tau_full, smp.wrench)
         for s in SIDES:
             sole[s][k] = rows.data.oMf[rows.soles[s]].translation
         centre[k] = 0.5 * (sole["left"][k] + sole["right"][k])
-        T = base_to_world(q, centre[k])
-
-        def channel(x: np.ndarray) -> np.ndarray:
-            """Rows of the model's v order (leading axis) -> channel order, base rows to world about the centre."""
-            out = x[perm].copy()
-            out[:6] = np.tensordot(T, x[:6], axes=(1, 0))
-            return out
-
-        e[k] = channel(r)
+        T = base_to_world(smp.q, centre[k])
+        e[k] = _to_channels(r, perm, T)
         tau_model[k] = rec.tau[k] - e[k, 6:]
-        Y = pin.computeJointTorqueRegressor(model, rows.data, q, v, a)
-        mass_cols[k] = channel(Y.reshape(model.nv, nb, 10)[:, :, :4])
+        Y = pin.computeJointTorqueRegressor(model, rows.data, smp.q, smp.v, smp.a)
+        mass_cols[k] = _to_channels(Y.reshape(model.nv, nb, 10)[:, :, :4], perm, T)
         for s in SIDES:
-            oMf = rows.data.oMf[rows.soles[s]]
-            R = oMf.rotation
-            lever = R @ np.array([0.0, 0.0, SOLE_OFFSET_M])     # sensor (ankle) minus sole, world axes
-            for c in range(6):
-                beta = np.zeros(6)
-                beta[c] = 1.0
-                df = -R @ beta[:3]
-                dt = -(R @ beta[3:] + np.cross(lever, R @ beta[:3]))
-                ft_cols[s][k, :, c] = channel(J[s].T @ np.concatenate([df, dt]))
+            _ft_bias_columns(rows, s, J[s], perm, T, ft_cols[s][k])
         if offsets:
-            for j in range(n):
-                qj = q.copy()
-                qj[idx_v[j] + 1] += FD_STEP_RAD
-                rj, _ = rows.residual(qj, v, a, tau_full, wrench)
-                offset_cols[k, :, j] = channel(rj - r) / FD_STEP_RAD
-            rows.residual(q, v, a, tau_full, wrench)     # leave the data at the measured state
-    valid = np.ones((N, C), bool)
+            _offset_columns(rows, smp, r, idx_v, perm, T, offset_cols[k])
+    channels = BASE_CHANNELS + [f"tau/{j}" for j in rec.joint_names]
+    return Evaluation(channels, e, _valid_rows(model, rec, idx_v, seated), tau_model, mass_cols, offset_cols, ft_cols,
+                      body_link_names(model), centre, sole)
+
+
+def _ft_bias_columns(rows: _Rows, side: str, J: np.ndarray, perm: np.ndarray, T: np.ndarray, out: np.ndarray) -> None:
+    """(C, 6) signature of a bias of the ``side`` F/T sensor (sensor axes, [N], [N m]) at this state, into out."""
+    R = rows.data.oMf[rows.soles[side]].rotation
+    lever = R @ np.array([0.0, 0.0, SOLE_OFFSET_M])     # sensor (ankle) minus sole, world axes
+    for c in range(6):
+        beta = np.zeros(6)
+        beta[c] = 1.0
+        df = -R @ beta[:3]
+        dt = -(R @ beta[3:] + np.cross(lever, R @ beta[:3]))
+        out[:, c] = _to_channels(J.T @ np.concatenate([df, dt]), perm, T)
+
+
+def _offset_columns(rows: _Rows, smp: _Sample, r: np.ndarray, idx_v: np.ndarray, perm: np.ndarray, T: np.ndarray,
+                    out: np.ndarray) -> None:
+    """(C, n) encoder-offset signature (d e / d q_j [per rad], finite differences) of the sample, into out."""
+    for j in range(len(idx_v)):
+        qj = smp.q.copy()
+        qj[idx_v[j] + 1] += FD_STEP_RAD
+        rj, _ = rows.residual(qj, smp.v, smp.a, smp.tau_full, smp.wrench)
+        out[:, j] = _to_channels(rj - r, perm, T) / FD_STEP_RAD
+    rows.residual(smp.q, smp.v, smp.a, smp.tau_full, smp.wrench)     # leave the data at the measured state
+
+
+def _valid_rows(model: pin.Model, rec: Recording, idx_v: np.ndarray, seated: np.ndarray | None) -> np.ndarray:
+    """(N, C) rows the measured contacts determine: not a joint at its limit, not base or hips while seated."""
+    valid = np.ones((len(rec), 6 + len(rec.joint_names)), bool)
     at_limit = joints_at_limit(model, rec, idx_v)
     valid[:, 6:] &= ~at_limit              # a hard stop's torque is not in the measured actuator torque
     if seated is not None and seated.any():
         hips = [6 + rec.joint_names.index(j) for j in SEATED_JOINTS if j in rec.joint_names]
         valid[np.ix_(seated, list(range(6)) + hips)] = False
-    channels = BASE_CHANNELS + [f"tau/{j}" for j in rec.joint_names]
-    return Evaluation(channels, e, valid, tau_model, mass_cols, offset_cols, ft_cols, body_link_names(model), centre,
-                      sole)
+    return valid
 
 
 def coulomb_signature(qd: np.ndarray, v0: float = COULOMB_V0_RADPS) -> np.ndarray:

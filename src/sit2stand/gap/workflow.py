@@ -128,15 +128,19 @@ class Dataset:
 
     @property
     def channels(self) -> list[str]:
+        """The residual channels (base rows, joint torques, controller channels)."""
         return self.evaluations[0].channels
 
     @property
     def joint_names(self) -> list[str]:
+        """The recordings' joints (plant order)."""
         return self.recordings[0].joint_names
 
 
 def load_dataset(bags: list[str | Path], model: pin.Model, rate_hz: float = 50.0, progress=None,
                  controller_params: dict | None = None) -> Dataset:
+    """Read each bag (what follows a fall left out), label its phases and evaluate ``model`` along it; controller
+    channels for all recordings when any has commands (``controller_params``: the controller's links, None: CAD)."""
     recs, evs, labels, events, notes = [], [], [], [], []
     for bag in bags:
         rec = read_recording(bag, model, rate_hz=rate_hz)
@@ -185,6 +189,7 @@ def fast_part_floor(e: np.ndarray, valid: np.ndarray, t_s: np.ndarray) -> np.nda
 
 # -- candidates ----------------------------------------------------------------------------------------------------------
 def moved_joints(ds: Dataset) -> np.ndarray:
+    """(n,) joints whose range over the data exceeds MOVED_RAD."""
     return np.max([np.ptp(r.q, axis=0) for r in ds.recordings], axis=0) > MOVED_RAD
 
 
@@ -223,6 +228,7 @@ def _stack(ds: Dataset, cols: list[np.ndarray]) -> np.ndarray:
 
 
 def _series_id(ds: Dataset) -> np.ndarray:
+    """Per stacked residual row, the id of its (recording, channel) series (time order within a series)."""
     ids = []
     for r, ev in enumerate(ds.evaluations):
         C = ev.e.shape[1]
@@ -272,6 +278,8 @@ def build_candidates(model: pin.Model, ds: Dataset) -> list[Candidate]:
 # -- the whole workflow ------------------------------------------------------------------------------------------
 @dataclass
 class GapResult:
+    """What the workflow found: floors, residual RMS before and after, the disagreements, the named effects."""
+
     model_source: str
     bags: list[str]
     channels: list[str]
@@ -293,10 +301,12 @@ class GapResult:
 
     @property
     def shrink(self) -> float:
+        """Share of the gap the named effects removed (1 - after / before)."""
         return 1.0 - self.gap_after / self.gap_before if self.gap_before > 0 else 0.0
 
 
 def _rms(e: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """(C,) RMS of each channel over its valid samples (NaN: none)."""
     return np.array([np.sqrt(np.mean(e[valid[:, c], c] ** 2)) if valid[:, c].any() else np.nan
                      for c in range(e.shape[1])])
 
@@ -410,55 +420,27 @@ def effect_columns(ds: Dataset, links: list[str], r: int, kind: str, location: s
     return joint_columns(rec, ev, kind, rec.joint_names.index(location))
 
 
+def _quiet(_msg: str) -> None:
+    """A progress callback that says nothing."""
+
+
 def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: float = 50.0,
         progress=None, controller: str | Path | None = None) -> GapResult:
     """The workflow on ``bags`` against the nominal model (see the module docstring). ``controller``: the link
     parameters the robot's controller ran with when the bags were recorded (the driver's ``controller_params``;
     None: CAD), for the controller channels; it is not the model under test."""
-    say = progress or (lambda _msg: None)
+    say = progress or _quiet
     model, source, known = load_nominal(model_path)
     if not bags:
         raise GapError("no measured bag given")
-    try:
-        ctrl_params = read_link_parameters(controller) if controller not in (None, "cad") else None
-    except (IdentificationError, OSError) as err:
-        raise GapError(f"{controller}: not a usable controller model: {err}") from None
-    ds = load_dataset(bags, model, rate_hz=rate_hz, progress=say, controller_params=ctrl_params)
+    ds = load_dataset(bags, model, rate_hz=rate_hz, progress=say, controller_params=_controller_params(controller))
     links = body_link_names(model)
-    for r, ev in enumerate(ds.evaluations):     # the model file's joint and sensor effects are part of the model
-        for eff in known:
-            theta = np.array([eff["value"] - 1.0 if eff["kind"] == "torque_gain" else eff["value"]])
-            ev.e -= np.tensordot(effect_columns(ds, links, r, eff["kind"], eff["location"]), theta, axes=(2, 0))
-    # noise floors: the residual's fast part (runs); for static postures, after all candidates at once
-    for rec, ev in zip(ds.recordings, ds.evaluations):
-        ds.floors.append(np.ones(ev.e.shape[1]) if rec.static else fast_part_floor(ev.e, ev.valid, rec.t_s))
-    for r, f in enumerate(ds.floors):
-        bad = ~np.isfinite(f) | (f <= 0)
-        f[bad] = np.nanmedian(f[~bad]) if (~bad).any() else 1.0
-        ds.floors[r] = np.maximum(f, 1e-3)
+    _subtract_known(ds, links, known)
+    _noise_floors(ds)
     say("  building the candidate effects")
     cands = build_candidates(model, ds)
     if any(r.static for r in ds.recordings):
-        X = np.hstack([c.X for c in cands])
-        y = _stack(ds, [ev.e[:, :, None] for ev in ds.evaluations])[:, 0]
-        theta, *_ = np.linalg.lstsq(X, y, rcond=1e-8)
-        res = y - X @ theta
-        i = 0
-        for r, (rec, ev) in enumerate(zip(ds.recordings, ds.evaluations)):
-            nrow = int(ev.valid.sum())
-            if rec.static:
-                part = res[i:i + nrow]
-                # rows are channel-major: rebuild per channel
-                k = 0
-                f = ds.floors[r].copy()
-                for c in range(ev.e.shape[1]):
-                    m = int(ev.valid[:, c].sum())
-                    x = part[k:k + m] * ds.floors[r][c]
-                    k += m
-                    if m >= 3:
-                        f[c] = max(1.4826 * np.median(np.abs(x - np.median(x))), 1e-3)
-                ds.floors[r] = f
-            i += nrow
+        _static_floors(ds, cands)
         cands = build_candidates(model, ds)
     y = _stack(ds, [ev.e[:, :, None] for ev in ds.evaluations])[:, 0]
     sid = _series_id(ds)
@@ -466,6 +448,7 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
     sel = select(y, cands, series_id=sid, noise_rss=float(len(y)), progress=say)
 
     def unweighted(r: int, cand: Candidate) -> np.ndarray:
+        """The candidate's signature on recording r, not divided by the noise floors."""
         return effect_columns(ds, links, r, cand.kind, cand.location)
 
     after = _after(ds, sel, unweighted)
@@ -477,21 +460,79 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
     pairs = [(d["recording"], ds.channels.index(d["channel"]), d["phase"]) for d in table if d["z"] >= SIGNIFICANT_Z]
     g0 = gap_size([ev.e for ev in ds.evaluations], ds, pairs)
     g1 = gap_size(after, ds, pairs)
+    return GapResult(source, [str(b) for b in bags], ds.channels, floors, rms_b, rms_a, table, sel,
+                     effects, _verdict(effects, table), _unexplained(ds, rms_a), g0, g1, ds.notes, ds, after, known)
+
+
+def _controller_params(controller: str | Path | None) -> dict | None:
+    """The controller's link parameters (None: CAD); GapError if the file is not usable."""
+    try:
+        return read_link_parameters(controller) if controller not in (None, "cad") else None
+    except (IdentificationError, OSError) as err:
+        raise GapError(f"{controller}: not a usable controller model: {err}") from None
+
+
+def _subtract_known(ds: Dataset, links: list[str], known: list[dict]) -> None:
+    """Take the model file's own joint and sensor effects out of the residuals (they are part of the model)."""
+    for r, ev in enumerate(ds.evaluations):
+        for eff in known:
+            theta = np.array([eff["value"] - 1.0 if eff["kind"] == "torque_gain" else eff["value"]])
+            ev.e -= np.tensordot(effect_columns(ds, links, r, eff["kind"], eff["location"]), theta, axes=(2, 0))
+
+
+def _noise_floors(ds: Dataset) -> None:
+    """Per recording, each channel's noise floor: the residual's fast part for runs, 1 (refitted later) for postures."""
+    for rec, ev in zip(ds.recordings, ds.evaluations):
+        ds.floors.append(np.ones(ev.e.shape[1]) if rec.static else fast_part_floor(ev.e, ev.valid, rec.t_s))
+    for r, f in enumerate(ds.floors):
+        bad = ~np.isfinite(f) | (f <= 0)
+        f[bad] = np.nanmedian(f[~bad]) if (~bad).any() else 1.0
+        ds.floors[r] = np.maximum(f, 1e-3)
+
+
+def _static_floors(ds: Dataset, cands: list[Candidate]) -> None:
+    """Static postures' floors: the robust scale per channel of what is left after fitting every candidate at once."""
+    X = np.hstack([c.X for c in cands])
+    y = _stack(ds, [ev.e[:, :, None] for ev in ds.evaluations])[:, 0]
+    theta, *_ = np.linalg.lstsq(X, y, rcond=1e-8)
+    res = y - X @ theta
+    i = 0
+    for r, (rec, ev) in enumerate(zip(ds.recordings, ds.evaluations)):
+        nrow = int(ev.valid.sum())
+        if rec.static:
+            part = res[i:i + nrow]
+            # rows are channel-major: rebuild per channel
+            k = 0
+            f = ds.floors[r].copy()
+            for c in range(ev.e.shape[1]):
+                m = int(ev.valid[:, c].sum())
+                x = part[k:k + m] * ds.floors[r][c]
+                k += m
+                if m >= 3:
+                    f[c] = max(1.4826 * np.median(np.abs(x - np.median(x))), 1e-3)
+            ds.floors[r] = f
+        i += nrow
+
+
+def _unexplained(ds: Dataset, rms_after: np.ndarray) -> list[dict]:
+    """Channels still above SIGNIFICANT_Z floors after the chosen effects, largest first."""
     unexplained = []
-    for r, (a, f) in enumerate(zip(rms_a, ds.floors)):
+    for r, (a, f) in enumerate(zip(rms_after, ds.floors)):
         for c, ch in enumerate(ds.channels):
             if np.isfinite(a[c]) and a[c] > SIGNIFICANT_Z * f[c]:
                 unexplained.append({"recording": r, "channel": ch, "rms": float(a[c]), "floor": float(f[c]),
                                     "z": float(a[c] / f[c])})
     unexplained.sort(key=lambda d: -d["z"])
+    return unexplained
+
+
+def _verdict(effects: list[dict], table: list[dict]) -> str:
+    """One line: the named effects, or whether there was a disagreement at all."""
+    if effects:
+        return "; ".join(describe(e) for e in effects)
     worst = table[0]["z"] if table else 0.0
-    if not effects:
-        verdict = ("no significant discrepancy" if worst < SIGNIFICANT_Z
-                   else "disagreement found, but no candidate effect explains it")
-    else:
-        verdict = "; ".join(describe(e) for e in effects)
-    return GapResult(source, [str(b) for b in bags], ds.channels, floors, rms_b, rms_a, table, sel,
-                     effects, verdict, unexplained, g0, g1, ds.notes, ds, after, known)
+    return ("no significant discrepancy" if worst < SIGNIFICANT_Z
+            else "disagreement found, but no candidate effect explains it")
 
 
 # -- augmented model -------------------------------------------------------------------------------------------------
@@ -518,6 +559,7 @@ def augmented_model(result: GapResult, nominal: pin.Model) -> dict:
 
 
 def write_augmented(result: GapResult, nominal: pin.Model, path: str | Path) -> dict:
+    """Write :func:`augmented_model` as YAML to ``path``; the document written."""
     doc = augmented_model(result, nominal)
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     Path(path).write_text("# written by sit2stand gap: the nominal model plus the effects it named\n"
@@ -526,6 +568,7 @@ def write_augmented(result: GapResult, nominal: pin.Model, path: str | Path) -> 
 
 
 def _plain(x):
+    """``x`` with NumPy scalars and arrays as plain Python numbers and lists (for JSON)."""
     if isinstance(x, dict):
         return {str(k): _plain(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
@@ -540,6 +583,7 @@ def _plain(x):
 
 
 def summary(result: GapResult) -> dict:
+    """The result as plain data (``gap.json``)."""
     return _plain({
         "model": result.model_source, "bags": result.bags, "verdict": result.verdict,
         "effects": result.effects, "gap_before": result.gap_before, "gap_after": result.gap_after,
@@ -551,10 +595,12 @@ def summary(result: GapResult) -> dict:
 
 
 def progress_printer(msg: str) -> None:
+    """A progress callback printing to stderr."""
     print(msg, file=sys.stderr, flush=True)
 
 
 def write_json(result: GapResult, path: str | Path) -> None:
+    """Write :func:`summary` as JSON to ``path``."""
     Path(path).write_text(json.dumps(summary(result), indent=1))
 
 

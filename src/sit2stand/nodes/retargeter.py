@@ -23,6 +23,7 @@ a human COM end the node with an error), ``com_feedback`` and its gains ``com_fe
 
 from __future__ import annotations
 
+import sys
 import time
 
 import numpy as np
@@ -277,3 +278,6 @@ class RetargeterNode(Node):
 
 
 main = node_main(RetargeterNode)
+
+if __name__ == "__main__":
+    sys.exit(main())
