@@ -6,14 +6,8 @@ import pytest
 import yaml
 
 from sit2stand.io.bag import BagReader, BagWriter
-from sit2stand.robot.identify import (
-    IdentificationError,
-    controller_model,
-    identify,
-    read_postures,
-    with_parameters,
-    write_yaml,
-)
+from sit2stand.robot.identify import (IdentificationError, controller_model, identify, read_postures, with_parameters,
+                                      write_yaml)
 from sit2stand.robot.model import PlantConfig
 from sit2stand.robot.plant import Plant
 from sit2stand.robot.postures import collect_postures, standing_qpos

@@ -2,7 +2,8 @@
 
 import pytest
 
-from sit2stand.io.playback import PlaybackClock, check_rate
+from sit2stand.errors import InputError
+from sit2stand.io.playback import ClockTicks, PlaybackClock, check_rate, parse_wait_for, played_fraction
 
 
 class FakeTime:
@@ -54,3 +55,22 @@ def test_unpaced_mode_is_always_due():
 def test_rate_bounds(rate):
     with pytest.raises(ValueError, match="outside 0.1..50"):
         check_rate(rate)
+
+
+def test_wait_for_entries_are_parsed_and_a_bad_one_is_named():
+    assert parse_wait_for(["/human/com:1", "/mocap/markers:2"]) == {"/human/com": 1, "/mocap/markers": 2}
+    with pytest.raises(InputError, match="'human/com:1' is not TOPIC:COUNT"):
+        parse_wait_for(["human/com:1"])
+
+
+def test_clock_ticks_every_period_of_bag_time_and_after_a_loop_restarts():
+    ticks = ClockTicks(period_ns=10_000_000)
+    due = [t for t in range(0, 50_000_000, 2_500_000) if ticks.due(t)]
+    assert due == [0, 10_000_000, 20_000_000, 30_000_000, 40_000_000]
+    assert ticks.due(0), "a loop back to the bag's start publishes the clock at once"
+
+
+def test_played_fraction_counts_the_current_pass():
+    assert played_fraction(50, 200, 0, loop=False) == 0.25
+    assert played_fraction(250, 200, 1, loop=True) == 0.25
+    assert played_fraction(300, 200, 0, loop=False) == 1.0

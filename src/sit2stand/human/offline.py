@@ -24,17 +24,8 @@ from ..errors import InputError
 from ..io import messages as M
 from ..io.bag import BagError, BagReader, BagWriter
 from ..io.forceplate import PlateSeries
-from ..io.topics import (
-    COM_TYPE,
-    FORCE_PLATE_PREFIX,
-    GROUND_TRUTH_COM_TOPIC,
-    HUMAN_COM_TOPIC,
-    HUMAN_JOINTS_TOPIC,
-    HUMAN_MODEL_COP_TOPIC,
-    HUMAN_SCALING_TOPIC,
-    MARKERS_TOPIC,
-    REFERENCE_COM_TOPIC,
-)
+from ..io.topics import (COM_TYPE, FORCE_PLATE_PREFIX, GROUND_TRUTH_COM_TOPIC, HUMAN_COM_TOPIC, HUMAN_JOINTS_TOPIC,
+                         HUMAN_MODEL_COP_TOPIC, HUMAN_SCALING_TOPIC, MARKERS_TOPIC, REFERENCE_COM_TOPIC)
 from ..io.typestore import typestore
 from .calibration import calibrate_stream, static_frames
 from .com import ComResult, estimate_com
@@ -212,7 +203,7 @@ def write_result_bag(result: ComResult, out: Path, joint_names: list[str]) -> No
                 x=float(result.model_cop_m[k, 0]), y=float(result.model_cop_m[k, 1]), z=0.0))
             bag.write(HUMAN_MODEL_COP_TOPIC, t_ns, p)
             bag.write(HUMAN_JOINTS_TOPIC, t_ns, store["sensor_msgs/msg/JointState"](
-                header=M.header(t_ns, "pelvis"), name=["pelvis_x", "pelvis_y", "pelvis_z", "pelvis_qx", "pelvis_qy",
+                header=M.header(t_ns), name=["pelvis_x", "pelvis_y", "pelvis_z", "pelvis_qx", "pelvis_qy",
                                                        "pelvis_qz", "pelvis_qw"] + joint_names,
                 position=result.q[k].astype(float), velocity=np.zeros(0), effort=np.zeros(0)))
 

@@ -84,3 +84,39 @@ class PlaybackClock:
     def played(self, bag_t_ns: int) -> None:
         """Note that the message at ``bag_t_ns`` has been published."""
         self._last_bag_ns = int(bag_t_ns)
+
+
+def parse_wait_for(entries: list[str]) -> dict[str, int]:
+    """``TOPIC:COUNT`` entries (the replayer's ``wait_for``) as {topic: subscribers to wait for}.
+
+    Raises:
+        InputError: an entry that is not an absolute topic, a colon and a count.
+    """
+    wanted = {}
+    for entry in entries:
+        topic, _, count = entry.rpartition(":")
+        if not topic.startswith("/") or not count.isdigit():
+            raise InputError(f"parameter wait_for: {entry!r} is not TOPIC:COUNT")
+        wanted[topic] = int(count)
+    return wanted
+
+
+class ClockTicks:
+    """When to publish ``/clock`` while playing: every ``period_ns`` of bag time, and again after a loop restarts."""
+
+    def __init__(self, period_ns: int) -> None:
+        self.period_ns = period_ns
+        self.last_ns: int | None = None
+
+    def due(self, bag_t_ns: int) -> bool:
+        """True (and noted) if a clock message is due at the message stamped ``bag_t_ns``."""
+        if self.last_ns is not None and self.last_ns <= bag_t_ns < self.last_ns + self.period_ns:
+            return False
+        self.last_ns = bag_t_ns
+        return True
+
+
+def played_fraction(sent: int, total: int, loops_done: int, loop: bool) -> float:
+    """Share of the bag played in the current pass (0..1), from the messages sent so far."""
+    done = sent - loops_done * total if loop else sent
+    return min(1.0, max(0.0, done / max(1, total)))

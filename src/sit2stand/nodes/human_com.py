@@ -38,15 +38,8 @@ from ..human.com_stream import StreamingComEstimator
 from ..human.marker_ik import TooFewMarkers
 from ..human.skeleton import Subject
 from ..io.messages import mocap_arrays, plate_sample_from_cdr, reorder_markers, stamp_ns
-from ..io.topics import (
-    FORCE_PLATE_PREFIX,
-    HUMAN_COM_TOPIC,
-    HUMAN_JOINTS_TOPIC,
-    HUMAN_MEASURED_COP_TOPIC,
-    HUMAN_MODEL_COP_TOPIC,
-    HUMAN_SCALING_TOPIC,
-    MARKERS_TOPIC,
-)
+from ..io.topics import (FORCE_PLATE_PREFIX, HUMAN_COM_TOPIC, HUMAN_JOINTS_TOPIC, HUMAN_MEASURED_COP_TOPIC,
+                         HUMAN_MODEL_COP_TOPIC, HUMAN_SCALING_TOPIC, LAB_FRAME, MARKERS_TOPIC)
 from .runtime import PUBLISH_DEPTH, IdleDrain, NodeError, declare, node_main
 
 PENDING_PLATE_SAMPLES = 4000      # per plate, between two marker frames (4 s at 1 kHz; the estimator keeps ~2 s)
@@ -92,7 +85,8 @@ class HumanComNode(Node):
         self.joint_pub = self.create_publisher(JointState, HUMAN_JOINTS_TOPIC, history)
         self.model_cop_pub = self.create_publisher(PointStamped, HUMAN_MODEL_COP_TOPIC, history)
         self.measured_cop_pub = self.create_publisher(PointStamped, HUMAN_MEASURED_COP_TOPIC, history)
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.scaling_pub = self.create_publisher(InertialParameters, HUMAN_SCALING_TOPIC, latched)
         self.stats_pub = self.create_publisher(DiagnosticStatus, "~/stats", 10)
         self.plate_subs: dict[str, object] = {}
@@ -184,9 +178,9 @@ class HumanComNode(Node):
     def _publish_rest(self, header, out) -> None:
         if out.model_cop_m is not None and out.measured_cop_m is not None:
             self.last_cop_error = float(np.linalg.norm(out.model_cop_m[:2] - out.measured_cop_m[:2]))
-        js = JointState(header=header, name=ROOT_NAMES + self.estimator.human.joint_names(),
-                        position=[float(x) for x in out.q])
-        js.header.frame_id = "pelvis"
+        # its own header: the marker frame's is shared with the COPs (lab frame); the pelvis pose is in the lab too
+        js = JointState(header=Header(stamp=header.stamp, frame_id=LAB_FRAME),
+                        name=ROOT_NAMES + self.estimator.human.joint_names(), position=[float(x) for x in out.q])
         self.joint_pub.publish(js)
         for pub, cop in ((self.model_cop_pub, out.model_cop_m), (self.measured_cop_pub, out.measured_cop_m)):
             if cop is not None and out.delayed_t_s is not None:
@@ -226,7 +220,7 @@ class HumanComNode(Node):
 
     def close(self) -> None:
         if self.estimator is not None and self.estimator.rescale() is not None:   # a last solve with all rows
-            header = Header(frame_id="lab")
+            header = Header(frame_id=LAB_FRAME)
             header.stamp = self.get_clock().now().to_msg()
             self._publish_scaling(header)
         stats = self._stats()

@@ -39,7 +39,7 @@ from std_srvs.srv import SetBool
 
 from ..io.topics import CLOCK_TOPIC
 from ..io.bag import BagError, BagReader
-from ..io.playback import PlaybackClock, check_rate
+from ..io.playback import ClockTicks, PlaybackClock, check_rate, parse_wait_for, played_fraction
 from .runtime import NodeError, declare, message_class, node_main, qos_from_bag
 
 # Reliable writers heartbeat every 5 ms instead of Fast DDS's 3 s, so acknowledgements (and with them the unpaced
@@ -61,9 +61,9 @@ class Replayer(Node):
         self.loop = declare(self, "loop", False, "start again at the end")
         self.at_end = declare(self, "at_end", "exit", "exit | idle")
         self.publish_clock = declare(self, "publish_clock", True, "publish /clock")
-        self.clock_period_ns = int(1e9 / max(1e-3, declare(self, "clock_rate_hz", 100.0, "/clock rate [Hz]")))
+        self.clock_ticks = ClockTicks(int(1e9 / max(1e-3, declare(self, "clock_rate_hz", 100.0, "/clock rate [Hz]"))))
         self.wait_for_subscribers = declare(self, "wait_for_subscribers", 0, "subscribers per topic to wait for")
-        self.wait_for = declare(self, "wait_for", [], "TOPIC:COUNT entries: wait for these instead of every topic")
+        wait_for = declare(self, "wait_for", [], "TOPIC:COUNT entries: wait for these instead of every topic")
         self.wait_timeout_s = declare(self, "wait_timeout_s", 10.0, "longest wait for subscribers [s]")
         self.delay_s = declare(self, "delay_s", 0.0, "wait before the first message [s]")
         start_paused = declare(self, "start_paused", False, "wait for ~/pause false before playing")
@@ -74,6 +74,7 @@ class Replayer(Node):
             raise NodeError(f"parameter 'at_end' must be 'exit' or 'idle', not {self.at_end!r}")
         try:
             rate = check_rate(rate)
+            self.wait_for = parse_wait_for(wait_for)
             self.reader = BagReader(self.bag_path)
         except (ValueError, BagError) as err:
             raise NodeError(str(err)) from None
@@ -147,12 +148,7 @@ class Replayer(Node):
 
     # --- playback thread ---------------------------------------------------------------------------------------
     def _wait_for_subscribers(self) -> None:
-        wanted = {}
-        for entry in self.wait_for:
-            topic, _, count = entry.rpartition(":")
-            if not topic.startswith("/") or not count.isdigit():
-                raise NodeError(f"parameter wait_for: {entry!r} is not TOPIC:COUNT")
-            wanted[topic] = int(count)
+        wanted = dict(self.wait_for)
         if not wanted and self.wait_for_subscribers > 0:
             wanted = {t: self.wait_for_subscribers for t in self.pubs}
         if not wanted:
@@ -182,7 +178,6 @@ class Replayer(Node):
             self._wait_for_subscribers()
             if self.delay_s > 0:
                 time.sleep(self.delay_s)
-            last_clock_ns = None
             while not self._stop.is_set():
                 self.clock.restart(self.reader.start_ns)
                 since_ack = 0
@@ -196,12 +191,10 @@ class Replayer(Node):
                         self._report()
                     if self._stop.is_set():
                         return
-                    if self.clock_pub is not None and (last_clock_ns is None or msg.timestamp_ns < last_clock_ns
-                                                       or msg.timestamp_ns - last_clock_ns >= self.clock_period_ns):
+                    if self.clock_pub is not None and self.clock_ticks.due(msg.timestamp_ns):
                         clock = Clock()
                         clock.clock.sec, clock.clock.nanosec = divmod(msg.timestamp_ns, 1_000_000_000)
                         self.clock_pub.publish(clock)
-                        last_clock_ns = msg.timestamp_ns
                     self.pubs[msg.topic].publish(msg.data)
                     if self._t_first is None:
                         self._t_first = time.monotonic()
@@ -237,13 +230,13 @@ class Replayer(Node):
             return
         self._last_progress = now
         bag_t = min(max(0, self.clock.bag_now_ns() - self.reader.start_ns) * 1e-9, self.reader.duration_s)
-        frac = (self.sent - self.loops_done * self.total if self.loop else self.sent) / max(1, self.total)
-        frac = min(1.0, max(0.0, frac))
+        frac = played_fraction(self.sent, self.total, self.loops_done, self.loop)
         status = DiagnosticStatus(level=DiagnosticStatus.OK, name=self.get_fully_qualified_name(),
                                   message="paused" if self.clock.paused else "playing", hardware_id=self.bag_path)
         status.values = [KeyValue(key=k, value=v) for k, v in (
-            ("fraction", f"{frac:.4f}"), ("bag_time_s", f"{bag_t:.3f}"), ("duration_s", f"{self.reader.duration_s:.3f}"),
-            ("messages_sent", str(self.sent)), ("loops_done", str(self.loops_done)), ("rate", f"{self.clock.rate:g}"))]
+            ("fraction", f"{frac:.4f}"), ("bag_time_s", f"{bag_t:.3f}"),
+            ("duration_s", f"{self.reader.duration_s:.3f}"), ("messages_sent", str(self.sent)),
+            ("loops_done", str(self.loops_done)), ("rate", f"{self.clock.rate:g}"))]
         self.progress_pub.publish(status)
         if force or now - self._last_log >= 2.0:
             self._last_log = now

@@ -36,15 +36,8 @@ import pinocchio as pin
 
 from ..errors import InputError
 from ..robot.identify import read_link_parameters
-from ..robot.model import (
-    SIDES,
-    SOLE_CENTRE_X_M,
-    SOLE_HALF_SIZE_M,
-    UPPER_LIMB_PREFIXES,
-    PlantConfig,
-    build_spec,
-    controller_model,
-)
+from ..robot.model import (SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, UPPER_LIMB_PREFIXES, PlantConfig, build_spec,
+                           controller_model)
 from ..robot.plant import seated_configuration
 from .calibration import PELVIS_MARKERS, MarkerMap, calibrate_markers, marker_group
 from .feasibility import support_polygon

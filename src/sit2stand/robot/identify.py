@@ -32,14 +32,8 @@ import yaml
 
 from ..errors import Sit2StandError
 from ..io.bag import BagError, BagReader
-from ..io.topics import (
-    ROBOT_BASE_POSE_TOPIC,
-    ROBOT_COP_TOPIC,
-    ROBOT_FT_LEFT_TOPIC,
-    ROBOT_FT_RIGHT_TOPIC,
-    ROBOT_JOINT_STATES_TOPIC,
-    ft_topic,
-)
+from ..io.topics import (ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC,
+                         ROBOT_JOINT_STATES_TOPIC, ft_topic)
 from ..optim import constrained_lsq
 from .model import SIDES, controller_model
 
