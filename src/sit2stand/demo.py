@@ -33,20 +33,31 @@ import sys
 import time
 from pathlib import Path
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
 
-from .io.topics import GROUND_TRUTH_COM_TOPIC, HUMAN_COM_TOPIC
+from .data import graph_path, plant_path
+from .gap.excite import excite
+from .gap.report import cop_rms, gap_command
+from .gap.workflow import describe
 from .human.offline import calibrate_from_bag
 from .human.offline import run as human_com_offline
-from .data import graph_path, plant_path
 from .io import messages as M
 from .io.bag import BagReader
+from .io.topics import GROUND_TRUTH_COM_TOPIC, HUMAN_COM_TOPIC
+from .retarget.report import RunAnalysis, analyse, figure_6, figure_7, render_strip
+from .robot.figures import com_path_figure, posture_figure
+from .robot.identify import identify, read_postures, write_yaml
+from .robot.model import PlantConfig
+from .robot.postures import collect_postures
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_BAGS = [ROOT / "bags" / "natural", ROOT / "bags" / "elderly"]
 
 
 def _series(bag: BagReader, topic: str) -> tuple[np.ndarray, np.ndarray]:
+    """Header times [s] and positions [m] of a topic of center-of-mass messages."""
     msgs = bag.read(topic)
     return (np.array([M.stamp_ns(m.header) for _, m in msgs]) * 1e-9,
             np.array([[m.position.x, m.position.y, m.position.z] for _, m in msgs]))
@@ -72,13 +83,12 @@ def live(bag: Path, out: Path, rate: float) -> dict:
     err = np.linalg.norm(com - truth_i, axis=1)
     return {"wall_s": round(time.monotonic() - t0, 2), "frames": int(len(t)),
             "com_error_mean_mm": float(err.mean() * 1e3), "com_error_p95_mm": float(np.percentile(err, 95) * 1e3),
-            "cost_p50_ms": float(cost.group(1)) if cost else None, "cost_p99_ms": float(cost.group(2)) if cost else None}
+            "cost_p50_ms": float(cost.group(1)) if cost else None,
+            "cost_p99_ms": float(cost.group(2)) if cost else None}
 
 
 def standup(bag: Path, out: Path, params: Path) -> dict:
     """Run the stand-up graph on ``bag`` with the identified ``params``; analyse and plot the run."""
-    from .retarget.report import analyse, figure_6, render_strip
-
     with BagReader(bag) as b:
         meta = b.custom_data
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
@@ -116,11 +126,6 @@ def standup(bag: Path, out: Path, params: Path) -> dict:
 
 def robot_identification(out: Path, n_postures: int) -> dict:
     """Static postures of the default plant, full-model identification, figures."""
-    from .robot.figures import com_path_figure, posture_figure
-    from .robot.identify import identify, read_postures, write_yaml
-    from .robot.model import PlantConfig
-    from .robot.postures import collect_postures
-
     print(f"[robot] {n_postures} static postures of the simulated TALOS (default plant)", flush=True)
     out.mkdir(parents=True, exist_ok=True)
     counts = collect_postures(PlantConfig.load(plant_path("default")), n_postures,
@@ -138,11 +143,6 @@ def robot_identification(out: Path, n_postures: int) -> dict:
 def model_gap(out: Path) -> dict:
     """The model-gap workflow on the default plant against the CAD model: an excitation run (standing, stance to
     stance) recorded like the driver's stream, plus the identification's static postures."""
-    from .gap.excite import excite
-    from .gap.report import cop_rms, gap_command
-    from .gap.workflow import describe
-    from .robot.model import PlantConfig
-
     plant = plant_path("default")
     print("[gap] excitation run of the simulated TALOS (default plant), then sit2stand gap against CAD", flush=True)
     excite(PlantConfig.load(plant), out / "excite", seed=0)
@@ -163,11 +163,7 @@ def model_gap(out: Path) -> dict:
 
 def com_paths_figure(runs: dict[str, tuple[Path, Path]], png: Path) -> None:
     """Sagittal COM paths of the demonstrations: estimated (offline, scaled) and true."""
-    import matplotlib
-
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     fig, ax = plt.subplots(figsize=(7, 5.5))
     for (name, (run_dir, bag)), color in zip(runs.items(), ("tab:blue", "tab:red", "tab:green")):
         with BagReader(run_dir / "human_com") as b:
@@ -188,13 +184,8 @@ def com_paths_figure(runs: dict[str, tuple[Path, Path]], png: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="sit2stand-demo", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", type=Path, default=Path("runs/demo"))
-    parser.add_argument("--bags", type=Path, nargs="*", default=DEFAULT_BAGS)
-    parser.add_argument("--rate", type=float, default=1.0)
-    parser.add_argument("--postures", type=int, default=88, help="static postures for the robot identification")
-    parser.add_argument("--skip-robot", action="store_true")
-    args = parser.parse_args(argv)
+    """Run the demo (see the module docstring); 0 when every COM error is within bounds and every robot stood up."""
+    args = _parse_args(argv)
     missing = [b for b in args.bags if not (b / "metadata.yaml").exists()]
     if missing:
         print(f"sit2stand demo: error: no demonstration bag at {', '.join(map(str, missing))}", file=sys.stderr)
@@ -210,37 +201,60 @@ def main(argv: list[str] | None = None) -> int:
         params = args.out / "robot" / "identified_full.yaml"
     analyses = []
     for i, bag in enumerate(args.bags, 1):
-        name = bag.name
-        run_dir = args.out / name
-        runs[name] = (run_dir, bag)
-        print(f"[{i}/{len(args.bags)}] {name}: human COM offline", flush=True)
-        offline = human_com_offline(bag, run_dir, quiet=True)
-        print(f"      COM RMS vs truth {offline['com_rms_vs_truth_scaled_mm']:.1f} mm scaled, "
-              f"{offline['com_rms_vs_truth_unscaled_mm']:.1f} mm average model; COP RMS "
-              f"{offline['cop_rms_scaled_mm']:.1f} mm", flush=True)
-        print(f"      live graph: replayer -> human_com -> recorder at {args.rate:g}x", flush=True)
-        live_figs = live(bag, run_dir / "live", args.rate)
-        print(f"      live COM error mean {live_figs['com_error_mean_mm']:.1f} mm; per-frame cost p50 "
-              f"{live_figs['cost_p50_ms']} ms, p99 {live_figs['cost_p99_ms']} ms", flush=True)
-        summary[name] = {"offline": offline, "live": live_figs}
-        if params is not None:
-            print("      stand-up graph: replayer -> human_com -> retargeter -> driver -> recorder", flush=True)
-            summary[name]["standup"], a = standup(bag, run_dir, params)
+        runs[bag.name] = (args.out / bag.name, bag)
+        summary[bag.name], a = demonstration(bag, args.out / bag.name, args.rate, params, f"[{i}/{len(args.bags)}]")
+        if a is not None:
             analyses.append(a)
-            st = summary[name]["standup"]
-            print(f"      {'stood up' if st['stood_up'] else 'DID NOT STAND UP'}: pelvis {st['pelvis_start_m']:.2f} -> "
-                  f"{st['pelvis_final_m']:.2f} m, COM tracking RMS {st['com_tracking_rms_m'] * 100:.1f} cm, time scale "
-                  f"{st.get('time_scale', float('nan')):.2f}, IK p50 {st.get('ik_p50_ms', float('nan')):.2f} ms, "
-                  f"marker->command p50 {st.get('latency_p50_ms', float('nan')):.1f} ms p99 "
-                  f"{st.get('latency_p99_ms', float('nan')):.1f} ms", flush=True)
     if not args.skip_robot:
         summary["robot_gap"] = model_gap(args.out / "gap")
     com_paths_figure(runs, args.out / "com_paths.png")
     if analyses:
-        from .retarget.report import figure_7
-
         figure_7(analyses, args.out / "fig7_com_paths.png")
     (args.out / "summary.json").write_text(json.dumps(summary, indent=2))
+    return _report(summary, runs, args)
+
+
+def _parse_args(argv: list[str] | None) -> argparse.Namespace:
+    """The command line: output folder, bags, replay rate, robot postures, --skip-robot."""
+    parser = argparse.ArgumentParser(prog="sit2stand-demo", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", type=Path, default=Path("runs/demo"))
+    parser.add_argument("--bags", type=Path, nargs="*", default=DEFAULT_BAGS)
+    parser.add_argument("--rate", type=float, default=1.0)
+    parser.add_argument("--postures", type=int, default=88, help="static postures for the robot identification")
+    parser.add_argument("--skip-robot", action="store_true")
+    return parser.parse_args(argv)
+
+
+def demonstration(bag: Path, run_dir: Path, rate: float, params: Path | None,
+                  tag: str) -> tuple[dict, RunAnalysis | None]:
+    """One demonstration: the human COM offline and live, then (with identified ``params``) the robot's stand-up;
+    its summary and the stand-up's analysis (None without a robot)."""
+    name = bag.name
+    print(f"{tag} {name}: human COM offline", flush=True)
+    offline = human_com_offline(bag, run_dir, quiet=True)
+    print(f"      COM RMS vs truth {offline['com_rms_vs_truth_scaled_mm']:.1f} mm scaled, "
+          f"{offline['com_rms_vs_truth_unscaled_mm']:.1f} mm average model; COP RMS "
+          f"{offline['cop_rms_scaled_mm']:.1f} mm", flush=True)
+    print(f"      live graph: replayer -> human_com -> recorder at {rate:g}x", flush=True)
+    live_figs = live(bag, run_dir / "live", rate)
+    print(f"      live COM error mean {live_figs['com_error_mean_mm']:.1f} mm; per-frame cost p50 "
+          f"{live_figs['cost_p50_ms']} ms, p99 {live_figs['cost_p99_ms']} ms", flush=True)
+    out = {"offline": offline, "live": live_figs}
+    if params is None:
+        return out, None
+    print("      stand-up graph: replayer -> human_com -> retargeter -> driver -> recorder", flush=True)
+    out["standup"], a = standup(bag, run_dir, params)
+    st = out["standup"]
+    print(f"      {'stood up' if st['stood_up'] else 'DID NOT STAND UP'}: pelvis {st['pelvis_start_m']:.2f} -> "
+          f"{st['pelvis_final_m']:.2f} m, COM tracking RMS {st['com_tracking_rms_m'] * 100:.1f} cm, time scale "
+          f"{st.get('time_scale', float('nan')):.2f}, IK p50 {st.get('ik_p50_ms', float('nan')):.2f} ms, "
+          f"marker->command p50 {st.get('latency_p50_ms', float('nan')):.1f} ms p99 "
+          f"{st.get('latency_p99_ms', float('nan')):.1f} ms", flush=True)
+    return out, a
+
+
+def _report(summary: dict, runs: dict[str, tuple[Path, Path]], args: argparse.Namespace) -> int:
+    """Print what was written and, per demonstration, whether the robot stood up; the exit status."""
     ok = all(s["offline"]["com_rms_vs_truth_scaled_mm"] <= 10.0 for n, s in summary.items()
              if n not in ("robot", "robot_gap"))
     ok = ok and ("robot" not in summary or summary["robot"]["eval_rms_mm"] <= 5.0)
