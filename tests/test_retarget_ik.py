@@ -39,6 +39,11 @@ def frame_markers(model, q, rng, noise=0.01):
             for n in MARKER_LINKS]
 
 
+def within_limits(model, q, tol=1e-9):
+    """The joints of q are within the model's position limits (to ``tol`` rad)."""
+    return np.all(q[7:] >= model.lowerPositionLimit[7:] - tol) and np.all(q[7:] <= model.upperPositionLimit[7:] + tol)
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_com_equality_feet_and_limits_hold_and_the_result_is_a_constrained_optimum(scene, seed):
     model, q_true, soles, sole_targets = scene
@@ -50,7 +55,7 @@ def test_com_equality_feet_and_limits_hold_and_the_result_is_a_constrained_optim
     ik = ComIk(model, soles)
     r = ik.solve(start, markers, com_target, sole_targets, max_iterations=40, tol=1e-9)
     assert r.feasible and r.com_error_m < 1e-6 and r.sole_error < 1e-6
-    assert np.all(r.q[7:] >= model.lowerPositionLimit[7:] - 1e-9) and np.all(r.q[7:] <= model.upperPositionLimit[7:] + 1e-9)
+    assert within_limits(model, r.q)
     assert r.step_norm < 1e-4 and r.kkt_dual_residual < 1e-6      # a KKT point of the constrained problem
     # the same markers without the COM constraint fit at least as well: the price of the hard COM, reported
     free = ComIk(model, soles).solve(start, markers, com_target, sole_targets, com_axes=(), max_iterations=40, tol=1e-9)
@@ -64,7 +69,7 @@ def test_an_unreachable_com_is_flagged_and_the_pose_stays_valid(scene):
     far = pin.centerOfMass(model, model.createData(), q_true) + np.array([0.0, 0.0, 1.0])   # 1 m higher
     r = ComIk(model, soles).solve(q_true, markers, far, sole_targets, max_iterations=10)
     assert not r.feasible and np.all(np.isfinite(r.q))
-    assert np.all(r.q[7:] >= model.lowerPositionLimit[7:] - 1e-9) and np.all(r.q[7:] <= model.upperPositionLimit[7:] + 1e-9)
+    assert within_limits(model, r.q)
 
 
 def test_speed_limits_bound_the_motion_from_the_previous_frame(scene):

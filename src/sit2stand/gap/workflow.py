@@ -187,7 +187,7 @@ def fast_part_floor(e: np.ndarray, valid: np.ndarray, t_s: np.ndarray) -> np.nda
     return out
 
 
-# -- candidates ----------------------------------------------------------------------------------------------------------
+# -- candidates --------------------------------------------------------------------------------------------------------
 def moved_joints(ds: Dataset) -> np.ndarray:
     """(n,) joints whose range over the data exceeds MOVED_RAD."""
     return np.max([np.ptp(r.q, axis=0) for r in ds.recordings], axis=0) > MOVED_RAD

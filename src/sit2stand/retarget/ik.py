@@ -126,7 +126,8 @@ class ComIk:
         feasible, dua = True, 0.0
         step = np.inf
         it = 0
-        for it in range(1, max_iterations + 1):
+        while it < max_iterations:
+            it += 1
             dq, com_held, dua = self._step(q, frame)
             feasible = feasible and com_held
             q = self._integrate(q, dq, q_prev)

@@ -25,6 +25,8 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 import yaml
+
+from ..data import DataFileNotFound, plant_path
 from ..errors import Sit2StandError
 
 SIDES = ("left", "right")
@@ -124,8 +126,6 @@ class PlantConfig:
     def load(path: str | Path | None) -> PlantConfig:
         """Read a plant YAML, a file or a packaged plant's name (``default``; None: the defaults, which carry no
         unmodeled effects)."""
-        from ..data import DataFileNotFound, plant_path
-
         if path is None:
             return PlantConfig()
         try:
