@@ -539,7 +539,8 @@ def write_demonstration_bag(demo: Demonstration, out) -> dict[str, int]:
         "source": "sit2stand synth-human", "style": cfg.style, "seed": str(cfg.seed),
         "height_m": f"{cfg.height_m:g}", "body_mass_kg": f"{demo.human.total_mass:.3f}", "sex": cfg.sex,
         "seat_height_m": f"{demo.seat_height_m:.3f}", "plates": "chair, feet",
-        "events": (f"rise_start@{START_TIME_S + demo.rise_start_s:.3f}s; seat_off@{START_TIME_S + demo.seat_off_s:.3f}s;"
+        "events": (f"rise_start@{START_TIME_S + demo.rise_start_s:.3f}s;"
+                   f" seat_off@{START_TIME_S + demo.seat_off_s:.3f}s;"
                    f" rise_end@{START_TIME_S + demo.rise_end_s:.3f}s"),
         "lab_axes": "REP-103 (synthetic): x forward, y left, z up; origin between the ankles",
     }
