@@ -4,7 +4,7 @@
 # the project's Python package installed (editable). Each step is skipped when its inputs have not changed.
 #
 #   ros_ws/bootstrap.sh            (what `make setup`, `make demo` and `make test` call)
-#   PYTHON=python3.12 ros_ws/bootstrap.sh   (choose the interpreter; 3.10 to 3.12)
+#   PYTHON=python3.12 ros_ws/bootstrap.sh   (choose the interpreter; 3.11 or 3.12)
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -14,19 +14,19 @@ say() { printf 'bootstrap: %s\n' "$*"; }
 die() { printf 'bootstrap: error: %s\n' "$*" >&2; exit 1; }
 t_start=$(date +%s)
 
-# --- 1. An interpreter in 3.10..3.12 -------------------------------------------------------------------------
+# --- 1. An interpreter in 3.11..3.12 -------------------------------------------------------------------------
 pick_python() {
   local cand
-  for cand in "${PYTHON:-}" python3 python3.12 python3.11 python3.10; do
+  for cand in "${PYTHON:-}" python3 python3.12 python3.11; do
     [ -n "$cand" ] || continue
     command -v "$cand" >/dev/null 2>&1 || continue
-    if "$cand" -c 'import sys; sys.exit(0 if (3, 10) <= sys.version_info[:2] <= (3, 12) else 1)' 2>/dev/null; then
+    if "$cand" -c 'import sys; sys.exit(0 if (3, 11) <= sys.version_info[:2] <= (3, 12) else 1)' 2>/dev/null; then
       command -v "$cand"; return 0
     fi
   done
   return 1
 }
-PY="$(pick_python)" || die "need Python 3.10, 3.11 or 3.12 (the ros-jazzy-* wheels exist only for those); set PYTHON=..."
+PY="$(pick_python)" || die "need Python 3.11 or 3.12 (ros-jazzy-* wheels exist for 3.10-3.12; the pinned numpy, scipy and mujoco have no 3.10 wheels); set PYTHON=..."
 
 # --- 2. System tools, from apt only if missing -----------------------------------------------------------------
 missing=()

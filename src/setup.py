@@ -7,7 +7,7 @@ registers the package for tools that search AMENT_PREFIX_PATH.
 from setuptools import setup
 
 setup(
-    python_requires=">=3.10,<3.13",   # the ros-jazzy-* wheels exist for 3.10..3.12 (see pyproject.toml's note)
+    python_requires=">=3.11,<3.13",   # ros-jazzy-* wheels: 3.10-3.12; the pinned numpy, scipy, mujoco: 3.11+
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/sit2stand"]),
         ("share/sit2stand", ["package.xml"]),

@@ -18,7 +18,8 @@ from sit2stand.gap.hidden import Hidden, draw, plant_with, run_case, score
 from sit2stand.gap.human import human_gap
 from sit2stand.gap.select import Candidate, select
 from sit2stand.human.skeleton import ExtraMass
-from sit2stand.human.synth import SynthConfig, synthesize, write_demonstration_bag
+from sit2stand.human.demonstration_bag import write_demonstration_bag
+from sit2stand.human.synth import SynthConfig, synthesize
 from sit2stand.robot.identify import read_link_parameters
 from sit2stand.robot.model import PlantConfig
 from sit2stand.robot.plant import Plant

@@ -8,7 +8,8 @@ import pytest
 
 from conftest import GRAPHS
 from sit2stand.io.topics import MARKERS_TOPIC, MOCAP_TYPE
-from sit2stand.human.synth import SynthConfig, synthesize, write_demonstration_bag
+from sit2stand.human.demonstration_bag import write_demonstration_bag
+from sit2stand.human.synth import SynthConfig, synthesize
 from sit2stand.io import messages as M
 from sit2stand.io.bag import BagReader, BagWriter
 

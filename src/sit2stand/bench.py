@@ -71,8 +71,10 @@ def bench_write(path: Path, n: int) -> dict[str, float]:
             bag.write(MARKERS_TOPIC, i * 10_000_000, msg)
         t3 = time.perf_counter()
     t4 = time.perf_counter()
-    return {"write_plate_msg_per_s": _rate(len(plates), t2 - t1), "write_mocap40_msg_per_s": _rate(len(frames), t3 - t2),
-            "write_total_msg_per_s": _rate(n, t4 - t0), "bag_size_mb": sum(p.stat().st_size for p in path.iterdir()) / 1e6}
+    size_mb = sum(p.stat().st_size for p in path.iterdir()) / 1e6
+    return {"write_plate_msg_per_s": _rate(len(plates), t2 - t1),
+            "write_mocap40_msg_per_s": _rate(len(frames), t3 - t2),
+            "write_total_msg_per_s": _rate(n, t4 - t0), "bag_size_mb": size_mb}
 
 
 def bench_read(path: Path) -> dict[str, float]:
@@ -96,7 +98,8 @@ def _replayer_rate(bag: Path, env: dict[str, str], record_to: Path | None) -> fl
     rec = None
     if record_to is not None:
         rec = subprocess.Popen([sys.executable, "-m", "sit2stand.nodes.recorder", "--ros-args", "-p",
-                                f"output:={record_to}", "-p", "regex:=^/(mocap|force)", "-p", "discovery_period_s:=0.1"],
+                                f"output:={record_to}", "-p", "regex:=^/(mocap|force)",
+                                "-p", "discovery_period_s:=0.1"],
                                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     args = [sys.executable, "-m", "sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={bag}", "-p", "rate:=0.0",
             "-p", "publish_clock:=false"]
@@ -192,7 +195,8 @@ def bench_retarget(root: Path) -> dict[str, float]:
             rms_free.append(free.marker_rms_m)
     ik, pl = np.array(ik_ms), np.array(player_ms)
     return {"frames": len(ik), "ik_p50_ms": float(np.percentile(ik, 50)), "ik_p99_ms": float(np.percentile(ik, 99)),
-            "ik_p50_vs_1ms_target": float(np.percentile(ik, 50)) / 1.0, "ik_p99_vs_3ms_target": float(np.percentile(ik, 99)) / 3,
+            "ik_p50_vs_1ms_target": float(np.percentile(ik, 50)) / 1.0,
+            "ik_p99_vs_3ms_target": float(np.percentile(ik, 99)) / 3,
             "player_p50_ms": float(np.percentile(pl, 50)), "player_p99_ms": float(np.percentile(pl, 99)),
             "marker_only_ik_p50_ms": float(np.percentile(free_ms, 50)),
             "marker_rms_com_hard_mm": float(np.mean(rms_c) * 1e3),
@@ -279,7 +283,8 @@ def _print_sections(results: dict, sections: list[str]) -> None:
             if isinstance(value, list):
                 print(f"  {key:<{width}}  {len(value)} (see the JSON file)")
             else:
-                print(f"  {key:<{width}}  {value:>12,.2f}" if isinstance(value, float) else f"  {key:<{width}}  {value:>12}")
+                text = f"{value:>12,.2f}" if isinstance(value, float) else f"{value:>12}"
+                print(f"  {key:<{width}}  {text}")
 
 
 def bench_gap(n_per_kind: int = 20, n_two: int = 10, workers: int = 2, progress: bool = True) -> dict:
@@ -304,8 +309,9 @@ def bench_gap(n_per_kind: int = 20, n_two: int = 10, workers: int = 2, progress:
             r["kind"] = kind
             rows.append(r)
             if progress:
-                print(f"  [{i + 1}/{len(cases)}] {'hit ' if r['hit'] or (kind == 'none' and not r['named']) else 'MISS'}"
-                      f" {kind}: hidden {r['hidden']} -> named {r['named']}", flush=True)
+                hit = r["hit"] or (kind == "none" and not r["named"])
+                print(f"  [{i + 1}/{len(cases)}] {'hit ' if hit else 'MISS'} {kind}: hidden {r['hidden']} -> named "
+                      f"{r['named']}", flush=True)
     wall = time.perf_counter() - t0
     for kind in (*KINDS, "none", "two"):
         rs = [r for r in rows if r["kind"] == kind]
@@ -381,7 +387,8 @@ def main(argv: list[str] | None = None) -> int:
         print("replayer -> recorder, unpaced, lossless ...", flush=True)
         into_recorder = _replayer_rate(bag, env, Path(tmp) / "copy")
         results["replayer"] = {"top_rate_msg_per_s": alone, "top_rate_vs_bare_read": alone / bare,
-                               "into_recorder_msg_per_s": into_recorder, "into_recorder_vs_bare_read": into_recorder / bare}
+                               "into_recorder_msg_per_s": into_recorder,
+                               "into_recorder_vs_bare_read": into_recorder / bare}
 
     demo = root / "bags" / "natural"
     if demo.exists():

@@ -52,7 +52,8 @@ def _import_c3d(args: argparse.Namespace) -> int:
 
 def _synth_human(args: argparse.Namespace) -> int:
     from .human.skeleton import ExtraMass
-    from .human.synth import SynthConfig, synthesize, write_demonstration_bag
+    from .human.demonstration_bag import write_demonstration_bag
+    from .human.synth import SynthConfig, synthesize
 
     cfg = SynthConfig(style=args.style, height_m=args.height, mass_kg=args.mass, sex=args.sex,
                       seat_height_m=args.seat_height, duration_s=args.duration, seed=args.seed,

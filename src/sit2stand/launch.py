@@ -8,7 +8,7 @@ A graph file::
       out: ../bags/generated/copy
     nodes:
       - name: recorder
-        executable: recorder         # a sit2stand node (run as python -m sit2stand.nodes.<executable>) or a program on PATH
+        executable: recorder         # a sit2stand node (python -m sit2stand.nodes.<executable>) or a program on PATH
         parameters:                  # ROS parameter YAML files (relative to the graph file, or a packaged
           - recorder                 # parameter file's name: recorder, replayer, human_com) and/or inline maps
           - {output: $(var out)}
@@ -301,7 +301,8 @@ class Launcher:
         env = dict(os.environ)
         env.update({"PYTHONUNBUFFERED": "1", "RCUTILS_COLORIZED_OUTPUT": "0", "RCUTILS_LOGGING_BUFFERED_STREAM": "0"})
         env.update(spec.env)
-        proc = subprocess.Popen(spec.command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+        proc = subprocess.Popen(spec.command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                stdin=subprocess.DEVNULL,
                                 env=env, start_new_session=True,
                                 preexec_fn=lambda: _child_setup(spec.scheduling))
         self.procs[spec.name] = proc

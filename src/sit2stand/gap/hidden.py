@@ -148,7 +148,8 @@ def run_case(hidden: list[Hidden], seed: int, workdir: str, n_moves: int = 8) ->
     t2 = time.monotonic()
     s = score(hidden, result.effects)
     shutil.rmtree(bag, ignore_errors=True)
-    return {"hidden": [h.describe() for h in hidden], "named": [e["kind"] + " @ " + e["location"] for e in result.effects],
+    return {"hidden": [h.describe() for h in hidden],
+            "named": [e["kind"] + " @ " + e["location"] for e in result.effects],
             "found": s.found, "errors": s.errors, "extra": [e["kind"] + " @ " + e["location"] for e in s.extra],
             "hit": s.hit(), "shrink": result.shrink, "gap_before": result.gap_before, "gap_after": result.gap_after,
             "verdict": result.verdict, "fell": info["fell"], "excite_s": t1 - t0, "workflow_s": t2 - t1}

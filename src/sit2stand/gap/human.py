@@ -27,7 +27,8 @@ from ..human.skeleton import SEGMENTS, Subject, build_human
 from ..io.bag import BagError
 from .residuals import base_to_world
 from .select import Candidate, Selection, select
-from .workflow import SIGNIFICANT_Z, _mass_within_reach, effect_summary, fast_part_floor
+from .dataset import fast_part_floor
+from .workflow import SIGNIFICANT_Z, _mass_within_reach, effect_summary
 
 
 @dataclass

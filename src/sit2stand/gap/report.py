@@ -222,8 +222,8 @@ def markdown(result: GapResult) -> str:
 
 def replay_all(result: GapResult, progress=None) -> list[dict]:
     """Re-simulate each run that carries its commands, in the nominal model (CAD) and with the named effects added
-    (see :mod:`sit2stand.gap.resimulate`); identified nominal models are not re-simulated (their per-link masses are not a
-    plant file)."""
+    (see :mod:`sit2stand.gap.resimulate`); identified nominal models are not re-simulated (their per-link masses are
+    not a plant file)."""
 
     out = []
     if result.model_source != "cad":

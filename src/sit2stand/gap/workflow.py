@@ -32,19 +32,16 @@ import numpy as np
 import pinocchio as pin
 import yaml
 
-from ..dynamics import savgol_series
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import PlantConfig, controller_model
-from .control import control_law
-from .recording import Recording, RecordingError, read_recording
+from .dataset import Dataset, GapError, fast_part_floor, load_dataset
+from .recording import RecordingError
 from .effects import FT_AXES, ft_location, unmodeled_dict, unmodeled_from
-from .residuals import Evaluation, body_link_names, evaluate, joint_columns
+from .residuals import body_link_names, joint_columns
 from .select import Candidate, Selection, select
-from ..errors import Sit2StandError
 
 MOVED_RAD = 0.1              # a joint whose range in the data is below this did not move: its links are one body
 MOVING_RADPS = 0.05          # RMS speed above which a joint's friction can be seen
-FLOOR_WINDOW_S = 1.0         # the residual's slow part (any physical effect) is its Savitzky-Golay fit over this
 MIN_DELAY_S = 0.001          # one control step of the simulated robot
 MASS_REACH_M = 0.6           # an extra mass further than this from its link's origin is not a mass on that link
 MASS_MAX_KG = 40.0           # an extra mass above this on one link of a 90 kg robot is not a missing part
@@ -52,10 +49,6 @@ SIGNIFICANT_Z = 3.0          # a channel's RMS residual this many times its floo
 UNITS = {"extra_mass": ("kg", "m"), "viscous_friction": "N m s/rad", "coulomb_friction": "N m",
          "torque_bias": "N m", "torque_gain": "1", "joint_offset": "rad", "actuator_delay": "s",
          "mass_scale": "true / model"}
-
-
-class GapError(Sit2StandError, ValueError):
-    """Input the workflow cannot use; the message names the file."""
 
 
 # -- nominal model --------------------------------------------------------------------------------------------------
@@ -71,120 +64,6 @@ def load_nominal(path: str | Path | None) -> tuple[pin.Model, str, list[dict]]:
         raise GapError(f"{path}: not a usable model file: {err}") from None
     known = [e for e in doc.get("effects", []) or [] if e.get("kind") != "extra_mass"]
     return model, str(path), known
-
-
-# -- phases -----------------------------------------------------------------------------------------------------------
-def phases(rec: Recording) -> tuple[np.ndarray, dict]:
-    """Phase label per sample and the events found: a rise from a chair (the feet carry under 90 % of the final
-    standing load, then all of it, and the pelvis ends >= 15 cm higher) gives seated / seat-off / rising / standing;
-    otherwise moving / still (joint speed) or static (held postures)."""
-    n = len(rec)
-    if rec.static:
-        return np.full(n, "static", dtype=object), {}
-    fz = rec.feet_force_z_n
-    z = rec.base_pose[:, 2]
-    speed = np.sqrt(np.mean(rec.qd ** 2, axis=1))
-    labels = np.where(speed > MOVING_RADPS, "moving", "still").astype(object)
-    tail = max(5, n // 5)
-    if z[-tail:].mean() - z[:tail].mean() < 0.15:
-        return labels, {}
-    load = fz / max(np.median(fz[-tail:]), 1e-9)
-    dt = float(np.median(np.diff(rec.t_s)))
-    hold = max(1, int(round(0.2 / dt)))
-    above = load >= 0.95
-    k_so = next((k for k in range(n - hold) if above[k:k + hold].all()), None)
-    if k_so is None or load[:max(k_so, 1)].min() > 0.9:
-        return labels, {}
-    t_so = float(rec.t_s[k_so])
-    z_final = np.median(z[-tail:])
-    k_up = next((k for k in range(k_so, n) if z[k] >= z_final - 0.01), n - 1)
-    t = rec.t_s
-    labels = np.full(n, "rising", dtype=object)
-    labels[t < t_so - 0.25] = "seated"
-    labels[np.abs(t - t_so) <= 0.25] = "seat-off"
-    labels[t >= t[k_up]] = "standing"
-    return labels, {"seat_off_s": t_so, "standing_s": float(t[k_up])}
-
-
-def fallen(rec: Recording) -> np.ndarray:
-    """Samples after the robot fell (pelvis below 0.45 m or the base tilted past 60 degrees)."""
-    w = rec.base_pose[:, 3:7]
-    tilt = 2 * np.arccos(np.clip(np.sqrt(w[:, 0] ** 2 + w[:, 3] ** 2), 0, 1))
-    bad = (rec.base_pose[:, 2] < 0.45) | (tilt > np.radians(60))
-    return np.maximum.accumulate(bad)
-
-
-# -- data --------------------------------------------------------------------------------------------------------------
-@dataclass
-class Dataset:
-    """Recordings with their evaluation, phases and noise floors."""
-
-    recordings: list[Recording]
-    evaluations: list[Evaluation]
-    labels: list[np.ndarray]
-    events: list[dict]
-    floors: list[np.ndarray] = field(default_factory=list)     # per recording: (C,) noise floor per channel
-    notes: list[str] = field(default_factory=list)
-
-    @property
-    def channels(self) -> list[str]:
-        """The residual channels (base rows, joint torques, controller channels)."""
-        return self.evaluations[0].channels
-
-    @property
-    def joint_names(self) -> list[str]:
-        """The recordings' joints (plant order)."""
-        return self.recordings[0].joint_names
-
-
-def load_dataset(bags: list[str | Path], model: pin.Model, rate_hz: float = 50.0, progress=None,
-                 controller_params: dict | None = None) -> Dataset:
-    """Read each bag (what follows a fall left out), label its phases and evaluate ``model`` along it; controller
-    channels for all recordings when any has commands (``controller_params``: the controller's links, None: CAD)."""
-    recs, evs, labels, events, notes = [], [], [], [], []
-    for bag in bags:
-        rec = read_recording(bag, model, rate_hz=rate_hz)
-        down = fallen(rec)
-        if down.any():
-            notes.append(f"{bag}: the robot fell at {rec.t_s[np.argmax(down)]:.2f} s; the samples after are left out")
-            rec = rec.subset(~down)
-        if recs and rec.joint_names != recs[0].joint_names:
-            raise GapError(f"{bag}: joints differ from {recs[0].source}'s")
-        lab, ev_info = phases(rec)
-        seated = np.isin(lab, ["seated", "seat-off"])
-        if progress:
-            progress(f"  {bag}: {len(rec)} samples ({'static postures' if rec.static else 'run'}); evaluating the "
-                     "model along them")
-        ev = evaluate(model, rec, seated=seated)
-        law = control_law(rec, controller_params)
-        if law is not None:
-            ev.add_control(*law, rec.tau, rec.joint_names)
-        recs.append(rec)
-        evs.append(ev)
-        labels.append(lab)
-        events.append(ev_info)
-        notes.extend(rec.notes)
-    if any(ev.ctrl_law is not None for ev in evs):      # one channel layout: no controller rows where no commands
-        for rec, ev in zip(recs, evs):
-            if ev.ctrl_law is None:
-                z = np.zeros_like(rec.tau)
-                ev.add_control(z, z, np.zeros(len(rec), bool), rec.tau, rec.joint_names)
-    return Dataset(recs, evs, labels, events, notes=notes)
-
-
-def fast_part_floor(e: np.ndarray, valid: np.ndarray, t_s: np.ndarray) -> np.ndarray:
-    """(C,) robust scale of each channel's residual minus its slow part (Savitzky-Golay over FLOOR_WINDOW_S)."""
-    dt = float(np.median(np.diff(t_s)))
-    w = max(5, int(round(FLOOR_WINDOW_S / dt)) | 1)
-    out = np.zeros(e.shape[1])
-    for c in range(e.shape[1]):
-        x = e[valid[:, c], c]
-        if len(x) <= w:
-            out[c] = np.nan
-            continue
-        fast = x - savgol_series(x, w, 2, 0)
-        out[c] = 1.4826 * np.median(np.abs(fast - np.median(fast)))
-    return out
 
 
 # -- candidates --------------------------------------------------------------------------------------------------------

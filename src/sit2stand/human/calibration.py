@@ -30,7 +30,8 @@ def calibrate_lengths(subject: Subject, marker_names: list[str], positions: np.n
                       n_frames: int = 10, max_nfev: int = 60) -> tuple[Subject, float, float]:
     """Segment length factors that best fit the markers, over ``n_frames`` frames spread over the trial.
 
-    Returns (subject with fitted ``lengths``, marker RMS before [m], after [m]). Factors are bounded to 0.6..1.6 (children and adults).
+    Returns (subject with fitted ``lengths``, marker RMS before [m], after [m]). Factors are bounded to 0.6..1.6
+    (children and adults).
     """
     good = [k for k in range(len(positions)) if np.sum(valid[k]) >= CALIBRATION_MIN_MARKERS]
     picks = [good[i] for i in np.linspace(0, len(good) - 1, min(n_frames, len(good))).astype(int)]

@@ -101,7 +101,7 @@ class MarkerIK:
         it = 0
         damping = 1e-6
         eye = np.eye(nv)
-        for it in range(1, max_iter + 1):
+        for it in range(1, max_iter + 1):  # noqa: B007 (the count is reported after the loop)
             pin.computeJointJacobians(model, data, q)
             pin.updateFramePlacements(model, data)
             P, Jm = self.points(data, self.frames)

@@ -127,7 +127,8 @@ def evaluate(trial: Trial, result: ComResult) -> dict:
         out["com_rms_vs_reference_mm"] = float(np.sqrt(np.mean(np.sum((result.com_m - refi) ** 2, axis=1))) * 1e3)
         if stand.any():
             d_ref = np.linalg.norm(refi[stand, :2] - result.measured_cop_m[stand, :2], axis=1)
-            out["standing_reference_com_to_cop_mm"] = {"mean": float(d_ref.mean() * 1e3), "max": float(d_ref.max() * 1e3)}
+            out["standing_reference_com_to_cop_mm"] = {"mean": float(d_ref.mean() * 1e3),
+                                                        "max": float(d_ref.max() * 1e3)}
     return out
 
 

@@ -5,8 +5,9 @@
   killed with SIGKILL leaves every flushed message recoverable.
 * :class:`BagReader` reads a bag and names the file (and the chunk) and the problem when it cannot (missing,
   truncated, corrupt).
-* :func:`~sit2stand.io.recover.recover_bag` rebuilds a bag from the readable chunks of a truncated or damaged ``.mcap`` (a killed
-  recorder, a bad disk block), and :func:`bag_info` summarises topics, types, counts, rates and duration.
+* :func:`~sit2stand.io.recover.recover_bag` rebuilds a bag from the readable chunks of a truncated or damaged
+  ``.mcap`` (a killed recorder, a bad disk block), and :func:`bag_info` summarises topics, types, counts, rates and
+  duration.
 
 Timestamps are integer nanoseconds (ROS time). Bags follow rosbag2's metadata version 9 (Jazzy).
 """
@@ -246,8 +247,8 @@ class BagWriter:
 
     def flush(self) -> None:
         """Write the queued messages sorted, close the pending MCAP chunk and push it to the disk: everything
-        written so far survives a SIGKILL (:func:`~sit2stand.io.recover.recover_bag` reads it back). Costs one chunk record; call it about
-        once a second, not per message."""
+        written so far survives a SIGKILL (:func:`~sit2stand.io.recover.recover_bag` reads it back). Costs one chunk
+        record; call it about once a second, not per message."""
         if self._closed or self._writer.storage is None:
             return
         self._write_pending()

@@ -73,8 +73,10 @@ def shift_moment(moment_nm: np.ndarray, force_n: np.ndarray, from_point_m: np.nd
     return np.asarray(moment_nm, float) + np.cross(arm, np.asarray(force_n, float))
 
 
-def plate_surface(corners_m: np.ndarray, up: np.ndarray = np.array([0.0, 0.0, 1.0])) -> tuple[np.ndarray, np.ndarray]:
-    """Centre [m] and unit normal (pointing along ``up``) of a plate's top surface from its 4 corners (4, 3)."""
+def plate_surface(corners_m: np.ndarray, up: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Centre [m] and unit normal (pointing along ``up``, default +z) of a plate's top surface from its 4 corners
+    (4, 3)."""
+    up = np.array([0.0, 0.0, 1.0]) if up is None else up
     corners = np.asarray(corners_m, float)
     if corners.shape != (4, 3):
         raise InputError(f"plate corners must have shape (4, 3), got {corners.shape}")

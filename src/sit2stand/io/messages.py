@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from .topics import (COM_TYPE, LAB_FRAME, MOCAP_TYPE, PLATE_TYPE, ROBOT_BASE_POSE_TOPIC,
-                     ROBOT_COP_TOPIC, ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC, ROBOT_JOINT_STATES_TOPIC, ft_topic)
+from .topics import (COM_TYPE, LAB_FRAME, MOCAP_TYPE, PLATE_TYPE, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC,
+                     ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC, ROBOT_JOINT_STATES_TOPIC, WORLD_FRAME, ft_topic)
 from .forceplate import PlateSeries
 from .typestore import typestore
 
@@ -165,10 +165,11 @@ def robot_state(t_ns: int, joint_names: list[str], q: np.ndarray, qd: np.ndarray
         out.append((ft_topic(side), s["geometry_msgs/msg/WrenchStamped"](
             header=header(t_ns, frame), wrench=s["geometry_msgs/msg/Wrench"](force=_vector(w[:3]),
                                                                              torque=_vector(w[3:])))))
-    out.append((ROBOT_COP_TOPIC, s["geometry_msgs/msg/PointStamped"](header=header(t_ns, "world"), point=point(*cop_m))))
+    out.append((ROBOT_COP_TOPIC, s["geometry_msgs/msg/PointStamped"](header=header(t_ns, WORLD_FRAME),
+                                                                      point=point(*cop_m))))
     b = base_pose
     out.append((ROBOT_BASE_POSE_TOPIC, s["geometry_msgs/msg/PoseStamped"](
-        header=header(t_ns, "world"), pose=s["geometry_msgs/msg/Pose"](
+        header=header(t_ns, WORLD_FRAME), pose=s["geometry_msgs/msg/Pose"](
             position=point(*b[:3]), orientation=s["geometry_msgs/msg/Quaternion"](
                 x=float(b[4]), y=float(b[5]), z=float(b[6]), w=float(b[3]))))))
     return out

@@ -26,7 +26,8 @@ class UnknownMessageType(Sit2StandError, KeyError):
     def __init__(self, msgtype: str, where: str = "") -> None:
         self.msgtype = msgtype
         super().__init__(f"unknown message type {msgtype!r}{' in ' + where if where else ''}: no definition in "
-                         f"rosbags' Jazzy store, msgs/ or the share/ folders searched ({', '.join(map(str, _share_dirs()))})")
+                         f"rosbags' Jazzy store, msgs/ or the share/ folders searched "
+                         f"({', '.join(map(str, _share_dirs()))})")
 
     def __str__(self) -> str:  # KeyError quotes its message otherwise
         return str(self.args[0])

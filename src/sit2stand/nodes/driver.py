@@ -37,7 +37,8 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from ..io.topics import (CLOCK_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_JOINT_COMMAND_TOPIC,
-                         ROBOT_JOINT_STATES_TOPIC, ROBOT_JOINT_STATE_COMMAND_TOPIC, ROBOT_STATUS_TOPIC, ft_topic)
+                         ROBOT_JOINT_STATES_TOPIC, ROBOT_JOINT_STATE_COMMAND_TOPIC, ROBOT_STATUS_TOPIC, WORLD_FRAME,
+                         ft_topic)
 from ..data import plant_path
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
@@ -184,12 +185,12 @@ class Driver(Node):
             self.ft_pubs[side].publish(w)
         p = PointStamped()
         self._stamp(p.header)
-        p.header.frame_id = "world"
+        p.header.frame_id = WORLD_FRAME
         p.point.x, p.point.y, p.point.z = (float(v) for v in s.cop_m) if s.cop_valid else (float("nan"),) * 3
         self.cop_pub.publish(p)
         b = PoseStamped()
         self._stamp(b.header)
-        b.header.frame_id = "world"
+        b.header.frame_id = WORLD_FRAME
         b.pose.position.x, b.pose.position.y, b.pose.position.z = map(float, s.base_pose[:3])
         (b.pose.orientation.w, b.pose.orientation.x, b.pose.orientation.y,
          b.pose.orientation.z) = map(float, s.base_pose[3:7])
@@ -202,7 +203,8 @@ class Driver(Node):
                                   level=DiagnosticStatus.ERROR if plant.fallen else DiagnosticStatus.OK,
                                   message=plant.status_text if plant.fallen else ("limp" if plant.limp else "ok"))
         status.values = [KeyValue(key=k, value=v) for k, v in (
-            ("sim_time_s", f"{plant.t_s:.3f}"), ("real_time_factor", f"{(plant.t_s - self._sim0) / max(wall, 1e-9):.2f}"),
+            ("sim_time_s", f"{plant.t_s:.3f}"),
+            ("real_time_factor", f"{(plant.t_s - self._sim0) / max(wall, 1e-9):.2f}"),
             ("pelvis_height_m", f"{plant.data.qpos[2]:.3f}"), ("feedforward", plant.feedforward))]
         self.status_pub.publish(status)
 

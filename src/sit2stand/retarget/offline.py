@@ -24,7 +24,8 @@ from ..human.skeleton import Subject
 from ..io import messages as M
 from ..io.bag import BagReader, BagWriter
 from ..io.messages import stamp_ns
-from ..io.topics import HUMAN_COM_TOPIC, ROBOT_JOINT_COMMAND_TOPIC, ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC
+from ..io.topics import (HUMAN_COM_TOPIC, ROBOT_JOINT_COMMAND_TOPIC, ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC,
+                         WORLD_FRAME)
 from ..io.typestore import typestore
 from ..robot.identify import read_link_parameters
 from ..robot.model import PlantConfig
@@ -118,9 +119,9 @@ def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float)
                     ts["trajectory_msgs/msg/JointTrajectory"](header=M.header(t_ns, "base_link"),
                                                             joint_names=list(joint_names), points=[point]))
             w.write(ROBOT_PLANNED_COM_TOPIC, t_ns,
-                    ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, "world"), point=M.point(*c.com)))
+                    ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, WORLD_FRAME), point=M.point(*c.com)))
             w.write(ROBOT_PLANNED_ZMP_TOPIC, t_ns,
-                    ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, "world"), point=M.point(*c.zmp)))
+                    ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, WORLD_FRAME), point=M.point(*c.zmp)))
 
 
 def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0,

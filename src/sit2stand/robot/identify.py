@@ -73,7 +73,8 @@ def read_postures(path: str | Path) -> PostureData:
 
     with BagReader(path) as bag:
         topics = bag.topics()
-        need = [ROBOT_JOINT_STATES_TOPIC, ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC, ROBOT_COP_TOPIC, ROBOT_BASE_POSE_TOPIC]
+        need = [ROBOT_JOINT_STATES_TOPIC, ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC, ROBOT_COP_TOPIC,
+                ROBOT_BASE_POSE_TOPIC]
         missing = [t for t in need if t not in topics]
         if missing:
             raise BagError(f"{path}: not a static-posture bag: no {', '.join(missing)}")
@@ -241,7 +242,7 @@ def identify_full(data: PostureData, eval_fraction: float = 0.1, seed: int = 0, 
 def planar_columns(model: pin.Model, Y: np.ndarray) -> np.ndarray:
     """(nv, 15) columns of the planar5 parameters (m, m c_x, m c_z per link; legs left = right)."""
     cols = []
-    for link, (joint, per_leg) in PLANAR_LINKS.items():
+    for joint, per_leg in PLANAR_LINKS.values():
         joints = [joint.format(side=s, root=model.names[1]) for s in SIDES] if per_leg else \
             [joint.format(root=model.names[1])]
         for a in (0, 1, 3):     # m, m c_x, m c_z of the link's frame body
@@ -278,7 +279,7 @@ def identify_planar5(data: PostureData, eval_fraction: float = 0.1, seed: int = 
         q = _pin_q(model, data, k)
         pin.forwardKinematics(model, mdata, q)
         total_m, moment = 0.0, 0.0
-        for i, (link, (joint, per_leg)) in enumerate(PLANAR_LINKS.items()):
+        for i, (joint, per_leg) in enumerate(PLANAR_LINKS.values()):
             m, mcx, mcz = theta[3 * i:3 * i + 3]
             for j in ([joint.format(side=s) for s in SIDES] if per_leg else [joint.format(root=model.names[1])]):
                 M = mdata.oMi[model.getJointId(j)]
@@ -291,7 +292,7 @@ def identify_planar5(data: PostureData, eval_fraction: float = 0.1, seed: int = 
     rms = lambda pred, idx: float(np.sqrt(np.mean((pred - data.cop[idx, 0]) ** 2)))  # noqa: E731
     cad_train = np.array([com_x(model, data, k) for k in train])
     cad_eval = np.array([com_x(model, data, k) for k in ev])
-    total = sum(theta[3 * i] * (2 if PLANAR_LINKS[l][1] else 1) for i, l in enumerate(PLANAR_LINKS))
+    total = sum(theta[3 * i] * (2 if per_leg else 1) for i, (_, per_leg) in enumerate(PLANAR_LINKS.values()))
     names = [f"{link}.{p}" for link in PLANAR_LINKS for p in ("mass", "mcx", "mcz")]
     return IdentificationResult("planar5", names, theta, np.sqrt(np.maximum(np.diag(cov), 0.0)), rms(t_train, train),
                                 rms(t_eval, ev), rms(cad_train, train), rms(cad_eval, ev), cond, rank, len(train),

@@ -25,7 +25,7 @@ import pinocchio as pin
 
 from ..io import messages as M
 from ..io.bag import BagWriter
-from ..io.topics import GROUND_TRUTH_ROBOT_COM_TOPIC
+from ..io.topics import GROUND_TRUTH_ROBOT_COM_TOPIC, WORLD_FRAME
 from ..io.typestore import typestore
 from .model import SIDES, PlantConfig
 from .plant import Plant, lowest_point
@@ -220,7 +220,7 @@ def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, p
                                             sample.cop, sample.base_pose, sole_m=sample.sole):
                 bag.write(topic, t_ns, msg)
             bag.write(GROUND_TRUTH_ROBOT_COM_TOPIC, t_ns, store["geometry_msgs/msg/PointStamped"](
-                header=M.header(t_ns, "world"), point=M.point(*sample.true_com)))
+                header=M.header(t_ns, WORLD_FRAME), point=M.point(*sample.true_com)))
             if progress and kept % 10 == 0:
                 print(f"  {kept}/{n} postures held ({dropped} tipped and dropped)", file=sys.stderr, flush=True)
     return {"kept": kept, "dropped": dropped, "home_com_bias_m": bias}
