@@ -1,13 +1,15 @@
 """sit2stand.robot.identify: the hidden mass of the plant is found from static postures; bad data fails clearly."""
 
+import dataclasses
+
 import numpy as np
 import pinocchio as pin
 import pytest
 import yaml
 
 from sit2stand.io.bag import BagReader, BagWriter
-from sit2stand.robot.identify import (IdentificationError, controller_model, identify, read_postures, with_parameters,
-                                      write_yaml)
+from sit2stand.robot.identify import (IdentificationError, check_postures, check_result, controller_model, identify,
+                                      identify_full, read_postures, with_parameters, write_yaml)
 from sit2stand.robot.model import PlantConfig
 from sit2stand.robot.plant import Plant
 from sit2stand.robot.postures import collect_postures, standing_qpos
@@ -99,3 +101,30 @@ def test_a_plant_with_a_different_hidden_mass(tmp_path):
     # 4.6 mm measured: with the payload in front many postures stand near the toes (57 tipped and were dropped)
     assert result.eval_rms_m <= 0.006 and result.cad_eval_rms_m > 3 * 0.006
     assert np.isfinite(result.condition_number)
+
+
+def test_postures_with_foreign_missing_or_nan_joints_are_refused_by_name(postures):
+    model = controller_model()
+    data = read_postures(postures)
+    foreign = dataclasses.replace(data, joint_names=["arm_7_joint"] + data.joint_names[1:])
+    with pytest.raises(IdentificationError, match="joints the robot model does not have: arm_7_joint"):
+        check_postures(foreign, model, "p")
+    keep = list(range(12))
+    few = dataclasses.replace(data, joint_names=data.joint_names[:12], q=data.q[:, keep], tau=data.tau[:, keep])
+    with pytest.raises(IdentificationError, match=f"12 of the robot's {len(data.joint_names)} joints"):
+        check_postures(few, model, "p")
+    q = data.q.copy()
+    q[4, 3] = np.nan
+    with pytest.raises(IdentificationError, match=r"joint positions not finite in posture\(s\) 4"):
+        check_postures(dataclasses.replace(data, q=q), model, "p")
+    check_postures(data, model, "p")
+
+
+def test_doubled_forces_give_an_implausible_mass_that_is_refused(postures):
+    data = read_postures(postures)
+    doubled = dataclasses.replace(data, tau=2 * data.tau, wrench={s: 2 * w for s, w in data.wrench.items()})
+    result = identify_full(doubled)
+    assert result.total_mass_kg > 1.5 * result.cad_mass_kg        # what was accepted before
+    with pytest.raises(IdentificationError, match="check the force units"):
+        check_result(result, "p")
+    check_result(identify_full(data), "p")

@@ -24,7 +24,7 @@ import pinocchio as pin
 from ..dynamics import G, model_cop, savgol_series, smooth_motion
 from ..io.forceplate import PlateSeries, center_of_pressure
 from .calibration import calibrate_lengths, calibrate_markers
-from .marker_ik import MarkerIK, TooFewMarkers, bridge_skipped, fit_sequence
+from .marker_ik import MarkerIK, TooFewMarkers, bridge_skipped, check_marker_units, fit_sequence
 from .mass_scaling import MassScaling, apply_scaling, assemble_rows, frame_rows, prior_scaling, solve_mass_scaling
 from .skeleton import HumanModel, Subject, build_human
 from .support import SupportRule, body_mass_from_plates, plate_gaps, plate_wrench_at
@@ -89,6 +89,8 @@ def _fit_motion(marker_t_s, marker_names, positions, valid, subject: Subject, ca
                 progress) -> _Motion:
     """Calibrate (optionally), fit every frame, bridge the frames that could not be fitted, smooth."""
     dt = float(np.median(np.diff(marker_t_s)))
+    first = int(np.argmax(np.sum(valid, axis=1)))          # the frame that sees the most markers
+    check_marker_units(positions[first], valid[first], subject.height_m, "markers")
     rms_before = rms_after = float("nan")
     if calibrate:
         subject, rms_before, _ = calibrate_lengths(subject, marker_names, positions, valid)

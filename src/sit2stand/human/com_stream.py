@@ -17,7 +17,7 @@ from scipy.signal import savgol_coeffs   # at import time: the first frame must 
 from ..dynamics import G, model_cop
 from ..io.forceplate import PlateSeries, center_of_pressure
 from .calibration import CALIBRATION_MIN_MARKERS, StreamCalibration, calibrate_stream
-from .marker_ik import MarkerIK
+from .marker_ik import MIN_MARKERS, MarkerIK, check_marker_units
 from .mass_scaling import FrameRows, MassScaling, apply_scaling, assemble_rows, frame_rows, solve_mass_scaling
 from .skeleton import Subject, build_human
 from .support import SupportRule, plate_wrench_at
@@ -114,6 +114,7 @@ class StreamingComEstimator:
         self.rows: list[FrameRows] = []
         self._x: list[np.ndarray] = []       # tangent coordinates of each frame (see smooth_motion)
         self._fitted: list[bool] = []        # False: the frame's markers could not be fitted, its pose was held
+        self._units_checked = False
         self.rows_skipped_unfitted = 0       # supported frames kept out of the scaling: held poses in their window
         self._R0: np.ndarray | None = None
         self.scaling: MassScaling | None = None
@@ -153,6 +154,9 @@ class StreamingComEstimator:
         causal COM, then the delayed work (the centred window half a window back: model and measured COP, scaling
         rows). ``defer_delayed``: leave that to :meth:`process_delayed`, so that a live caller can publish the COM
         first (its model/measured COP then come with that call)."""
+        if not self._units_checked and np.sum(valid) >= MIN_MARKERS:
+            check_marker_units(positions_m, valid, self.subject.height_m, "marker stream")
+            self._units_checked = True
         if not self.calibrated:
             if np.sum(valid) >= CALIBRATION_MIN_MARKERS:
                 self._calib.append((np.asarray(positions_m, float).copy(), np.asarray(valid, bool).copy()))

@@ -24,6 +24,37 @@ class TooFewMarkers(Sit2StandError, ValueError):
     """The marker set cannot constrain the skeleton; the message lists what is there and what is needed."""
 
 
+class MarkerUnitsError(Sit2StandError, ValueError):
+    """The markers' spread does not fit a body of the subject's stature in metres; the message names the likely
+    unit."""
+
+
+BODY_SPAN_RANGE = (0.2, 3.0)
+"""Plausible span of one frame's markers (bounding-box diagonal) over the stature: seated, standing, arms out."""
+UNIT_FACTORS = {"millimetres": 1000.0, "centimetres": 100.0, "inches": 39.37}
+
+
+def check_marker_units(positions: np.ndarray, valid: np.ndarray, height_m: float, source: str) -> None:
+    """Check that one frame's markers (M, 3) span a body of ``height_m`` in metres.
+
+    Raises:
+        MarkerUnitsError: they do not; the message names ``source`` (the file or topic), the span and the unit the
+            numbers most likely are in.
+    """
+    pts = np.asarray(positions, float)[np.asarray(valid, bool)]
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    if len(pts) < MIN_MARKERS:
+        return
+    span = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+    ratio = span / height_m
+    if BODY_SPAN_RANGE[0] <= ratio <= BODY_SPAN_RANGE[1]:
+        return
+    unit = min(UNIT_FACTORS, key=lambda u: abs(np.log(ratio / UNIT_FACTORS[u]))) if ratio > 1 else "not metres"
+    raise MarkerUnitsError(f"{source}: the markers of one frame span {span:.4g} for a {height_m:g} m subject "
+                           f"({ratio:.3g} x the stature); the positions look like {unit}, not metres "
+                           f"(convert them, or check the subject's stature)")
+
+
 @dataclass
 class FrameFit:
     q: np.ndarray

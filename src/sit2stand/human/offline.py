@@ -29,6 +29,7 @@ from ..io.topics import (COM_TYPE, FORCE_PLATE_PREFIX, GROUND_TRUTH_COM_TOPIC, H
 from ..io.typestore import typestore
 from .calibration import calibrate_stream, static_frames
 from .com import ComResult, estimate_com
+from .marker_ik import check_marker_units
 from .skeleton import Subject, build_human
 
 
@@ -229,6 +230,8 @@ def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg
         print(f"{bag_path}: {len(trial.marker_names)} markers x {len(trial.marker_t_s)} frames, plates "
               f"{', '.join(p.name for p in trial.plates)}; subject {height:g} m, {mass:g} kg"
               f"{'' if chair else ' (chair not on a plate: scaling uses frames after seat-off)'}", file=sys.stderr)
+    best = int(np.argmax(trial.valid.sum(axis=1)))         # the frame that sees the most markers
+    check_marker_units(trial.positions[best], trial.valid[best], height, f"{bag_path}: {MARKERS_TOPIC}")
     result = estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,
                           subject, calibrate=calibrate, scale_masses=scale, chair_on_plate=chair, progress=progress,
                           trust_plate_mass=mass_kg is None)

@@ -35,7 +35,7 @@ from std_msgs.msg import Header
 
 from ..human.calibration import StreamCalibration
 from ..human.com_stream import StreamingComEstimator
-from ..human.marker_ik import TooFewMarkers
+from ..human.marker_ik import MarkerUnitsError, TooFewMarkers
 from ..human.skeleton import Subject
 from ..io.messages import mocap_arrays, plate_sample_from_cdr, reorder_markers, stamp_ns
 from ..io.topics import (FORCE_PLATE_PREFIX, HUMAN_COM_TOPIC, HUMAN_JOINTS_TOPIC, HUMAN_MEASURED_COP_TOPIC,
@@ -149,7 +149,12 @@ class HumanComNode(Node):
         pos, valid = reorder_markers(*mocap_arrays(msg), self.names)
         t_s = stamp_ns(msg.header) * 1e-9
         self._flush_plates()
-        out = self.estimator.update(t_s, pos, valid, defer_delayed=True)
+        try:
+            out = self.estimator.update(t_s, pos, valid, defer_delayed=True)
+        except MarkerUnitsError as err:
+            self.get_logger().error(f"{MARKERS_TOPIC}: {err}")
+            self.exit_code, self.finished = 2, True
+            return
         if not out.valid:
             self.skipped += 1
         self._publish_com(msg.header, out)        # first: the retargeter waits for it

@@ -43,6 +43,10 @@ class IdentificationNode(Node):
             res.success, res.message = False, str(err)
             self.get_logger().error(f"identification failed: {err}")
             return res
+        except Exception as err:  # noqa: BLE001 - every request gets an answer; the node stays up for the next
+            res.success, res.message = False, f"internal error: {err!r}"
+            self.get_logger().error(f"identification failed unexpectedly: {err!r}")
+            return res
         out = req.output_path or str(Path(req.data_path) / f"identified_{model}.yaml")
         write_yaml(result, out, source=req.data_path)
         res.success, res.message = True, result.summary()

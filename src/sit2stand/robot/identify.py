@@ -324,8 +324,59 @@ def identify(path: str | Path, model: str = "full", eval_fraction: float = 0.1, 
     data = read_postures(path)
     if len(data) < 6:
         raise IdentificationError(f"{path}: only {len(data)} postures (need at least 6: 5 to train, 1 to evaluate)")
+    check_postures(data, controller_model(), path)
     fn = identify_full if model == "full" else identify_planar5
-    return fn(data, eval_fraction=eval_fraction, seed=seed)
+    result = fn(data, eval_fraction=eval_fraction, seed=seed)
+    check_result(result, path)
+    return result
+
+
+MASS_RATIO_RANGE = (0.67, 1.5)
+"""Plausible identified total mass over CAD's: a robot carries extra parts, not twice or half its CAD mass."""
+EVAL_WORSE_THAN_CAD = 1.5
+"""The held-out COM error may not exceed CAD's by more than this factor (and 5 mm): a fit that predicts worse than
+the CAD model it started from learned the noise, not the robot."""
+
+
+def check_postures(data: PostureData, model: pin.Model, path: str | Path) -> None:
+    """The postures name exactly the model's joints and hold finite numbers.
+
+    Raises:
+        IdentificationError: foreign or missing joints (named), or postures with NaN or infinite values (listed).
+    """
+    joints = [n for n in model.names[2:]]
+    foreign = [n for n in data.joint_names if n not in joints]
+    if foreign:
+        raise IdentificationError(f"{path}: joints the robot model does not have: {', '.join(foreign[:6])}"
+                                  f"{' ...' if len(foreign) > 6 else ''}")
+    missing = [n for n in joints if n not in data.joint_names]
+    if missing:
+        raise IdentificationError(f"{path}: {len(data.joint_names)} of the robot's {len(joints)} joints; missing "
+                                  f"{', '.join(missing[:6])}{' ...' if len(missing) > 6 else ''}")
+    arrays = {"joint positions": data.q, "joint torques": data.tau, "COP": data.cop, "base pose": data.base_pose,
+              **{f"{side} F/T wrench": w for side, w in data.wrench.items()}}
+    for what, values in arrays.items():
+        bad = np.flatnonzero(~np.all(np.isfinite(np.asarray(values, float).reshape(len(values), -1)), axis=1))
+        if len(bad):
+            raise IdentificationError(f"{path}: {what} not finite in posture(s) {', '.join(map(str, bad[:8]))}")
+
+
+def check_result(result: IdentificationResult, path: str | Path) -> None:
+    """The identified parameters are physically plausible and predict better than CAD's.
+
+    Raises:
+        IdentificationError: a total mass outside :data:`MASS_RATIO_RANGE` of CAD's (likely scaled forces), or a
+            held-out error beyond :data:`EVAL_WORSE_THAN_CAD` times CAD's.
+    """
+    ratio = result.total_mass_kg / result.cad_mass_kg
+    if not MASS_RATIO_RANGE[0] <= ratio <= MASS_RATIO_RANGE[1]:
+        raise IdentificationError(f"{path}: identified total mass {result.total_mass_kg:.1f} kg is {ratio:.2f} x "
+                                  f"CAD's {result.cad_mass_kg:.1f} kg: check the force units and the F/T scaling")
+    if not np.isfinite(result.eval_rms_m) or \
+            result.eval_rms_m > max(EVAL_WORSE_THAN_CAD * result.cad_eval_rms_m, result.cad_eval_rms_m + 0.005):
+        raise IdentificationError(f"{path}: held-out COM error {result.eval_rms_m * 1e3:.1f} mm against CAD's "
+                                  f"{result.cad_eval_rms_m * 1e3:.1f} mm: the postures do not determine the "
+                                  f"parameters (too few, too alike, or inconsistent)")
 
 
 def read_link_parameters(path: str | Path) -> dict:
