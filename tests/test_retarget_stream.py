@@ -137,3 +137,30 @@ def test_a_calibration_frame_without_the_needed_markers_is_refused_by_name(elder
     rt = Retargeter(robot_setup())
     with pytest.raises(RuntimeError, match="calibrate"):
         rt.step(0.0, trial.positions[0], trial.valid[0], com_h[0])
+
+
+def test_a_recording_that_starts_after_seat_off_is_led_in_from_the_robots_seat(elderly):
+    """The elderly rise cut where the human COM has passed the heel: the seated knot comes from the body's
+    proportions and a lead-in takes the robot from its own seated COM to the first frame's target, smoothly."""
+    trial, com_h, _ = elderly
+    heel = trial.positions[0, trial.marker_names.index("LHEE"), 0]
+    k0 = int(np.argmax(com_h[:, 0] > heel + 0.02))
+    robot = robot_setup()
+    rt = Retargeter(robot)
+    rt.calibrate(trial.marker_names, trial.positions[k0], trial.valid[k0], com_h[k0])
+    assert not rt.started_seated and rt.human_seat_off
+    lead = rt.lead_in(float(trial.marker_t_s[k0]), 0.01, trial.positions[k0], trial.valid[k0], com_h[k0])
+    targets = np.array([f.com_target[0] for f in lead])
+    assert len(lead) >= 50 and targets[0] == pytest.approx(rt.com_seated[0], abs=0.002)
+    assert np.all(np.diff(targets) > -1e-6), "the lead-in moves the COM forward only"
+    assert np.abs(np.diff(targets)).max() < 0.01, "no jump: at most 1 cm per frame"
+    assert lead[0].seated and not lead[-1].seated, "the robot leaves its seat during the lead-in"
+    first = rt.step(float(trial.marker_t_s[k0]), trial.positions[k0], trial.valid[k0], com_h[k0])
+    assert abs(first.com_target[0] - targets[-1]) < 0.01
+
+
+def test_a_recording_that_starts_seated_gets_no_lead_in(retargeted, elderly):
+    trial, com_h, _ = elderly
+    _, rt, frames, *_ = retargeted
+    assert rt.started_seated and len(frames) == len(trial.marker_t_s)
+    assert rt.lead_in(0.0, 0.01, trial.positions[0], trial.valid[0], com_h[0]) == []

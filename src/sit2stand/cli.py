@@ -1,8 +1,9 @@
 """The `sit2stand` command: one entry point for the offline tools and for starting nodes and graphs.
 
     sit2stand import-c3d FILE.c3d --out BAG [--chair-plate I] [--feet-plate J] [--forward +X --up +Z]
+    sit2stand import-trc FILE.trc [--grf FILE.mot] [--mass KG --height M] --out BAG   (OpenSim markers and forces)
     sit2stand synth-human --style natural|elderly [--height M --mass KG ...] [--extra-mass SEG:KG[:x,y,z]] --out BAG
-    sit2stand human-com BAG --out DIR                       (offline human COM: JSON, PNG, a bag of /human/*)
+    sit2stand human-com BAG --out DIR [--marker-set NAME|FILE]   (offline human COM: JSON, PNG, CSV, .sto, a bag)
     sit2stand human-calibrate BAG --out FILE.yaml [--frames 50]   (the human_com node's calibration_file)
     sit2stand retarget BAG --out DIR [--params P.yaml] [--simulate] [--time-scale S | --max-time-scale S]
     sit2stand drive [--plant PLANT] [--params P.yaml] [--rtf R] [--clock]   (the driver node)
@@ -50,6 +51,26 @@ def _import_c3d(args: argparse.Namespace) -> int:
     return 0
 
 
+def _import_trc(args: argparse.Namespace) -> int:
+    from .io.bag import bag_info
+    from .io.c3d import write_trial_bag
+    from .io.trc import read_opensim_trial
+
+    trial = read_opensim_trial(args.file, args.grf, mass_kg=args.mass, height_m=args.height, forward=args.forward,
+                               up=args.up, cop_threshold_n=args.cop_threshold)
+    m = trial.markers
+    print(f"{trial.path}: {len(m.names)} markers x {len(m.times_s)} frames at {m.rate_hz:g} Hz, "
+          f"{len(trial.plates)} plates ({', '.join(p.name for p in trial.plates) or 'none'}); lab axes: "
+          f"{trial.axes.reason}")
+    if trial.height_m is None or trial.body_mass_kg is None:
+        print("  no --height/--mass: give them to human-com later (TRC files do not carry them)")
+    counts = write_trial_bag(trial, args.out)
+    print(f"wrote {args.out}: " + ", ".join(f"{t} ({n})" for t, n in counts.items()))
+    if args.verbose:
+        print(bag_info(args.out))
+    return 0
+
+
 def _synth_human(args: argparse.Namespace) -> int:
     from .human.skeleton import ExtraMass
     from .human.demonstration_bag import write_demonstration_bag
@@ -87,7 +108,7 @@ def _human_com(args: argparse.Namespace) -> int:
     from .human.offline import run
 
     summary = run(args.bag, args.out, height_m=args.height, mass_kg=args.mass, sex=args.sex,
-                  calibrate=not args.no_calibration, scale=not args.no_scaling)
+                  calibrate=not args.no_calibration, scale=not args.no_scaling, marker_set=args.marker_set)
     keys = ["com_rms_vs_truth_scaled_mm", "com_rms_vs_truth_unscaled_mm", "cop_rms_unscaled_mm", "cop_rms_scaled_mm",
             "com_rms_vs_reference_mm", "standing_com_to_cop_mm", "standing_reference_com_to_cop_mm", "marker_rms_mm"]
     for key in keys:
@@ -99,7 +120,11 @@ def _human_com(args: argparse.Namespace) -> int:
     if summary.get("plate_gaps"):
         print("  force plates dropped out: " + "; ".join(
             f"{g['plate']} {g['from_s']:.3f}-{g['to_s']:.3f} s" for g in summary["plate_gaps"]))
-    print(f"wrote {args.out}/summary.json, human_com.png and the human_com bag")
+    if "newton_residual_rms_xyz_n" in summary:
+        rms = ", ".join(f"{v:.1f}" for v in summary["newton_residual_rms_xyz_n"])
+        print(f"  {'newton_residual_rms_xyz_n':<36} {rms} ({summary['newton_residual_frames']} frames on the plates)")
+    print(f"wrote {args.out}/summary.json, human_com.png, com.csv, joint_angles.csv, human_states.sto and the "
+          f"human_com bag (marker set {summary['marker_set']})")
     return 0
 
 
@@ -113,6 +138,7 @@ def _retarget(args: argparse.Namespace) -> int:
     print(json.dumps(summary, indent=2))
     if args.simulate:
         print("stood up" if summary["stood_up"] else f"did not stand up: {summary['fall'] or 'pelvis too low'}")
+        return 0 if summary["stood_up"] else 1
     return 0
 
 
@@ -286,6 +312,20 @@ def _add_import_c3d(sub) -> None:
     p.set_defaults(func=_import_c3d)
 
 
+def _add_import_trc(sub) -> None:
+    p = sub.add_parser("import-trc", help="OpenSim TRC markers (and .mot ground reaction forces) -> bag (SI, REP-103)")
+    p.add_argument("file", type=Path, help="the .trc marker file")
+    p.add_argument("--grf", type=Path, help="OpenSim .mot ground reaction forces (plates plate0, plate1, ...)")
+    p.add_argument("--out", type=Path, required=True, help="bag directory to create")
+    p.add_argument("--mass", type=float, help="body mass [kg] for the bag's metadata (TRC files lack it)")
+    p.add_argument("--height", type=float, help="stature [m] for the bag's metadata (TRC files lack it)")
+    p.add_argument("--forward", help="file axis that is lab x (forward); default +X (OpenSim's)")
+    p.add_argument("--up", help="file axis that is lab z (up); default +Y (OpenSim's)")
+    p.add_argument("--cop-threshold", type=float, default=20.0, help="normal force [N] below which COP is invalid")
+    p.add_argument("-v", "--verbose", action="store_true", help="print the bag summary afterwards")
+    p.set_defaults(func=_import_trc)
+
+
 def _add_synth_human(sub) -> None:
     p = sub.add_parser("synth-human", help="digital-human sit-to-stand demonstration (markers, plates, true COM)")
     p.add_argument("--style", choices=["natural", "elderly"], default="natural")
@@ -310,6 +350,8 @@ def _add_human_com(sub) -> None:
     p.add_argument("--sex", choices=["male", "female"])
     p.add_argument("--no-calibration", action="store_true", help="keep de Leva's segment lengths")
     p.add_argument("--no-scaling", action="store_true", help="keep de Leva's segment masses")
+    p.add_argument("--marker-set", help="marker set: plug_in_gait, plug_in_gait_lower, gait2392 or a YAML file "
+                   "(default: the packaged set that covers most of the bag's marker names)")
     p.set_defaults(func=_human_com)
 
 
@@ -446,6 +488,7 @@ def _add_record(sub) -> None:
 
 COMMANDS = [
     _add_import_c3d,
+    _add_import_trc,
     _add_synth_human,
     _add_human_com,
     _add_human_calibrate,

@@ -18,7 +18,8 @@ from ..dynamics import G, model_cop
 from ..io.forceplate import PlateSeries, center_of_pressure
 from .calibration import CALIBRATION_MIN_MARKERS, StreamCalibration, calibrate_stream
 from .marker_ik import MIN_MARKERS, MarkerIK, check_marker_units
-from .mass_scaling import FrameRows, MassScaling, apply_scaling, assemble_rows, frame_rows, solve_mass_scaling
+from .mass_scaling import (FactorAtBound, FrameRows, MassScaling, apply_scaling, assemble_rows, frame_rows,
+                           lengths_at_bounds, scaling_at_bounds, solve_mass_scaling)
 from .skeleton import Subject, build_human
 from .support import SupportRule, plate_wrench_at
 
@@ -115,6 +116,7 @@ class StreamingComEstimator:
         self._x: list[np.ndarray] = []       # tangent coordinates of each frame (see smooth_motion)
         self._fitted: list[bool] = []        # False: the frame's markers could not be fitted, its pose was held
         self._units_checked = False
+        self._t_first: float | None = None    # the first marker frame's time [s]
         self.rows_skipped_unfitted = 0       # supported frames kept out of the scaling: held poses in their window
         self._R0: np.ndarray | None = None
         self.scaling: MassScaling | None = None
@@ -139,6 +141,21 @@ class StreamingComEstimator:
         if name not in self._plates:
             self._plates[name] = PlateBuffer(name)
 
+    def drop_silent_plates(self, after_s: float = 0.3) -> list[str]:
+        """Expected plates that have sent nothing for ``after_s`` [s] of marker time while another plate has: the
+        recording has no such plate. They stop holding frames back; without the chair plate, frames count for the
+        scaling only once the feet carry the whole weight. Returns the plates dropped."""
+        if self._t_first is None or not self._t or self._t[-1] - self._t_first < after_s or \
+                not any(b.n for b in self._plates.values()):
+            return []
+        silent = [name for name, b in self._plates.items() if b.n == 0]
+        for name in silent:
+            del self._plates[name]
+        if "chair" in silent:
+            self.chair_on_plate = False
+            self.support = SupportRule(self.subject.mass_kg * G, chair_on_plate=False)
+        return silent
+
     def add_plate_samples(self, name: str, t_s: np.ndarray, force_n: np.ndarray, moment_nm: np.ndarray) -> None:
         """Append force-plate samples (times [s], force [N] and moment about the lab origin [N m], (K, 3))."""
         t = np.atleast_1d(np.asarray(t_s, float))
@@ -154,6 +171,7 @@ class StreamingComEstimator:
         causal COM, then the delayed work (the centred window half a window back: model and measured COP, scaling
         rows). ``defer_delayed``: leave that to :meth:`process_delayed`, so that a live caller can publish the COM
         first (its model/measured COP then come with that call)."""
+        self._t_first = t_s if self._t_first is None else self._t_first
         if not self._units_checked and np.sum(valid) >= MIN_MARKERS:
             check_marker_units(positions_m, valid, self.subject.height_m, "marker stream")
             self._units_checked = True
@@ -301,6 +319,17 @@ class StreamingComEstimator:
         self.scaled_model = apply_scaling(self.human, self.scaling)
         self.scaled_data = self.scaled_model.createData()
         return self.scaling
+
+    @property
+    def at_bounds(self) -> list[FactorAtBound]:
+        """The calibration's length factors and the latest scaling's mass factors that sit at a bound of their fit."""
+        out = lengths_at_bounds(self.calibration.lengths) if self.calibration is not None else []
+        return out + (scaling_at_bounds(self.scaling) if self.scaling is not None else [])
+
+    @property
+    def warnings(self) -> list[str]:
+        """:attr:`at_bounds` as lines for a log, each naming the segment group and the factor (empty: none)."""
+        return [f.note() for f in self.at_bounds]
 
     def _plate_wrench(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
         """Summed plate wrench at the centre of the window's marker ``times``, smoothed by the same centred

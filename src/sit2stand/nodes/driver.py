@@ -47,6 +47,8 @@ from .runtime import PUBLISH_DEPTH, NodeError, declare, node_main
 
 DEFAULT_PLANT = plant_path("default")
 SIM_EPOCH_S = 100.0      # simulated time starts here when the driver is the time source (0 reads as "unset")
+FELL_EXIT_CODE = 3
+"""The driver's exit status after the robot fell (a graph with it then exits 1)."""
 
 
 class Driver(Node):
@@ -90,6 +92,7 @@ class Driver(Node):
         self._sim0 = self.plant.t_s
         self.steps_done = 0
         self._fall_reported = False
+        self.exit_code = 0
         self.create_timer(0.005, self._tick)
         self.create_timer(0.1, self._publish_status)
         self.get_logger().info(f"TALOS seated on a {self.plant.seat_height_m:.3f} m chair; plant {cfg.name}; "
@@ -132,6 +135,7 @@ class Driver(Node):
         self.plant.settle(self.settle_s)
         self._wall0, self._sim0 = time.monotonic(), self.plant.t_s
         self._fall_reported = False
+        self.exit_code = 0
         res.success, res.message = True, "reset: seated on the chair"
         return res
 
@@ -149,7 +153,9 @@ class Driver(Node):
             self._publish_state()
             if plant.fallen and not self._fall_reported:
                 self._fall_reported = True
-                self.get_logger().error(f"robot {plant.status_text}; going {self.on_fall}")
+                self.exit_code = FELL_EXIT_CODE        # the graph's job failed: the launcher says so
+                self.get_logger().error(f"robot {plant.status_text} at {plant.t_s:.2f} s of simulated time; "
+                                        f"going {self.on_fall}")
                 if self.on_fall == "limp":
                     plant.set_limp(True)
                 else:

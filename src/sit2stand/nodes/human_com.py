@@ -149,6 +149,9 @@ class HumanComNode(Node):
         pos, valid = reorder_markers(*mocap_arrays(msg), self.names)
         t_s = stamp_ns(msg.header) * 1e-9
         self._flush_plates()
+        for name in self.estimator.drop_silent_plates():
+            self.get_logger().warning(f"no samples on {FORCE_PLATE_PREFIX}{name} while other plates stream: going on "
+                                      f"without it{' (seat-off from the kinematics)' if name == 'chair' else ''}")
         try:
             out = self.estimator.update(t_s, pos, valid, defer_delayed=True)
         except MarkerUnitsError as err:

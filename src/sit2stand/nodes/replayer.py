@@ -37,7 +37,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool
 
-from ..io.topics import CLOCK_TOPIC
+from ..io.topics import CLOCK_TOPIC, FORCE_PLATE_PREFIX, MARKERS_TOPIC
 from ..io.bag import BagError, BagReader
 from ..io.playback import ClockTicks, PlaybackClock, check_rate, parse_wait_for, played_fraction
 from .runtime import NodeError, declare, message_class, node_main, qos_from_bag
@@ -148,7 +148,11 @@ class Replayer(Node):
 
     # --- playback thread ---------------------------------------------------------------------------------------
     def _wait_for_subscribers(self) -> None:
-        wanted = dict(self.wait_for)
+        # a capture topic the bag does not hold (a trial without a chair plate) has nobody to wait for
+        absent = [t for t in self.wait_for if t.startswith((FORCE_PLATE_PREFIX, MARKERS_TOPIC)) and t not in self.pubs]
+        if absent:
+            self.get_logger().info(f"the bag has no {', '.join(absent)}: not waiting for its subscribers")
+        wanted = {t: n for t, n in self.wait_for.items() if t not in absent}
         if not wanted and self.wait_for_subscribers > 0:
             wanted = {t: self.wait_for_subscribers for t in self.pubs}
         if not wanted:

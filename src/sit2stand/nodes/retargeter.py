@@ -198,8 +198,10 @@ class RetargeterNode(Node):
                 self.destroy_subscription(sub)
         waited = f"; the first frames waited {time.monotonic() - self._robot_wait:.2f} s for the robot's state " \
                  "(they count in the latency)" if self._robot_wait else ""
+        lead = f"; the recording starts after the human's seat-off: a lead-in of {self.live.lead_in_frames} " \
+               "frames from the robot's seat" if self.live.lead_in_frames else ""
         self.get_logger().info(f"calibrated on the first frame: {len(marker_map.links)} markers fixed to the robot; "
-                               f"leg-length scale {self.live.retargeter.scale:.3f}{waited}")
+                               f"leg-length scale {self.live.retargeter.scale:.3f}{waited}{lead}")
         return True
 
     def _robot_q(self, js: JointState) -> np.ndarray:

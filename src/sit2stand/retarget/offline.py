@@ -167,13 +167,14 @@ def _figure(trial, com_h, frames, cmds, dt: float, png: Path, summary: dict) -> 
     matplotlib.use("Agg")
 
     t = trial.marker_t_s - trial.marker_t_s[0]
+    t_frames = np.array([f.t_s for f in frames]) - trial.marker_t_s[0]      # lead-in frames before 0
     fig, ax = plt.subplots(2, 1, figsize=(9, 7), sharex=False)
     ax[0].plot(t, com_h[:, 0], label="human COM x")
-    ax[0].plot(t, [f.com_target[0] for f in frames], label="robot COM target x (mapped)")
-    ax[0].plot(t, [f.com[0] for f in frames], "--", label="robot IK COM x")
+    ax[0].plot(t_frames, [f.com_target[0] for f in frames], label="robot COM target x (mapped)")
+    ax[0].plot(t_frames, [f.com[0] for f in frames], "--", label="robot IK COM x")
     so = summary.get("robot_seat_off_frame")
     if so is not None:
-        ax[0].axvline(t[so], color="k", lw=0.8, ls=":", label="robot seat-off")
+        ax[0].axvline(t_frames[so], color="k", lw=0.8, ls=":", label="robot seat-off")
     ax[0].set_ylabel("forward [m]")
     ax[0].set_xlabel("human time [s]")
     ax[0].legend(fontsize=8)

@@ -64,6 +64,12 @@ class HumanComTrack:
             return p + v * (t_s - tc) if t_s - tc <= self.com_wait_s else None
         return None
 
+    def velocity_at(self, t_s: float) -> np.ndarray:
+        """The COM velocity [m/s] of the estimate nearest to ``t_s`` (zero without any)."""
+        if not self.samples:
+            return np.zeros(3)
+        return min(self.samples, key=lambda s: abs(s[0] - t_s))[2]
+
     def began_after(self, t_s: float) -> bool:
         """The COM stream's first estimate kept is later than ``t_s``: that frame will never get one."""
         return bool(self.samples) and self.samples[0][0] > t_s + STAMP_TOLERANCE_S
@@ -194,7 +200,7 @@ class LiveRetargeting:
         self.player: PlanPlayer | None = None
         self.stabiliser: ComStabiliser | None = None
         self.names: list[str] = []
-        self.infeasible = self.skipped = self.processed = self.state_stale = 0
+        self.infeasible = self.skipped = self.processed = self.state_stale = self.lead_in_frames = 0
         self.feedback_max_m = 0.0
         self.last_frame_s = 0.0       # time.monotonic of the last frame processed
 
@@ -211,10 +217,17 @@ class LiveRetargeting:
                                  lookahead_s=c.lookahead_s, smooth_frames=c.smooth_frames,
                                  fixed_time_scale=c.fixed_time_scale, max_time_scale=c.max_time_scale,
                                  max_joint_speed=c.max_joint_speed)
+        vx = float(self.coms.velocity_at(frame.t_s)[0])
+        self.lead_in_frames = len(self.retargeter.lead_in(frame.t_s, 1.0 / c.rate_hz, frame.positions_m,
+                                                          frame.valid, com_m, vx, on_frame=self._push))
         if c.com_feedback:
             self.stabiliser = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, c.stabiliser)
         self.names = frame.names
         return marker_map
+
+    def _push(self, pose) -> None:
+        """A lead-in pose into the plan, as a frame's would go."""
+        self.player.push(pose.q, not pose.seated)
 
     def next_ready(self) -> tuple[MarkerFrame, np.ndarray] | None:
         """The oldest queued frame and its human COM once that COM is known (frames that can never get one are

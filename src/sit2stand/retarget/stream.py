@@ -45,6 +45,14 @@ from .ik import ComIk, IkResult
 from .player import Command, PlanPlayer
 
 FOOT_MARKERS = ("LANK", "RANK", "LHEE", "RHEE", "LTOE", "RTOE")
+SEATED_COM_BEHIND_ANKLE_THIGHS = 0.6
+"""Where a seated human's COM is along x: this many thigh lengths behind the ankle (0.60 on both shipped digital
+humans: the hips on the seat, the shanks near vertical). The COM map's seated knot when a recording starts after the
+human has left the seat."""
+LEAD_IN_COM_SPEED_MPS = 0.2
+"""Mean forward COM speed [m/s] of the lead-in that a recording starting mid-rise gets (the shipped natural rise
+moves its COM 0.26 m in ~1.3 s)."""
+MIN_LEAD_IN_S = 0.5
 
 
 @dataclass
@@ -133,6 +141,8 @@ class RetargetConfig:
     lateral_weight: float = 0.1           # torso yaw, hip yaw and roll, ankle roll: pull toward the seated posture
     #                                       (a sit-to-stand is sagittal; twists would trade marker errors)
     seat_off_fraction: float = 0.3        # robot COM this far along its foot (heel -> toe) before its hips leave
+    toe_margin_m: float = 0.08            # the COM target stays this far behind the robot's toes: a child's COM is
+    #                                       8 cm ahead of its ankles when it stands up, 12.5 cm scaled to TALOS's legs
     velocity_limit_rad_s: float = 4.0
     chair_off_force_n: float = 30.0       # human left the seat when the chair plate reads less
     pelvis_rise_m: float = 0.02           # ... or, without a chair plate, when the pelvis markers rose this much
@@ -234,29 +244,64 @@ class Retargeter:
         # forward-axis knots of the COM map (robot x relative to its left ankle vs scaled human x relative to its)
         ax, rx = ankle[0], self.robot.ankle_left[0]
         foot = self.robot.toe_x_m - self.robot.heel_x_m
-        h = [self.scale * (human_com_m[0] - ax), self.scale * (heel[0] - ax), 0.0]
+        # a frame whose COM is not behind the heel is after the human's seat-off: the seated knot then comes from
+        # the body's proportions, and a lead-in (see :meth:`lead_in`) takes the robot from its seat to this frame
+        self.started_seated = human_com_m[0] < heel[0] and heel[0] < ax
+        self.seated_com_x = float(human_com_m[0]) if self.started_seated else \
+            float(ax - SEATED_COM_BEHIND_ANKLE_THIGHS * self.human_thigh)
+        self.human_seat_off = not self.started_seated
+        h = [self.scale * (self.seated_com_x - ax), self.scale * (heel[0] - ax), 0.0]
         r = [self.com_seated[0] - rx, self.robot.heel_x_m + self.cfg.seat_off_fraction * foot - rx, 0.0]
         if not (h[0] < h[1] < h[2]) or not (r[0] < r[1] <= r[2] + 0.05):
-            raise InputError(f"calibration frame: the human's seated COM ({human_com_m[0]:.3f} m), heel "
-                             f"({heel[0]:.3f} m) and ankle ({ax:.3f} m) are not in that order along x: not seated")
+            raise InputError(f"calibration frame: the human's seated COM ({self.seated_com_x:.3f} m), heel "
+                             f"({heel[0]:.3f} m) and ankle ({ax:.3f} m) are not in that order along x")
         self.knots_h, self.knots_r = np.array(h), np.array(r)
         self.human_ankle_x, self.robot_ankle_x = ax, rx
         self.calibrated = True
         return marker_map
 
     def com_target_x(self, human_com_x_m: float | np.ndarray) -> np.ndarray:
-        """The robot's forward COM target [m] for a human COM x [m] (lab), through the piecewise-linear map."""
+        """The robot's forward COM target [m] for a human COM x [m] (lab), through the piecewise-linear map, at
+        most ``toe_margin_m`` behind the robot's toes."""
         h = self.scale * (np.asarray(human_com_x_m, float) - self.human_ankle_x)
         r = np.interp(h, self.knots_h, self.knots_r, left=self.knots_r[0], right=np.nan)
         beyond = h > self.knots_h[-1]
         r = np.where(beyond, self.knots_r[-1] + (h - self.knots_h[-1]), r)
-        return self.robot_ankle_x + r
+        return np.minimum(self.robot_ankle_x + r, self.robot.toe_x_m - self.cfg.toe_margin_m)
+
+    def lead_in(self, t0_s: float, dt: float, positions_m: np.ndarray, valid: np.ndarray, human_com_m: np.ndarray,
+                human_com_vx_mps: float = 0.0, on_frame=None) -> list[RetargetFrame]:
+        """The frames that take the robot from its seat to the calibration frame when the recording starts after
+        the human left the seat (none when it starts seated).
+
+        The human COM is led from the seated knot to the first frame's along a cubic (at rest at the start, at the
+        frame's own forward velocity at the end) over ``max(MIN_LEAD_IN_S, distance / LEAD_IN_COM_SPEED_MPS)``,
+        while the first frame's markers fade in (weight 0 -> 1, smoothstep); the hips stay on the seat until the
+        robot's COM target passes the seat-off knot, as in a recording that starts seated. The frames are stamped
+        before ``t0_s``, every ``dt``; ``on_frame`` is called with each as it is made.
+        """
+        if self.started_seated:
+            return []
+        x0, x1 = self.seated_com_x, float(human_com_m[0])
+        duration = max(MIN_LEAD_IN_S, (x1 - x0) / LEAD_IN_COM_SPEED_MPS)
+        n = int(round(duration / dt))
+        frames = []
+        for k in range(n):
+            u = k / n
+            x = x0 + (x1 - x0) * (3 * u**2 - 2 * u**3) + human_com_vx_mps * duration * (u**3 - u**2)
+            com = np.array([x, human_com_m[1], human_com_m[2]])
+            frames.append(self.step(t0_s - (n - k) * dt, positions_m, valid, com, None,
+                                    marker_weight=u * u * (3 - 2 * u)))
+            if on_frame is not None:
+                on_frame(frames[-1])
+        return frames
 
     # -- per frame ---------------------------------------------------------------------------------------------
     def step(self, t_s: float, positions_m: np.ndarray, valid: np.ndarray, human_com_m: np.ndarray,
-             chair_force_n: float | None = None) -> RetargetFrame:
+             chair_force_n: float | None = None, marker_weight: float = 1.0) -> RetargetFrame:
         """Retarget one frame (the first call calibrates). ``chair_force_n``: the chair plate's vertical force, if
-        there is a chair plate (None: seat-off from the pelvis markers)."""
+        there is a chair plate (None: seat-off from the pelvis markers). ``marker_weight`` scales every marker's
+        weight (the lead-in fades the first frame's markers in)."""
         if not self.calibrated:
             raise RuntimeError("Retargeter.step before calibrate")
         cfg, robot = self.cfg, self.robot
@@ -298,8 +343,8 @@ class Retargeter:
         if not self.seated:
             progress = np.clip((pelvis_now[2] - self._z_off) / (0.9 * self.human_thigh), 0.0, 1.0)
             tgt = tgt - (1.0 - progress) * self._marker_offset
-        markers = [(self.marker_frames[self.names[i]], tgt[i], float(self.weights[i]))
-                   for i in range(len(self.names)) if ok[i] and self.weights[i] > 0]
+        markers = [(self.marker_frames[self.names[i]], tgt[i], marker_weight * float(self.weights[i]))
+                   for i in range(len(self.names)) if ok[i] and self.weights[i] > 0 and marker_weight > 0]
         # hips on the seat: pelvis x and z held (hard); after seat-off the hold fades out as a soft task, so that
         # the pose does not jump to where the human's pelvis already is
         hold, weight = self.base_seated, None
@@ -321,8 +366,17 @@ def retarget_sequence(retargeter: Retargeter, player: PlanPlayer, t_s: np.ndarra
                       valid: np.ndarray, human_com_m: np.ndarray, chair_force_n: np.ndarray | None = None
                       ) -> tuple[list[RetargetFrame], list[Command]]:
     """A whole recorded demonstration through a calibrated ``retargeter`` and a ``player``, as the node streams it:
-    one pull per frame, then the rest of the (retimed) plan. Returns (frames, commands)."""
+    one pull per frame, then the rest of the (retimed) plan; a recording that starts after the human left the seat
+    is led in first (:meth:`Retargeter.lead_in`). Returns (frames, commands), lead-in frames included."""
     frames, cmds = [], []
+    vx0 = float(np.gradient(human_com_m[:, 0], t_s)[0]) if len(t_s) > 1 else 0.0
+    for f in retargeter.lead_in(float(t_s[0]), float(np.median(np.diff(t_s))), positions_m[0], valid[0],
+                                human_com_m[0], vx0):
+        frames.append(f)
+        player.push(f.q, not f.seated)
+        c = player.pull()
+        if c is not None:
+            cmds.append(c)
     for k, t in enumerate(t_s):
         fz = None if chair_force_n is None else float(chair_force_n[k])
         f = retargeter.step(float(t), positions_m[k], valid[k], human_com_m[k], fz)
