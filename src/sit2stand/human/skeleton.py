@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from .anthropometry import TOE_MASS_FRACTION, ankle_height_m, check_subject, segment_inertias
+from .anthropometry import TOE_MASS_FRACTION, ankle_height_m, anthropometric_set, check_subject, segment_inertias
 
 SIDES = ("l", "r")
 SEGMENTS = ["pelvis", "torso", "head"] + [f"{s}_{side}" for side in SIDES for s in
@@ -260,9 +260,11 @@ def _add_torso_and_head(b: _Builder, root: int) -> int:
     head = b.add_chain(torso, "neck", "yxz", [0, 0, l_to])
     b.attach(head, "head", [0.01 * s, 0, seg["head"].com_from_proximal_m * L["head"]], b.inertia_of("head", "head"),
              [0.01 * s, 0, 0.05 * s], [0.01 * s, 0, l_head - 0.07 * s], 0.085 * s)
+    # a child's head is larger than an adult's of its stature: head offsets grow as the segment table's head does
+    head_mm = mm * anthropometric_set(b.subject.height_m, b.subject.sex).length_factors["head"]
     for name, xyz in {"LFHD": (90, 55, 150), "RFHD": (90, -55, 150), "LBHD": (-75, 55, 140),
                       "RBHD": (-75, -55, 140)}.items():
-        b.marker(head, name, np.array(xyz) * mm * np.array([1, 1, L["head"]]))
+        b.marker(head, name, np.array(xyz) * head_mm * np.array([1, 1, L["head"]]))
     return torso
 
 
