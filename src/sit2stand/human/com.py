@@ -10,6 +10,8 @@ Pipeline (the paper's section on the human COM, with the scaling done automatica
 4. Frames whose whole weight is on the plates (:class:`~sit2stand.human.support.SupportRule`) and whose window
    holds no bridged frame scale the segment masses to the plates' wrench (:mod:`sit2stand.human.mass_scaling`).
 5. COM position, velocity and acceleration follow from the scaled model.
+6. A length or mass factor that ends at a bound of its fit is named in the notes (:class:`FactorAtBound`), and so is
+   a children's segment table (:func:`~sit2stand.human.anthropometry.anthropometric_set`).
 
 Units SI, lab frame REP-103.
 """
@@ -23,9 +25,11 @@ import pinocchio as pin
 
 from ..dynamics import G, model_cop, savgol_series, smooth_motion
 from ..io.forceplate import PlateSeries, center_of_pressure
+from .anthropometry import anthropometric_set
 from .calibration import calibrate_lengths, calibrate_markers
 from .marker_ik import MarkerIK, TooFewMarkers, bridge_skipped, check_marker_units, fit_sequence
-from .mass_scaling import MassScaling, apply_scaling, assemble_rows, frame_rows, prior_scaling, solve_mass_scaling
+from .mass_scaling import (FactorAtBound, MassScaling, apply_scaling, assemble_rows, frame_rows, lengths_at_bounds,
+                           prior_scaling, scaling_at_bounds, solve_mass_scaling)
 from .skeleton import HumanModel, Subject, build_human
 from .support import SupportRule, body_mass_from_plates, plate_gaps, plate_wrench_at
 
@@ -67,6 +71,8 @@ class ComResult:
     force_n: np.ndarray | None = None        # (N, 3) plates' total force at the marker times (smoothed alike)
     moment_nm: np.ndarray | None = None      # (N, 3) and moment about the lab origin
     model: pin.Model | None = None           # the calibrated skeleton before any mass scaling
+    at_bounds: list[FactorAtBound] = field(default_factory=list)   # fitted factors at a bound (also in notes)
+    segment_table: str = ""                  # which anthropometric table the skeleton has (anthropometric_set)
 
 
 
@@ -195,9 +201,14 @@ def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.
     sel = supported & np.all(np.isfinite(measured_cop), axis=1)
     scaling.cop_rms_before_m = _cop_rms(cop_unscaled, measured_cop, sel)
     scaling.cop_rms_after_m = _cop_rms(cop_model, measured_cop, sel)
+    table = anthropometric_set(motion.subject.height_m, motion.subject.sex)
+    if not table.is_adult:
+        notes.append(table.describe())
+    at_bounds = (lengths_at_bounds(motion.subject.lengths) if calibrate else []) + scaling_at_bounds(scaling)
+    notes += [f.note() for f in at_bounds]
     fits = motion.fits
     return ComResult(marker_t_s, com, vcom, acom, com_unscaled,
                      cop_model, measured_cop, supported, motion.fitted, np.array([f.rms_m for f in fits]),
                      np.array([f.n_markers for f in fits]), scaling, motion.subject, motion.rms_before_m,
                      motion.rms_after_m, plate_gaps(marker_t_s, plates, dt), qs, notes,
-                     vs, as_, force, moment, human.model)
+                     vs, as_, force, moment, human.model, at_bounds=at_bounds, segment_table=table.describe())

@@ -21,6 +21,12 @@ from .skeleton import SEGMENTS, HumanModel
 
 MASS_GROUPS = ["pelvis", "torso", "head", "upper_arm", "forearm", "hand", "thigh", "shank", "foot", "toes"]
 """Segment groups with one mass factor each (left and right segments share theirs)."""
+MASS_FACTOR_BOUNDS = (0.5, 2.0)
+"""Bounds of each group's mass factor (its mass over the segment table's) in :func:`solve_mass_scaling`."""
+LENGTH_FACTOR_BOUNDS = (0.6, 1.6)
+"""Bounds of the calibrated length factors (:func:`sit2stand.human.calibration.calibrate_lengths`)."""
+AT_BOUND_TOLERANCE = 0.03
+"""A factor within this fraction of a bound's value sits at that bound."""
 
 
 @dataclass
@@ -34,9 +40,53 @@ class MassScaling:
     cop_rms_after_m: float = float("nan")
     condition_number: float = float("nan")
     frames_used: int = 0
+    bounds: tuple[float, float] = MASS_FACTOR_BOUNDS
 
     def factors(self) -> dict[str, float]:
         return {g: self.masses[g] / self.prior_masses[g] for g in self.masses}
+
+
+@dataclass(frozen=True)
+class FactorAtBound:
+    """A fitted factor that sits at a bound of its fit: ``kind`` "mass" (scaling) or "length" (calibration); ``side``
+    "lower" or "upper"."""
+
+    kind: str
+    group: str
+    factor: float
+    bound: float
+    side: str
+
+    def note(self) -> str:
+        """One line for notes, summaries and logs, naming the segment group and the factor."""
+        why = {"mass": "the plates cannot place this mass",
+               "length": "its markers sit unlike the model's (placement, marker size, shoes)"}[self.kind]
+        return (f"{self.group} {self.kind} factor {self.factor:.3f} sits at its {self.side} bound {self.bound:g}: "
+                f"the segment table does not fit this body there, or {why}")
+
+
+def factors_at_bounds(factors: dict[str, float], bounds: tuple[float, float], kind: str,
+                      tolerance: float = AT_BOUND_TOLERANCE) -> list[FactorAtBound]:
+    """The factors (group -> factor) within ``tolerance`` (relative) of a bound of ``bounds``, as :class:`FactorAtBound`
+    of ``kind``."""
+    lo, hi = bounds
+    out = []
+    for group, f in factors.items():
+        if f <= lo * (1 + tolerance):
+            out.append(FactorAtBound(kind, group, float(f), float(lo), "lower"))
+        elif f >= hi * (1 - tolerance):
+            out.append(FactorAtBound(kind, group, float(f), float(hi), "upper"))
+    return out
+
+
+def scaling_at_bounds(scaling: MassScaling) -> list[FactorAtBound]:
+    """The mass factors of a scaling that sit at their bounds."""
+    return factors_at_bounds(scaling.factors(), scaling.bounds, "mass")
+
+
+def lengths_at_bounds(lengths: dict[str, float]) -> list[FactorAtBound]:
+    """The calibrated length factors (a subject's ``lengths``) that sit at :data:`LENGTH_FACTOR_BOUNDS`."""
+    return factors_at_bounds(lengths, LENGTH_FACTOR_BOUNDS, "length")
 
 
 def group_of(segment: str) -> str:
@@ -149,7 +199,7 @@ def assemble_rows(rows: list[FrameRows], quasi_static_acc: float = 0.15, quiet_f
 
 
 def solve_mass_scaling(human: HumanModel, A: np.ndarray, b: np.ndarray, body_mass_kg: float,
-                       bounds: tuple[float, float] = (0.5, 2.0), prior_sd: float = 0.2,
+                       bounds: tuple[float, float] = MASS_FACTOR_BOUNDS, prior_sd: float = 0.2,
                        max_torso_shift_m: float = 0.12, force_sd_n: float = 5.0,
                        moment_sd_nm: float = 2.0, weights: np.ndarray | None = None) -> MassScaling:
     """Constrained least squares for the group masses and torso COM shift (rows stacked from many frames).
@@ -185,7 +235,7 @@ def solve_mass_scaling(human: HumanModel, A: np.ndarray, b: np.ndarray, body_mas
     m_torso = res.x[MASS_GROUPS.index("torso")]
     shift = np.array([res.x[-2] / m_torso, res.x[-1] / m_torso, 0.0])
     return MassScaling(masses, shift, {g: prior[g] for g in MASS_GROUPS}, condition_number=res.condition_number,
-                       frames_used=int(np.sum(weights > 0) // 3))
+                       frames_used=int(np.sum(weights > 0) // 3), bounds=(float(bounds[0]), float(bounds[1])))
 
 
 

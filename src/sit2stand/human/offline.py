@@ -108,6 +108,9 @@ def evaluate(trial: Trial, result: ComResult) -> dict:
         "scaling_condition_number": result.scaling.condition_number,
         "plate_gaps": [{"plate": p, "from_s": a, "to_s": b} for p, a, b in result.plate_gaps],
         "body_mass_used_kg": result.subject.mass_kg,
+        "segment_table": result.segment_table,
+        "factors_at_bounds": [{"kind": f.kind, "group": f.group, "factor": round(f.factor, 4), "bound": f.bound,
+                               "side": f.side} for f in result.at_bounds],
         "notes": result.notes,
     }
     if trial.truth is not None:
@@ -237,8 +240,9 @@ def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg
                           trust_plate_mass=mass_kg is None)
     summary = {"bag": str(bag_path), "subject": {"height_m": height, "mass_kg": mass, "sex": subject.sex},
                **evaluate(trial, result)}
+    warned = {f.note() for f in result.at_bounds}
     for note in result.notes:
-        print(f"note: {note}", file=sys.stderr)
+        print(f"{'warning' if note in warned else 'note'}: {note}", file=sys.stderr)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     figure(trial, result, out_dir / "human_com.png", f"Human COM: {Path(bag_path).name}")
