@@ -40,7 +40,7 @@ def calibrate_lengths(subject: Subject, marker_names: list[str], positions: np.n
 
     def residuals(x: np.ndarray) -> np.ndarray:
         subj = Subject(subject.height_m, subject.mass_kg, subject.sex, dict(zip(groups, x)), dict(subject.masses),
-                       list(subject.extra))
+                       list(subject.extra), marker_set=subject.marker_set)
         ik = MarkerIK(build_human(subj), marker_names)
         out = []
         for k in picks:
@@ -61,7 +61,7 @@ def calibrate_lengths(subject: Subject, marker_names: list[str], positions: np.n
         return float(np.sqrt(np.mean(r[:n_m] ** 2) * 3))
 
     fitted = Subject(subject.height_m, subject.mass_kg, subject.sex, dict(zip(groups, map(float, sol.x))),
-                     dict(subject.masses), list(subject.extra))
+                     dict(subject.masses), list(subject.extra), marker_set=subject.marker_set)
     return fitted, rms(r0), rms(r1)
 
 
@@ -136,7 +136,7 @@ class StreamCalibration:
             raise CalibrationError(f"the calibration is for a {self.height_m:g} m {self.sex}, the subject is a "
                              f"{subject.height_m:g} m {subject.sex}")
         subj = Subject(subject.height_m, subject.mass_kg, subject.sex, dict(self.lengths), dict(subject.masses),
-                       list(subject.extra))
+                       list(subject.extra), marker_set=subject.marker_set)
         human = build_human(subj)
         for name, p in self.marker_placements_m.items():
             fid = human.marker_frames.get(name)

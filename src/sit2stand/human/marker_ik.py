@@ -1,7 +1,13 @@
 """Per-frame skeleton fit to labelled markers (inverse kinematics on marker positions).
 
 Damped Gauss-Newton on the marker errors, with a weak pull toward a reference posture for what the markers do not
-see, joint limits, and a warm start from the previous frames. Units SI, lab frame REP-103.
+see, joint limits, and a warm start from the previous frames. Units SI, lab frame REP-103. A step that raises the
+cost is taken back and retried with 10x the damping (Levenberg-Marquardt): from a far start (a walking pose fitted
+from the upright reference) plain Gauss-Newton steps overshot into poses 160-210 mm RMS off on OpenSim's subject01,
+where the damped ones reach ~31 mm (before calibration); steps that lower the cost are the plain ones, unchanged.
+
+Which markers the skeleton carries, and which of them define the pelvis, is the skeleton's marker set
+(:mod:`sit2stand.human.marker_sets`): 3 of Plug-in-Gait's LASI/RASI/LPSI/RPSI, or e.g. both ASIS and a sacral marker.
 """
 
 from __future__ import annotations
@@ -13,11 +19,16 @@ import pinocchio as pin
 
 from ..errors import Sit2StandError
 from ..kinematics import PointJacobians, positions
+from .marker_sets import MIN_MARKERS, MarkerSetError, load_marker_set
 from .skeleton import HumanModel
 
 PELVIS_MARKERS = ("LASI", "RASI", "LPSI", "RPSI")
-MIN_MARKERS = 8
-"""Fewest skeleton markers a frame needs (3 of them on the pelvis) to be fitted."""
+"""Plug-in-Gait's pelvis markers (the default marker set's; a skeleton's own are ``human.marker_set.pelvis``)."""
+
+
+MIN_DAMPING = 1e-6
+"""Damping of a Gauss-Newton step [m^2 per unit of tangent step]; raised 10x per uphill step, back after a downhill
+one."""
 
 
 class TooFewMarkers(Sit2StandError, ValueError):
@@ -65,7 +76,7 @@ class FrameFit:
 
 
 class MarkerIK:
-    """Per-frame skeleton fit to labelled markers (Plug-in-Gait names; unknown names are ignored).
+    """Per-frame skeleton fit to labelled markers (the names of the skeleton's marker set; others are ignored).
 
     Args:
         human: the skeleton.
@@ -81,18 +92,37 @@ class MarkerIK:
         self.stream_index = [i for i, n in enumerate(marker_names) if n in human.marker_frames]
         self.frames = [human.marker_frames[marker_names[i]] for i in self.stream_index]
         known = [marker_names[i] for i in self.stream_index]
-        if len(known) < MIN_MARKERS or sum(n in known for n in PELVIS_MARKERS) < 3:
-            raise TooFewMarkers(
-                f"{len(known)} of the stream's {len(marker_names)} markers are Plug-in-Gait markers the skeleton "
-                f"carries ({', '.join(known) or 'none'}); at least {MIN_MARKERS} are needed, including 3 of "
-                f"{', '.join(PELVIS_MARKERS)}")
+        self.marker_set = human.marker_set or load_marker_set()
+        try:
+            self.marker_set.check_stream(list(marker_names))
+        except MarkerSetError as err:
+            raise TooFewMarkers(str(err)) from None
         self.used_names = known
+        rule = self.marker_set.pelvis
+        where = {n: k for k, n in enumerate(known)}
+        self._pelvis_any3 = np.array([where[n] for n in rule.any_three_of if n in where], int)
+        self._pelvis_asis = np.array([where[n] for n in rule.asis if n in where], int)
+        self._pelvis_sacral = np.array([where[n] for n in rule.sacral if n in where], int)
+        self._pelvis_all = np.array([where[n] for n in rule.markers if n in where], int)
+        self._asis_complete = len(rule.asis) > 0 and len(self._pelvis_asis) == len(rule.asis)
         self.posture_weight = posture_weight
         self.q_ref = pin.neutral(self.model) if q_ref is None else q_ref.copy()
         self.lo, self.hi = self.model.lowerPositionLimit.copy(), self.model.upperPositionLimit.copy()
         self.q: np.ndarray | None = None
         self._q_prev: np.ndarray | None = None
         self.points = PointJacobians(self.model)
+
+    def pelvis_defined(self, ok: np.ndarray) -> bool:
+        """True if the valid markers ``ok`` (in :attr:`used_names` order) define the pelvis (the set's rule)."""
+        if ok[self._pelvis_any3].sum() >= 3:
+            return True
+        return self._asis_complete and bool(ok[self._pelvis_asis].all()) and bool(ok[self._pelvis_sacral].any())
+
+    def _posture_error(self, q: np.ndarray) -> np.ndarray:
+        """Tangent difference from the reference posture, zero on the floating base (which is free)."""
+        e = pin.difference(self.model, self.q_ref, q)
+        e[:6] = 0.0
+        return e
 
     def _marker_positions(self, q: np.ndarray) -> np.ndarray:
         pin.framesForwardKinematics(self.model, self.data, q)
@@ -101,8 +131,7 @@ class MarkerIK:
     def initial_guess(self, positions: np.ndarray, valid: np.ndarray) -> np.ndarray:
         """Pelvis pose by a Kabsch fit of the pelvis markers; the rest at the reference posture."""
         q = self.q_ref.copy()
-        names = self.used_names
-        idx = [k for k, n in enumerate(names) if n in PELVIS_MARKERS and valid[k]]
+        idx = sorted(k for k in self._pelvis_all if valid[k])     # in the stream's order
         model_pts = self._marker_positions(pin.neutral(self.model))[idx]
         meas = positions[idx]
         mc, sc = model_pts.mean(axis=0), meas.mean(axis=0)
@@ -119,7 +148,7 @@ class MarkerIK:
         pos = np.asarray(positions_m, float)[self.stream_index]
         ok = np.asarray(valid, bool)[self.stream_index] & np.all(np.isfinite(pos), axis=1)
         n_ok = int(ok.sum())
-        if n_ok < MIN_MARKERS or sum(ok[k] for k, n in enumerate(self.used_names) if n in PELVIS_MARKERS) < 3:
+        if n_ok < MIN_MARKERS or not self.pelvis_defined(ok):
             return FrameFit(self.q if self.q is not None else self.q_ref, float("nan"), n_ok, 0, False)
         if q0 is None and self.q is not None and self._q_prev is not None:
             # constant-velocity prediction from the last two fits: fewer iterations when streaming
@@ -130,24 +159,32 @@ class MarkerIK:
         model, data, nv = self.model, self.data, self.model.nv
         w_post = self.posture_weight
         it = 0
-        damping = 1e-6
+        damping = MIN_DAMPING
         eye = np.eye(nv)
+        best_q, best_cost, JtJ, grad = q, np.inf, eye, np.zeros(nv)
         for it in range(1, max_iter + 1):  # noqa: B007 (the count is reported after the loop)
             pin.computeJointJacobians(model, data, q)
             pin.updateFramePlacements(model, data)
             P, Jm = self.points(data, self.frames)
-            J = Jm[ok].reshape(-1, nv)
             r = (P[ok] - pos[ok]).ravel()
-            e_post = pin.difference(model, self.q_ref, q)
-            e_post[:6] = 0.0  # the floating base is free
-            H = J.T @ J + (w_post + damping) * eye
-            grad = J.T @ r + w_post * e_post
-            dq = -np.linalg.solve(H, grad)
-            q = pin.integrate(model, q, dq)
+            e_post = self._posture_error(q)
+            cost = r @ r + w_post * (e_post @ e_post)
+            if cost <= best_cost:     # downhill (or the start): keep it, and the damping back to its floor
+                J = Jm[ok].reshape(-1, nv)
+                best_q, best_cost, JtJ, grad = q, cost, J.T @ J, J.T @ r + w_post * e_post
+                damping = max(damping / 10, MIN_DAMPING)
+            else:                     # uphill: back to the best pose, a shorter step
+                damping *= 10
+            dq = -np.linalg.solve(JtJ + (w_post + damping) * eye, grad)
+            q = pin.integrate(model, best_q, dq)
             q[7:] = np.clip(q[7:], self.lo[7:], self.hi[7:])
             if np.max(np.abs(dq)) < tol:
                 break
         err = self._marker_positions(q)[ok] - pos[ok]
+        e_post = self._posture_error(q)
+        if np.sum(err**2) + w_post * (e_post @ e_post) > best_cost:   # the last step went uphill
+            q = best_q
+            err = self._marker_positions(q)[ok] - pos[ok]
         self._q_prev = self.q
         self.q = q
         return FrameFit(q, float(np.sqrt(np.mean(np.sum(err**2, axis=1)))), n_ok, it, True)

@@ -1,4 +1,4 @@
-"""Full-body human skeleton with de Leva inertia and the Vicon Plug-in-Gait marker set, as a Pinocchio model.
+"""Full-body human skeleton with de Leva inertia and a marker set (Plug-in-Gait by default), as a Pinocchio model.
 
 Bodies (16): pelvis (floating base, origin at the mid-hip point), torso, head, upper_arm/forearm/hand, thigh/shank/
 foot/toes on each side (suffix ``_l``/``_r``). 38 degrees of freedom: free-flyer 6, lumbar 3, neck 3, shoulders 3,
@@ -13,6 +13,10 @@ negative.
 Subjects are described by stature, body mass, sex, optional per-segment length factors (``lengths``), optional
 per-segment mass factors (``masses``, renormalised to the body mass) and optional extra rigid point masses
 (:class:`ExtraMass`, e.g. a backpack), which the synthesiser uses to hide a mass distribution unlike the average.
+
+The markers come from a marker set file (:mod:`sit2stand.human.marker_sets`): each marker's segment and offset are
+data, placed on the built body by :func:`build_human`. The default, Vicon Plug-in-Gait (``plug_in_gait.yaml``),
+gives the placements this module's builders carried before marker sets were data.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ import numpy as np
 import pinocchio as pin
 
 from .anthropometry import TOE_MASS_FRACTION, ankle_height_m, anthropometric_set, check_subject, segment_inertias
+from .marker_sets import DEFAULT_MARKER_SET, MarkerSet, MarkerSetError, load_marker_set
 
 SIDES = ("l", "r")
 SEGMENTS = ["pelvis", "torso", "head"] + [f"{s}_{side}" for side in SIDES for s in
@@ -31,11 +36,10 @@ LENGTH_GROUPS = ("pelvis", "torso", "head", "upper_arm", "forearm", "hand", "thi
 """Segment groups whose length can be scaled (left and right together)."""
 ALIASES = {"trunk": "torso", "back": "torso", "abdomen": "torso"}
 REFERENCE_STATURE_M = 1.75
-"""Marker offsets below are given for this stature [m] and scale with the subject's."""
+"""Marker offsets in millimetres (marker set files) are given for this stature [m] and scale with the subject's."""
 
-PLUG_IN_GAIT = ["LFHD", "RFHD", "LBHD", "RBHD", "C7", "T10", "CLAV", "STRN", "RBAK", "LSHO", "RSHO", "LELB", "RELB",
-                "LWRA", "LWRB", "RWRA", "RWRB", "LFIN", "RFIN", "LASI", "RASI", "LPSI", "RPSI", "LTHI", "RTHI",
-                "LKNE", "RKNE", "LTIB", "RTIB", "LANK", "RANK", "LHEE", "RHEE", "LTOE", "RTOE"]
+PLUG_IN_GAIT = load_marker_set(DEFAULT_MARKER_SET).names
+"""The default marker set's names (Vicon Plug-in-Gait full body, 35 markers), in its order."""
 
 
 @dataclass(frozen=True)
@@ -67,7 +71,9 @@ class ExtraMass:
 
 @dataclass
 class Subject:
-    """Who the skeleton describes. ``lengths``/``masses``: factors per length group / per segment (default 1)."""
+    """Who the skeleton describes. ``lengths``/``masses``: factors per length group / per segment (default 1);
+    ``marker_set``: the markers the subject wears (a :class:`~sit2stand.human.marker_sets.MarkerSet`, a packaged
+    set's name or a file; None: Plug-in-Gait)."""
 
     height_m: float = 1.75
     mass_kg: float = 75.0
@@ -75,6 +81,7 @@ class Subject:
     lengths: dict[str, float] = field(default_factory=dict)
     masses: dict[str, float] = field(default_factory=dict)
     extra: list[ExtraMass] = field(default_factory=list)
+    marker_set: MarkerSet | str | None = None
 
     def __post_init__(self) -> None:
         check_subject(self.height_m, self.mass_kg, self.sex)
@@ -98,6 +105,8 @@ class HumanModel:
     segment_mass: dict[str, float]         # [kg], extra masses included
     segment_com: dict[str, np.ndarray]     # COM in the joint frame [m], extra masses included
     geometry: dict[str, dict]              # segment -> {"from": xyz, "to": xyz, "radius": m} for drawing
+    marker_set: MarkerSet | None = None    # where the markers came from (its pelvis rule tells MarkerIK what it needs)
+    ankle_height_m: float = float("nan")   # ankle joint above the sole [m]
 
     @property
     def total_mass(self) -> float:
@@ -159,7 +168,6 @@ class _Builder:
     segment_joint: dict[str, int] = field(default_factory=dict)
     segment_com: dict[str, np.ndarray] = field(default_factory=dict)
     geometry: dict[str, dict] = field(default_factory=dict)
-    markers: dict[str, tuple[int, np.ndarray]] = field(default_factory=dict)
     mm: float = field(init=False)          # 1 mm at the reference stature, scaled to this body [m]
 
     def __post_init__(self) -> None:
@@ -199,22 +207,40 @@ class _Builder:
         self.mass[name] = inertia.mass
         self.geometry[name] = {"from": np.asarray(from_xyz, float), "to": np.asarray(to_xyz, float), "radius": radius}
 
-    def marker(self, jid: int, name: str, xyz_at_ref) -> None:
-        """Marker ``name`` at ``xyz_at_ref`` [m] in joint ``jid``'s frame (framed at the end, in PLUG_IN_GAIT order)."""
-        self.markers[name] = (jid, np.asarray(xyz_at_ref, float))
+    def segment_length(self, segment: str) -> float:
+        """Length [m] of a segment with its length factor (the toes take the foot's: the offsets' unit)."""
+        group = segment.rsplit("_", 1)[0] if segment.endswith(("_l", "_r")) else segment
+        group = "foot" if group == "toes" else group
+        return self.seg[group].length_m * self.L[group]
 
-    def marker_frames(self) -> dict[str, int]:
-        """Add the markers as operational frames, in PLUG_IN_GAIT order; marker name -> frame id."""
+    def marker_frames(self, marker_set: MarkerSet) -> dict[str, int]:
+        """Add the set's markers as operational frames on their segments, in the set's order; name -> frame id.
+
+        Raises:
+            MarkerSetError: a marker on a segment the skeleton lacks (the message names the file and the segments).
+        """
         frames = {}
-        for name in PLUG_IN_GAIT:
-            jid, xyz = self.markers[name]
-            frames[name] = self.model.addFrame(pin.Frame(name, jid, pin.SE3(np.eye(3), xyz), pin.FrameType.OP_FRAME))
+        # a child's head is larger than an adult's of its stature: head offsets grow as the segment table's head does
+        head_mm = self.mm * anthropometric_set(self.subject.height_m, self.subject.sex).length_factors["head"]
+        for spec in marker_set.markers:
+            if spec.segment not in self.segment_joint:
+                raise MarkerSetError(f"{marker_set.source or marker_set.name}: marker {spec.name} is on segment "
+                                     f"{spec.segment!r}, not one of {', '.join(SEGMENTS)}")
+            group = spec.segment.rsplit("_", 1)[0] if spec.segment.endswith(("_l", "_r")) else spec.segment
+            xyz = spec.offset_m(head_mm if group == "head" else self.mm, self.L.get(group, 1.0),
+                                self.segment_length(spec.segment), self.h_ankle)
+            frames[spec.name] = self.model.addFrame(pin.Frame(spec.name, self.segment_joint[spec.segment],
+                                                              pin.SE3(np.eye(3), np.array(xyz)),
+                                                              pin.FrameType.OP_FRAME))
         return frames
 
 
-def build_human(subject: Subject | None = None) -> HumanModel:
-    """Build the skeleton of ``subject`` (default: a 1.75 m, 75 kg average male)."""
+def build_human(subject: Subject | None = None, marker_set: MarkerSet | str | None = None) -> HumanModel:
+    """Build the skeleton of ``subject`` (default: a 1.75 m, 75 kg average male) with the markers of
+    ``marker_set`` (a :class:`~sit2stand.human.marker_sets.MarkerSet`, a packaged set's name or a YAML file; default:
+    the subject's, else Plug-in-Gait)."""
     subject = subject or Subject()
+    markers = load_marker_set(marker_set if marker_set is not None else subject.marker_set)
     H, sex = subject.height_m, subject.sex
     seg = segment_inertias(H, subject.mass_kg, sex)
     L = {g: subject.lengths.get(g, 1.0) for g in LENGTH_GROUPS}
@@ -225,90 +251,69 @@ def build_human(subject: Subject | None = None) -> HumanModel:
     for side, sy in (("l", 1.0), ("r", -1.0)):
         _add_arm(b, torso, side, sy)
         _add_leg(b, root, side, sy)
-    marker_frames = b.marker_frames()
-    return HumanModel(subject, b.model, list(PLUG_IN_GAIT), marker_frames, b.segment_joint, b.mass, b.segment_com,
-                      b.geometry)
+    marker_frames = b.marker_frames(markers)
+    return HumanModel(subject, b.model, markers.names, marker_frames, b.segment_joint, b.mass, b.segment_com,
+                      b.geometry, markers, b.h_ankle)
 
 
 def _add_pelvis(b: _Builder) -> int:
-    """The pelvis: floating base at the mid-hip point, with its four markers; the root joint id."""
-    seg, L, s, mm = b.seg, b.L, b.s, b.mm
+    """The pelvis: floating base at the mid-hip point; the root joint id."""
+    seg, L, s = b.seg, b.L, b.s
     root = b.model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "pelvis")
     l_pel = seg["pelvis"].length_m * L["pelvis"]
     b.attach(root, "pelvis", [0, 0, seg["pelvis"].com_from_proximal_m * L["pelvis"]], b.inertia_of("pelvis", "pelvis"),
              [0, 0, 0], [0, 0, l_pel], 0.085 * s)
-    for name, xyz in {"LASI": (60, 120, 70), "RASI": (60, -120, 70), "LPSI": (-110, 45, 95),
-                      "RPSI": (-110, -45, 95)}.items():
-        b.marker(root, name, np.array(xyz) * mm * np.array([1, L["pelvis"], L["pelvis"]]))
     return root
 
 
 def _add_torso_and_head(b: _Builder, root: int) -> int:
-    """Lumbar joints, torso, neck joints and head, with their markers; the torso's joint id."""
-    seg, L, s, mm = b.seg, b.L, b.s, b.mm
+    """Lumbar joints, torso, neck joints and head; the torso's joint id."""
+    seg, L, s = b.seg, b.L, b.s
     l_pel = seg["pelvis"].length_m * L["pelvis"]
     l_to = seg["torso"].length_m * L["torso"]
     torso = b.add_chain(root, "lumbar", "yxz", [0, 0, l_pel])
     b.attach(torso, "torso", [0, 0, seg["torso"].com_from_proximal_m * L["torso"]], b.inertia_of("torso", "torso"),
              [0, 0, 0], [0, 0, l_to], 0.12 * s)
-    neck_z = l_to
-    for name, xyz in {"C7": (-60, 0, 0), "T10": (-110, 0, -0.5 * l_to / mm), "CLAV": (60, 0, -40),
-                      "STRN": (110, 0, -200), "RBAK": (-100, -80, -160), "LSHO": (0, 175, -25),
-                      "RSHO": (0, -175, -25)}.items():
-        b.marker(torso, name, np.array([xyz[0] * mm, xyz[1] * mm, neck_z + xyz[2] * mm]))
     l_head = seg["head"].length_m * L["head"]
     head = b.add_chain(torso, "neck", "yxz", [0, 0, l_to])
     b.attach(head, "head", [0.01 * s, 0, seg["head"].com_from_proximal_m * L["head"]], b.inertia_of("head", "head"),
              [0.01 * s, 0, 0.05 * s], [0.01 * s, 0, l_head - 0.07 * s], 0.085 * s)
-    # a child's head is larger than an adult's of its stature: head offsets grow as the segment table's head does
-    head_mm = mm * anthropometric_set(b.subject.height_m, b.subject.sex).length_factors["head"]
-    for name, xyz in {"LFHD": (90, 55, 150), "RFHD": (90, -55, 150), "LBHD": (-75, 55, 140),
-                      "RBHD": (-75, -55, 140)}.items():
-        b.marker(head, name, np.array(xyz) * head_mm * np.array([1, 1, L["head"]]))
     return torso
 
 
 def _add_arm(b: _Builder, torso: int, side: str, sy: float) -> None:
     """Shoulder, elbow and wrist joints with upper arm, forearm and hand of one side (sy: +1 left, -1 right)."""
-    seg, L, s, mm, H, P = b.seg, b.L, b.s, b.mm, b.subject.height_m, side.upper()
+    seg, L, s, H = b.seg, b.L, b.s, b.subject.height_m
     l_to = seg["torso"].length_m * L["torso"]
     l_ua, l_fa, l_ha = (seg[g].length_m * L[g] for g in ("upper_arm", "forearm", "hand"))
     shoulder = b.add_chain(torso, f"shoulder_{side}", "yxz", [0, sy * 0.095 * H, l_to - 0.04 * H])
     b.attach(shoulder, f"upper_arm_{side}", [0, 0, -seg["upper_arm"].com_from_proximal_m * L["upper_arm"]],
              b.inertia_of("upper_arm", f"upper_arm_{side}"), [0, 0, 0], [0, 0, -l_ua], 0.045 * s)
-    b.marker(shoulder, f"{P}ELB", [0, sy * 35 * mm, -l_ua + 10 * mm])
     elbow = b.add_chain(shoulder, f"elbow_{side}", "y", [0, 0, -l_ua])
     b.attach(elbow, f"forearm_{side}", [0, 0, -seg["forearm"].com_from_proximal_m * L["forearm"]],
              b.inertia_of("forearm", f"forearm_{side}"), [0, 0, 0], [0, 0, -l_fa], 0.035 * s)
-    b.marker(elbow, f"{P}WRA", [30 * mm, 0, -l_fa])
-    b.marker(elbow, f"{P}WRB", [-30 * mm, 0, -l_fa])
     wrist = b.add_chain(elbow, f"wrist_{side}", "yx", [0, 0, -l_fa])
     b.attach(wrist, f"hand_{side}", [0, 0, -seg["hand"].com_from_proximal_m * L["hand"]],
              b.inertia_of("hand", f"hand_{side}"), [0, 0, 0], [0, 0, -l_ha], 0.03 * s)
-    b.marker(wrist, f"{P}FIN", [10 * mm, sy * 15 * mm, -l_ha])
 
 
 def _add_leg(b: _Builder, root: int, side: str, sy: float) -> None:
     """Hip and knee joints with thigh and shank of one side (sy: +1 left, -1 right), then its foot."""
-    seg, L, s, mm, P = b.seg, b.L, b.s, b.mm, side.upper()
+    seg, L, s = b.seg, b.L, b.s
     hip_y = 0.048 * b.subject.height_m * L["pelvis"]
     l_th, l_sh = (seg[g].length_m * L[g] for g in ("thigh", "shank"))
     hip = b.add_chain(root, f"hip_{side}", "yxz", [0, sy * hip_y, 0])
     b.attach(hip, f"thigh_{side}", [0, 0, -seg["thigh"].com_from_proximal_m * L["thigh"]],
              b.inertia_of("thigh", f"thigh_{side}"), [0, 0, 0], [0, 0, -l_th], 0.075 * s)
-    b.marker(hip, f"{P}THI", [15 * mm, sy * 75 * mm, -0.6 * l_th])
-    b.marker(hip, f"{P}KNE", [0, sy * 55 * mm, -l_th])
     knee = b.add_chain(hip, f"knee_{side}", "y", [0, 0, -l_th])
     b.attach(knee, f"shank_{side}", [0, 0, -seg["shank"].com_from_proximal_m * L["shank"]],
              b.inertia_of("shank", f"shank_{side}"), [0, 0, 0], [0, 0, -l_sh], 0.055 * s)
-    b.marker(knee, f"{P}TIB", [15 * mm, sy * 55 * mm, -0.6 * l_sh])
-    b.marker(knee, f"{P}ANK", [0, sy * 40 * mm, -l_sh])
     _add_foot(b, knee, side, sy, l_sh)
 
 
 def _add_foot(b: _Builder, knee: int, side: str, sy: float, l_sh: float) -> None:
     """Ankle and toe joints with hindfoot and toes of one side, below a shank of length ``l_sh`` [m]."""
-    seg, L, s, mm, h_ankle, P = b.seg, b.L, b.s, b.mm, b.h_ankle, side.upper()
+    seg, L, s, h_ankle = b.seg, b.L, b.s, b.h_ankle
     l_ft = seg["foot"].length_m * L["foot"]
     ankle = b.add_chain(knee, f"ankle_{side}", "yx", [0, 0, -l_sh])
     heel_x, mtp_x, tip_x = -0.22 * l_ft, 0.52 * l_ft, 0.78 * l_ft
@@ -320,8 +325,6 @@ def _add_foot(b: _Builder, knee: int, side: str, sy: float, l_sh: float) -> None
     foot_com = (com_total * (m_f + m_t) - (mtp + toes_com_rel) * m_t) / m_f
     b.attach(ankle, f"foot_{side}", foot_com, b.inertia_of("foot", f"foot_{side}") * (1 - TOE_MASS_FRACTION),
              [heel_x, 0, -h_ankle + 0.02 * s], [mtp_x, 0, -h_ankle + 0.02 * s], 0.035 * s)
-    b.marker(ankle, f"{P}HEE", [heel_x - 10 * mm, 0, -h_ankle + 25 * mm])
-    b.marker(ankle, f"{P}TOE", [mtp_x - 10 * mm, sy * 10 * mm, -h_ankle + 25 * mm])
     toe = b.add_chain(ankle, f"toe_{side}", "y", mtp)
     b.attach(toe, f"toes_{side}", toes_com_rel, b.inertia_of("foot", f"foot_{side}") * TOE_MASS_FRACTION,
              [0, 0, 0.005 * s], [tip_x - mtp_x, 0, 0.005 * s], 0.02 * s)
@@ -331,9 +334,9 @@ def standing_configuration(human: HumanModel) -> np.ndarray:
     """q of upright standing with the soles on the floor (z = 0), at the origin, facing +x."""
     q = pin.neutral(human.model)
     data = human.model.createData()
-    pin.framesForwardKinematics(human.model, data, q)
-    heel = data.oMf[human.marker_frames["LHEE"]].translation
-    q[2] = -(heel[2] - 0.025 * human.subject.height_m / REFERENCE_STATURE_M)
+    pin.forwardKinematics(human.model, data, q)
+    ankle = data.oMi[human.segment_joint["foot_l"]].translation
+    q[2] = -(ankle[2] - human.ankle_height_m)
     return q
 
 
