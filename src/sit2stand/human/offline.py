@@ -5,7 +5,12 @@ writes into DIR: a bag ``human_com`` (``/human/com``, ``/human/model_cop``, ``/h
 ``/human/scaling``), ``summary.json`` and ``human_com.png``. When the bag carries a reference it is evaluated:
 ``/ground_truth/com`` (synthetic demonstrations) gives the COM error; ``/mocap/reference_com`` (the capture
 software's own COM, e.g. Vicon's ``CentreOfMass``) gives the distance to it and, in the standing phase, both COMs'
-horizontal distance to the measured COP.
+horizontal distance to the measured COP. Every trial gets the residual of Newton's law on the COM
+(:func:`newton_residual`) over the frames whose whole weight is on the plates. The COM and the joint angles also go
+to ``com.csv``, ``joint_angles.csv`` and an OpenSim ``human_states.sto`` (:mod:`sit2stand.human.export`).
+
+The marker set is the one given, else the packaged set that covers most of the bag's marker names
+(:func:`sit2stand.human.marker_sets.choose_marker_set`): Plug-in-Gait, its lower body, or OpenSim's Gait2392.
 """
 
 from __future__ import annotations
@@ -26,11 +31,18 @@ from ..io.bag import BagError, BagReader, BagWriter
 from ..io.forceplate import PlateSeries
 from ..io.topics import (COM_TYPE, FORCE_PLATE_PREFIX, GROUND_TRUTH_COM_TOPIC, HUMAN_COM_TOPIC, HUMAN_JOINTS_TOPIC,
                          HUMAN_MODEL_COP_TOPIC, HUMAN_SCALING_TOPIC, MARKERS_TOPIC, REFERENCE_COM_TOPIC)
+from ..dynamics import G, savgol_series
 from ..io.typestore import typestore
 from .calibration import calibrate_stream, static_frames
 from .com import ComResult, estimate_com
+from .export import write_exports
 from .marker_ik import check_marker_units
+from .marker_sets import MarkerSet, choose_marker_set
 from .skeleton import Subject, build_human
+from .support import plate_wrench_at
+
+NEWTON_WINDOW_S = 0.3
+"""Savitzky-Golay window [s] (order 4) of the COM's second derivative and the plate force in :func:`newton_residual`."""
 
 
 @dataclass
@@ -92,6 +104,21 @@ def standing_phase(result: ComResult, fraction: float = 0.95) -> np.ndarray:
     return out
 
 
+def newton_residual(t_s: np.ndarray, com_m: np.ndarray, plates: list[PlateSeries], mass_kg: float,
+                    window_s: float = NEWTON_WINDOW_S, order: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Newton's law on the COM, F_plates = m (a_com + g z): its residual F_plates - m (a_com + g z) [N], (N, 3).
+
+    a_com is the Savitzky-Golay second derivative of the COM (``window_s``, ``order``); the plates' summed force at
+    the marker times is smoothed by the same filter (one bandwidth for both). Only frames whose whole weight is on
+    the plates can satisfy it. Also returns (N,) True where every plate has samples around the frame."""
+    dt = float(np.median(np.diff(t_s)))
+    window = min(2 * int(round(window_s / dt / 2)) + 1, len(t_s) - (1 - len(t_s) % 2))
+    acc = savgol_series(np.asarray(com_m, float), window, order, 2) / dt**2
+    force, _, covered = plate_wrench_at(np.asarray(t_s, float), plates, dt / 2)
+    force = savgol_series(force, window, order, 0)
+    return force - mass_kg * (acc + np.array([0.0, 0.0, G])), covered
+
+
 def evaluate(trial: Trial, result: ComResult) -> dict:
     """Figures of merit: COP fit, and against the truth / the capture software's COM where present."""
     out: dict = {
@@ -113,6 +140,12 @@ def evaluate(trial: Trial, result: ComResult) -> dict:
                                "side": f.side} for f in result.at_bounds],
         "notes": result.notes,
     }
+    if trial.plates and len(result.t_s) > 10:
+        residual, covered = newton_residual(result.t_s, result.com_m, trial.plates, result.subject.mass_kg)
+        sel = result.supported & covered
+        if sel.any():
+            out["newton_residual_frames"] = int(sel.sum())
+            out["newton_residual_rms_xyz_n"] = np.sqrt(np.mean(residual[sel] ** 2, axis=0)).round(2).tolist()
     if trial.truth is not None:
         tt, com = trial.truth
         truth = np.array([np.interp(result.t_s, tt, com[:, i]) for i in range(3)]).T
@@ -214,15 +247,18 @@ def write_result_bag(result: ComResult, out: Path, joint_names: list[str]) -> No
 
 
 def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg: float | None = None,
-        sex: str | None = None, calibrate: bool = True, scale: bool = True, quiet: bool = False) -> dict:
-    """The whole offline job; returns the summary dict (also written to OUT/summary.json)."""
+        sex: str | None = None, calibrate: bool = True, scale: bool = True, quiet: bool = False,
+        marker_set: MarkerSet | str | None = None) -> dict:
+    """The whole offline job; returns the summary dict (also written to OUT/summary.json). ``marker_set``: a
+    packaged set's name, a file or a MarkerSet; None chooses from the bag's marker names."""
     trial = read_trial(bag_path)
     height = height_m or trial.height_m
     mass = mass_kg or trial.mass_kg
     if height is None or mass is None:
         raise BagError(f"{bag_path}: the subject's {'height' if height is None else 'mass'} is not in the bag's "
                        f"metadata; give --height/--mass")
-    subject = Subject(height, mass, sex or trial.sex)
+    markers = choose_marker_set(trial.marker_names, marker_set)
+    subject = Subject(height, mass, sex or trial.sex, marker_set=markers)
     chair = any(p.name == "chair" for p in trial.plates)
 
     def progress(k: int, n: int) -> None:
@@ -233,13 +269,15 @@ def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg
         print(f"{bag_path}: {len(trial.marker_names)} markers x {len(trial.marker_t_s)} frames, plates "
               f"{', '.join(p.name for p in trial.plates)}; subject {height:g} m, {mass:g} kg"
               f"{'' if chair else ' (chair not on a plate: scaling uses frames after seat-off)'}", file=sys.stderr)
+        print(f"  marker set {markers.name}: {len(markers.covered(trial.marker_names))} of the "
+              f"{len(trial.marker_names)} markers", file=sys.stderr)
     best = int(np.argmax(trial.valid.sum(axis=1)))         # the frame that sees the most markers
     check_marker_units(trial.positions[best], trial.valid[best], height, f"{bag_path}: {MARKERS_TOPIC}")
     result = estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,
                           subject, calibrate=calibrate, scale_masses=scale, chair_on_plate=chair, progress=progress,
                           trust_plate_mass=mass_kg is None)
     summary = {"bag": str(bag_path), "subject": {"height_m": height, "mass_kg": mass, "sex": subject.sex},
-               **evaluate(trial, result)}
+               "marker_set": markers.name, **evaluate(trial, result)}
     warned = {f.note() for f in result.at_bounds}
     for note in result.notes:
         print(f"{'warning' if note in warned else 'note'}: {note}", file=sys.stderr)
@@ -250,12 +288,14 @@ def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg
     res_bag = out_dir / "human_com"
     if res_bag.exists():
         shutil.rmtree(res_bag)
-    write_result_bag(result, res_bag, build_human(result.subject).joint_names())
+    joint_names = build_human(result.subject).joint_names()
+    write_result_bag(result, res_bag, joint_names)
+    write_exports(result, out_dir, joint_names)
     return summary
 
 
 def calibrate_from_bag(bag_path: str | Path, out_yaml: str | Path, frames: int = 50, height_m: float | None = None,
-                       mass_kg: float | None = None, sex: str | None = None):
+                       mass_kg: float | None = None, sex: str | None = None, marker_set: MarkerSet | str | None = None):
     """The streaming estimator's skeleton calibration from a bag's first ``frames`` usable (seated, still) marker
     frames, as from a static trial recorded before the motion; written to ``out_yaml`` for the human_com node's
     ``calibration_file``. Returns the :class:`sit2stand.human.com.StreamCalibration`."""
@@ -264,7 +304,7 @@ def calibrate_from_bag(bag_path: str | Path, out_yaml: str | Path, frames: int =
     height, mass = height_m or trial.height_m, mass_kg or trial.mass_kg
     if height is None or mass is None:
         raise InputError(f"{bag_path}: no subject height_m/body_mass_kg in its metadata; give them")
-    subject = Subject(height, mass, sex or trial.sex)
+    subject = Subject(height, mass, sex or trial.sex, marker_set=choose_marker_set(trial.marker_names, marker_set))
     pos, valid = static_frames(trial.positions, trial.valid, frames)
     if len(pos) < frames:
         raise InputError(f"{bag_path}: only {len(pos)} frames with enough markers, {frames} asked")
