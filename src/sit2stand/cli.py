@@ -134,7 +134,7 @@ def _retarget(args: argparse.Namespace) -> int:
     summary = run(Path(args.bag), Path(args.out), params=args.params, plant=args.plant,
                   human_com_bag=args.human_com, margin_m=args.margin, time_scale=args.time_scale,
                   **({"max_time_scale": args.max_time_scale} if args.max_time_scale else {}),
-                  simulate=args.simulate, com_feedback=not args.no_com_feedback)
+                  simulate=args.simulate, com_feedback=not args.no_com_feedback, whole=args.whole)
     print(json.dumps(summary, indent=2))
     if args.simulate:
         print("stood up" if summary["stood_up"] else f"did not stand up: {summary['fall'] or 'pelvis too low'}")
@@ -380,6 +380,8 @@ def _add_retarget(sub) -> None:
                    help="the adaptive time scale's cap: at most this many times slower than the human "
                         "(default: retarget.player.DEFAULT_MAX_TIME_SCALE, 4)")
     p.add_argument("--simulate", action="store_true", help="execute the commands on the MuJoCo plant")
+    p.add_argument("--whole", action="store_true", help="play the whole recording; by default a trial that ends "
+                   "seated is played up to the human's sit-down (the robot does not sit back down yet)")
     p.add_argument("--no-com-feedback", action="store_true",
                    help="simulate the commands as planned, without the COM feedback the node applies")
     p.set_defaults(func=_retarget)

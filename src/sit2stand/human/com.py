@@ -18,6 +18,7 @@ Units SI, lab frame REP-103.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -139,8 +140,7 @@ def _reweighed(motion: _Motion, plate_mass: float, notes: list[str]) -> _Motion:
     rel = plate_mass / motion.subject.mass_kg - 1.0
     notes.append(f"the plates weigh the subject at {plate_mass:.2f} kg in quiet support, {100 * rel:+.1f} % "
                  f"from the given {motion.subject.mass_kg:g} kg; using the plates' value")
-    s = motion.subject
-    subject = Subject(s.height_m, plate_mass, s.sex, dict(s.lengths), dict(s.masses), list(s.extra))
+    subject = dataclasses.replace(motion.subject, mass_kg=plate_mass)     # marker set, lengths, extras kept
     human = build_human(subject)
     for name, fid in motion.human.marker_frames.items():
         human.model.frames[human.marker_frames[name]].placement = motion.human.model.frames[fid].placement

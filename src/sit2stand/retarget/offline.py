@@ -10,6 +10,7 @@ writes into DIR: ``retarget`` (a bag: ``/robot/joint_command``, ``/robot/planned
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -19,7 +20,8 @@ import numpy as np
 import pinocchio as pin
 
 from ..human.com import estimate_com
-from ..human.offline import read_trial
+from ..human.marker_ik import PELVIS_MARKERS
+from ..human.offline import Trial, read_trial
 from ..human.skeleton import Subject
 from ..io import messages as M
 from ..io.bag import BagReader, BagWriter
@@ -30,6 +32,7 @@ from ..io.typestore import typestore
 from ..robot.identify import read_link_parameters
 from ..robot.model import PlantConfig
 from ..robot.plant import Plant
+from .phases import Phases, find_phases
 from .player import DEFAULT_MAX_TIME_SCALE, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig
 from .stream import RetargetConfig, Retargeter, retarget_sequence, robot_model, robot_setup
@@ -52,18 +55,38 @@ def human_com_series(bag: Path, human_com_bag: Path | None, trial) -> np.ndarray
                         subject).com_m
 
 
+def trial_phases(trial: Trial, com_h: np.ndarray, chair_fz_n: np.ndarray | None) -> Phases:
+    """The trial's phases from its pelvis markers, the human COM and the chair plate (if any)."""
+    pel = [trial.marker_names.index(n) for n in PELVIS_MARKERS if n in trial.marker_names]
+    pelvis_z = np.nanmean(np.where(trial.valid[:, pel], trial.positions[:, pel, 2], np.nan), axis=1)
+    return find_phases(trial.marker_t_s, pelvis_z, com_h[:, 0], trial.height_m or 1.75, chair_fz_n)
+
+
+def _cropped(trial: Trial, keep: np.ndarray) -> Trial:
+    """The trial's marker frames where ``keep`` (the plates stay whole: they are looked up by time)."""
+    return dataclasses.replace(trial, marker_t_s=trial.marker_t_s[keep], positions=trial.positions[keep],
+                               valid=trial.valid[keep])
+
+
 def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None = None,
         human_com_bag: Path | None = None, margin_m: float = 0.06, time_scale: float | None = None,
         max_time_scale: float = DEFAULT_MAX_TIME_SCALE, simulate: bool = False, config: RetargetConfig | None = None,
-        com_feedback: bool = True, stabiliser: StabiliserConfig | None = None) -> dict:
+        com_feedback: bool = True, stabiliser: StabiliserConfig | None = None, whole: bool = False) -> dict:
     """Retarget ``bag`` into ``out`` (see the module docstring); returns the summary. ``com_feedback``: the
     simulated robot's commands are corrected by :class:`~sit2stand.retarget.stabiliser.ComStabiliser` (gains
     ``stabiliser``, default :class:`~sit2stand.retarget.stabiliser.StabiliserConfig`), as the node does.
-    ``time_scale``: play the plan this many times slower than the human (None: adapt, up to ``max_time_scale``)."""
+    ``time_scale``: play the plan this many times slower than the human (None: adapt, up to ``max_time_scale``).
+    ``whole``: play the whole recording; by default a trial that ends seated is played up to the human's sit-down
+    (:mod:`sit2stand.retarget.phases`)."""
     out.mkdir(parents=True, exist_ok=True)
     trial = read_trial(bag)
     com_h = human_com_series(bag, human_com_bag, trial)
     chair = next((p for p in trial.plates if p.name == "chair"), None)
+    fz = None if chair is None else np.interp(trial.marker_t_s, chair.t_s, chair.force_n[:, 2])
+    phases = trial_phases(trial, com_h, fz)
+    if not whole:
+        keep = phases.rise_and_stand(trial.marker_t_s)
+        trial, com_h, fz = _cropped(trial, keep), com_h[keep], None if fz is None else fz[keep]
     sim = None
     q_start = None
     links = read_link_parameters(params) if params else None     # read once: the plan's model and the robot's
@@ -77,7 +100,6 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     rt.calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0]).save(out / "marker_map.yaml")
     player = PlanPlayer(robot.model, dt, robot.support_xy, margin_m=margin_m, fixed_time_scale=time_scale,
                          max_time_scale=max_time_scale)
-    fz = None if chair is None else np.interp(trial.marker_t_s, chair.t_s, chair.force_n[:, 2])
     frames, cmds = retarget_sequence(rt, player, trial.marker_t_s, trial.positions, trial.valid, com_h, fz)
     ik_ms = np.array([f.ik.seconds for f in frames]) * 1e3
     feasible = np.array([f.ik.feasible for f in frames])
@@ -92,6 +114,10 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         "min_zmp_margin_on_feet_m": float(min(c.margin_m for c in on_feet)) if on_feet else None,
         "human_seat_off_frame": next((i for i, f in enumerate(frames) if f.human_seat_off), None),
         "robot_seat_off_frame": next((i for i, f in enumerate(frames) if not f.seated), None),
+        "lead_in_frames": int(sum(f.t_s < trial.marker_t_s[0] for f in frames)),
+        "phases": {"rise_start_s": phases.rise_start_s, "seat_off_s": phases.seat_off_s,
+                   "standing_s": phases.standing_s, "sit_down_s": phases.sit_down_s,
+                   "played": "whole trial" if whole or phases.sit_down_s is None else "rise and stand"},
     }
     _write_bag(out / "retarget", cmds, robot.joint_names, float(trial.marker_t_s[0]), dt)
     if sim is not None:
