@@ -1,0 +1,207 @@
+"""`sit2stand` sub-commands of the human side: importing lab files, digital humans, the human COM.
+
+Each ``add_*`` function adds one sub-command to the parser (see :mod:`sit2stand.cli`); each handler imports its
+stage when it runs, so that ``sit2stand --help`` stays fast (measured in :mod:`sit2stand.cli`'s docstring).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def _import_c3d(args: argparse.Namespace) -> int:
+    from ..io.bag import bag_info
+    from ..io.c3d import read_c3d, write_trial_bag
+
+    zero = "auto" if args.zero_frames == "auto" else None if args.zero_frames == "off" else \
+        tuple(int(v) for v in args.zero_frames.split(":"))
+    trial = read_c3d(args.file, chair_plate=args.chair_plate, feet_plate=args.feet_plate, forward=args.forward,
+                     up=args.up, cop_threshold_n=args.cop_threshold, markers_only=args.markers_only, zero_frames=zero)
+    print(f"{trial.path}: {len(trial.markers.names)} markers at {trial.markers.rate_hz:g} Hz, "
+          f"{len(trial.plates)} of {trial.all_plate_count} plates used; lab axes: {trial.axes.reason}")
+    if trial.skipped_labels:
+        print(f"  not published as markers (model outputs, unlabelled): {len(trial.skipped_labels)}")
+    counts = write_trial_bag(trial, args.out)
+    print(f"wrote {args.out}: " + ", ".join(f"{t} ({n})" for t, n in counts.items()))
+    if args.verbose:
+        print(bag_info(args.out))
+    return 0
+
+
+def _import_trc(args: argparse.Namespace) -> int:
+    from ..io.bag import bag_info
+    from ..io.c3d import write_trial_bag
+    from ..io.trc import read_opensim_trial
+
+    trial = read_opensim_trial(args.file, args.grf, mass_kg=args.mass, height_m=args.height, forward=args.forward,
+                               up=args.up, cop_threshold_n=args.cop_threshold)
+    m = trial.markers
+    print(f"{trial.path}: {len(m.names)} markers x {len(m.times_s)} frames at {m.rate_hz:g} Hz, "
+          f"{len(trial.plates)} plates ({', '.join(p.name for p in trial.plates) or 'none'}); lab axes: "
+          f"{trial.axes.reason}")
+    if trial.height_m is None or trial.body_mass_kg is None:
+        print("  no --height/--mass: give them to human-com later (TRC files do not carry them)")
+    counts = write_trial_bag(trial, args.out)
+    print(f"wrote {args.out}: " + ", ".join(f"{t} ({n})" for t, n in counts.items()))
+    if args.verbose:
+        print(bag_info(args.out))
+    return 0
+
+
+def _synth_human(args: argparse.Namespace) -> int:
+    from ..human.skeleton import ExtraMass
+    from ..human.demonstration_bag import write_demonstration_bag
+    from ..human.synth import SynthConfig, synthesize
+
+    cfg = SynthConfig(style=args.style, height_m=args.height, mass_kg=args.mass, sex=args.sex,
+                      seat_height_m=args.seat_height, duration_s=args.duration, seed=args.seed,
+                      extra=[ExtraMass.parse(e) for e in args.extra_mass])
+    demo = synthesize(cfg)
+    for warning in demo.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    counts = write_demonstration_bag(demo, args.out)
+    c, i0 = demo.com_m, int(demo.rise_start_s * cfg.plate_rate_hz)
+    print(f"{cfg.style} rise of a {cfg.height_m:g} m, {demo.human.total_mass:.1f} kg {cfg.sex}: seat-off at "
+          f"{demo.seat_off_s - demo.rise_start_s:.2f} s into a {demo.rise_end_s - demo.rise_start_s:.2f} s rise; "
+          f"COM height {c[i0, 2]:.3f} -> min {c[i0:, 2].min():.3f} -> {c[-1, 2]:.3f} m")
+    print(f"wrote {args.out}: " + ", ".join(f"{t} ({n})" for t, n in counts.items()))
+    return 0
+
+
+def _human_calibrate(args: argparse.Namespace) -> int:
+    import time
+
+    from ..human.offline import calibrate_from_bag
+
+    t0 = time.perf_counter()
+    cal = calibrate_from_bag(args.bag, args.out, args.frames, args.height, args.mass, args.sex)
+    print(f"calibrated a {cal.height_m:g} m {cal.sex} on the first {cal.frames} frames of {args.bag} in "
+          f"{time.perf_counter() - t0:.1f} s: marker RMS {cal.marker_rms_before_m * 1e3:.1f} -> "
+          f"{cal.marker_rms_after_m * 1e3:.1f} mm; wrote {args.out}")
+    return 0
+
+
+def _human_com(args: argparse.Namespace) -> int:
+    from ..human.offline import run
+
+    summary = run(args.bag, args.out, height_m=args.height, mass_kg=args.mass, sex=args.sex,
+                  calibrate=not args.no_calibration, scale=not args.no_scaling, marker_set=args.marker_set)
+    keys = ["com_rms_vs_truth_scaled_mm", "com_rms_vs_truth_unscaled_mm", "cop_rms_unscaled_mm", "cop_rms_scaled_mm",
+            "com_rms_vs_reference_mm", "standing_com_to_cop_mm", "standing_reference_com_to_cop_mm", "marker_rms_mm"]
+    for key in keys:
+        if key in summary:
+            value = summary[key]
+            text = (f"mean {value['mean']:.1f}, max {value['max']:.1f}" if isinstance(value, dict) else f"{value:.1f}")
+            print(f"  {key:<36} {text}")
+    print("  mass factors: " + ", ".join(f"{k} {v:.2f}" for k, v in summary["mass_factors"].items()))
+    if summary.get("plate_gaps"):
+        print("  force plates dropped out: " + "; ".join(
+            f"{g['plate']} {g['from_s']:.3f}-{g['to_s']:.3f} s" for g in summary["plate_gaps"]))
+    if "newton_residual_rms_xyz_n" in summary:
+        rms = ", ".join(f"{v:.1f}" for v in summary["newton_residual_rms_xyz_n"])
+        print(f"  {'newton_residual_rms_xyz_n':<36} {rms} ({summary['newton_residual_frames']} frames on the plates)")
+    print(f"wrote {args.out}/summary.json, human_com.png, com.csv, joint_angles.csv, human_states.sto and the "
+          f"human_com bag (marker set {summary['marker_set']})")
+    return 0
+
+
+def _gap_human(args: argparse.Namespace) -> int:
+
+    from ..gap.human import human_gap
+    from ..gap.workflow import progress_printer
+
+    r = human_gap(args.bag, progress=progress_printer)
+    print(r.verdict)
+    for e in r.effects:
+        if e.get("alternatives"):
+            print(f"  {e['location']}: nearly as good here: {', '.join(e['alternatives'][:4])}")
+    names = ["force_x", "force_y", "force_z", "moment_x", "moment_y", "moment_z"]
+    for n, f, b, a in zip(names, r.floors, r.rms_before, r.rms_after):
+        print(f"  {n:9s} floor {f:6.2f}  RMS {b:6.2f} -> {a:6.2f}")
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps({"bag": r.bag, "verdict": r.verdict, "effects": r.effects,
+                                        "floors": r.floors.tolist(), "rms_before": r.rms_before.tolist(),
+                                        "rms_after": r.rms_after.tolist(), "steps": r.selection.steps}, indent=1))
+    return 0
+
+
+def add_import_c3d(sub) -> None:
+    p = sub.add_parser("import-c3d", help="C3D markers and force plates -> bag (SI units, REP-103 lab frame)")
+    p.add_argument("file", type=Path)
+    p.add_argument("--out", type=Path, required=True, help="bag directory to create")
+    p.add_argument("--chair-plate", type=int, help="0-based index of the plate under the chair")
+    p.add_argument("--feet-plate", type=int, help="0-based index of the plate under the feet")
+    p.add_argument("--forward", help="file axis that is lab x (forward), e.g. +Y; detected if omitted")
+    p.add_argument("--up", help="file axis that is lab z (up), e.g. +Z; detected if omitted")
+    p.add_argument("--cop-threshold", type=float, default=20.0, help="normal force [N] below which COP is invalid")
+    p.add_argument("--zero-frames", default="auto",
+                   help="plate baseline: auto (FORCE_PLATFORM:ZERO), off, or FIRST:LAST 1-based point frames")
+    p.add_argument("--markers-only", action="store_true", help="accept a file without force plates")
+    p.add_argument("-v", "--verbose", action="store_true", help="print the bag summary afterwards")
+    p.set_defaults(func=_import_c3d)
+
+
+def add_import_trc(sub) -> None:
+    p = sub.add_parser("import-trc", help="OpenSim TRC markers (and .mot ground reaction forces) -> bag (SI, REP-103)")
+    p.add_argument("file", type=Path, help="the .trc marker file")
+    p.add_argument("--grf", type=Path, help="OpenSim .mot ground reaction forces (plates plate0, plate1, ...)")
+    p.add_argument("--out", type=Path, required=True, help="bag directory to create")
+    p.add_argument("--mass", type=float, help="body mass [kg] for the bag's metadata (TRC files lack it)")
+    p.add_argument("--height", type=float, help="stature [m] for the bag's metadata (TRC files lack it)")
+    p.add_argument("--forward", help="file axis that is lab x (forward); default +X (OpenSim's)")
+    p.add_argument("--up", help="file axis that is lab z (up); default +Y (OpenSim's)")
+    p.add_argument("--cop-threshold", type=float, default=20.0, help="normal force [N] below which COP is invalid")
+    p.add_argument("-v", "--verbose", action="store_true", help="print the bag summary afterwards")
+    p.set_defaults(func=_import_trc)
+
+
+def add_synth_human(sub) -> None:
+    p = sub.add_parser("synth-human", help="digital-human sit-to-stand demonstration (markers, plates, true COM)")
+    p.add_argument("--style", choices=["natural", "elderly"], default="natural")
+    p.add_argument("--height", type=float, default=1.75, help="stature [m]")
+    p.add_argument("--mass", type=float, default=75.0, help="body mass [kg] (extra masses come on top)")
+    p.add_argument("--sex", choices=["male", "female"], default="male")
+    p.add_argument("--seat-height", type=float, help="seat height [m] (default 0.26 x stature)")
+    p.add_argument("--duration", type=float, help="rise duration [s] (default: natural 1.6, elderly 3.0)")
+    p.add_argument("--seed", type=int, default=0, help="subject proportions, noise and occlusions")
+    p.add_argument("--extra-mass", action="append", default=[], metavar="SEGMENT:KG[:x,y,z]",
+                   help="hidden rigid mass on a segment, offset from its COM in segment axes (repeatable)")
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=_synth_human)
+
+
+def add_human_com(sub) -> None:
+    p = sub.add_parser("human-com", help="human COM of a bag: skeleton fit, COP-matched scaling, JSON + PNG")
+    p.add_argument("bag", type=Path)
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--height", type=float, help="stature [m] if the bag's metadata lacks it")
+    p.add_argument("--mass", type=float, help="body mass [kg] if the bag's metadata lacks it")
+    p.add_argument("--sex", choices=["male", "female"])
+    p.add_argument("--no-calibration", action="store_true", help="keep de Leva's segment lengths")
+    p.add_argument("--no-scaling", action="store_true", help="keep de Leva's segment masses")
+    p.add_argument("--marker-set", help="marker set: plug_in_gait, plug_in_gait_lower, gait2392 or a YAML file "
+                   "(default: the packaged set that covers most of the bag's marker names)")
+    p.set_defaults(func=_human_com)
+
+
+def add_human_calibrate(sub) -> None:
+    p = sub.add_parser("human-calibrate", help="calibrate the skeleton on a bag's first (seated, still) frames, "
+                       "for the human_com node's calibration_file")
+    p.add_argument("bag", type=Path)
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--frames", type=int, default=50, help="frames to use (the stream's own calibration takes 50)")
+    p.add_argument("--height", type=float, help="stature [m] if the bag's metadata lacks it")
+    p.add_argument("--mass", type=float, help="body mass [kg] if the bag's metadata lacks it")
+    p.add_argument("--sex", choices=["male", "female"])
+    p.set_defaults(func=_human_calibrate)
+
+
+def add_gap_human(sub) -> None:
+    p = sub.add_parser("gap-human", help="the model-gap workflow on a human demonstration: a mass the skeleton lacks")
+    p.add_argument("bag", type=Path)
+    p.add_argument("--out", type=Path, help="JSON summary")
+    p.set_defaults(func=_gap_human)

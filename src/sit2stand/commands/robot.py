@@ -1,0 +1,167 @@
+"""`sit2stand` sub-commands of the robot side: retargeting, the simulated robot, identification, the model gap.
+
+Each ``add_*`` function adds one sub-command to the parser (see :mod:`sit2stand.cli`); each handler imports its
+stage when it runs, so that ``sit2stand --help`` stays fast (measured in :mod:`sit2stand.cli`'s docstring).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from .graph import ros_params
+
+
+def _retarget(args: argparse.Namespace) -> int:
+    from ..retarget.offline import run
+
+    summary = run(Path(args.bag), Path(args.out), params=args.params, plant=args.plant,
+                  human_com_bag=args.human_com, margin_m=args.margin, time_scale=args.time_scale,
+                  **({"max_time_scale": args.max_time_scale} if args.max_time_scale else {}),
+                  simulate=args.simulate, com_feedback=not args.no_com_feedback, whole=args.whole)
+    print(json.dumps(summary, indent=2))
+    if args.simulate:
+        print("stood up" if summary["stood_up"] else f"did not stand up: {summary['fall'] or 'pelvis too low'}")
+        return 0 if summary["stood_up"] else 1
+    return 0
+
+
+def _drive(args: argparse.Namespace) -> int:
+    from ..nodes.driver import main as driver_main
+
+    return driver_main(["driver"] + ros_params([
+        ("plant", str(args.plant)), ("controller_params", str(args.params) if args.params else None),
+        ("real_time_factor", float(args.rtf)), ("publish_clock", args.clock), ("feedforward", args.feedforward)]))
+
+
+def _collect_postures(args: argparse.Namespace) -> int:
+    from ..robot.model import PlantConfig
+    from ..robot.postures import collect_postures
+
+    cfg = PlantConfig.load(args.plant)
+    counts = collect_postures(cfg, args.n, args.out, seed=args.seed)
+    print(f"wrote {args.out}: {counts['kept']} postures held ({counts['dropped']} tipped over and were dropped; the "
+          f"upright stance showed the real COM {counts['home_com_bias_m'] * 1e3:+.0f} mm from CAD's)")
+    return 0 if counts["kept"] >= min(args.n, 6) else 1
+
+
+def _identify(args: argparse.Namespace) -> int:
+    from ..robot.figures import com_path_figure, posture_figure
+    from ..robot.identify import identify, read_postures, write_yaml
+
+    result = identify(args.dir, args.model, eval_fraction=args.eval_fraction, seed=args.seed)
+    print(result.summary())
+    write_yaml(result, args.out, source=str(args.dir))
+    png = Path(args.out).with_suffix(".png")
+    posture_figure(result, read_postures(args.dir), png, args.eval_fraction, args.seed)
+    written = [str(args.out), str(png)]
+    if result.model_name == "full":
+        path_png = Path(args.out).with_name(Path(args.out).stem + "_com_path.png")
+        com_path_figure(result, path_png)
+        written.append(str(path_png))
+    print("wrote " + ", ".join(written))
+    return 0
+
+
+def _excite(args: argparse.Namespace) -> int:
+    from ..gap.excite import excite
+    from ..robot.model import PlantConfig
+
+    info = excite(PlantConfig.load(args.plant), args.out, seed=args.seed, n_moves=args.moves, progress=True)
+    print(f"wrote {args.out}: {info['duration_s']:.1f} s of excitation"
+          + (f"; the robot fell ({info['status']})" if info["fell"] else ""))
+    return 1 if info["fell"] else 0
+
+
+def _gap(args: argparse.Namespace) -> int:
+    from ..gap.report import cop_rms, gap_command
+    from ..gap.workflow import describe, progress_printer
+
+    result = gap_command(args.bags, args.out, model=args.model, rate_hz=args.rate, progress=progress_printer,
+                         controller=args.controller)
+    print(f"nominal model: {result.model_source}")
+    if result.effects:
+        print(f"named {len(result.effects)} effect(s):")
+        for e in result.effects:
+            print(f"  - {describe(e)}")
+    else:
+        print(result.verdict)
+    if result.unexplained:
+        print(f"left unexplained on {len(result.unexplained)} channel(s), worst {result.unexplained[0]['channel']} "
+              f"at {result.unexplained[0]['z']:.1f} x its noise floor")
+    print(f"gap above the noise on the disagreeing channels: {result.gap_before:.2f} -> {result.gap_after:.2f} "
+          f"(shrink {100 * result.shrink:.0f} %)")
+    for r, (b, a) in enumerate(cop_rms(result)):
+        print(f"model COP error, {result.bags[r]}: {100 * b:.2f} -> {100 * a:.2f} cm RMS")
+    print(f"report: {args.out}/report.md (+ gap.json, augmented_model.yaml, gap_*.png)")
+    return 0
+
+
+def add_retarget(sub) -> None:
+    p = sub.add_parser("retarget", help="retarget a demonstration to robot joint commands (optionally simulate them)")
+    p.add_argument("bag", help="demonstration bag (/mocap/markers, force plates)")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--params", default=None, help="identified COM parameters YAML (default: CAD)")
+    p.add_argument("--plant", default=None, help="plant YAML (seated posture; default: the nominal plant)")
+    p.add_argument("--human-com", default=None, help="bag with /human/com (default: the bag's, else estimated)")
+    p.add_argument("--margin", type=float, default=0.06, help="ZMP margin inside the feet [m]")
+    p.add_argument("--time-scale", type=float, default=None, help="fixed time scale (default: adaptive)")
+    p.add_argument("--max-time-scale", type=float,
+                   help="the adaptive time scale's cap: at most this many times slower than the human "
+                        "(default: retarget.player.DEFAULT_MAX_TIME_SCALE, 4)")
+    p.add_argument("--simulate", action="store_true", help="execute the commands on the MuJoCo plant")
+    p.add_argument("--whole", action="store_true", help="play the whole recording; by default a trial that ends "
+                   "seated is played up to the human's sit-down (the robot does not sit back down yet)")
+    p.add_argument("--no-com-feedback", action="store_true",
+                   help="simulate the commands as planned, without the COM feedback the node applies")
+    p.set_defaults(func=_retarget)
+
+
+def add_drive(sub) -> None:
+    p = sub.add_parser("drive", help="the simulated robot (the driver node), seated on its chair")
+    p.add_argument("--plant", help="plant YAML or a packaged plant: default (the default), heavy_front, cad")
+    p.add_argument("--params", type=Path, help="identified parameters YAML for the controller (default: CAD)")
+    p.add_argument("--rtf", type=float, default=1.0, help="real-time factor; 0 = as fast as possible")
+    p.add_argument("--clock", action="store_true", help="publish /clock (the driver is the time source)")
+    p.add_argument("--feedforward", choices=["gravity", "inverse_dynamics", "none"], default="gravity")
+    p.set_defaults(func=_drive)
+
+
+def add_collect_postures(sub) -> None:
+    p = sub.add_parser("collect-postures", help="hold the simulated robot in static postures and record its sensors")
+    p.add_argument("--plant", help="plant YAML or a packaged plant: default (the default), heavy_front, cad")
+    p.add_argument("--n", type=int, default=88, help="postures to keep (the paper had 88)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=_collect_postures)
+
+
+def add_identify(sub) -> None:
+    p = sub.add_parser("identify", help="identify the robot's mass/COM parameters from a static-posture bag")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--model", choices=["planar5", "full"], default="full")
+    p.add_argument("--eval-fraction", type=float, default=0.1)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", type=Path, required=True, help="parameters YAML (figures are written beside it)")
+    p.set_defaults(func=_identify)
+
+
+def add_excite(sub) -> None:
+    p = sub.add_parser("excite", help="record an excitation run of the simulated robot (standing, stance to stance)")
+    p.add_argument("--plant", help="plant YAML or a packaged plant: default (the default), heavy_front, cad")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--moves", type=int, default=8)
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=_excite)
+
+
+def add_gap(sub) -> None:
+    p = sub.add_parser("gap", help="find, name and add what a robot model misses, from measured robot bags")
+    p.add_argument("bags", type=Path, nargs="+", help="robot bags: runs (driver, excite) and/or static postures")
+    p.add_argument("--model", help="nominal model: cad (default), identified parameters or an augmented model YAML")
+    p.add_argument("--controller", help="the parameters the robot's controller ran with (driver controller_params; "
+                   "default: CAD): the control law is re-evaluated with them")
+    p.add_argument("--rate", type=float, default=50.0, help="analysis rate [Hz] for runs")
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=_gap)
