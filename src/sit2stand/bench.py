@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 from rosbags.rosbag2 import Reader
 
+from .bench_human import bench_human_real, print_table
 from .data import graph_path, plant_path
 from .gap.hidden import KINDS, draw, run_case
 from .human.com import estimate_com
@@ -276,11 +277,11 @@ def bench_robot(n_postures: int = 88) -> dict[str, float]:
 
 
 def _print_sections(results: dict, sections: list[str]) -> None:
-    width = max(len(k) for section in sections for k in results[section])
+    width = max((len(k) for section in sections for k in results[section]), default=0)
     for section in sections:
         print(f"\n[{section}]")
         for key, value in results[section].items():
-            if isinstance(value, list):
+            if isinstance(value, list | dict):
                 print(f"  {key:<{width}}  {len(value)} (see the JSON file)")
             else:
                 text = f"{value:>12,.2f}" if isinstance(value, float) else f"{value:>12}"
@@ -345,6 +346,13 @@ def _retarget_section(root: Path, env: dict[str, str]) -> dict:
     return out
 
 
+def _human_real_section() -> dict:
+    print("human COM on real lab trials: Newton's law for the whole body ...", flush=True)
+    out = bench_human_real()
+    print_table(out)
+    return out
+
+
 def _gap_section(seeds: int) -> dict:
     print(f"model gap: hidden-effect plants, {seeds} seeds per effect kind ...", flush=True)
     return bench_gap(seeds)
@@ -362,7 +370,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sit2stand-bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results/bench.json"))
     parser.add_argument("--messages", type=int, default=40_000)
-    parser.add_argument("--only", choices=["gap", "retarget"], help="run one section and merge it into the JSON file")
+    parser.add_argument("--only", choices=["gap", "retarget", "human"],
+                        help="run one section and merge it into the JSON file")
     parser.add_argument("--gap-seeds", type=int, default=20, help="hidden-effect cases per effect kind")
     args = parser.parse_args(argv)
     root = Path(__file__).resolve().parents[2]
@@ -370,8 +379,11 @@ def main(argv: list[str] | None = None) -> int:
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     if args.only:
         results = json.loads(args.out.read_text()) if args.out.exists() else {}
-        results[args.only] = _gap_section(args.gap_seeds) if args.only == "gap" else _retarget_section(root, env)
-        _write(results, args.out, [args.only])
+        sections = {"gap": lambda: _gap_section(args.gap_seeds), "retarget": lambda: _retarget_section(root, env),
+                    "human": _human_real_section}
+        key = "human_real" if args.only == "human" else args.only
+        results[key] = sections[args.only]()
+        _write(results, args.out, [] if key == "human_real" else [key])     # human_real: printed as its table
         return 0
 
     results: dict[str, object] = {"machine": {"python": sys.version.split()[0], "cpu_count": os.cpu_count(),
@@ -398,6 +410,7 @@ def main(argv: list[str] | None = None) -> int:
         results["human_com"].update(bench_human_com_graph(demo, env))
     print("robot: plant real-time factor, 88 postures, identification ...", flush=True)
     results["robot"] = bench_robot()
+    results["human_real"] = _human_real_section()
     results["retarget"] = _retarget_section(root, env)
     results["gap"] = _gap_section(args.gap_seeds)
     _write(results, args.out, [s for s in ("bag", "replayer", "human_com", "robot", "retarget", "gap") if s in results])
