@@ -141,8 +141,9 @@ class RetargetConfig:
     lateral_weight: float = 0.1           # torso yaw, hip yaw and roll, ankle roll: pull toward the seated posture
     #                                       (a sit-to-stand is sagittal; twists would trade marker errors)
     seat_off_fraction: float = 0.3        # robot COM this far along its foot (heel -> toe) before its hips leave
-    toe_margin_m: float = 0.08            # the COM target stays this far behind the robot's toes: a child's COM is
-    #                                       8 cm ahead of its ankles when it stands up, 12.5 cm scaled to TALOS's legs
+    toe_margin_m: float = 0.10            # the COM target stays this far behind the robot's toes (2.5 cm ahead of
+    #                                       the ankle, where the shipped rises end): a child's COM is 8 cm ahead of
+    #                                       its ankles, 12.5 cm scaled to TALOS; at 8 cm the live robot fell 1 in 3
     velocity_limit_rad_s: float = 4.0
     chair_off_force_n: float = 30.0       # human left the seat when the chair plate reads less
     pelvis_rise_m: float = 0.02           # ... or, without a chair plate, when the pelvis markers rose this much
