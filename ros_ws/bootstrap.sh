@@ -84,16 +84,17 @@ if ! stamp_ok requirements "$req_hash"; then
   stamp_set requirements "$req_hash"
 fi
 
-# --- 4. The interface package, built with colcon into the venv ---------------------------------------------------
+# --- 4. The interface packages (sit2stand_msgs, tf2_msgs), built with colcon into the venv -----------------------
 msgs_hash="$(cd "$ROOT" && find msgs -type f | sort | xargs cat | sha256sum | cut -c1-16)"
-if ! stamp_ok msgs "$msgs_hash" || ! "$VPY" -c 'import sit2stand_msgs.msg' 2>/dev/null; then
+if ! stamp_ok msgs "$msgs_hash" || ! "$VPY" -c 'import sit2stand_msgs.msg, tf2_msgs.msg' 2>/dev/null; then
   say "building msgs/ with colcon (install base: $VENV)"
   ( cd "$ROOT/ros_ws" && PATH="$VENV/bin:$PATH" "$VENV/bin/colcon" --log-base log build \
       --base-paths "$ROOT/msgs" --build-base build --install-base "$VENV" --merge-install \
       --event-handlers console_cohesion- summary+ \
       --cmake-args -DBUILD_TESTING=OFF "-DPython3_EXECUTABLE=$VPY" ) > "$ROOT/ros_ws/colcon-build.log" 2>&1 \
     || { tail -40 "$ROOT/ros_ws/colcon-build.log"; die "colcon build of msgs/ failed (full log: ros_ws/colcon-build.log)"; }
-  "$VPY" -c 'import sit2stand_msgs.msg, sit2stand_msgs.srv' || die "built msgs/ but cannot import sit2stand_msgs"
+  "$VPY" -c 'import sit2stand_msgs.msg, sit2stand_msgs.srv, tf2_msgs.msg' \
+    || die "built msgs/ but cannot import sit2stand_msgs or tf2_msgs"
   stamp_set msgs "$msgs_hash"
 fi
 
