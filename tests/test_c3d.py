@@ -152,3 +152,13 @@ def test_not_a_c3d_file(tmp_path):
     bad.write_bytes(b"\x00" * 64)
     with pytest.raises(C3DError, match="bad.c3d"):
         read_c3d(bad)
+
+
+def test_a_truncated_file_is_refused_not_read_in_part(tmp_path):
+    """A copy cut half way: ezc3d reads 44 of its 91 frames and rewrites its own header to match; the raw header
+    still says 91, and the import says the file is truncated."""
+    whole = real_file("sts_child_vicon_01.c3d").read_bytes()
+    cut = tmp_path / "cut.c3d"
+    cut.write_bytes(whole[: len(whole) // 2])
+    with pytest.raises(C3DError, match="announces 91 frames, the file holds 44: it is truncated"):
+        read_c3d(cut, feet_plate=2)

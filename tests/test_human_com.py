@@ -5,11 +5,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from sit2stand.human.calibration import StreamCalibration, calibrate_stream, static_frames
+from sit2stand.human.calibration import StreamCalibration, calibrate_lengths, calibrate_stream, static_frames
 from sit2stand.human.com import estimate_com
 from sit2stand.human.com_stream import StreamingComEstimator
 from sit2stand.human.marker_ik import MarkerIK, MarkerUnitsError, TooFewMarkers
+from sit2stand.human.offline import read_trial
 from sit2stand.human.support import plate_wrench_at
+from sit2stand.io.bag import BagError, BagWriter
+from sit2stand.io.topics import MARKERS_TOPIC, MOCAP_TYPE
 from sit2stand.io.forceplate import PlateSeries
 from sit2stand.human.skeleton import ExtraMass, Subject, build_human
 from sit2stand.human.synth import SynthConfig, synthesize
@@ -217,3 +220,20 @@ def test_offline_a_marker_dropout_keeps_bridged_frames_out_of_the_scaling():
     truth = demo.com_m[::10][: len(result.com_m)]
     assert not result.supported[105:185].any(), "no frame whose smoothing window holds a bridged one"
     assert np.linalg.norm(result.com_m - truth, axis=1).mean() < 0.012
+
+
+def test_nan_markers_flagged_valid_are_not_seen_by_the_calibration():
+    """A file with NaN coordinates but the marker still flagged valid: calibrated on the rest, no solver error."""
+    demo = synthesize(SynthConfig(style="natural", seed=3))
+    markers, valid = demo.markers_m.copy(), demo.marker_valid.copy()
+    markers[::7, 3] = np.nan                          # valid stays True there
+    subject, before, after = calibrate_lengths(Subject(1.75, demo.human.total_mass), demo.marker_names, markers,
+                                               valid, n_frames=4, max_nfev=5)
+    assert np.isfinite(before) and np.isfinite(after) and after <= before
+
+
+def test_a_bag_whose_marker_topic_has_no_messages_is_named(tmp_path):
+    with BagWriter(tmp_path / "empty") as bag:
+        bag.add_topic(MARKERS_TOPIC, MOCAP_TYPE)
+    with pytest.raises(BagError, match="/mocap/markers has no messages"):
+        read_trial(tmp_path / "empty")

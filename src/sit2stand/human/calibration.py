@@ -33,6 +33,7 @@ def calibrate_lengths(subject: Subject, marker_names: list[str], positions: np.n
     Returns (subject with fitted ``lengths``, marker RMS before [m], after [m]). Factors are bounded to 0.6..1.6
     (children and adults).
     """
+    valid = np.asarray(valid, bool) & np.all(np.isfinite(positions), axis=-1)    # a NaN marker is not seen
     good = [k for k in range(len(positions)) if np.sum(valid[k]) >= CALIBRATION_MIN_MARKERS]
     picks = [good[i] for i in np.linspace(0, len(good) - 1, min(n_frames, len(good))).astype(int)]
     groups = list(LENGTH_GROUPS)

@@ -68,6 +68,8 @@ def read_trial(bag_path: str | Path) -> Trial:
         if MARKERS_TOPIC not in topics:
             raise BagError(f"{bag_path}: no {MARKERS_TOPIC} topic (it has {', '.join(sorted(topics))})")
         frames = bag.read(MARKERS_TOPIC)
+        if not frames:
+            raise BagError(f"{bag_path}: {MARKERS_TOPIC} has no messages")
         names = list(frames[0][1].marker_names)
         t = np.array([ts for ts, _ in frames]) * 1e-9
         pos = np.full((len(frames), len(names), 3), np.nan)

@@ -18,6 +18,7 @@ plate's corner geometry, and is invalid below a normal-force threshold.
 from __future__ import annotations
 
 import re
+import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -245,12 +246,29 @@ def _open(path: Path) -> _RawFile:
         raise C3DError(f"{path}: not a readable C3D file: {err}") from None
     params = c3d["parameters"]
     points = np.asarray(c3d["data"]["points"], float)  # (4, M, N), file units
+    announced = _header_frame_count(path)
+    if announced is not None and announced > points.shape[2]:
+        raise C3DError(f"{path}: the header announces {announced} frames, the file holds {points.shape[2]}: it is "
+                       f"truncated (export it again, or cut it with the capture software)")
     rate = _first_number(_param(params, "POINT", "RATE")) or float(c3d["header"]["points"]["frame_rate"])
     first_frame = int(c3d["header"]["points"]["first_frame"])
     units = str((_param(params, "POINT", "UNITS", ["mm"]) or ["mm"])[0]).strip().lower()
     if units not in LENGTH_SCALE:
         raise C3DError(f"{path}: POINT:UNITS {units!r} is not a length unit I know ({', '.join(LENGTH_SCALE)})")
     return _RawFile(path, c3d, params, points, rate, first_frame / rate, LENGTH_SCALE[units])
+
+
+def _header_frame_count(path: Path) -> int | None:
+    """Frames the file's own header announces (words 4 and 5: first and last frame, 1-based), read from the raw
+    bytes: ezc3d rewrites its header and POINT:FRAMES from the data it could read, so a cut file looks whole there.
+    Little-endian first (Intel/DEC files), else big-endian; None when neither reads as a range."""
+    with open(path, "rb") as f:
+        head = f.read(10)
+    for order in ("<", ">"):
+        first, last = struct.unpack(order + "HH", head[6:10])
+        if 1 <= first <= last:
+            return last - first + 1
+    return None
 
 
 def _check_plate_choice(raw: _RawFile, n_plates: int, chair_plate: int | None, feet_plate: int | None,
