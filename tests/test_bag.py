@@ -374,3 +374,18 @@ def test_reading_fewer_messages_than_the_metadata_counts_fails(tmp_path):
     meta.write_text(meta.read_text().replace("message_count: 300", "message_count: 301"))
     with pytest.raises(BagError, match="read 300 messages where its metadata counts 301"):
         list(BagReader(tmp_path / "b").messages())
+
+
+def test_recovery_keeps_the_damaged_bags_subject_data(tmp_path):
+    """A complete bag with one corrupt chunk: the rebuilt bag keeps its metadata's custom_data (stature, mass)."""
+    damaged = tmp_path / "natural"
+    damaged.mkdir()
+    root = Path(__file__).resolve().parents[1] / "bags" / "natural"
+    (damaged / "metadata.yaml").write_text((root / "metadata.yaml").read_text())
+    data = bytearray((root / "natural.mcap").read_bytes())
+    data[300_000:300_256] = bytes(256)
+    (damaged / "natural.mcap").write_bytes(bytes(data))
+    report = recover_bag(damaged, tmp_path / "rebuilt")
+    assert report.bad_chunks, "the corrupt chunk is named"
+    with BagReader(tmp_path / "rebuilt") as bag:
+        assert bag.custom_data["height_m"] == "1.75" and "recovered_from" in bag.custom_data

@@ -12,6 +12,8 @@ import shutil
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import yaml
 from typing import IO
 
 from mcap.exceptions import McapError
@@ -185,9 +187,21 @@ def _add_recovered_topic(writer: BagWriter, channel: Channel, schemas: dict[int,
     return channel.topic
 
 
+def _surviving_custom_data(bag_dir: Path) -> dict[str, str]:
+    """The ``custom_data`` of the bag's metadata.yaml, if it is there and readable (a killed recorder leaves none)."""
+    try:
+        doc = yaml.safe_load((bag_dir / "metadata.yaml").read_text()) or {}
+        custom = doc["rosbag2_bagfile_information"].get("custom_data") or {}
+        return {str(k): str(v) for k, v in custom.items()}
+    except (OSError, KeyError, TypeError, AttributeError, yaml.YAMLError):
+        return {}
+
+
 def _write_recovered(scan: _Scan, out_dir: Path, source: Path, report: RecoveryReport) -> None:
-    """Write the scanned messages as a complete bag at ``out_dir`` (sorted by log time, by BagWriter)."""
-    with BagWriter(out_dir, custom_data={"recovered_from": str(source)}) as writer:
+    """Write the scanned messages as a complete bag at ``out_dir`` (sorted by log time, by BagWriter), with the
+    damaged bag's own ``custom_data`` (the subject's stature and mass...) where its metadata.yaml survived."""
+    custom = {**_surviving_custom_data(source.parent), "recovered_from": str(source)}
+    with BagWriter(out_dir, custom_data=custom) as writer:
         topics = {cid: _add_recovered_topic(writer, ch, scan.schemas) for cid, ch in sorted(scan.channels.items())}
         for cid, t_ns, data in sorted(scan.messages, key=lambda m: m[1]):
             topic = topics.get(cid)
