@@ -12,9 +12,20 @@ import sys
 from pathlib import Path
 
 
-def _import_c3d(args: argparse.Namespace) -> int:
+def _write_lab_trial(trial, args: argparse.Namespace) -> int:
+    """An imported lab trial written as a bag (``args.out``), its topics said, the summary with ``-v``."""
     from ..io.bag import bag_info
-    from ..io.c3d import read_c3d, write_trial_bag
+    from ..io.c3d import write_trial_bag
+
+    counts = write_trial_bag(trial, args.out)
+    print(f"wrote {args.out}: " + ", ".join(f"{t} ({n})" for t, n in counts.items()))
+    if args.verbose:
+        print(bag_info(args.out))
+    return 0
+
+
+def _import_c3d(args: argparse.Namespace) -> int:
+    from ..io.c3d import read_c3d
 
     zero = "auto" if args.zero_frames == "auto" else None if args.zero_frames == "off" else \
         tuple(int(v) for v in args.zero_frames.split(":"))
@@ -24,16 +35,10 @@ def _import_c3d(args: argparse.Namespace) -> int:
           f"{len(trial.plates)} of {trial.all_plate_count} plates used; lab axes: {trial.axes.reason}")
     if trial.skipped_labels:
         print(f"  not published as markers (model outputs, unlabelled): {len(trial.skipped_labels)}")
-    counts = write_trial_bag(trial, args.out)
-    print(f"wrote {args.out}: " + ", ".join(f"{t} ({n})" for t, n in counts.items()))
-    if args.verbose:
-        print(bag_info(args.out))
-    return 0
+    return _write_lab_trial(trial, args)
 
 
 def _import_trc(args: argparse.Namespace) -> int:
-    from ..io.bag import bag_info
-    from ..io.c3d import write_trial_bag
     from ..io.trc import read_opensim_trial
 
     trial = read_opensim_trial(args.file, args.grf, mass_kg=args.mass, height_m=args.height, forward=args.forward,
@@ -44,11 +49,7 @@ def _import_trc(args: argparse.Namespace) -> int:
           f"{trial.axes.reason}")
     if trial.height_m is None or trial.body_mass_kg is None:
         print("  no --height/--mass: give them to human-com later (TRC files do not carry them)")
-    counts = write_trial_bag(trial, args.out)
-    print(f"wrote {args.out}: " + ", ".join(f"{t} ({n})" for t, n in counts.items()))
-    if args.verbose:
-        print(bag_info(args.out))
-    return 0
+    return _write_lab_trial(trial, args)
 
 
 def _synth_human(args: argparse.Namespace) -> int:
