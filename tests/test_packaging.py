@@ -25,9 +25,10 @@ IMPORT_TO_DIST = {"numpy": "numpy", "scipy": "scipy", "matplotlib": "matplotlib"
                   "pinocchio": "pin", "proxsuite": "proxsuite", "mujoco": "mujoco", "ezc3d": "ezc3d",
                   "rosbags": "rosbags", "mcap": "mcap", "rclpy": "ros-jazzy-rclpy",
                   "zstandard": "mcap", "lz4": "mcap"}   # mcap's own dependencies (MCAP chunk compressions)
-# ROS interface packages and where they come from on PyPI (sit2stand_msgs: msgs/, built with colcon)
+# ROS interface packages and where they come from on PyPI (sit2stand_msgs and tf2_msgs: msgs/, built with colcon)
 WITH_RCLPY = {"builtin_interfaces", "rcl_interfaces", "rosgraph_msgs"}
-COMMON_INTERFACES = {"std_msgs", "std_srvs", "sensor_msgs", "geometry_msgs", "trajectory_msgs", "diagnostic_msgs"}
+COMMON_INTERFACES = {"std_msgs", "std_srvs", "sensor_msgs", "geometry_msgs", "trajectory_msgs", "diagnostic_msgs",
+                     "visualization_msgs"}
 RUNTIME_DISTS = {"ros-jazzy-rclpy", "ros-jazzy-common-interfaces", "ros-jazzy-rmw-fastrtps-cpp", "rosbags", "mcap",
                  "ezc3d", "pin", "proxsuite", "mujoco", "example-robot-data", "numpy", "scipy", "matplotlib", "pyyaml"}
 
@@ -91,7 +92,7 @@ def test_every_third_party_import_of_src_is_a_declared_dependency():
             dist = "ros-jazzy-rclpy"
         elif module in COMMON_INTERFACES:
             dist = "ros-jazzy-common-interfaces"
-        elif module == "sit2stand_msgs":
+        elif module in ("sit2stand_msgs", "tf2_msgs"):
             continue
         elif module in IMPORT_TO_DIST:
             dist = IMPORT_TO_DIST[module]

@@ -11,6 +11,7 @@ from __future__ import annotations
 # --- frames -------------------------------------------------------------------------------------------------------
 LAB_FRAME = "lab"
 WORLD_FRAME = "world"
+BASE_FRAME = "base_link"       # the robot's floating base (URDF root link)
 
 # --- message types of our interface package -----------------------------------------------------------------------
 MOCAP_TYPE = "sit2stand_msgs/msg/MocapFrame"
@@ -41,11 +42,18 @@ ROBOT_STATUS_TOPIC = "/robot/status"                 # diagnostic_msgs/Diagnosti
 ROBOT_JOINT_COMMAND_TOPIC = "/robot/joint_command"   # trajectory_msgs/JointTrajectory (one point)
 ROBOT_JOINT_STATE_COMMAND_TOPIC = "/robot/joint_state_command"   # sensor_msgs/JointState (positions only)
 
+# --- robot: frames and description (driver; what robot_state_publisher gives on a full ROS install) ---------------
+TF_TOPIC = "/tf"                                     # tf2_msgs/TFMessage: world -> base_link, each moving joint
+TF_STATIC_TOPIC = "/tf_static"                       # tf2_msgs/TFMessage (transient local): fixed frames, lab -> world
+ROBOT_DESCRIPTION_TOPIC = "/robot_description"       # std_msgs/String (transient local): the URDF
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+
 # --- robot: retargeter --------------------------------------------------------------------------------------------
 ROBOT_PLANNED_COM_TOPIC = "/robot/planned_com"       # CenterOfMass, world frame
 ROBOT_PLANNED_ZMP_TOPIC = "/robot/planned_zmp"       # geometry_msgs/PointStamped, world frame
 ROBOT_COM_FEEDBACK_TOPIC = "/robot/com_feedback"     # geometry_msgs/Vector3Stamped [m], world frame
 ROBOT_RETARGET_IK_TOPIC = "/robot/retarget/ik"       # sensor_msgs/JointState: the raw IK pose per frame
+VIZ_MARKERS_TOPIC = "/viz/markers"                   # visualization_msgs/MarkerArray: plan's COM, ZMP, support
 
 # --- robot: identification service --------------------------------------------------------------------------------
 IDENTIFY_COM_SERVICE = "/robot/identify_com"         # sit2stand_msgs/srv/IdentifyCom
@@ -70,3 +78,9 @@ FEET_PLATE_TOPIC = plate_topic("feet")
 def ft_topic(side: str) -> str:
     """Topic of the robot's ankle force/torque sensor on ``side`` (``left`` or ``right``)."""
     return {"left": ROBOT_FT_LEFT_TOPIC, "right": ROBOT_FT_RIGHT_TOPIC}[side]
+
+
+def sole_world_aligned_frame(side: str) -> str:
+    """The frame of the ground reaction under the foot on ``side`` (``/robot/ft/<side>``): origin at the sole
+    point, world axes (a moving frame in ``/tf``, child of ``world``)."""
+    return f"sole_{side}_world_aligned"

@@ -8,14 +8,21 @@ Subscribes:
 
 Publishes: ``/robot/joint_states`` (position, velocity, measured torque as effort) at ``state_rate_hz`` (500) of
 simulated time, ``/robot/ft/left`` and ``/robot/ft/right`` (geometry_msgs/WrenchStamped: ground reaction in world
-axes about the sole, frame ``sole_<side>``), ``/robot/cop`` (geometry_msgs/PointStamped), ``/robot/base_pose``
-(geometry_msgs/PoseStamped, what a state estimator would give), ``/robot/status`` (diagnostic_msgs/DiagnosticStatus,
-10 Hz), and ``/clock`` when ``publish_clock`` is true (then every stamp is simulated time).
+axes about the sole point, frame ``sole_<side>_world_aligned``), ``/robot/cop`` (geometry_msgs/PointStamped),
+``/robot/base_pose`` (geometry_msgs/PoseStamped, what a state estimator would give), ``/robot/status``
+(diagnostic_msgs/DiagnosticStatus, 10 Hz), and ``/clock`` when ``publish_clock`` is true (then every stamp is
+simulated time). For RViz, Foxglove and tf2 (what robot_state_publisher does on a full ROS install; see
+:mod:`sit2stand.robot.description`): ``/tf`` (tf2_msgs/TFMessage: ``world`` -> ``base_link`` and every moving joint's
+link, from the measured joint state and base pose, at ``tf_rate_hz`` with that state sample's stamp), and, transient
+local, once: ``/tf_static`` (fixed joints, the soles, ``lab`` -> ``world``) and ``/robot_description``
+(std_msgs/String: TALOS's URDF).
 
 Parameters: ``plant`` (YAML, or a packaged plant's name; default ``default``), ``controller_params`` (identified
 parameters YAML from ``sit2stand identify``; empty: CAD), ``feedforward`` (gravity | inverse_dynamics | none),
 ``real_time_factor`` (1.0; 0 = as fast as it can), ``state_rate_hz``, ``publish_clock``, ``on_fall`` (limp | hold),
-``settle_s`` (2: simulated seconds to come to rest on the chair before anything is published).
+``settle_s`` (2: simulated seconds to come to rest on the chair before anything is published), ``tf_rate_hz`` (50;
+at most the state rate, 0: no ``/tf``), ``robot_description_meshes`` (``package``: the URDF's ``package://`` mesh
+URIs, or ``file``: this machine's paths).
 Service: ``~/reset`` (std_srvs/Trigger): back to sitting on the chair.
 Safety: torques clamped to the URDF efforts by the joints; a fall (pelvis below ``fall_pelvis_height_m`` or the base
 tilted past ``fall_tilt_rad``) is published on the status and the robot goes limp or holds its posture.
@@ -28,18 +35,22 @@ import time
 import numpy as np
 from builtin_interfaces.msg import Time as BuiltinTime
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
+from geometry_msgs.msg import PointStamped, PoseStamped, TransformStamped, WrenchStamped
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
+from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 
-from ..io.topics import (CLOCK_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_JOINT_COMMAND_TOPIC,
-                         ROBOT_JOINT_STATES_TOPIC, ROBOT_JOINT_STATE_COMMAND_TOPIC, ROBOT_STATUS_TOPIC, WORLD_FRAME,
-                         ft_topic)
+from ..io.tf_message import TfEncoder
+from ..io.topics import (BASE_FRAME, CLOCK_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_DESCRIPTION_TOPIC,
+                         ROBOT_JOINT_COMMAND_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_JOINT_STATE_COMMAND_TOPIC,
+                         ROBOT_STATUS_TOPIC, TF_STATIC_TOPIC, TF_TOPIC, WORLD_FRAME, ft_topic, sole_world_aligned_frame)
 from ..data import plant_path
+from ..robot.description import DescriptionError, FrameTree, robot_description
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
 from ..robot.plant import Plant
@@ -49,6 +60,9 @@ DEFAULT_PLANT = plant_path("default")
 SIM_EPOCH_S = 100.0      # simulated time starts here when the driver is the time source (0 reads as "unset")
 FELL_EXIT_CODE = 3
 """The driver's exit status after the robot fell (a graph with it then exits 1)."""
+TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)            # tf2_ros's /tf publisher
+LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,          # /tf_static, /robot_description
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class Driver(Node):
@@ -85,6 +99,7 @@ class Driver(Node):
         self.base_pub = self.create_publisher(PoseStamped, ROBOT_BASE_POSE_TOPIC, PUBLISH_DEPTH)
         self.status_pub = self.create_publisher(DiagnosticStatus, ROBOT_STATUS_TOPIC, 10)
         self.clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, fast) if self.publish_clock else None
+        self._setup_frames(cfg.robot)
         self.create_subscription(JointTrajectory, ROBOT_JOINT_COMMAND_TOPIC, self._on_trajectory, 10)
         self.create_subscription(JointState, ROBOT_JOINT_STATE_COMMAND_TOPIC, self._on_command, 10)
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -98,6 +113,35 @@ class Driver(Node):
         self.get_logger().info(f"TALOS seated on a {self.plant.seat_height_m:.3f} m chair; plant {cfg.name}; "
                                f"controller model {'identified' if params_file else 'CAD'}; "
                                f"{'as fast as possible' if self.rtf <= 0 else f'{self.rtf:g}x real time'}")
+
+    def _setup_frames(self, robot: str) -> None:
+        """/tf every ``tf_every`` state samples; /tf_static and /robot_description once (transient local)."""
+        tf_rate = declare(self, "tf_rate_hz", 50.0, "/tf rate [Hz] (at most the state rate; 0: none)")
+        meshes = declare(self, "robot_description_meshes", "package", "package | file: mesh URIs of the URDF")
+        try:
+            urdf = robot_description(robot, meshes)
+            self.frames = FrameTree(self.names, urdf)
+        except DescriptionError as err:
+            raise NodeError(str(err)) from None
+        self.tf_every = max(1, int(round(1.0 / (tf_rate * self.state_period)))) if tf_rate > 0 else 0
+        self.tf_encoder = TfEncoder(self.frames.pairs)
+        self.tf_pub = self.create_publisher(TFMessage, TF_TOPIC, TF_QOS)
+        self.tf_cost_s: list[float] = []          # per /tf message: forward kinematics + encoding + publish
+        self._samples = 0
+        stamp = self._now_stamp()
+        static = TFMessage()
+        for tr in self.frames.static_transforms():
+            m = TransformStamped(child_frame_id=tr.child)
+            m.header.stamp, m.header.frame_id = stamp, tr.parent
+            m.transform.translation.x, m.transform.translation.y, m.transform.translation.z = tr.translation_m
+            r = m.transform.rotation
+            r.x, r.y, r.z, r.w = tr.rotation_xyzw
+            static.transforms.append(m)
+        # kept: a latched message lives as long as its publisher
+        self.tf_static_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, LATCHED_QOS)
+        self.tf_static_pub.publish(static)
+        self.description_pub = self.create_publisher(String, ROBOT_DESCRIPTION_TOPIC, LATCHED_QOS)
+        self.description_pub.publish(String(data=urdf))
 
     # -- commands ---------------------------------------------------------------------------------------------
     def _apply(self, names, positions, velocities=None, accelerations=None, ff=None) -> None:
@@ -179,12 +223,12 @@ class Driver(Node):
             self.clock_pub.publish(c)
         js = JointState(name=self.names, position=s.q.tolist(), velocity=s.qd.tolist(), effort=s.tau.tolist())
         self._stamp(js.header)
-        js.header.frame_id = "base_link"
+        js.header.frame_id = BASE_FRAME
         self.js_pub.publish(js)
         for side in SIDES:
             w = WrenchStamped()
             self._stamp(w.header)
-            w.header.frame_id = f"sole_{side}"
+            w.header.frame_id = sole_world_aligned_frame(side)
             f, t = s.wrench_world[side][:3], s.wrench_world[side][3:]
             w.wrench.force.x, w.wrench.force.y, w.wrench.force.z = map(float, f)
             w.wrench.torque.x, w.wrench.torque.y, w.wrench.torque.z = map(float, t)
@@ -201,6 +245,26 @@ class Driver(Node):
         (b.pose.orientation.w, b.pose.orientation.x, b.pose.orientation.y,
          b.pose.orientation.z) = map(float, s.base_pose[3:7])
         self.base_pub.publish(b)
+        self._samples += 1
+        if self.tf_every and (self._samples - 1) % self.tf_every == 0:     # from the first sample on
+            self._publish_tf(s)
+
+    def _publish_tf(self, s) -> None:
+        """world -> base_link and every moving joint of this state sample (raw CDR: see io/tf_message.py)."""
+        t0 = time.perf_counter()
+        translations, rotations = self.frames.transforms(s.base_pose, s.q)
+        stamp = self._sample_stamp
+        self.tf_pub.publish(self.tf_encoder.encode(stamp.sec * 1_000_000_000 + stamp.nanosec, translations,
+                                                   rotations))
+        if len(self.tf_cost_s) < 1_000_000:
+            self.tf_cost_s.append(time.perf_counter() - t0)
+
+    def _tf_cost_text(self) -> str:
+        if not self.tf_cost_s:
+            return "no /tf published"
+        us = np.percentile(self.tf_cost_s, [50, 99]) * 1e6
+        return (f"/tf at {1.0 / (self.tf_every * self.state_period):g} Hz: {len(self.tf_cost_s)} messages of "
+                f"{len(self.frames.pairs)} transforms, {us[0]:.0f} us median, {us[1]:.0f} us p99 per message")
 
     def _publish_status(self) -> None:
         plant = self.plant
@@ -218,7 +282,8 @@ class Driver(Node):
         wall = time.monotonic() - self._wall0
         print(f"[driver] simulated {self.plant.t_s - self._sim0:.2f} s in {wall:.2f} s "
               f"(real-time factor {(self.plant.t_s - self._sim0) / max(wall, 1e-9):.2f}); "
-              f"{'FALLEN: ' + self.plant.status_text if self.plant.fallen else 'upright'}", flush=True)
+              f"{'FALLEN: ' + self.plant.status_text if self.plant.fallen else 'upright'}; {self._tf_cost_text()}",
+              flush=True)
 
 
 main = node_main(Driver)
