@@ -11,8 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from .topics import (COM_TYPE, LAB_FRAME, MOCAP_TYPE, PLATE_TYPE, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC,
-                     ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC, ROBOT_JOINT_STATES_TOPIC, WORLD_FRAME, ft_topic)
+from .topics import (BASE_FRAME, COM_TYPE, LAB_FRAME, MOCAP_TYPE, PLATE_TYPE, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC,
+                     ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC, ROBOT_JOINT_STATES_TOPIC, WORLD_FRAME, ft_topic,
+                     sole_world_aligned_frame)
 from .forceplate import PlateSeries
 from .typestore import typestore
 
@@ -149,22 +150,19 @@ ROBOT_STATE_TOPICS = {
 
 
 def robot_state(t_ns: int, joint_names: list[str], q: np.ndarray, qd: np.ndarray | None, tau: np.ndarray,
-                wrench_world: dict[str, np.ndarray], cop_m: np.ndarray, base_pose: np.ndarray,
-                sole_m: dict[str, np.ndarray] | None = None) -> list[tuple[str, Any]]:
+                wrench_world: dict[str, np.ndarray], cop_m: np.ndarray, base_pose: np.ndarray) -> list[tuple[str, Any]]:
     """(topic, message) of one robot state sample, as the driver publishes it: joint states (effort = measured
-    torque [N m]), ground reaction per foot (world axes, torque about the sole; frame ``sole_<side>``, with
-    ``@x,y,z`` of the sole point appended when ``sole_m`` is given), COP (NaN when unloaded) and the base pose
-    (``base_pose`` in MuJoCo order x y z qw qx qy qz)."""
+    torque [N m]), ground reaction per foot (world axes, torque about the sole point: frame
+    ``sole_<side>_world_aligned``), COP (NaN when unloaded) and the base pose (``base_pose`` in MuJoCo order
+    x y z qw qx qy qz)."""
     s = typestore().types
     out: list[tuple[str, Any]] = [(ROBOT_JOINT_STATES_TOPIC, s["sensor_msgs/msg/JointState"](
-        header=header(t_ns, "base_link"), name=list(joint_names), position=np.asarray(q, float),
+        header=header(t_ns, BASE_FRAME), name=list(joint_names), position=np.asarray(q, float),
         velocity=np.zeros(0) if qd is None else np.asarray(qd, float), effort=np.asarray(tau, float)))]
     for side, w in wrench_world.items():
-        frame = f"sole_{side}" if sole_m is None else \
-            f"sole_{side}@{sole_m[side][0]:.6f},{sole_m[side][1]:.6f},{sole_m[side][2]:.6f}"
+        wrench = s["geometry_msgs/msg/Wrench"](force=_vector(w[:3]), torque=_vector(w[3:]))
         out.append((ft_topic(side), s["geometry_msgs/msg/WrenchStamped"](
-            header=header(t_ns, frame), wrench=s["geometry_msgs/msg/Wrench"](force=_vector(w[:3]),
-                                                                             torque=_vector(w[3:])))))
+            header=header(t_ns, sole_world_aligned_frame(side)), wrench=wrench)))
     out.append((ROBOT_COP_TOPIC, s["geometry_msgs/msg/PointStamped"](header=header(t_ns, WORLD_FRAME),
                                                                       point=point(*cop_m))))
     b = base_pose

@@ -60,7 +60,6 @@ class PostureData:
     q: np.ndarray
     tau: np.ndarray
     wrench: dict[str, np.ndarray]
-    sole: dict[str, np.ndarray]
     cop: np.ndarray
     base_pose: np.ndarray
 
@@ -82,17 +81,16 @@ def read_postures(path: str | Path) -> PostureData:
         names = list(js[0][1].name)
         q = np.array([m.position for _, m in js])
         tau = np.array([m.effort for _, m in js])
-        wrench, sole = {}, {}
+        wrench = {}
         for side in SIDES:
             msgs = bag.read(ft_topic(side))
             wrench[side] = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z, m.wrench.torque.x,
                                       m.wrench.torque.y, m.wrench.torque.z] for _, m in msgs])
-            sole[side] = np.array([[float(v) for v in m.header.frame_id.split("@")[1].split(",")] for _, m in msgs])
         cop = np.array([[m.point.x, m.point.y, m.point.z] for _, m in bag.read(ROBOT_COP_TOPIC)])
         base = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.w,
                           m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z]
                          for _, m in bag.read(ROBOT_BASE_POSE_TOPIC)])
-    return PostureData(names, q, tau, wrench, sole, cop, base)
+    return PostureData(names, q, tau, wrench, cop, base)
 
 
 def _pin_q(model: pin.Model, data: PostureData, k: int) -> np.ndarray:

@@ -8,9 +8,9 @@ lets it settle, averages the sensors and writes one bag message per posture; pos
 
 Bag topics (one message per posture, stamped at the end of its averaging window):
 ``/robot/joint_states`` (sensor_msgs/JointState: position, effort = measured torque), ``/robot/ft/left`` and
-``/robot/ft/right`` (geometry_msgs/WrenchStamped: ground reaction in world axes about the sole, frame ``sole_*``),
-``/robot/cop`` (geometry_msgs/PointStamped), ``/robot/base_pose`` (geometry_msgs/PoseStamped, from the state
-estimator).
+``/robot/ft/right`` (geometry_msgs/WrenchStamped: ground reaction in world axes about the sole point, frame
+``sole_*_world_aligned``), ``/robot/cop`` (geometry_msgs/PointStamped), ``/robot/base_pose``
+(geometry_msgs/PoseStamped, from the state estimator).
 """
 
 from __future__ import annotations
@@ -217,7 +217,7 @@ def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, p
             kept += 1
             t_ns = kept * 2_000_000_000
             for topic, msg in M.robot_state(t_ns, plant.joint_names, sample.q, None, sample.tau, sample.wrench,
-                                            sample.cop, sample.base_pose, sole_m=sample.sole):
+                                            sample.cop, sample.base_pose):
                 bag.write(topic, t_ns, msg)
             bag.write(GROUND_TRUTH_ROBOT_COM_TOPIC, t_ns, store["geometry_msgs/msg/PointStamped"](
                 header=M.header(t_ns, WORLD_FRAME), point=M.point(*sample.true_com)))

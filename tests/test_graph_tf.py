@@ -1,0 +1,322 @@
+"""The stand-up graph's frames as ROS tools see them: one live stand-up (CAD robot, elderly demonstration) recorded,
+then its /tf, /tf_static and /robot_description checked against Pinocchio, and the frame id of every stamped topic
+checked against the frame its numbers are in."""
+
+import os
+import random
+import re
+import subprocess
+import sys
+import time
+from bisect import bisect_left
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from conftest import GRAPHS
+from sit2stand.data import plant_path
+from sit2stand.io.bag import BagReader
+from sit2stand.io.topics import BASE_FRAME, LAB_FRAME, WORLD_FRAME, sole_world_aligned_frame
+from sit2stand.robot.model import SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, controller_model
+
+pytestmark = pytest.mark.graph
+ROOT = Path(__file__).resolve().parents[1]
+SIDES = ("left", "right")
+LEG_LINKS = [f"leg_{s}_{i}_link" for s in SIDES for i in range(1, 7)]
+# The frame each stamped topic's numbers are in. Joint-space messages (joint angles of the chain rooted at the
+# base) say base_link; those carrying a base pose as root_* / pelvis_* entries say where that pose is given.
+EXPECTED_FRAME = {
+    "/mocap/markers": LAB_FRAME, "/force_plate/chair": LAB_FRAME, "/force_plate/feet": LAB_FRAME,
+    "/human/com": LAB_FRAME, "/human/joint_states": LAB_FRAME, "/human/model_cop": LAB_FRAME,
+    "/human/measured_cop": LAB_FRAME, "/ground_truth/com": LAB_FRAME,
+    "/robot/base_pose": WORLD_FRAME, "/robot/cop": WORLD_FRAME, "/robot/planned_com": WORLD_FRAME,
+    "/robot/planned_zmp": WORLD_FRAME, "/robot/com_feedback": WORLD_FRAME, "/robot/retarget/ik": WORLD_FRAME,
+    "/robot/ft/left": sole_world_aligned_frame("left"), "/robot/ft/right": sole_world_aligned_frame("right"),
+    "/robot/joint_states": BASE_FRAME, "/robot/joint_command": BASE_FRAME,
+}
+# Stamped, but with no single frame: per-link parameters (masses, COMs in each link's own frame, scale factors)
+NO_SINGLE_FRAME = {"/human/scaling", "/ground_truth/inertial_parameters"}
+# Replayed as recorded in the shipped demonstration bags, which an older synthesiser wrote with 'pelvis' for a pelvis
+# pose in lab (today's writes lab); a regenerated bag flips the strict xfail below
+STALE_IN_SHIPPED_BAGS = {"/ground_truth/joint_states": LAB_FRAME}
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """One stand-up on bags/elderly with the CAD plant, in a ROS domain of its own: (bag path, launcher stdout)."""
+    out = tmp_path_factory.mktemp("tf") / "run"
+    env = dict(os.environ, ROS_DOMAIN_ID=str(random.Random(os.getpid() * 31 + time.time_ns()).randint(101, 200)),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
+    cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(GRAPHS / "standup.yaml"),
+           f"bag:={ROOT / 'bags' / 'elderly'}", f"out:={out}", f"plant:={plant_path('cad')}"]
+    result = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=240)
+    assert result.returncode == 0, result.stdout[-4000:] + result.stderr[-2000:]
+    return out, result.stdout
+
+
+@pytest.fixture(scope="module")
+def bag(run):
+    reader = BagReader(run[0])
+    yield cache(reader.read), reader
+    reader.close()
+
+
+def _ns(header) -> int:
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+def _se3(transform) -> pin.SE3:
+    t, r = transform.translation, transform.rotation
+    return pin.SE3(pin.Quaternion(r.w, r.x, r.y, r.z).normalized().toRotationMatrix(), np.array([t.x, t.y, t.z]))
+
+
+def _edges(*messages) -> dict[str, tuple[str, pin.SE3]]:
+    """child -> (parent, placement in parent) of the transforms of TFMessages."""
+    return {tr.child_frame_id: (tr.header.frame_id, _se3(tr.transform)) for m in messages for tr in m.transforms}
+
+
+def _in(edges, frame: str, root: str = WORLD_FRAME) -> pin.SE3:
+    """The pose of ``frame`` in ``root``, composed along the tree as tf2 does."""
+    X = pin.SE3.Identity()
+    while frame != root:
+        frame, Xp = edges[frame]
+        X = Xp * X
+    return X
+
+
+@pytest.fixture(scope="module")
+def frames(bag):
+    """Per /tf stamp: the tree (with /tf_static), the recorded joint state and base pose of that stamp."""
+    read, _ = bag
+    static = [m for _, m in read("/tf_static")]
+    js = {_ns(m.header): m for _, m in read("/robot/joint_states")}
+    base = {_ns(m.header): m for _, m in read("/robot/base_pose")}
+    out = {}
+    for _, m in read("/tf"):
+        stamp = {_ns(tr.header) for tr in m.transforms}
+        assert len(stamp) == 1, "one stamp per /tf message (one state sample)"
+        s = stamp.pop()
+        out[s] = (_edges(*static, m), js[s], base[s])
+    return out
+
+
+@cache
+def _model():
+    return controller_model()
+
+
+def _pin_q(js, base) -> np.ndarray:
+    """The controller model's configuration of a recorded joint state and base pose."""
+    model = _model()
+    q = pin.neutral(model)
+    p, o = base.pose.position, base.pose.orientation
+    q[:7] = p.x, p.y, p.z, o.x, o.y, o.z, o.w
+    for name, value in zip(js.name, js.position):
+        q[model.joints[model.getJointId(name)].idx_q] = value
+    return q
+
+
+# --- /tf, /tf_static, /robot_description ------------------------------------------------------------------------------
+def test_the_robot_stands_up_and_the_bag_holds_tf_and_the_description(run, bag):
+    out, stdout = run
+    read, reader = bag
+    topics = reader.topics()
+    assert "upright" in stdout and "FALLEN" not in stdout, stdout[-3000:]
+    z = np.array([m.pose.position.z for _, m in read("/robot/base_pose")])
+    assert z[0] < 0.65 and z[-1] > 0.85, f"pelvis from {z[0]:.2f} m to {z[-1]:.2f} m: did not stand up"
+    assert topics["/tf"].msgtype == "tf2_msgs/msg/TFMessage" and topics["/tf"].count > 500
+    assert topics["/tf_static"].count == 1 and topics["/robot_description"].count == 1
+    for latched in ("/tf_static", "/robot_description"):
+        assert [q.durability.name for q in reader.qos(latched)] == ["TRANSIENT_LOCAL"], latched
+    [(_, desc)] = read("/robot_description")
+    urdf = desc.data
+    assert urdf.startswith("<?xml") and '<robot name="talos"' in urdf
+    for link in ["base_link", "torso_2_link", "left_sole_link", *LEG_LINKS]:
+        assert f'<link name="{link}"' in urdf
+    # the driver measures what /tf costs it
+    cost = re.search(r"/tf at 50 Hz: (\d+) messages of 35 transforms, (\d+) us median, (\d+) us p99", stdout)
+    # (the recorder finds the driver's topics a little after it starts publishing)
+    assert cost and 0.8 * int(cost.group(1)) < topics["/tf"].count <= int(cost.group(1)), stdout[-2000:]
+
+
+def test_tf_has_world_to_base_link_and_every_leg_link_at_50_hz(bag, frames):
+    read, _ = bag
+    stamps = sorted(frames)
+    period_ms = np.median(np.diff(stamps)) * 1e-6
+    assert period_ms == pytest.approx(20.0, abs=0.5), "tf_rate_hz 50 of a 200 Hz state"
+    edges = frames[stamps[0]][0]
+    assert edges[BASE_FRAME][0] == WORLD_FRAME and edges[WORLD_FRAME][0] == LAB_FRAME
+    for link in LEG_LINKS + ["left_sole_link", "right_sole_link", "sole_left", "sole_right", "arm_left_7_link",
+                             "head_2_link", sole_world_aligned_frame("left")]:
+        assert _in(edges, link, LAB_FRAME) is not None
+    [(_, msg)] = read("/tf")[:1]
+    assert len(msg.transforms) == 35
+
+
+def test_the_sole_tf_is_where_pinocchio_puts_it_for_the_recorded_state(frames):
+    """Every /tf message: world -> base_link -> leg links -> left_sole_link (and both soles), composed as tf2 does,
+    against the controller's Pinocchio model (built from MuJoCo's compiled MJCF, not the URDF the driver reads) at
+    the recorded joint state and base pose of the same stamp: within 1 mm (and 1e-6 rad)."""
+    model = _model()
+    data = model.createData()
+    worst_m, worst_rad = 0.0, 0.0
+    for edges, js, base in frames.values():
+        pin.framesForwardKinematics(model, data, _pin_q(js, base))
+        for side in SIDES:
+            ref = data.oMf[model.getFrameId(f"sole_{side}")]
+            for frame in (f"{side}_sole_link", f"sole_{side}"):
+                X = _in(edges, frame)
+                worst_m = max(worst_m, np.linalg.norm(X.translation - ref.translation))
+                worst_rad = max(worst_rad, np.linalg.norm(pin.log3(ref.rotation.T @ X.rotation)))
+    assert len(frames) > 500
+    assert worst_m < 1e-3 and worst_rad < 1e-6, f"sole off by {worst_m * 1e3:.3g} mm, {worst_rad:.2g} rad"
+
+
+# --- frame labels ----------------------------------------------------------------------------------------------------
+def test_every_stamped_topic_says_a_known_frame(bag):
+    """Each stamped topic is in this module's table (a new topic needs its frame stated) and says that frame."""
+    read, reader = bag
+    for topic in sorted(reader.topics()):
+        [(_, first)] = read(topic)[:1]
+        if topic in ("/tf", "/tf_static") or not hasattr(first, "header"):
+            continue
+        ids = {m.header.frame_id for _, m in read(topic)}
+        if topic in NO_SINGLE_FRAME:
+            continue
+        if topic in STALE_IN_SHIPPED_BAGS:
+            continue
+        assert topic in EXPECTED_FRAME, f"{topic}: stamped, frame {ids}, but not in EXPECTED_FRAME"
+        assert ids == {EXPECTED_FRAME[topic]}, f"{topic} says {ids}, its numbers are in {EXPECTED_FRAME[topic]}"
+
+
+@pytest.mark.xfail(strict=True, reason="bags/elderly was written by an older synthesiser ('pelvis'); "
+                                       "regenerate it with sit2stand synth-human to fix")
+def test_the_replayed_ground_truth_pelvis_pose_says_lab(bag):
+    read, _ = bag
+    for topic, frame in STALE_IN_SHIPPED_BAGS.items():
+        assert {m.header.frame_id for _, m in read(topic)} == {frame}
+
+
+def _nearest(stamps: list[int], s: int) -> int:
+    i = min(bisect_left(stamps, s), len(stamps) - 1)
+    return stamps[i] if i == 0 or abs(stamps[i] - s) < abs(stamps[i - 1] - s) else stamps[i - 1]
+
+
+def test_the_base_pose_is_in_world(frames):
+    """/robot/base_pose (world) is the transform world -> base_link of the same stamp, and the pelvis's height."""
+    for edges, _, base in frames.values():
+        p, o = base.pose.position, base.pose.orientation
+        X = _in(edges, BASE_FRAME)
+        np.testing.assert_allclose(X.translation, [p.x, p.y, p.z], atol=1e-12)
+        np.testing.assert_allclose(X.rotation, pin.Quaternion(o.w, o.x, o.y, o.z).toRotationMatrix(), atol=1e-12)
+
+
+def test_the_feet_wrenches_are_in_the_world_aligned_sole_frames(bag, frames):
+    """/robot/ft/<side>: force in world axes, torque about the sole point. With the numbers taken as they are in
+    sole_<side>_world_aligned (world axes at the sole, from /tf), each loaded foot's own COP lies on its sole plate,
+    and both feet's moments carried to the world origin give the /robot/cop (world) of the same sample. (Seated, the
+    feet rock on their heel edges; the F/T sensor's static foot-weight compensation then puts the COP up to ~1 cm
+    past the edge, measured. A torque about the world origin would put it ~8.5 cm off sideways.)"""
+    read, _ = bag
+    wrench = {s: {_ns(m.header): m.wrench for _, m in read(f"/robot/ft/{s}")} for s in SIDES}
+    cop = {_ns(m.header): m.point for _, m in read("/robot/cop")}
+    half_x, half_y = SOLE_HALF_SIZE_M[0], SOLE_HALF_SIZE_M[1]
+    outside, compared = [], 0
+    for stamp, (edges, _, _) in frames.items():
+        force, moment = np.zeros(3), np.zeros(3)
+        for side in SIDES:
+            X = _in(edges, sole_world_aligned_frame(side))
+            np.testing.assert_allclose(X.rotation, np.eye(3), atol=1e-12)
+            sole = _in(edges, f"sole_{side}")
+            np.testing.assert_allclose(X.translation, sole.translation, atol=1e-12)
+            w = wrench[side][stamp]
+            f = np.array([w.force.x, w.force.y, w.force.z])
+            tau = np.array([w.torque.x, w.torque.y, w.torque.z])
+            force += f
+            moment += tau + np.cross(X.translation, f)
+            if f[2] > 100.0:        # this foot's COP in its world-aligned sole frame, against the sole plate
+                local = sole.rotation.T @ np.array([-tau[1] / f[2], tau[0] / f[2], 0.0])
+                outside.append(max(abs(local[0] - SOLE_CENTRE_X_M) - half_x, abs(local[1]) - half_y))
+        c = cop[stamp]
+        if np.isfinite(c.x):
+            np.testing.assert_allclose([c.x, c.y], [-moment[1] / force[2], moment[0] / force[2]], atol=2e-3)
+            assert c.z == 0.0
+            compared += 1
+    outside = np.array(outside)
+    assert len(outside) > 500 and compared > 500
+    assert outside.max() < 0.02 and np.mean(outside > 0.005) < 0.01, f"feet COPs up to {outside.max():.3f} m off"
+
+
+def test_the_plans_com_zmp_and_feedback_are_in_world(bag, frames):
+    """The plan's last COM is the robot's measured COM (Pinocchio, world) within 3 cm; its ZMP lies on the floor
+    between the soles' heels and toes (world, from /tf); the COM feedback's shift is horizontal."""
+    read, _ = bag
+    tf_stamps = sorted(frames)
+    coms = read("/robot/planned_com")
+    model = _model()
+    data = model.createData()
+    err = []
+    for _, m in coms[-100:]:                       # the last second of the plan: standing
+        edges, js, base = frames[_nearest(tf_stamps, _ns(m.header))]
+        measured = pin.centerOfMass(model, data, _pin_q(js, base))
+        err.append(np.linalg.norm(measured - [m.position.x, m.position.y, m.position.z]))
+    assert np.mean(err) < 0.03, f"planned COM {np.mean(err) * 100:.1f} cm from the robot's"
+    edges = frames[tf_stamps[-1]][0]
+    soles = np.array([_in(edges, f"sole_{s}").translation for s in SIDES])
+    heel = soles[:, 0].min() + SOLE_CENTRE_X_M - SOLE_HALF_SIZE_M[0]
+    toe = soles[:, 0].max() + SOLE_CENTRE_X_M + SOLE_HALF_SIZE_M[0]
+    zmp = np.array([[m.point.x, m.point.y, m.point.z] for _, m in read("/robot/planned_zmp")[-100:]])
+    assert np.all(zmp[:, 2] == 0.0) and np.all((zmp[:, 0] > heel) & (zmp[:, 0] < toe))
+    assert np.all(np.abs(zmp[:, 1]) < np.abs(soles[:, 1]).max() + SOLE_HALF_SIZE_M[1])
+    assert all(m.vector.z == 0.0 for _, m in read("/robot/com_feedback"))
+
+
+def test_the_ik_base_pose_is_in_world(bag, frames):
+    """/robot/retarget/ik's root_* entries (world): the first IK pose is calibrated over the robot's measured seated
+    base pose, so its base is where /tf has base_link then (within 5 cm)."""
+    read, _ = bag
+    [(_, first)] = read("/robot/retarget/ik")[:1]
+    names = list(first.name)
+    root = np.array([first.position[names.index(f"root_{c}")] for c in "xyz"])
+    edges = frames[_nearest(sorted(frames), _ns(first.header))][0]
+    assert np.linalg.norm(root - _in(edges, BASE_FRAME).translation) < 0.05
+
+
+def _markers(msg, names):
+    where = {n: i for i, n in enumerate(msg.marker_names)}
+    return np.array([[msg.positions[where[n]].x, msg.positions[where[n]].y, msg.positions[where[n]].z]
+                     for n in names])
+
+
+def test_the_human_topics_are_in_lab(bag):
+    """Markers, plates, the human's COM, COPs and pelvis pose agree with each other in lab: feet markers near the
+    floor (z up), the feet plate's COP between the feet markers' heels and toes, the standing COM above the feet,
+    the skeleton's pelvis at the pelvis markers, and the ground truth COM at the estimate."""
+    read, _ = bag
+    frames = read("/mocap/markers")
+    feet = ["LHEE", "RHEE", "LTOE", "RTOE"]
+    by_stamp = {_ns(m.header): m for _, m in frames}
+    last = _markers(frames[-1][1], feet)
+    z = np.array([_markers(m, feet)[:, 2] for _, m in frames])
+    assert np.nanmin(z) > -0.01 and np.nanmax(z) < 0.15, "feet markers above the lab floor"
+    heel, toe = np.nanmin(last[:, 0]) - 0.03, np.nanmax(last[:, 0]) + 0.03
+    plate = [m for _, m in read("/force_plate/feet")[-500:] if m.cop_valid]
+    assert plate and all(heel < m.cop.x < toe and abs(m.cop.z) < 0.01 for m in plate)
+    for topic in ("/human/measured_cop", "/human/model_cop"):
+        pts = np.array([[m.point.x, m.point.y, m.point.z] for _, m in read(topic)[-30:]])
+        assert np.all(np.abs(pts[:, 2]) < 0.01) and np.all((pts[:, 0] > heel) & (pts[:, 0] < toe)), topic
+    com = read("/human/com")[-1][1].position
+    assert heel < com.x < toe and 0.8 < com.z < 1.2
+    truth = {_ns(m.header): m.position for _, m in read("/ground_truth/com")}
+    d = [np.linalg.norm([m.position.x - truth[s].x, m.position.y - truth[s].y, m.position.z - truth[s].z])
+         for _, m in read("/human/com") if (s := _ns(m.header)) in truth]
+    assert len(d) > 400 and np.median(d) < 0.05
+    pelvis = ["LASI", "RASI", "LPSI", "RPSI"]
+    for _, js in read("/human/joint_states")[::50]:
+        names = list(js.name)
+        p = np.array([js.position[names.index(f"pelvis_{c}")] for c in "xyz"])
+        centre = np.nanmean(_markers(by_stamp[_ns(js.header)], pelvis), axis=0)
+        assert np.linalg.norm(p - centre) < 0.15
