@@ -35,7 +35,7 @@ EXPECTED_FRAME = {
     "/robot/base_pose": WORLD_FRAME, "/robot/cop": WORLD_FRAME, "/robot/planned_com": WORLD_FRAME,
     "/robot/planned_zmp": WORLD_FRAME, "/robot/com_feedback": WORLD_FRAME, "/robot/retarget/ik": WORLD_FRAME,
     "/robot/ft/left": sole_world_aligned_frame("left"), "/robot/ft/right": sole_world_aligned_frame("right"),
-    "/robot/joint_states": BASE_FRAME, "/robot/joint_command": BASE_FRAME,
+    "/robot/joint_states": BASE_FRAME, "/robot/joint_command": BASE_FRAME, "/viz/markers": WORLD_FRAME,
 }
 # Stamped, but with no single frame: per-link parameters (masses, COMs in each link's own frame, scale factors)
 NO_SINGLE_FRAME = {"/human/scaling", "/ground_truth/inertial_parameters"}
@@ -181,9 +181,9 @@ def test_every_stamped_topic_says_a_known_frame(bag):
     read, reader = bag
     for topic in sorted(reader.topics()):
         [(_, first)] = read(topic)[:1]
-        if topic in ("/tf", "/tf_static") or not hasattr(first, "header"):
+        if topic in ("/tf", "/tf_static") or not hasattr(first, "header") and not hasattr(first, "markers"):
             continue
-        ids = {m.header.frame_id for _, m in read(topic)}
+        ids = {m.header.frame_id for _, msg in read(topic) for m in getattr(msg, "markers", [msg])}
         if topic in NO_SINGLE_FRAME:
             continue
         if topic in STALE_IN_SHIPPED_BAGS:
@@ -320,3 +320,24 @@ def test_the_human_topics_are_in_lab(bag):
         p = np.array([js.position[names.index(f"pelvis_{c}")] for c in "xyz"])
         centre = np.nanmean(_markers(by_stamp[_ns(js.header)], pelvis), axis=0)
         assert np.linalg.norm(p - centre) < 0.15
+
+
+def test_the_plan_markers_are_recorded_in_world_at_the_plans_com_and_zmp(bag):
+    """/viz/markers (every 5th command): the COM sphere at the planned COM and the ZMP disc at the planned ZMP of the
+    same stamp; the support polygon holds the plan's ZMP once standing."""
+    read, reader = bag
+    markers = read("/viz/markers")
+    commands = reader.topics()["/robot/joint_command"].count
+    assert abs(len(markers) - commands / 5) <= 2
+    com = {_ns(m.header): m.position for _, m in read("/robot/planned_com")}
+    zmp = {_ns(m.header): m.point for _, m in read("/robot/planned_zmp")}
+    for _, msg in markers:
+        by_id = {m.id: m for m in msg.markers}
+        s = _ns(by_id[0].header)
+        c, z = com[s], zmp[s]
+        assert (by_id[0].pose.position.x, by_id[0].pose.position.y, by_id[0].pose.position.z) == (c.x, c.y, c.z)
+        assert (by_id[2].pose.position.x, by_id[2].pose.position.y) == (z.x, z.y)
+    polygon = np.array([[p.x, p.y] for p in by_id[3].points[:-1]])
+    edges = np.roll(polygon, -1, axis=0) - polygon
+    rel = np.array([z.x, z.y]) - polygon
+    assert np.all(edges[:, 0] * rel[:, 1] - edges[:, 1] * rel[:, 0] > 0), "the last ZMP inside the support polygon"

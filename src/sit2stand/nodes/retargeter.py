@@ -11,6 +11,8 @@ the calibration overlays the first human frame on; then, with ``com_feedback``, 
 * ``/robot/planned_com`` (sit2stand_msgs/CenterOfMass, source ``robot_plan``) and ``/robot/planned_zmp``
   (geometry_msgs/PointStamped) of each command, as planned (the COM feedback's target);
 * ``/robot/com_feedback`` (geometry_msgs/Vector3Stamped): the COM shift the feedback put into each command [m];
+* ``/viz/markers`` (visualization_msgs/MarkerArray, every ``markers_every``-th command): the planned COM, its drop
+  to the floor, the planned ZMP and the feet's support polygon, in world (:mod:`sit2stand.nodes.markers`);
 * ``/robot/retarget/ik`` (sensor_msgs/JointState, the raw IK pose per frame, base as root_* entries) and
   ``~/status`` (diagnostic_msgs/DiagnosticStatus: infeasible frames, time scale, latency p50/p99).
 
@@ -18,7 +20,8 @@ Parameters: ``plant``, ``controller_params`` (identified YAML; empty: CAD), ``ma
 ``smooth_frames``, ``max_joint_speed``, ``time_scale`` (0: adaptive; else fixed), ``max_time_scale`` (the adaptive
 one's cap), ``rate_hz``, ``com_wait_s``, ``wait_for_robot``, ``marker_map`` (YAML to write the calibration to),
 ``hold_s`` (exit this long after the plan ends; 0: never), ``input_timeout_s`` (marker frames waiting this long for
-a human COM end the node with an error), ``com_feedback`` and its gains ``com_feedback_kp``, ``_ki``, ``_kd``.
+a human COM end the node with an error), ``com_feedback`` and its gains ``com_feedback_kp``, ``_ki``, ``_kd``,
+``markers_every`` (5; 0: no markers).
 """
 
 from __future__ import annotations
@@ -35,16 +38,19 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, MocapFrame
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from visualization_msgs.msg import MarkerArray
 
 from ..data import plant_path
 from ..io.messages import plate_sample_from_cdr, stamp_ns
 from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_BASE_POSE_TOPIC,
                          ROBOT_COM_FEEDBACK_TOPIC, ROBOT_JOINT_COMMAND_TOPIC, ROBOT_JOINT_STATES_TOPIC,
-                         ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC, ROBOT_RETARGET_IK_TOPIC, WORLD_FRAME)
+                         ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC, ROBOT_RETARGET_IK_TOPIC, VIZ_MARKERS_TOPIC,
+                         WORLD_FRAME)
 from ..retarget.pacing import LiveConfig, LiveRetargeting, MarkerFrame, summary_line
 from ..retarget.player import DEFAULT_MAX_TIME_SCALE, Command
 from ..retarget.stabiliser import StabiliserConfig
 from ..retarget.stream import robot_model, robot_setup
+from .markers import plan_markers
 from .runtime import (PUBLISH_DEPTH, IdleDrain, NodeError, declare, node_main, qos_matching_publishers,
                       scheduling_text)
 
@@ -98,6 +104,10 @@ class RetargeterNode(Node):
         self.zmp_pub = self.create_publisher(PointStamped, ROBOT_PLANNED_ZMP_TOPIC, PUBLISH_DEPTH)
         self.feedback_pub = self.create_publisher(Vector3Stamped, ROBOT_COM_FEEDBACK_TOPIC, PUBLISH_DEPTH)
         self.ik_pub = self.create_publisher(JointState, ROBOT_RETARGET_IK_TOPIC, PUBLISH_DEPTH)
+        self.viz_pub = self.create_publisher(MarkerArray, VIZ_MARKERS_TOPIC, PUBLISH_DEPTH)
+        self.markers_every = declare(self, "markers_every", 5, "/viz/markers every this many commands (0: none)")
+        self.support_xy: np.ndarray | None = None   # the plan's support polygon, once calibrated
+        self._commands = 0
         self.status_pub = self.create_publisher(DiagnosticStatus, "~/status", 10)
         self.robot_js: bytes | None = None        # the latest robot state, serialized, and when each came
         self.robot_base: bytes | None = None
@@ -191,6 +201,7 @@ class RetargeterNode(Node):
         except (ValueError, OSError) as err:
             raise NodeError(f"retargeter calibration: {err}") from None
         self.joint_names = robot.joint_names
+        self.support_xy = robot.support_xy
         if self.map_out:
             marker_map.save(self.map_out)
         if not self.live.cfg.com_feedback:        # 400 callbacks/s no longer needed, in the same thread as frames
@@ -265,6 +276,9 @@ class RetargeterNode(Node):
             f.header.stamp, f.header.frame_id = stamp, WORLD_FRAME
             f.vector.x, f.vector.y = float(offset_m[0]), float(offset_m[1])
             self.feedback_pub.publish(f)
+        self._commands += 1
+        if self.markers_every > 0 and self.support_xy is not None and (self._commands - 1) % self.markers_every == 0:
+            self.viz_pub.publish(plan_markers(stamp, cmd.com, cmd.zmp, self.support_xy))   # ~0.15 ms
         return sent
 
     def _report(self) -> None:
