@@ -256,3 +256,17 @@ def test_wait_for_counts_a_topic_the_bag_does_not_hold(sts_bag, ros_env, tmp_pat
     assert waited.returncode == 0, waited.stderr
     assert "playing without" not in waited.stdout + waited.stderr
     driver.stop()
+
+
+def test_two_replayers_on_one_domain_stop_instead_of_mixing(sts_bag, ros_env, run_node):
+    """Two graphs on one ROS domain would mix their streams: a replayer that sees another publish its topics stops
+    with exit 2 naming the topic and the domain (the other may find itself alone again by then and go on)."""
+    replayers = [run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={sts_bag}", "-p", "loop:=true")
+                 for _ in range(2)]
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and all(r.proc.poll() is None for r in replayers):
+        time.sleep(0.1)
+    stopped = [r for r in replayers if r.proc.poll() is not None]
+    assert stopped and stopped[0].proc.returncode == 2, "".join(r.output for r in replayers)
+    assert " has 2 publishers (/replayer)" in stopped[0].output
+    assert f"on ROS domain {ros_env['ROS_DOMAIN_ID']}" in stopped[0].output

@@ -50,6 +50,10 @@ ACK_BATCH = 200          # unpaced mode: wait for acknowledgements every this ma
 ACK_TIMEOUT_S = 10.0
 
 
+class SharedDomain(NodeError):
+    """Another node publishes one of the played topics on this ROS domain: two graphs would mix their data."""
+
+
 class Replayer(Node):
     """Plays a bag onto topics (see the module docstring)."""
 
@@ -220,6 +224,9 @@ class Replayer(Node):
         except BagError as err:
             self.get_logger().error(str(err))
             self.exit_code = 1
+        except SharedDomain as err:
+            self.get_logger().error(str(err))
+            self.exit_code = 2
         except Exception as err:  # noqa: BLE001 - a dying playback thread must not leave the node hanging
             if not self._stop.is_set():
                 self.get_logger().error(f"playback failed: {err!r}")
@@ -228,11 +235,24 @@ class Replayer(Node):
             if self.at_end == "exit" or self.exit_code:
                 self.finished = True
 
+    def _check_alone(self) -> None:
+        """Raise :class:`SharedDomain` if another node publishes a topic this replayer plays."""
+        for topic in self.pubs:
+            publishers = self.get_publishers_info_by_topic(topic)       # ours among them (two replayers share a name)
+            if len(publishers) > 1:
+                names = sorted({f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in publishers})
+                domain = os.environ.get("ROS_DOMAIN_ID", "0")
+                raise SharedDomain(f"{topic} has {len(publishers)} publishers ({', '.join(names)}) on ROS domain "
+                                   f"{domain}: two graphs there would mix their data; stopping (give each its own "
+                                   f"ROS_DOMAIN_ID)")
+
     def _report(self, force: bool = False) -> None:
         now = time.monotonic()
         if not force and now - self._last_progress < 0.5:
             return
         self._last_progress = now
+        if not force:
+            self._check_alone()
         bag_t = min(max(0, self.clock.bag_now_ns() - self.reader.start_ns) * 1e-9, self.reader.duration_s)
         frac = played_fraction(self.sent, self.total, self.loops_done, self.loop)
         status = DiagnosticStatus(level=DiagnosticStatus.OK, name=self.get_fully_qualified_name(),
