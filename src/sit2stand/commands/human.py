@@ -130,33 +130,34 @@ def _gap_human(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_lab_file_args(p, default_axes: str) -> None:
+    """What every lab-file import takes: the bag to write, the file's axes, the COP threshold, the summary."""
+    p.add_argument("--out", type=Path, required=True, help="bag directory to create")
+    p.add_argument("--forward", help=f"file axis that is lab x (forward), e.g. +Y; {default_axes}")
+    p.add_argument("--up", help=f"file axis that is lab z (up), e.g. +Z; {default_axes}")
+    p.add_argument("--cop-threshold", type=float, default=20.0, help="normal force [N] below which COP is invalid")
+    p.add_argument("-v", "--verbose", action="store_true", help="print the bag summary afterwards")
+
+
 def add_import_c3d(sub) -> None:
     p = sub.add_parser("import-c3d", help="C3D markers and force plates -> bag (SI units, REP-103 lab frame)")
     p.add_argument("file", type=Path)
-    p.add_argument("--out", type=Path, required=True, help="bag directory to create")
+    _add_lab_file_args(p, "detected if omitted")
     p.add_argument("--chair-plate", type=int, help="0-based index of the plate under the chair")
     p.add_argument("--feet-plate", type=int, help="0-based index of the plate under the feet")
-    p.add_argument("--forward", help="file axis that is lab x (forward), e.g. +Y; detected if omitted")
-    p.add_argument("--up", help="file axis that is lab z (up), e.g. +Z; detected if omitted")
-    p.add_argument("--cop-threshold", type=float, default=20.0, help="normal force [N] below which COP is invalid")
     p.add_argument("--zero-frames", default="auto",
                    help="plate baseline: auto (FORCE_PLATFORM:ZERO), off, or FIRST:LAST 1-based point frames")
     p.add_argument("--markers-only", action="store_true", help="accept a file without force plates")
-    p.add_argument("-v", "--verbose", action="store_true", help="print the bag summary afterwards")
     p.set_defaults(func=_import_c3d)
 
 
 def add_import_trc(sub) -> None:
     p = sub.add_parser("import-trc", help="OpenSim TRC markers (and .mot ground reaction forces) -> bag (SI, REP-103)")
     p.add_argument("file", type=Path, help="the .trc marker file")
+    _add_lab_file_args(p, "default OpenSim's (+X forward, +Y up)")
     p.add_argument("--grf", type=Path, help="OpenSim .mot ground reaction forces (plates plate0, plate1, ...)")
-    p.add_argument("--out", type=Path, required=True, help="bag directory to create")
     p.add_argument("--mass", type=float, help="body mass [kg] for the bag's metadata (TRC files lack it)")
     p.add_argument("--height", type=float, help="stature [m] for the bag's metadata (TRC files lack it)")
-    p.add_argument("--forward", help="file axis that is lab x (forward); default +X (OpenSim's)")
-    p.add_argument("--up", help="file axis that is lab z (up); default +Y (OpenSim's)")
-    p.add_argument("--cop-threshold", type=float, default=20.0, help="normal force [N] below which COP is invalid")
-    p.add_argument("-v", "--verbose", action="store_true", help="print the bag summary afterwards")
     p.set_defaults(func=_import_trc)
 
 

@@ -36,7 +36,7 @@ from ..io.typestore import typestore
 from .calibration import calibrate_stream, static_frames
 from .com import ComResult, estimate_com
 from .export import write_exports
-from .marker_ik import check_marker_units
+from .marker_ik import MarkerUnitsError
 from .marker_sets import MarkerSet, choose_marker_set
 from .skeleton import Subject, build_human
 from .support import plate_wrench_at
@@ -273,11 +273,12 @@ def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg
               f"{'' if chair else ' (chair not on a plate: scaling uses frames after seat-off)'}", file=sys.stderr)
         print(f"  marker set {markers.name}: {len(markers.covered(trial.marker_names))} of the "
               f"{len(trial.marker_names)} markers", file=sys.stderr)
-    best = int(np.argmax(trial.valid.sum(axis=1)))         # the frame that sees the most markers
-    check_marker_units(trial.positions[best], trial.valid[best], height, f"{bag_path}: {MARKERS_TOPIC}")
-    result = estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,
-                          subject, calibrate=calibrate, scale_masses=scale, chair_on_plate=chair, progress=progress,
-                          trust_plate_mass=mass_kg is None)
+    try:
+        result = estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,
+                              subject, calibrate=calibrate, scale_masses=scale, chair_on_plate=chair,
+                              progress=progress, trust_plate_mass=mass_kg is None)
+    except MarkerUnitsError as err:          # the estimator checks the units; the bag is named here
+        raise MarkerUnitsError(f"{bag_path}: {MARKERS_TOPIC}: {err}") from None
     summary = {"bag": str(bag_path), "subject": {"height_m": height, "mass_kg": mass, "sex": subject.sex},
                "marker_set": markers.name, **evaluate(trial, result)}
     warned = {f.note() for f in result.at_bounds}

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..io.messages import reorder_markers
-from .player import Command, PlanPlayer
+from .player import DEFAULT_MAX_TIME_SCALE, Command, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig
 from .stream import RetargetConfig, Retargeter, RobotSetup
 
@@ -171,7 +171,7 @@ class LiveConfig:
     smooth_frames: int = 21
     max_joint_speed: float = 0.6
     fixed_time_scale: float | None = None
-    max_time_scale: float = 4.0
+    max_time_scale: float = DEFAULT_MAX_TIME_SCALE
     com_wait_s: float = 0.03
     com_feedback: bool = True
     stabiliser: StabiliserConfig = field(default_factory=StabiliserConfig)

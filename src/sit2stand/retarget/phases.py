@@ -10,7 +10,7 @@ forward speed (flexion starts when it first exceeds :data:`FLEXION_SPEED_MPS`) a
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -38,7 +38,6 @@ class Phases:
     seat_off_s: float | None
     standing_s: float | None
     sit_down_s: float | None
-    notes: list[str] = field(default_factory=list)
 
     @property
     def starts_seated(self) -> bool:

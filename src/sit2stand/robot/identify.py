@@ -196,10 +196,10 @@ def _check_data(data: PostureData, train: np.ndarray, Y: np.ndarray, min_posture
 
 def identify_full(data: PostureData, eval_fraction: float = 0.1, seed: int = 0, com_bound_m: float = 0.35,
                   max_extra_kg: float = 30.0, prior_weight: float = 1.0, tau_sd_nm: float = 1.0,
-                  wrench_sd: float = 2.0) -> IdentificationResult:
-    """The full model (see the module docstring)."""
+                  wrench_sd: float = 2.0, model: pin.Model | None = None) -> IdentificationResult:
+    """The full model (see the module docstring); ``model``: the CAD controller model, if already built."""
     t0 = time.perf_counter()
-    model = controller_model()
+    model = model if model is not None else controller_model()
     mdata = model.createData()
     train, ev = split(len(data), eval_fraction, seed)
     rows = [static_rows(model, mdata, data, k) for k in range(len(data))]
@@ -249,10 +249,10 @@ def planar_columns(model: pin.Model, Y: np.ndarray) -> np.ndarray:
 
 
 def identify_planar5(data: PostureData, eval_fraction: float = 0.1, seed: int = 0, tau_sd_nm: float = 1.0,
-                     wrench_sd: float = 2.0) -> IdentificationResult:
-    """The paper's reduced sagittal model (see the module docstring)."""
+                     wrench_sd: float = 2.0, model: pin.Model | None = None) -> IdentificationResult:
+    """The paper's reduced sagittal model (see the module docstring); ``model`` as in :func:`identify_full`."""
     t0 = time.perf_counter()
-    model = controller_model()
+    model = model if model is not None else controller_model()
     mdata = model.createData()
     train, ev = split(len(data), eval_fraction, seed)
     row_idx = [0, 2, 4] + [model.joints[model.getJointId(j)].idx_v for j in PLANAR_JOINT_ROWS]
@@ -322,9 +322,10 @@ def identify(path: str | Path, model: str = "full", eval_fraction: float = 0.1, 
     data = read_postures(path)
     if len(data) < 6:
         raise IdentificationError(f"{path}: only {len(data)} postures (need at least 6: 5 to train, 1 to evaluate)")
-    check_postures(data, controller_model(), path)
+    cad = controller_model()          # built once (~0.3 s): for the joint check and the identification
+    check_postures(data, cad, path)
     fn = identify_full if model == "full" else identify_planar5
-    result = fn(data, eval_fraction=eval_fraction, seed=seed)
+    result = fn(data, eval_fraction=eval_fraction, seed=seed, model=cad)
     check_result(result, path)
     return result
 

@@ -25,11 +25,11 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
+from ..dynamics import G
 from ..errors import InputError
 from ..io.forceplate import DEFAULT_COP_THRESHOLD_N
 from .model import SIDES, PlantConfig, add_chair, build_spec, controller_model, expand
 
-G = 9.81
 EXTRAPOLATE_MAX_S = 0.05      # a reference is followed along its velocity for at most this long after its message
 
 
