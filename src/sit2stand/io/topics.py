@@ -1,9 +1,13 @@
 """Every topic and service name of the sit2stand graph, with the message types and frame ids that go with them.
 
 The one home of these names: nodes, offline tools, the importer and the synthesiser take them from here. Names are
-absolute (a leading ``/``); node-private services (``~/pause``, ``~/status``) stay with their nodes. Frames follow
-REP-103 (x forward, y left, z up). ``lab`` is the capture volume's frame, in which markers, plates and the human COM
-are given; ``world`` is the robot simulation's frame.
+written as a bag stores them and as a graph in the root namespace sees them (``/mocap/markers``). Nodes subscribe and
+publish them relative (:func:`ros_name`: ``mocap/markers``), so ``--ros-args -r __ns:=/robot2`` (or ``sit2stand
+launch --namespace robot2``) moves a whole graph to ``/robot2/mocap/markers``; a recorder in ``/robot2`` writes that
+topic into its bag as ``/mocap/markers`` again (:func:`bag_name`), so a bag never depends on the namespace it was
+recorded in. Node-private services (``~/pause``, ``~/status``) stay with their nodes. Frames follow REP-103 (x
+forward, y left, z up). ``lab`` is the capture volume's frame, in which markers, plates and the human COM are given;
+``world`` is the robot simulation's frame; ``lab`` -> ``world`` is one static transform (the driver's /tf_static).
 """
 
 from __future__ import annotations
@@ -12,11 +16,14 @@ from __future__ import annotations
 LAB_FRAME = "lab"
 WORLD_FRAME = "world"
 BASE_FRAME = "base_link"       # the robot's floating base (URDF root link)
+HUMAN_ROOT_FRAME = "pelvis"    # the human skeleton's floating base (its URDF's root link; lab -> pelvis in /tf)
 
 # --- message types of our interface package -----------------------------------------------------------------------
 MOCAP_TYPE = "sit2stand_msgs/msg/MocapFrame"
 PLATE_TYPE = "sit2stand_msgs/msg/ForcePlateSample"
 COM_TYPE = "sit2stand_msgs/msg/CenterOfMass"
+SUBJECT_TYPE = "sit2stand_msgs/msg/Subject"
+MARKER_ARRAY_TYPE = "visualization_msgs/msg/MarkerArray"
 
 # --- capture: replayer (from a bag) or a capture-system bridge ------------------------------------------------------
 MARKERS_TOPIC = "/mocap/markers"                     # sit2stand_msgs/MocapFrame, lab frame
@@ -29,8 +36,12 @@ CLOCK_TOPIC = "/clock"                               # rosgraph_msgs/Clock
 HUMAN_COM_TOPIC = "/human/com"                       # CenterOfMass, lab frame
 HUMAN_MODEL_COP_TOPIC = "/human/model_cop"           # geometry_msgs/PointStamped
 HUMAN_MEASURED_COP_TOPIC = "/human/measured_cop"     # geometry_msgs/PointStamped
-HUMAN_JOINTS_TOPIC = "/human/joint_states"           # sensor_msgs/JointState: the fitted skeleton
+HUMAN_JOINTS_TOPIC = "/human/joint_states"           # sensor_msgs/JointState: the fitted skeleton's joints, pelvis
+HUMAN_PELVIS_POSE_TOPIC = "/human/pelvis_pose"       # geometry_msgs/PoseStamped: the skeleton's base, lab frame
 HUMAN_SCALING_TOPIC = "/human/scaling"               # sit2stand_msgs/InertialParameters
+HUMAN_DESCRIPTION_TOPIC = "/human/robot_description"   # std_msgs/String (transient local): the skeleton's URDF
+HUMAN_MARKERS_TOPIC = "/viz/human"                   # visualization_msgs/MarkerArray: markers, COM, COPs in lab
+SUBJECT_TOPIC = "/human/subject"                     # sit2stand_msgs/Subject (transient local): stature, mass, sex
 
 # --- robot: driver (simulated TALOS) ------------------------------------------------------------------------------
 ROBOT_JOINT_STATES_TOPIC = "/robot/joint_states"     # sensor_msgs/JointState
@@ -64,6 +75,18 @@ GROUND_TRUTH_COM_TOPIC = "/ground_truth/com"
 GROUND_TRUTH_JOINTS_TOPIC = "/ground_truth/joint_states"
 GROUND_TRUTH_PARAMETERS_TOPIC = "/ground_truth/inertial_parameters"
 GROUND_TRUTH_ROBOT_COM_TOPIC = "/ground_truth/robot_com"
+
+
+def ros_name(topic: str) -> str:
+    """The name a node uses for ``topic``: relative (no leading ``/``), so it resolves in the node's namespace."""
+    return topic.lstrip("/")
+
+
+def bag_name(namespace: str, resolved: str) -> str | None:
+    """The bag's name of ``resolved`` (a fully qualified topic) seen from ``namespace``: the name relative to it with
+    a leading ``/`` (``/robot2``, ``/robot2/mocap/markers`` -> ``/mocap/markers``); None for a topic outside it."""
+    prefix = namespace.rstrip("/") + "/"
+    return "/" + resolved[len(prefix):] if resolved.startswith(prefix) else None
 
 
 def plate_topic(name: str) -> str:
