@@ -11,7 +11,10 @@ simulated time, ``/robot/ft/left`` and ``/robot/ft/right`` (geometry_msgs/Wrench
 axes about the sole point, frame ``sole_<side>_world_aligned``), ``/robot/cop`` (geometry_msgs/PointStamped),
 ``/robot/base_pose`` (geometry_msgs/PoseStamped, what a state estimator would give), ``/robot/status``
 (diagnostic_msgs/DiagnosticStatus, 10 Hz), and ``/clock`` when ``publish_clock`` is true (then every stamp is
-simulated time). For RViz, Foxglove and tf2 (what robot_state_publisher does on a full ROS install; see
+simulated time). Under ``use_sim_time`` (a replayer's /clock drives the graph) the simulation follows that clock
+instead of the wall clock: it waits seated, publishing nothing, until the first /clock, then steps to each /clock
+time, and each state sample is stamped with the /clock time it simulates. Every name is relative (``__ns`` moves
+them). For RViz, Foxglove and tf2 (what robot_state_publisher does on a full ROS install; see
 :mod:`sit2stand.robot.description`): ``/tf`` (tf2_msgs/TFMessage: ``world`` -> ``base_link`` and every moving joint's
 link, from the measured joint state and base pose, at ``tf_rate_hz`` with that state sample's stamp), and, transient
 local, once: ``/tf_static`` (fixed joints, the soles, ``lab`` -> ``world``) and ``/robot_description``
@@ -36,8 +39,10 @@ import numpy as np
 from builtin_interfaces.msg import Time as BuiltinTime
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, TransformStamped, WrenchStamped
+from rclpy.clock import Clock as RosClock
+from rclpy.clock import ClockType
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -48,21 +53,19 @@ from trajectory_msgs.msg import JointTrajectory
 from ..io.tf_message import TfEncoder
 from ..io.topics import (BASE_FRAME, CLOCK_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_DESCRIPTION_TOPIC,
                          ROBOT_JOINT_COMMAND_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_JOINT_STATE_COMMAND_TOPIC,
-                         ROBOT_STATUS_TOPIC, TF_STATIC_TOPIC, TF_TOPIC, WORLD_FRAME, ft_topic, sole_world_aligned_frame)
+                         ROBOT_STATUS_TOPIC, TF_STATIC_TOPIC, TF_TOPIC, WORLD_FRAME, ft_topic, ros_name,
+                         sole_world_aligned_frame)
 from ..data import plant_path
 from ..robot.description import DescriptionError, FrameTree, robot_description
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
 from ..robot.plant import Plant
-from .runtime import PUBLISH_DEPTH, NodeError, declare, node_main
+from .runtime import LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, NodeError, declare, node_main
 
 DEFAULT_PLANT = plant_path("default")
 SIM_EPOCH_S = 100.0      # simulated time starts here when the driver is the time source (0 reads as "unset")
 FELL_EXIT_CODE = 3
 """The driver's exit status after the robot fell (a graph with it then exits 1)."""
-TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)            # tf2_ros's /tf publisher
-LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,          # /tf_static, /robot_description
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class Driver(Node):
@@ -93,22 +96,27 @@ class Driver(Node):
         self.names = self.plant.joint_names
         self.index = {n: i for i, n in enumerate(self.names)}
         fast = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.js_pub = self.create_publisher(JointState, ROBOT_JOINT_STATES_TOPIC, PUBLISH_DEPTH)
-        self.ft_pubs = {s: self.create_publisher(WrenchStamped, ft_topic(s), PUBLISH_DEPTH) for s in SIDES}
-        self.cop_pub = self.create_publisher(PointStamped, ROBOT_COP_TOPIC, PUBLISH_DEPTH)
-        self.base_pub = self.create_publisher(PoseStamped, ROBOT_BASE_POSE_TOPIC, PUBLISH_DEPTH)
-        self.status_pub = self.create_publisher(DiagnosticStatus, ROBOT_STATUS_TOPIC, 10)
-        self.clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, fast) if self.publish_clock else None
+        self.js_pub = self.create_publisher(JointState, ros_name(ROBOT_JOINT_STATES_TOPIC), PUBLISH_DEPTH)
+        self.ft_pubs = {s: self.create_publisher(WrenchStamped, ros_name(ft_topic(s)), PUBLISH_DEPTH) for s in SIDES}
+        self.cop_pub = self.create_publisher(PointStamped, ros_name(ROBOT_COP_TOPIC), PUBLISH_DEPTH)
+        self.base_pub = self.create_publisher(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC), PUBLISH_DEPTH)
+        self.status_pub = self.create_publisher(DiagnosticStatus, ros_name(ROBOT_STATUS_TOPIC), 10)
+        self.clock_pub = self.create_publisher(Clock, ros_name(CLOCK_TOPIC), fast) if self.publish_clock else None
         self._setup_frames(cfg.robot)
-        self.create_subscription(JointTrajectory, ROBOT_JOINT_COMMAND_TOPIC, self._on_trajectory, 10)
-        self.create_subscription(JointState, ROBOT_JOINT_STATE_COMMAND_TOPIC, self._on_command, 10)
+        self.create_subscription(JointTrajectory, ros_name(ROBOT_JOINT_COMMAND_TOPIC), self._on_trajectory, 10)
+        self.create_subscription(JointState, ros_name(ROBOT_JOINT_STATE_COMMAND_TOPIC), self._on_command, 10)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self._wall0 = time.monotonic()
         self._sim0 = self.plant.t_s
+        self.sim_time = bool(self.get_parameter("use_sim_time").value)
+        self._clock0_ns: int | None = None   # under use_sim_time: the /clock time the simulation started at _sim0
         self.steps_done = 0
         self._fall_reported = False
         self.exit_code = 0
-        self.create_timer(0.005, self._tick)
+        if not self.sim_time:
+            self._publish_latched()
+        # wall-clock ticks either way: under use_sim_time a ROS-time timer would not run before the first /clock
+        self.create_timer(0.005, self._tick, clock=RosClock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(0.1, self._publish_status)
         self.get_logger().info(f"TALOS seated on a {self.plant.seat_height_m:.3f} m chair; plant {cfg.name}; "
                                f"controller model {'identified' if params_file else 'CAD'}; "
@@ -125,9 +133,16 @@ class Driver(Node):
             raise NodeError(str(err)) from None
         self.tf_every = max(1, int(round(1.0 / (tf_rate * self.state_period)))) if tf_rate > 0 else 0
         self.tf_encoder = TfEncoder(self.frames.pairs)
-        self.tf_pub = self.create_publisher(TFMessage, TF_TOPIC, TF_QOS)
+        self.tf_pub = self.create_publisher(TFMessage, ros_name(TF_TOPIC), TF_QOS)
         self.tf_cost_s: list[float] = []          # per /tf message: forward kinematics + encoding + publish
         self._samples = 0
+        self.urdf = urdf
+        # kept: a latched message lives as long as its publisher
+        self.tf_static_pub = self.create_publisher(TFMessage, ros_name(TF_STATIC_TOPIC), LATCHED_QOS)
+        self.description_pub = self.create_publisher(String, ros_name(ROBOT_DESCRIPTION_TOPIC), LATCHED_QOS)
+
+    def _publish_latched(self) -> None:
+        """/tf_static and /robot_description, stamped now (under use_sim_time: once the clock runs)."""
         stamp = self._now_stamp()
         static = TFMessage()
         for tr in self.frames.static_transforms():
@@ -137,11 +152,8 @@ class Driver(Node):
             r = m.transform.rotation
             r.x, r.y, r.z, r.w = tr.rotation_xyzw
             static.transforms.append(m)
-        # kept: a latched message lives as long as its publisher
-        self.tf_static_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, LATCHED_QOS)
         self.tf_static_pub.publish(static)
-        self.description_pub = self.create_publisher(String, ROBOT_DESCRIPTION_TOPIC, LATCHED_QOS)
-        self.description_pub.publish(String(data=urdf))
+        self.description_pub.publish(String(data=self.urdf))
 
     # -- commands ---------------------------------------------------------------------------------------------
     def _apply(self, names, positions, velocities=None, accelerations=None, ff=None) -> None:
@@ -178,6 +190,8 @@ class Driver(Node):
         self.plant.feedforward = self.ff_mode
         self.plant.settle(self.settle_s)
         self._wall0, self._sim0 = time.monotonic(), self.plant.t_s
+        if self._clock0_ns is not None:       # under use_sim_time: from the clock's time now
+            self._clock0_ns = self.get_clock().now().nanoseconds
         self._fall_reported = False
         self.exit_code = 0
         res.success, res.message = True, "reset: seated on the chair"
@@ -186,7 +200,15 @@ class Driver(Node):
     # -- simulation ----------------------------------------------------------------------------------------------
     def _tick(self) -> None:
         plant = self.plant
-        if self.rtf > 0:
+        if self.sim_time:
+            now_ns = self.get_clock().now().nanoseconds
+            if now_ns == 0:                  # no /clock yet: wait seated
+                return
+            if self._clock0_ns is None:
+                self._clock0_ns, self._sim0 = now_ns, plant.t_s
+                self._publish_latched()
+            target = self._sim0 + (now_ns - self._clock0_ns) * 1e-9
+        elif self.rtf > 0:
             target = self._sim0 + (time.monotonic() - self._wall0) * self.rtf
         else:
             target = plant.t_s + 0.25      # as fast as it can: 250 ms of simulation per tick
@@ -209,6 +231,9 @@ class Driver(Node):
         msg_header.stamp = self._sample_stamp       # one stamp for every message of a state sample
 
     def _now_stamp(self):
+        if self._clock0_ns is not None:      # the /clock time this state simulates
+            sec, nsec = divmod(self._clock0_ns + int(round((self.plant.t_s - self._sim0) * 1e9)), 1_000_000_000)
+            return BuiltinTime(sec=sec, nanosec=nsec)
         if self.publish_clock:
             sec, nsec = divmod(int(round((SIM_EPOCH_S + self.plant.t_s) * 1e9)), 1_000_000_000)
             return BuiltinTime(sec=sec, nanosec=nsec)

@@ -106,6 +106,9 @@ def qos_to_bag(profile: QoSProfile):
 # writer drops its oldest samples the recorder has not yet acknowledged beyond this depth (seen at 50 and 100:
 # 7-13 samples missing from a bag)
 PUBLISH_DEPTH = 1000
+TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)            # tf2_ros's /tf publisher
+# /tf_static, descriptions, the subject, parameters: the latest message reaches subscribers that come later
+LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def qos_from_bag(profiles, depth: int = PUBLISH_DEPTH) -> QoSProfile:
