@@ -17,7 +17,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sit2stand_msgs.msg import InertialParameters
 from sit2stand_msgs.srv import IdentifyCom
 
-from ..io.topics import IDENTIFY_COM_SERVICE, ROBOT_INERTIAL_PARAMETERS_TOPIC
+from ..io.topics import IDENTIFY_COM_SERVICE, ROBOT_INERTIAL_PARAMETERS_TOPIC, ros_name
 from ..io.bag import BagError
 from ..robot.identify import IdentificationError, identify, write_yaml
 from .runtime import node_main
@@ -30,8 +30,9 @@ class IdentificationNode(Node):
         super().__init__("identification")
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.params_pub = self.create_publisher(InertialParameters, ROBOT_INERTIAL_PARAMETERS_TOPIC, latched)
-        self.create_service(IdentifyCom, IDENTIFY_COM_SERVICE, self._on_request)
+        self.params_pub = self.create_publisher(InertialParameters, ros_name(ROBOT_INERTIAL_PARAMETERS_TOPIC),
+                                                latched)
+        self.create_service(IdentifyCom, ros_name(IDENTIFY_COM_SERVICE), self._on_request)
         self.get_logger().info("ready: /robot/identify_com")
 
     def _on_request(self, req: IdentifyCom.Request, res: IdentifyCom.Response) -> IdentifyCom.Response:

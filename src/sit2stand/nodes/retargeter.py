@@ -45,7 +45,7 @@ from ..io.messages import plate_sample_from_cdr, stamp_ns
 from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_BASE_POSE_TOPIC,
                          ROBOT_COM_FEEDBACK_TOPIC, ROBOT_JOINT_COMMAND_TOPIC, ROBOT_JOINT_STATES_TOPIC,
                          ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC, ROBOT_RETARGET_IK_TOPIC, VIZ_MARKERS_TOPIC,
-                         WORLD_FRAME)
+                         WORLD_FRAME, ros_name)
 from ..retarget.pacing import LiveConfig, LiveRetargeting, MarkerFrame, summary_line
 from ..retarget.player import DEFAULT_MAX_TIME_SCALE, Command
 from ..retarget.stabiliser import StabiliserConfig
@@ -99,12 +99,12 @@ class RetargeterNode(Node):
             raise NodeError(f"retargeter: plant {self.plant_file}, controller_params "
                             f"{self.params_file or '(CAD)'}: {err}") from None
         self._subscribe()
-        self.cmd_pub = self.create_publisher(JointTrajectory, ROBOT_JOINT_COMMAND_TOPIC, PUBLISH_DEPTH)
-        self.com_pub = self.create_publisher(CenterOfMass, ROBOT_PLANNED_COM_TOPIC, PUBLISH_DEPTH)
-        self.zmp_pub = self.create_publisher(PointStamped, ROBOT_PLANNED_ZMP_TOPIC, PUBLISH_DEPTH)
-        self.feedback_pub = self.create_publisher(Vector3Stamped, ROBOT_COM_FEEDBACK_TOPIC, PUBLISH_DEPTH)
-        self.ik_pub = self.create_publisher(JointState, ROBOT_RETARGET_IK_TOPIC, PUBLISH_DEPTH)
-        self.viz_pub = self.create_publisher(MarkerArray, VIZ_MARKERS_TOPIC, PUBLISH_DEPTH)
+        self.cmd_pub = self.create_publisher(JointTrajectory, ros_name(ROBOT_JOINT_COMMAND_TOPIC), PUBLISH_DEPTH)
+        self.com_pub = self.create_publisher(CenterOfMass, ros_name(ROBOT_PLANNED_COM_TOPIC), PUBLISH_DEPTH)
+        self.zmp_pub = self.create_publisher(PointStamped, ros_name(ROBOT_PLANNED_ZMP_TOPIC), PUBLISH_DEPTH)
+        self.feedback_pub = self.create_publisher(Vector3Stamped, ros_name(ROBOT_COM_FEEDBACK_TOPIC), PUBLISH_DEPTH)
+        self.ik_pub = self.create_publisher(JointState, ros_name(ROBOT_RETARGET_IK_TOPIC), PUBLISH_DEPTH)
+        self.viz_pub = self.create_publisher(MarkerArray, ros_name(VIZ_MARKERS_TOPIC), PUBLISH_DEPTH)
         self.markers_every = declare(self, "markers_every", 5, "/viz/markers every this many commands (0: none)")
         self.support_xy: np.ndarray | None = None   # the plan's support polygon, once calibrated
         self._commands = 0
@@ -127,18 +127,18 @@ class RetargeterNode(Node):
 
     def _subscribe(self) -> None:
         deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
-        self.create_subscription(MocapFrame, MARKERS_TOPIC, self._on_markers, deep)
+        self.create_subscription(MocapFrame, ros_name(MARKERS_TOPIC), self._on_markers, deep)
         # /human/com is subscribed with its publishers' durability once they appear (transient local from the
         # estimator: a late match still gets every estimate; volatile from a replayed bag)
         self._com_discovery = self.create_timer(0.1, self._discover_com)
-        self.create_subscription(ForcePlateSample, CHAIR_PLATE_TOPIC, self._on_chair,
+        self.create_subscription(ForcePlateSample, ros_name(CHAIR_PLATE_TOPIC), self._on_chair,
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
                                             reliability=ReliabilityPolicy.RELIABLE), raw=True)
         # kept as bytes (400 Hz, in the real-time thread); read when a command needs them
-        self.robot_subs = [self.create_subscription(JointState, ROBOT_JOINT_STATES_TOPIC, self._on_joint_states, 10,
-                                                    raw=True),
-                           self.create_subscription(PoseStamped, ROBOT_BASE_POSE_TOPIC, self._on_base_pose, 10,
-                                                    raw=True)]
+        self.robot_subs = [self.create_subscription(JointState, ros_name(ROBOT_JOINT_STATES_TOPIC),
+                                                    self._on_joint_states, 10, raw=True),
+                           self.create_subscription(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC),
+                                                    self._on_base_pose, 10, raw=True)]
 
     # -- inputs ------------------------------------------------------------------------------------------------
     def _on_joint_states(self, data: bytes) -> None:
@@ -153,9 +153,9 @@ class RetargeterNode(Node):
         self.live.chair.add(t_s, fz)
 
     def _discover_com(self) -> None:
-        if self.get_publishers_info_by_topic(HUMAN_COM_TOPIC):
-            qos = qos_matching_publishers(self, HUMAN_COM_TOPIC, keep_all=False, depth=2000)
-            self.create_subscription(CenterOfMass, HUMAN_COM_TOPIC, self._on_com, qos)
+        if self.get_publishers_info_by_topic(ros_name(HUMAN_COM_TOPIC)):
+            qos = qos_matching_publishers(self, ros_name(HUMAN_COM_TOPIC), keep_all=False, depth=2000)
+            self.create_subscription(CenterOfMass, ros_name(HUMAN_COM_TOPIC), self._on_com, qos)
             self.get_logger().info(f"{HUMAN_COM_TOPIC} publisher found after {time.monotonic() - self._t_init:.2f} "
                                    f"s; subscribed ({qos.durability.name.lower()})")
             self._com_discovery.cancel()
