@@ -4,7 +4,9 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from visualization_msgs.msg import Marker
 
-from sit2stand.nodes.markers import COM_DROP_ID, COM_ID, NAMESPACE, SUPPORT_ID, ZMP_ID, plan_markers
+from sit2stand.nodes.markers import (COM_DROP_ID, COM_ID, HUMAN_COM_DROP_ID, HUMAN_COM_ID, HUMAN_NAMESPACE,
+                                    MEASURED_COP_ID, MOCAP_ID, MODEL_COP_ID, NAMESPACE, SUPPORT_ID, ZMP_ID,
+                                    human_markers, plan_markers)
 
 SQUARE = np.array([[-0.1, -0.15], [0.12, -0.15], [0.12, 0.15], [-0.1, 0.15]])
 
@@ -29,3 +31,26 @@ def test_com_zmp_and_support_polygon_markers_in_world():
     np.testing.assert_array_equal(pts[:4, :2], SQUARE)
     np.testing.assert_array_equal(pts[4], pts[0])
     assert np.all(pts[:, 2] == 0.001)
+
+
+def test_the_human_markers_are_in_lab_with_their_own_stamps():
+    """Mocap markers (NaN rows left out), the COM with its drop, and the COPs at the delayed frame's stamp."""
+    pts = np.array([[0.1, 0.2, 0.9], [np.nan, np.nan, np.nan], [0.3, -0.1, 0.05]])
+    msg = human_markers(Time(sec=5), pts, np.array([0.05, 0.0, 0.95]), Time(sec=4, nanosec=850_000_000),
+                        np.array([0.07, 0.01, 0.0]), np.array([0.06, 0.02, 0.0]))
+    by_id = {m.id: m for m in msg.markers}
+    assert sorted(by_id) == [MOCAP_ID, HUMAN_COM_ID, HUMAN_COM_DROP_ID, MEASURED_COP_ID, MODEL_COP_ID]
+    assert {(m.ns, m.header.frame_id) for m in msg.markers} == {(HUMAN_NAMESPACE, "lab")}
+    assert [(p.x, p.y, p.z) for p in by_id[MOCAP_ID].points] == [(0.1, 0.2, 0.9), (0.3, -0.1, 0.05)]
+    assert by_id[MOCAP_ID].type == Marker.SPHERE_LIST and by_id[MOCAP_ID].header.stamp.sec == 5
+    com = by_id[HUMAN_COM_ID].pose.position
+    assert (com.x, com.y, com.z) == (0.05, 0.0, 0.95)
+    for ident, cop in ((MEASURED_COP_ID, (0.07, 0.01)), (MODEL_COP_ID, (0.06, 0.02))):
+        m = by_id[ident]
+        assert (m.pose.position.x, m.pose.position.y) == cop and m.type == Marker.CYLINDER
+        assert (m.header.stamp.sec, m.header.stamp.nanosec) == (4, 850_000_000)
+
+
+def test_the_human_markers_leave_out_what_is_not_there_yet():
+    msg = human_markers(Time(sec=1), np.zeros((0, 3)), None)
+    assert [m.id for m in msg.markers] == [MOCAP_ID] and not msg.markers[0].points

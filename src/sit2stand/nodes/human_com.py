@@ -5,10 +5,19 @@ Subscribes ``/mocap/markers`` (sit2stand_msgs/MocapFrame) and every ``/force_pla
 
 * ``/human/com`` (sit2stand_msgs/CenterOfMass): position now; velocity and acceleration from a causal fit;
   ``valid`` false (last estimate repeated) on frames with too few markers;
-* ``/human/joint_states`` (sensor_msgs/JointState): the fitted skeleton (pelvis pose as pelvis_* entries);
-* ``/human/model_cop`` and ``/human/measured_cop`` (geometry_msgs/PointStamped), half a window (~150 ms) behind;
+* ``/human/joint_states`` (sensor_msgs/JointState, frame ``pelvis``): the fitted skeleton's joint angles;
+* ``/human/pelvis_pose`` (geometry_msgs/PoseStamped, lab): the skeleton's floating base;
+* ``/human/model_cop`` and ``/human/measured_cop`` (geometry_msgs/PointStamped, lab), half a window (~150 ms)
+  behind, stamped with the frame they belong to;
 * ``/human/scaling`` (sit2stand_msgs/InertialParameters, transient local): the segment masses it chose, each
-  time it re-solves them (every ``rescale_every`` frames with plate data).
+  time it re-solves them (every ``rescale_every`` frames with plate data);
+* for RViz and Foxglove, at ``viz_rate_hz`` (50) of marker time: ``/tf`` (lab -> pelvis -> every segment, see
+  :mod:`sit2stand.human.description`) and ``/viz/human`` (visualization_msgs/MarkerArray: the frame's markers, the
+  COM, both COPs; :func:`sit2stand.nodes.markers.human_markers`); ``/human/robot_description`` (std_msgs/String,
+  transient local): the URDF of the skeleton, again when the calibration rescales it.
+
+Every name is relative (:func:`sit2stand.io.topics.ros_name`): ``__ns`` moves them all. Stamps are the marker
+frame's (bag time when replayed: run it with ``use_sim_time`` under the replayer's /clock).
 
 Parameters: ``height_m``, ``mass_kg``, ``sex`` (the subject), ``rate_hz`` (marker rate, 100), ``window`` (31
 frames), ``calibration_frames`` (50: length and marker calibration from the first frames, a pause of ~1 s, several
@@ -16,7 +25,7 @@ under load, that the stream then runs behind), ``calibration_file`` (a calibrati
 trial, ``sit2stand human-calibrate``: no pause), ``rescale_every`` (100),
 ``chair_on_plate`` (true: every frame with the whole weight on plates is used; false: only after seat-off),
 ``plates`` (names of the plates to expect, e.g. [chair, feet]: frames count only when all have data; default:
-the plates that appear).
+the plates that appear), ``viz_rate_hz`` (50; 0: no /tf nor markers).
 The per-frame cost is logged on exit (p50/p99) and on ``~/stats`` (diagnostic_msgs/DiagnosticStatus) every 2 s.
 """
 
@@ -25,25 +34,31 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PointStamped
+from geometry_msgs.msg import PointStamped, PoseStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, InertialParameters, MocapFrame
-from std_msgs.msg import Header
+from std_msgs.msg import Header, String
+from tf2_msgs.msg import TFMessage
+from visualization_msgs.msg import MarkerArray
 
 from ..human.calibration import StreamCalibration
+from ..human.description import SkeletonFrames, human_urdf
 from ..human.com_stream import StreamingComEstimator
 from ..human.marker_ik import MarkerUnitsError, TooFewMarkers
 from ..human.skeleton import Subject
 from ..io.messages import mocap_arrays, plate_sample_from_cdr, reorder_markers, stamp_ns
-from ..io.topics import (FORCE_PLATE_PREFIX, HUMAN_COM_TOPIC, HUMAN_JOINTS_TOPIC, HUMAN_MEASURED_COP_TOPIC,
-                         HUMAN_MODEL_COP_TOPIC, HUMAN_SCALING_TOPIC, LAB_FRAME, MARKERS_TOPIC)
-from .runtime import PUBLISH_DEPTH, IdleDrain, NodeError, declare, node_main
+from ..io.tf_message import TfEncoder
+from ..io.topics import (FORCE_PLATE_PREFIX, HUMAN_COM_TOPIC, HUMAN_DESCRIPTION_TOPIC, HUMAN_JOINTS_TOPIC,
+                         HUMAN_MARKERS_TOPIC, HUMAN_MEASURED_COP_TOPIC, HUMAN_MODEL_COP_TOPIC, HUMAN_PELVIS_POSE_TOPIC,
+                         HUMAN_ROOT_FRAME, HUMAN_SCALING_TOPIC, LAB_FRAME, MARKERS_TOPIC, TF_TOPIC, bag_name, ros_name)
+from .markers import human_markers
+from .runtime import LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, IdleDrain, NodeError, declare, node_main
 
 PENDING_PLATE_SAMPLES = 4000      # per plate, between two marker frames (4 s at 1 kHz; the estimator keeps ~2 s)
-ROOT_NAMES = ["pelvis_x", "pelvis_y", "pelvis_z", "pelvis_qx", "pelvis_qy", "pelvis_qz", "pelvis_qw"]
 
 
 class HumanComNode(Node):
@@ -75,19 +90,19 @@ class HumanComNode(Node):
             except ValueError as err:
                 raise NodeError(f"calibration_file: {err}") from None
         deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
-        self.create_subscription(MocapFrame, MARKERS_TOPIC, self._on_markers, deep)
+        self.create_subscription(MocapFrame, ros_name(MARKERS_TOPIC), self._on_markers, deep)
         # transient-local with a deep history: a subscriber that matches late (a recorder still discovering the
         # topic when the first frames come) still gets every estimate
         history = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=PUBLISH_DEPTH,
                              reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.com_pub = self.create_publisher(CenterOfMass, HUMAN_COM_TOPIC, history)
-        self.joint_pub = self.create_publisher(JointState, HUMAN_JOINTS_TOPIC, history)
-        self.model_cop_pub = self.create_publisher(PointStamped, HUMAN_MODEL_COP_TOPIC, history)
-        self.measured_cop_pub = self.create_publisher(PointStamped, HUMAN_MEASURED_COP_TOPIC, history)
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.scaling_pub = self.create_publisher(InertialParameters, HUMAN_SCALING_TOPIC, latched)
+        self.com_pub = self.create_publisher(CenterOfMass, ros_name(HUMAN_COM_TOPIC), history)
+        self.joint_pub = self.create_publisher(JointState, ros_name(HUMAN_JOINTS_TOPIC), history)
+        self.pelvis_pub = self.create_publisher(PoseStamped, ros_name(HUMAN_PELVIS_POSE_TOPIC), history)
+        self.model_cop_pub = self.create_publisher(PointStamped, ros_name(HUMAN_MODEL_COP_TOPIC), history)
+        self.measured_cop_pub = self.create_publisher(PointStamped, ros_name(HUMAN_MEASURED_COP_TOPIC), history)
+        self.scaling_pub = self.create_publisher(InertialParameters, ros_name(HUMAN_SCALING_TOPIC), LATCHED_QOS)
+        self._setup_viz(declare(self, "viz_rate_hz", 50.0, "/tf and /viz/human rate [Hz] of marker time (0: none)"))
         self.stats_pub = self.create_publisher(DiagnosticStatus, "~/stats", 10)
         self.plate_subs: dict[str, object] = {}
         self._pending_plates: dict[str, list[tuple]] = {}   # samples received since the last marker frame
@@ -105,15 +120,25 @@ class HumanComNode(Node):
         self.get_logger().info(f"human COM estimator for a {self.subject.height_m:g} m, {self.subject.mass_kg:g} kg "
                                f"{self.subject.sex}; waiting for {MARKERS_TOPIC}")
 
+    def _setup_viz(self, rate_hz: float) -> None:
+        """/tf and /viz/human every ``viz_every`` marker frames; the description when the skeleton is (re)built."""
+        self.viz_every = max(1, int(round(self.rate_hz / rate_hz))) if rate_hz > 0 else 0
+        self.tf_pub = self.create_publisher(TFMessage, ros_name(TF_TOPIC), TF_QOS)
+        self.viz_pub = self.create_publisher(MarkerArray, ros_name(HUMAN_MARKERS_TOPIC), PUBLISH_DEPTH)
+        self.description_pub = self.create_publisher(String, ros_name(HUMAN_DESCRIPTION_TOPIC), LATCHED_QOS)
+        self._described = None           # the skeleton (HumanModel) the frames and description are of
+        self._frames_seen = 0
+
     def _discover_plates(self) -> None:
-        for topic, types in self.get_topic_names_and_types():
-            if topic.startswith(FORCE_PLATE_PREFIX) and topic not in self.plate_subs and \
+        for resolved, types in self.get_topic_names_and_types():
+            topic = bag_name(self.get_namespace(), resolved)     # None: another namespace's
+            if topic is not None and topic.startswith(FORCE_PLATE_PREFIX) and topic not in self.plate_subs and \
                     "sit2stand_msgs/msg/ForcePlateSample" in types:
                 name = topic[len(FORCE_PLATE_PREFIX):]
                 qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000, reliability=ReliabilityPolicy.RELIABLE)
                 self.plate_subs[topic] = self.create_subscription(   # raw: see _on_plate
-                    ForcePlateSample, topic, lambda data, n=name: self._on_plate(n, data), qos, raw=True)
-                self.get_logger().info(f"using force plate {topic}")
+                    ForcePlateSample, ros_name(topic), lambda data, n=name: self._on_plate(n, data), qos, raw=True)
+                self.get_logger().info(f"using force plate {resolved}")
 
     def _on_plate(self, name: str, data: bytes) -> None:
         # ~1 kHz per plate: the stamp and wrench are read straight from the CDR bytes (~1 us, against ~30 us to build
@@ -163,6 +188,7 @@ class HumanComNode(Node):
         self._publish_com(msg.header, out)        # first: the retargeter waits for it
         self.estimator.process_delayed(out)        # then the window half a window back (COPs, scaling rows)
         self._publish_rest(msg.header, out)
+        self._publish_viz(msg.header, pos, out)
         self.costs.append(time.perf_counter() - t0)
         if self.estimator.rescale_pending:     # after the frame is out: the re-solve does not delay its COM
             self.estimator.rescale_pending = False
@@ -170,7 +196,7 @@ class HumanComNode(Node):
                 self._publish_scaling(msg.header)
 
     def _publish_com(self, header, out) -> None:
-        com_msg = CenterOfMass(header=header, source="skeleton_fit", valid=bool(out.valid),
+        com_msg = CenterOfMass(header=_header(header.stamp, LAB_FRAME), source="skeleton_fit", valid=bool(out.valid),
                                marker_rms_m=float(out.marker_rms_m), n_markers=int(out.n_markers),
                                cop_error_m=float("nan"))
         com = out.com_m if np.all(np.isfinite(out.com_m)) else (self.last_com if self.last_com is not None else None)
@@ -186,24 +212,46 @@ class HumanComNode(Node):
     def _publish_rest(self, header, out) -> None:
         if out.model_cop_m is not None and out.measured_cop_m is not None:
             self.last_cop_error = float(np.linalg.norm(out.model_cop_m[:2] - out.measured_cop_m[:2]))
-        # its own header: the marker frame's is shared with the COPs (lab frame); the pelvis pose is in the lab too
-        js = JointState(header=Header(stamp=header.stamp, frame_id=LAB_FRAME),
-                        name=ROOT_NAMES + self.estimator.human.joint_names(), position=[float(x) for x in out.q])
-        self.joint_pub.publish(js)
+        # every message its own header: a shared one changed for one message changes them all (the COPs once said
+        # 'pelvis' so); joint angles are of the chain below the pelvis, the pelvis pose is in lab
+        self.joint_pub.publish(JointState(header=_header(header.stamp, HUMAN_ROOT_FRAME),
+                                          name=self.estimator.human.joint_names(),
+                                          position=[float(x) for x in out.q[7:]]))
+        pose = PoseStamped(header=_header(header.stamp, LAB_FRAME))
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in out.q[:3])
+        o = pose.pose.orientation
+        o.x, o.y, o.z, o.w = (float(v) for v in out.q[3:7])
+        self.pelvis_pub.publish(pose)
         for pub, cop in ((self.model_cop_pub, out.model_cop_m), (self.measured_cop_pub, out.measured_cop_m)):
             if cop is not None and out.delayed_t_s is not None:
-                p = PointStamped()
-                p.header.frame_id = header.frame_id
-                p.header.stamp.sec, p.header.stamp.nanosec = divmod(int(round(out.delayed_t_s * 1e9)), 1_000_000_000)
+                p = PointStamped(header=_header(_stamp_of(out.delayed_t_s), LAB_FRAME))
                 p.point.x, p.point.y = float(cop[0]), float(cop[1])
                 pub.publish(p)
+
+    def _publish_viz(self, header, markers_m: np.ndarray, out) -> None:
+        """The skeleton's /tf and the human's markers every ``viz_every`` frames (~0.1 ms together)."""
+        human = self.estimator.human
+        if human is not self._described:          # built, or rebuilt by the calibration: new lengths
+            self._described = human
+            self.frames = SkeletonFrames(human)
+            self.tf_encoder = TfEncoder(self.frames.pairs)
+            self.description_pub.publish(String(data=human_urdf(human)))
+        self._frames_seen += 1
+        if not self.viz_every or (self._frames_seen - 1) % self.viz_every:
+            return
+        if np.all(np.isfinite(out.q)):
+            self.tf_pub.publish(self.tf_encoder.encode(stamp_ns(header), *self.frames.transforms(out.q)))
+        cop_stamp = _stamp_of(out.delayed_t_s) if out.delayed_t_s is not None else None
+        self.viz_pub.publish(human_markers(header.stamp, markers_m, self.last_com, cop_stamp, out.measured_cop_m,
+                                           out.model_cop_m))
 
     def _publish_scaling(self, header) -> None:
         sc = self.estimator.scaling
         if sc is not None:
             names = [f"{g}.mass" for g in sc.masses] + ["torso.com_shift_x", "torso.com_shift_y"]
             values = list(sc.masses.values()) + [float(sc.torso_com_shift_m[0]), float(sc.torso_com_shift_m[1])]
-            self.scaling_pub.publish(InertialParameters(header=header, model="human_scaling", names=names,
+            self.scaling_pub.publish(InertialParameters(header=_header(header.stamp, LAB_FRAME), model="human_scaling",
+                                                        names=names,
                                                         values=[float(v) for v in values],
                                                         std_devs=[float("nan")] * len(values)))
             self.get_logger().info("scaling: " + ", ".join(f"{g} x{f:.2f}" for g, f in sc.factors().items()))
@@ -235,6 +283,17 @@ class HumanComNode(Node):
         print(f"[human_com] {stats['frames']} frames, {stats['skipped_frames']} skipped (too few markers), per-frame "
               f"cost p50 {stats['cost_p50_ms']} ms p99 {stats['cost_p99_ms']} ms; plate dropouts: "
               f"{stats['plate_dropouts']}", flush=True)
+
+
+def _header(stamp, frame_id: str) -> Header:
+    """A header of its own (never shared between messages)."""
+    return Header(stamp=Time(sec=stamp.sec, nanosec=stamp.nanosec), frame_id=frame_id)
+
+
+def _stamp_of(t_s: float):
+    """builtin_interfaces/Time of ``t_s`` [s]."""
+    sec, nsec = divmod(int(round(t_s * 1e9)), 1_000_000_000)
+    return Time(sec=sec, nanosec=nsec)
 
 
 main = node_main(HumanComNode)
