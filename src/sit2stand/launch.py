@@ -175,9 +175,10 @@ def _substitute(value, variables: dict[str, str], graph_dir: Path, where: str):
     return value
 
 
-def load_graph(path: str | Path, overrides: dict[str, str] | None = None) -> Graph:
+def load_graph(path: str | Path, overrides: dict[str, str] | None = None, namespace: str = "") -> Graph:
     """Parse a graph file, or a packaged graph's name, into :class:`Graph` (commands resolved, inline parameters
-    written to a temp folder)."""
+    written to a temp folder). ``namespace`` (e.g. ``robot2``): every node runs in it (``-r __ns:=/robot2``), and
+    with them every topic, /clock included, so two graphs run side by side on one ROS domain."""
     try:
         path = graph_path(path)
     except DataFileNotFound as err:
@@ -208,11 +209,20 @@ def load_graph(path: str | Path, overrides: dict[str, str] | None = None) -> Gra
         if name in names:
             raise LaunchError(f"{where}: duplicate node name {name!r}")
         names.add(name)
-        nodes.append(_node_spec(spec, name, where, graph_dir, tmpdir))
+        nodes.append(_node_spec(spec, name, where, graph_dir, tmpdir, _namespace(namespace)))
     return Graph(str(doc.get("name", path.stem)), nodes, tmpdir)
 
 
-def _node_spec(spec: dict, name: str, where: str, graph_dir: Path, tmpdir: Path) -> NodeSpec:
+def _namespace(namespace: str) -> str:
+    """``robot2`` or ``/robot2`` as ``/robot2`` ('' for none); names the rule a ROS namespace breaks."""
+    ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
+    if ns and not re.fullmatch(r"(/[A-Za-z_][A-Za-z0-9_]*)+", ns):
+        raise LaunchError(f"namespace {namespace!r}: ROS names are letters, digits and _ (not starting with a digit), "
+                          f"separated by /")
+    return ns
+
+
+def _node_spec(spec: dict, name: str, where: str, graph_dir: Path, tmpdir: Path, namespace: str = "") -> NodeSpec:
     exe = spec.get("executable")
     if exe is None:
         raise LaunchError(f"{where} ({name}): needs 'executable'")
@@ -225,7 +235,7 @@ def _node_spec(spec: dict, name: str, where: str, graph_dir: Path, tmpdir: Path)
                               f"({', '.join(sorted(OUR_NODES))}) nor on PATH")
         command = [found]
     command += [str(a) for a in spec.get("arguments", []) or []]
-    command += ["--ros-args", "-r", f"__node:={name}"]
+    command += ["--ros-args", "-r", f"__node:={name}"] + (["-r", f"__ns:={namespace}"] if namespace else [])
     for j, entry in enumerate(spec.get("parameters", []) or []):
         if isinstance(entry, str):
             file = Path(entry) if Path(entry).is_absolute() else graph_dir / entry

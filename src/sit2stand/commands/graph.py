@@ -38,7 +38,7 @@ def _bag_recover(args: argparse.Namespace) -> int:
 def _launch(args: argparse.Namespace) -> int:
     from ..launch import Launcher, load_graph, parse_overrides
 
-    graph = load_graph(args.graph, parse_overrides(args.overrides))
+    graph = load_graph(args.graph, parse_overrides(args.overrides), namespace=args.namespace)
     return Launcher(graph, grace_s=args.grace).run(timeout_s=args.timeout)
 
 
@@ -93,6 +93,8 @@ def add_launch(sub) -> None:
     p.add_argument("overrides", nargs="*", help="NAME:=VALUE for the graph's arguments")
     p.add_argument("--timeout", type=float, help="stop the graph after this many seconds")
     p.add_argument("--grace", type=float, default=10.0, help="seconds between SIGINT and SIGTERM at shutdown")
+    p.add_argument("--namespace", default="", help="run every node (and so every topic, /clock included) in this "
+                   "ROS namespace, e.g. robot2: two graphs side by side on one domain")
     p.set_defaults(func=_launch)
 
 
