@@ -39,8 +39,6 @@ import numpy as np
 from builtin_interfaces.msg import Time as BuiltinTime
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, TransformStamped, WrenchStamped
-from rclpy.clock import Clock as RosClock
-from rclpy.clock import ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -60,7 +58,7 @@ from ..robot.description import DescriptionError, FrameTree, robot_description
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
 from ..robot.plant import Plant
-from .runtime import LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, NodeError, declare, node_main
+from .runtime import LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, NodeError, declare, node_main, steady_timer
 
 DEFAULT_PLANT = plant_path("default")
 SIM_EPOCH_S = 100.0      # simulated time starts here when the driver is the time source (0 reads as "unset")
@@ -115,9 +113,9 @@ class Driver(Node):
         self.exit_code = 0
         if not self.sim_time:
             self._publish_latched()
-        # wall-clock ticks either way: under use_sim_time a ROS-time timer would not run before the first /clock
-        self.create_timer(0.005, self._tick, clock=RosClock(clock_type=ClockType.STEADY_TIME))
-        self.create_timer(0.1, self._publish_status)
+        # steady ticks either way: under use_sim_time a ROS-time timer would not run before the first /clock
+        steady_timer(self, 0.005, self._tick)
+        steady_timer(self, 0.1, self._publish_status)
         self.get_logger().info(f"TALOS seated on a {self.plant.seat_height_m:.3f} m chair; plant {cfg.name}; "
                                f"controller model {'identified' if params_file else 'CAD'}; "
                                f"{'as fast as possible' if self.rtf <= 0 else f'{self.rtf:g}x real time'}")

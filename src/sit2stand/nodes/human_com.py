@@ -56,7 +56,7 @@ from ..io.topics import (FORCE_PLATE_PREFIX, HUMAN_COM_TOPIC, HUMAN_DESCRIPTION_
                          HUMAN_MARKERS_TOPIC, HUMAN_MEASURED_COP_TOPIC, HUMAN_MODEL_COP_TOPIC, HUMAN_PELVIS_POSE_TOPIC,
                          HUMAN_ROOT_FRAME, HUMAN_SCALING_TOPIC, LAB_FRAME, MARKERS_TOPIC, TF_TOPIC, bag_name, ros_name)
 from .markers import human_markers
-from .runtime import LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, IdleDrain, NodeError, declare, node_main
+from .runtime import LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, IdleDrain, NodeError, declare, node_main, steady_timer
 
 PENDING_PLATE_SAMPLES = 4000      # per plate, between two marker frames (4 s at 1 kHz; the estimator keeps ~2 s)
 
@@ -114,8 +114,8 @@ class HumanComNode(Node):
         self.finished = False
         self.exit_code = 0
         self.drain = IdleDrain(lambda: len(self.costs))   # after a signal, finish the frames already received
-        self.create_timer(0.5, self._discover_plates)
-        self.create_timer(2.0, self._report)
+        steady_timer(self, 0.5, self._discover_plates)
+        steady_timer(self, 2.0, self._report)
         self._discover_plates()
         self.get_logger().info(f"human COM estimator for a {self.subject.height_m:g} m, {self.subject.mass_kg:g} kg "
                                f"{self.subject.sex}; waiting for {MARKERS_TOPIC}")

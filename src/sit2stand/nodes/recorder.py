@@ -10,7 +10,13 @@ Parameters:
     discovery_period_s (0.5)     how often to look for new topics.
     flush_period_s (0.5)         how often the open chunk is written out: a recorder killed with SIGKILL loses at
                                  most this much (rebuild the bag with ``sit2stand bag recover DIR``).
-    use_sim_time (bool)          standard: stamp messages with /clock time instead of the wall clock.
+    use_sim_time (bool)          standard: log messages at /clock time instead of the wall clock (one time base
+                                 with a replayed bag's stamps); what arrives before the first /clock is logged at
+                                 the first /clock time, never at 0.
+
+Topics are those of the recorder's namespace, written with their names relative to it (``/robot2/mocap/markers``
+is ``/mocap/markers`` in the bag of a recorder under ``__ns:=/robot2``; :func:`sit2stand.io.topics.bag_name`), so a
+bag replays into any namespace; ``topics``, ``regex`` and ``exclude`` match those bag names.
 
 Subscriptions take the QoS of the topic's publishers (reliable only if all are, as rosbag2 does), and that QoS is
 stored in the bag. SIGINT or SIGTERM closes the bag cleanly (summary and metadata.yaml written).
@@ -24,9 +30,10 @@ from pathlib import Path
 
 from rclpy.node import Node
 
-from ..io.topics import CLOCK_TOPIC
+from ..io.topics import CLOCK_TOPIC, bag_name
 from ..io.bag import BagError, BagWriter
-from .runtime import IdleDrain, NodeError, declare, message_class, node_main, qos_matching_publishers, qos_to_bag
+from .runtime import (IdleDrain, NodeError, declare, message_class, node_main, qos_matching_publishers, qos_to_bag,
+                      steady_timer)
 
 DEFAULT_EXCLUDE = r"^/rosout$|^/parameter_events$"
 
@@ -60,14 +67,16 @@ class Recorder(Node):
         except BagError as err:
             raise NodeError(str(err)) from None
         self.output = Path(out)
+        self.sim_time = bool(self.get_parameter("use_sim_time").value)
+        self._early: list[tuple[str, bytes]] = []     # received before the first /clock (use_sim_time)
         self.subs = {}
         self.skipped: set[str] = set()
         self.finished = False
         self.exit_code = 0
         self._closed = False
-        self.create_timer(discovery_period, self._discover)
-        self.create_timer(flush_period, self.writer.flush)
-        self.create_timer(5.0, self._log_counts)
+        steady_timer(self, discovery_period, self._discover)
+        steady_timer(self, flush_period, self.writer.flush)
+        steady_timer(self, 5.0, self._log_counts)
         # after SIGINT/SIGTERM, take what DDS already delivered (a publisher that just finished expects it on disk)
         self.drain = IdleDrain(lambda: sum(self.writer.counts.values()))
         what = ["all topics"] if self.record_all else ([", ".join(sorted(self.topics))] if self.topics else []) + \
@@ -83,29 +92,37 @@ class Recorder(Node):
         return self.record_all or topic in self.topics or bool(self.regex and self.regex.search(topic))
 
     def _discover(self) -> None:
-        for topic, types in self.get_topic_names_and_types():
-            if topic in self.subs or topic in self.skipped or not self._wanted(topic):
+        for resolved, types in self.get_topic_names_and_types():
+            topic = bag_name(self.get_namespace(), resolved)       # None: another namespace's
+            if topic is None or topic in self.subs or topic in self.skipped or not self._wanted(topic):
                 continue
-            if not self.get_publishers_info_by_topic(topic):
+            if not self.get_publishers_info_by_topic(resolved):
                 continue  # only subscribers so far: wait for a publisher to learn its QoS
             msgtype = types[0]
             if len(types) > 1:
                 self.get_logger().warning(f"{topic} has several types {types}; recording {msgtype}")
             try:
                 cls = message_class(msgtype)
-                qos = qos_matching_publishers(self, topic)
+                qos = qos_matching_publishers(self, resolved)
                 self.writer.add_topic(topic, msgtype, [qos_to_bag(qos)])
             except (NodeError, BagError) as err:
                 self.get_logger().warning(f"not recording {topic}: {err}")
                 self.skipped.add(topic)
                 continue
             self.subs[topic] = self.create_subscription(
-                cls, topic, lambda data, t=topic: self._on_message(t, data), qos, raw=True)
+                cls, resolved, lambda data, t=topic: self._on_message(t, data), qos, raw=True)
             self.get_logger().info(f"subscribed to {topic} ({msgtype}, "
                                    f"{'reliable' if qos.reliability == 1 else 'best effort'})")
 
     def _on_message(self, topic: str, data: bytes) -> None:
-        self.writer.write_raw(topic, self.get_clock().now().nanoseconds, data)
+        now_ns = self.get_clock().now().nanoseconds
+        if self.sim_time and now_ns == 0:        # no /clock yet: a log time of 0 would be no time of the bag's
+            self._early.append((topic, data))
+            return
+        for early_topic, early in self._early:
+            self.writer.write_raw(early_topic, now_ns, early)
+        self._early.clear()
+        self.writer.write_raw(topic, now_ns, data)
 
     def _log_counts(self) -> None:
         counts = ", ".join(f"{t}: {n}" for t, n in sorted(self.writer.counts.items()))
@@ -117,6 +134,10 @@ class Recorder(Node):
         self._closed = True
         for sub in self.subs.values():
             self.destroy_subscription(sub)
+        if self._early:        # use_sim_time and never a /clock: kept, at log time 0, rather than lost
+            print(f"[recorder] no /clock came: {len(self._early)} messages logged at time 0", flush=True)
+            for topic, data in self._early:
+                self.writer.write_raw(topic, 0, data)
         self.writer.close()
         total = sum(self.writer.counts.values())
         print(f"[recorder] closed {self.output}: {total} messages on {len(self.writer.counts)} topics", flush=True)

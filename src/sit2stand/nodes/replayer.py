@@ -10,6 +10,9 @@ Parameters:
     start_paused (bool, false)   wait for ~/pause(false) before playing.
     publish_clock (bool, true)   publish rosgraph_msgs/Clock on /clock at clock_rate_hz of bag time.
     clock_rate_hz (float, 100)
+    clock_after_end (bool, false)  with at_end "idle": after the last message /clock goes on at the play rate, so a
+                                 graph run under use_sim_time (the stand-up: the robot still stands after the
+                                 human's recording ends) keeps its time base.
     wait_for_subscribers (int, 0)  before playing, wait until every topic has this many subscribers ...
     wait_for (str[], [])         ... or, instead, until each listed "TOPIC:COUNT" has COUNT subscribers (a topic
                                  the bag does not hold counts the graph's subscriptions: a downstream input) ...
@@ -19,6 +22,9 @@ Parameters:
 
 Services: ~/pause (std_srvs/SetBool: true pauses, false resumes).
 Topics out: every bag topic (raw CDR, recorded QoS), /clock, ~/progress (diagnostic_msgs/DiagnosticStatus, 2 Hz).
+Every topic is played relative to the node's namespace: a bag's ``/mocap/markers`` is ``/robot2/mocap/markers``
+under ``__ns:=/robot2`` (:func:`sit2stand.io.topics.ros_name`), /clock included, and the check for another publisher
+of a played topic looks there.
 """
 
 from __future__ import annotations
@@ -37,7 +43,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool
 
-from ..io.topics import CLOCK_TOPIC, FORCE_PLATE_PREFIX, MARKERS_TOPIC
+from ..io.topics import CLOCK_TOPIC, FORCE_PLATE_PREFIX, MARKERS_TOPIC, ros_name
 from ..io.bag import BagError, BagReader
 from ..io.playback import ClockTicks, PlaybackClock, check_rate, parse_wait_for, played_fraction
 from .runtime import NodeError, declare, message_class, node_main, qos_from_bag
@@ -98,12 +104,13 @@ class Replayer(Node):
                     self.get_logger().warning(f"skipping {topic}: {err}")
                     continue
                 raise NodeError(f"{self.bag_path}: topic {topic}: {err}") from None
-            self.pubs[topic] = self.create_publisher(cls, topic, qos_from_bag(self.reader.qos(topic)))
+            self.pubs[topic] = self.create_publisher(cls, ros_name(topic), qos_from_bag(self.reader.qos(topic)))
         if not self.pubs:
             raise NodeError(f"{self.bag_path}: nothing to play")
         self.total = sum(bag_topics[t].count for t in self.pubs)
+        self.clock_after_end = declare(self, "clock_after_end", False, "keep /clock going after the bag's end")
         self.clock_pub = self.create_publisher(
-            Clock, CLOCK_TOPIC, QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
+            Clock, ros_name(CLOCK_TOPIC), QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
                                         durability=DurabilityPolicy.VOLATILE)) if self.publish_clock else None
         self.progress_pub = self.create_publisher(DiagnosticStatus, "~/progress", 10)
         self.create_service(SetBool, "~/pause", self._on_pause)
@@ -166,7 +173,8 @@ class Replayer(Node):
             # a played topic: our publisher's matched subscriptions; any other (e.g. a downstream node's input,
             # /human/com in the stand-up graph): the subscriptions the graph has on it
             short = [t for t, n in wanted.items()
-                     if (self.pubs[t].get_subscription_count() if t in self.pubs else self.count_subscribers(t)) < n]
+                     if (self.pubs[t].get_subscription_count() if t in self.pubs else
+                         self.count_subscribers(ros_name(t))) < n]
             if not short:
                 return
             if time.monotonic() > deadline:
@@ -200,9 +208,7 @@ class Replayer(Node):
                     if self._stop.is_set():
                         return
                     if self.clock_pub is not None and self.clock_ticks.due(msg.timestamp_ns):
-                        clock = Clock()
-                        clock.clock.sec, clock.clock.nanosec = divmod(msg.timestamp_ns, 1_000_000_000)
-                        self.clock_pub.publish(clock)
+                        self._publish_clock(msg.timestamp_ns)
                     self.pubs[msg.topic].publish(msg.data)
                     if self._t_first is None:
                         self._t_first = time.monotonic()
@@ -221,6 +227,8 @@ class Replayer(Node):
             elapsed = time.monotonic() - self._t_first if self._t_first is not None else 0.0
             self.get_logger().info(f"done: {self.sent} messages published in {elapsed:.3f} s "
                                    f"({self.sent / elapsed if elapsed > 0 else 0.0:.0f} msg/s)")
+            if self.clock_after_end and self.at_end == "idle" and self.clock_pub is not None:
+                self._keep_clock()
         except BagError as err:
             self.get_logger().error(str(err))
             self.exit_code = 1
@@ -235,16 +243,29 @@ class Replayer(Node):
             if self.at_end == "exit" or self.exit_code:
                 self.finished = True
 
+    def _publish_clock(self, bag_ns: int) -> None:
+        clock = Clock()
+        clock.clock.sec, clock.clock.nanosec = divmod(int(bag_ns), 1_000_000_000)
+        self.clock_pub.publish(clock)
+
+    def _keep_clock(self) -> None:
+        """After the bag: /clock at ``clock_rate_hz`` of play time from the last message on, until stopped."""
+        period_s = self.clock_ticks.period_ns * 1e-9
+        while not self._stop.wait(period_s / max(self.clock.rate, 1.0)):
+            self._publish_clock(max(self.clock.bag_now_ns(), self.reader.end_ns))
+
     def _check_alone(self) -> None:
-        """Raise :class:`SharedDomain` if another node publishes a topic this replayer plays."""
+        """Raise :class:`SharedDomain` if another node publishes a topic this replayer plays (in its namespace:
+        another graph in another namespace is no conflict)."""
         for topic in self.pubs:
-            publishers = self.get_publishers_info_by_topic(topic)       # ours among them (two replayers share a name)
+            publishers = self.get_publishers_info_by_topic(ros_name(topic))  # ours among them
             if len(publishers) > 1:
                 names = sorted({f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in publishers})
                 domain = os.environ.get("ROS_DOMAIN_ID", "0")
-                raise SharedDomain(f"{topic} has {len(publishers)} publishers ({', '.join(names)}) on ROS domain "
-                                   f"{domain}: two graphs there would mix their data; stopping (give each its own "
-                                   f"ROS_DOMAIN_ID)")
+                raise SharedDomain(f"{self.resolve_topic_name(ros_name(topic))} has {len(publishers)} publishers "
+                                   f"({', '.join(names)}) on ROS domain {domain}: two graphs there would mix their "
+                                   f"data; stopping (give each its own namespace, sit2stand launch --namespace, or "
+                                   f"its own ROS_DOMAIN_ID)")
 
     def _report(self, force: bool = False) -> None:
         now = time.monotonic()

@@ -52,7 +52,7 @@ from ..retarget.stabiliser import StabiliserConfig
 from ..retarget.stream import robot_model, robot_setup
 from .markers import plan_markers
 from .runtime import (PUBLISH_DEPTH, IdleDrain, NodeError, declare, node_main, qos_matching_publishers,
-                      scheduling_text)
+                      scheduling_text, steady_timer)
 
 ROBOT_STATE_MAX_AGE_S = 0.1
 """An older robot state is not used by the COM feedback (the last shift is kept instead)."""
@@ -120,8 +120,8 @@ class RetargeterNode(Node):
         self.finished, self.exit_code = False, 0
         self.drain = IdleDrain(lambda: self.live.processed)
         self.scheduling = scheduling_text()
-        self.create_timer(0.25 / self.live.cfg.rate_hz, self._tick)
-        self.create_timer(2.0, self._report)
+        steady_timer(self, 0.25 / self.live.cfg.rate_hz, self._tick)
+        steady_timer(self, 2.0, self._report)
         self.get_logger().info(f"retargeter: plant {self.plant_file}, COM parameters "
                                f"{self.params_file or 'CAD'}; waiting for {MARKERS_TOPIC} and {HUMAN_COM_TOPIC}")
 
@@ -130,7 +130,7 @@ class RetargeterNode(Node):
         self.create_subscription(MocapFrame, ros_name(MARKERS_TOPIC), self._on_markers, deep)
         # /human/com is subscribed with its publishers' durability once they appear (transient local from the
         # estimator: a late match still gets every estimate; volatile from a replayed bag)
-        self._com_discovery = self.create_timer(0.1, self._discover_com)
+        self._com_discovery = steady_timer(self, 0.1, self._discover_com)
         self.create_subscription(ForcePlateSample, ros_name(CHAIR_PLATE_TOPIC), self._on_chair,
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
                                             reliability=ReliabilityPolicy.RELIABLE), raw=True)

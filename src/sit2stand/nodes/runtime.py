@@ -15,6 +15,8 @@ import time
 from collections.abc import Callable
 
 import rclpy
+from rclpy.clock import Clock as RosClock
+from rclpy.clock import ClockType
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
@@ -138,6 +140,12 @@ def qos_matching_publishers(node: Node, topic: str, keep_all: bool = True, depth
         durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)
 
 
+def steady_timer(node: Node, period_s: float, callback: Callable[[], None]):
+    """A timer on the monotonic clock: it runs under ``use_sim_time`` too, before the first /clock and after the
+    last (a ROS-time timer would not: discovery waiting for the replayer, which waits for the discovery)."""
+    return node.create_timer(period_s, callback, clock=RosClock(clock_type=ClockType.STEADY_TIME))
+
+
 class IdleDrain:
     """A node's ``drain()`` after a signal: keep spinning until ``count()`` has not changed for ``idle_s``."""
 
@@ -169,6 +177,12 @@ def _make_executor(kind: str):
     return SingleThreadedExecutor()
 
 
+# use_sim_time's /clock subscription is absolute in rclpy: remapped to the node's namespace (the replayer publishes
+# there), so ``__ns`` moves a graph's time base with its topics. After the user's own arguments: a rule of theirs for
+# /clock comes first and wins.
+CLOCK_IN_NAMESPACE = ["--ros-args", "-r", "/clock:=clock"]
+
+
 def node_main(factory: Callable[[], Node]) -> Callable[[list[str] | None], int]:
     """Make a console-script ``main`` that runs one node until it finishes, SIGINT or SIGTERM.
 
@@ -181,7 +195,8 @@ def node_main(factory: Callable[[], Node]) -> Callable[[list[str] | None], int]:
     """
 
     def main(argv: list[str] | None = None) -> int:
-        rclpy.init(args=sys.argv if argv is None else argv, signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(args=list(sys.argv if argv is None else argv) + CLOCK_IN_NAMESPACE,
+                   signal_handler_options=SignalHandlerOptions.NO)
         signals = {"count": 0}
 
         def on_signal(signum, _frame):
