@@ -16,6 +16,7 @@
     sit2stand launch GRAPH [NAME:=VALUE ...] [--timeout S]   (a graph file, or a packaged graph's name: standup)
     sit2stand replay BAG [--rate R] [--loop] [--topics T ...]   (the replayer node)
     sit2stand record --out BAG [--topics T ...] [--regex RE]    (the recorder node)
+    sit2stand serve-c3d FILE.c3d --protocol qtm [--port P] [--rate R] [--loop]   (a QTM stand-in for the bridge)
 
 PLANT is a plant YAML or a packaged plant's name (default, heavy_front, cad). Errors are printed as one line naming
 the file, topic or field, with exit code 2.
@@ -29,7 +30,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .commands import graph, human, robot
+from .commands import capture, graph, human, robot
 
 COMMANDS = [
     human.add_import_c3d,
@@ -48,6 +49,7 @@ COMMANDS = [
     graph.add_launch,
     graph.add_replay,
     graph.add_record,
+    capture.add_serve_c3d,
 ]
 """The sub-commands, in the order ``--help`` lists them."""
 

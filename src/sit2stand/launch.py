@@ -60,7 +60,7 @@ from .data import folder as data_folder
 from .data import names as data_names
 from .errors import Sit2StandError
 
-OUR_NODES = {"replayer", "recorder", "human_com", "driver", "identification", "retargeter"}
+OUR_NODES = {"replayer", "recorder", "human_com", "driver", "identification", "retargeter", "mocap_bridge"}
 SUBST = re.compile(r"\$\((var|env|dirname)(?:\s+([^)\s]+))?(?:\s+([^)]*))?\)")
 
 

@@ -29,7 +29,7 @@ from .topics import (COM_TYPE, MARKERS_TOPIC, MOCAP_TYPE, MODEL_POINTS_TOPIC, PL
                      plate_topic)
 from ..errors import Sit2StandError
 from .bag import BagWriter
-from .forceplate import DEFAULT_COP_THRESHOLD_N, PlateSeries, center_of_pressure, plate_surface, shift_moment
+from .forceplate import DEFAULT_COP_THRESHOLD_N, PlateSeries, wrench_in_lab
 from .messages import (center_of_mass, mocap_frame, plate_messages)
 
 LENGTH_SCALE = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "dm": 0.1}
@@ -342,21 +342,17 @@ def _point_series(raw: _RawFile, labels: list[str],
 def _lab_plates(raw_plates: list[tuple], R: np.ndarray, t0_s: float, analog_rate_hz: float, named: dict,
                 cop_threshold_n: float) -> list[PlateSeries]:
     """The plates in lab axes, wrench about the lab origin, with their COP; unloaded unnamed plates left out."""
-    up_lab = np.array([0.0, 0.0, 1.0])
     plates: list[PlateSeries] = []
     for i, force_f, moment_f, corners_f in raw_plates:
-        force = force_f @ R.T
-        corners = corners_f @ R.T
-        centre, normal = plate_surface(corners, up_lab)
-        moment_c = moment_f @ R.T
-        cop, cop_valid, tau = center_of_pressure(force, moment_c, centre, normal, cop_threshold_n)
-        moment_o = shift_moment(moment_c, force, centre, np.zeros(3))
+        w = wrench_in_lab(force_f, moment_f, corners_f, R, cop_threshold_n)
+        force = w.force_n
         name = named.get(i, f"plate{i}")
-        loaded = np.count_nonzero(np.abs(force @ normal) > cop_threshold_n) >= max(1, 0.01 * len(force))
+        loaded = np.count_nonzero(np.abs(force @ w.normal) > cop_threshold_n) >= max(1, 0.01 * len(force))
         if not loaded and i not in named:
             continue  # unused plates are not published
         t_s = t0_s + np.arange(len(force)) / analog_rate_hz
-        plates.append(PlateSeries(name, t_s, force, moment_o, cop, cop_valid, tau, corners, index=i))
+        plates.append(PlateSeries(name, t_s, force, w.moment_origin_nm, w.cop_m, w.cop_valid, w.free_moment_nm,
+                                  w.corners_m, index=i))
     return plates
 
 

@@ -121,6 +121,35 @@ def center_of_pressure(force_n: np.ndarray, moment_nm: np.ndarray, point_m: np.n
     return cop, valid, tau
 
 
+@dataclass
+class LabWrench:
+    """One plate's samples in lab axes: force [N], moment about the lab origin [N m], COP [m] (NaN where invalid)
+    and its validity, free moment [N m]; the plate's corners [m] and surface normal."""
+
+    force_n: np.ndarray
+    moment_origin_nm: np.ndarray
+    cop_m: np.ndarray
+    cop_valid: np.ndarray
+    free_moment_nm: np.ndarray
+    corners_m: np.ndarray
+    normal: np.ndarray
+
+
+def wrench_in_lab(force_n: np.ndarray, moment_centre_nm: np.ndarray, corners_m: np.ndarray, rotation: np.ndarray,
+                  threshold_n: float = DEFAULT_COP_THRESHOLD_N) -> LabWrench:
+    """A plate's wrench given in the capture system's axes, moment about the plate's surface centre, rotated into
+    the lab (``v_lab = rotation @ v``), its moment moved to the lab origin and its COP found on the surface.
+
+    The one home of this arithmetic: the C3D importer and the live capture bridge both call it, so a live stream
+    and an imported file of the same recording give the same samples."""
+    force = np.asarray(force_n, float) @ rotation.T
+    corners = np.asarray(corners_m, float) @ rotation.T
+    centre, normal = plate_surface(corners, np.array([0.0, 0.0, 1.0]))
+    moment_c = np.asarray(moment_centre_nm, float) @ rotation.T
+    cop, cop_valid, tau = center_of_pressure(force, moment_c, centre, normal, threshold_n)
+    return LabWrench(force, shift_moment(moment_c, force, centre, np.zeros(3)), cop, cop_valid, tau, corners, normal)
+
+
 def combined_cop(forces_n: list[np.ndarray], moments_origin_nm: list[np.ndarray], height_m: float = 0.0,
                  threshold_n: float = DEFAULT_COP_THRESHOLD_N) -> tuple[np.ndarray, np.ndarray]:
     """COP of several plates together, on the horizontal plane z = ``height_m``.

@@ -1,0 +1,272 @@
+"""A capture-system stand-in: serves a :class:`~.recording.CaptureRecording` over the QTM real-time protocol.
+
+``sit2stand serve-c3d FILE --protocol qtm --port P [--rate R] [--loop]``. Speaks protocol 1.8-1.25 on the
+little-endian port as QTM does (see :mod:`.qtm_protocol`): the welcome string, ``Version``, ``QTMVersion``,
+``ByteOrder``, ``GetState``, ``GetParameters`` (General, 3D, Force), ``GetCurrentFrame``, ``StreamFrames``
+(``AllFrames``, ``FrequencyDivisor:n``, ``Frequency:n``; over TCP or ``UDP[:address]:port``; components 3D, 3DRes,
+3DNoLabels, Force, ForceSingle) and ``ByeBye``/``Quit``; anything else is answered ``Parse Error``.
+
+The measurement is one clock shared by every client, like QTM's: it starts at the first ``StreamFrames`` (so a
+client that connects first gets frame 1) and plays at the file's rate times ``speed``. Frame ``k`` is sent when
+its capture time ``origin + k / rate`` comes: the origin (CLOCK_REALTIME) is printed, so a program on the same
+clock measures latency from capture. At the end (without ``loop``) every streaming client gets a No More Data
+packet and the event RT From File Stopped.
+
+Threads, not asyncio: the frame clock sleeps to 1 ms before a frame's time and spins the rest, so frames leave
+within ~0.1 ms of their capture time (an asyncio timer was 1 ms late at p50).
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from dataclasses import dataclass
+
+from .qtm_protocol import (OLDEST_VERSION, PROTOCOL_VERSION, WELCOME, Component, Event, PacketType, ProtocolError,
+                           StreamRequest, data_packet, event_packet, packet, parameters_xml, parse_stream_frames,
+                           parse_version, split_packets, string_packet, text_of)
+from .recording import CaptureRecording
+
+QTM_VERSION = "QTM Version is 2024.2 (sit2stand serve-c3d)"
+SPIN_S = 0.001
+
+
+@dataclass
+class _Stream:
+    """A client's StreamFrames request: where to send, which components, every n-th frame."""
+
+    client: _Client
+    request: StreamRequest
+    divisor: int
+    udp_target: tuple[str, int] | None
+
+
+class _Client(threading.Thread):
+    """One TCP client: reads commands, answers them; the frame clock writes its data packets."""
+
+    def __init__(self, server: QtmServer, sock: socket.socket, address: tuple[str, int]) -> None:
+        super().__init__(name=f"qtm-client-{address[1]}", daemon=True)
+        self.server, self.sock, self.address = server, sock, address
+        self.lock = threading.Lock()
+        self.alive = True
+        self.version = "1.1"
+
+    def send(self, data: bytes) -> None:
+        with self.lock:
+            try:
+                self.sock.sendall(data)
+            except OSError:
+                self.alive = False
+
+    def run(self) -> None:
+        self.send(string_packet(PacketType.COMMAND, WELCOME))
+        buffer = b""
+        try:
+            while self.alive and not self.server.stopped.is_set():
+                chunk = self.sock.recv(65536)
+                if not chunk:
+                    break
+                packets, buffer = split_packets(buffer + chunk)
+                for kind, body in packets:
+                    self._on_packet(kind, body)
+        except (OSError, ProtocolError):
+            pass
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        self.alive = False
+        self.server.drop(self)
+        try:
+            self.sock.close()
+        except OSError:
+            pass
+
+    def _on_packet(self, kind: PacketType, body: bytes) -> None:
+        if kind != PacketType.COMMAND:
+            self.send(string_packet(PacketType.ERROR, "Parse Error"))
+            return
+        words = text_of(body).split()
+        if not words:
+            return
+        try:
+            reply = self.server.command(self, words[0].lower(), words[1:])
+        except ProtocolError as err:
+            reply = string_packet(PacketType.ERROR, str(err))
+        if reply:
+            self.send(reply)
+
+
+class QtmServer:
+    """Serves one recording to any number of clients (see the module docstring)."""
+
+    def __init__(self, recording: CaptureRecording, host: str = "127.0.0.1", port: int = 22223,
+                 speed: float = 1.0, loop: bool = False, log=print) -> None:
+        if speed <= 0:
+            raise ProtocolError(f"--rate must be positive, not {speed}")
+        self.recording, self.speed, self.loop, self.log = recording, float(speed), loop, log
+        self.stopped = threading.Event()
+        self.started = threading.Event()
+        self.streams: dict[int, _Stream] = {}
+        self.clients: list[_Client] = []
+        self.frames_sent = 0
+        self.origin_ns = 0
+        self.listener = socket.create_server((host, port), reuse_port=False)
+        self.port = self.listener.getsockname()[1]
+        self.udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._lock = threading.Lock()
+
+    # --- commands --------------------------------------------------------------------------------------------
+    def command(self, client: _Client, word: str, args: list[str]) -> bytes | None:
+        """The reply packet to one command (None: no reply, as for ``StreamFrames``)."""
+        if word == "version":
+            return self._version(client, args)
+        if word == "qtmversion":
+            return string_packet(PacketType.COMMAND, QTM_VERSION)
+        if word == "byteorder":
+            return string_packet(PacketType.COMMAND, "Byte order is little endian")
+        if word == "getstate":
+            return event_packet(Event.RT_FROM_FILE_STARTED if self.started.is_set() else Event.RT_FROM_FILE_STOPPED)
+        if word == "getparameters":
+            return self._parameters(client, {a.lower() for a in args})
+        if word == "getcurrentframe":
+            req = parse_stream_frames(["allframes", *args])
+            return data_packet(self.recording.frame(min(self.frames_sent, self.recording.n_frames - 1)),
+                               req.components)
+        if word == "streamframes":
+            return self._stream(client, args)
+        if word in ("byebye", "bye", "quit"):
+            client.alive = False
+            return None
+        return string_packet(PacketType.ERROR, "Parse Error")
+
+    def _version(self, client: _Client, args: list[str]) -> bytes:
+        if not args:
+            return string_packet(PacketType.COMMAND, f"Version is {client.version}")
+        major, minor = parse_version(args[0])
+        if major != 1 or (major, minor) < OLDEST_VERSION or (major, minor) > parse_version(PROTOCOL_VERSION):
+            return string_packet(PacketType.ERROR, "Version NOT supported")
+        client.version = f"{major}.{minor}"
+        return string_packet(PacketType.COMMAND, f"Version set to {client.version}")
+
+    def _parameters(self, client: _Client, what: set[str]) -> bytes:
+        rec = self.recording
+        every = "all" in what
+        labels = rec.labels if every or "3d" in what else None
+        plates = [p.info for p in rec.plates] if every or "force" in what else None
+        return string_packet(PacketType.XML, parameters_xml(labels, plates, rec.rate_hz * self.speed, client.version))
+
+    def _stream(self, client: _Client, args: list[str]) -> None:
+        if args and args[0].lower() == "stop":
+            with self._lock:
+                self.streams.pop(id(client), None)
+            return None
+        req = parse_stream_frames(args)
+        divisor = req.divisor
+        if req.frequency_hz:
+            divisor = max(1, int(round(self.recording.rate_hz * self.speed / req.frequency_hz)))
+        target = (req.udp_address or client.address[0], req.udp_port) if req.udp_port else None
+        with self._lock:
+            self.streams[id(client)] = _Stream(client, req, divisor, target)
+        self.started.set()
+        return None
+
+    def drop(self, client: _Client) -> None:
+        with self._lock:
+            self.streams.pop(id(client), None)
+            if client in self.clients:
+                self.clients.remove(client)
+
+    # --- the frame clock -------------------------------------------------------------------------------------
+    def _wait_until(self, t_ns: int) -> None:
+        while not self.stopped.is_set():
+            left = (t_ns - time.time_ns()) * 1e-9
+            if left <= 0:
+                return
+            if left > SPIN_S:
+                time.sleep(left - SPIN_S)
+
+    def _send_frame(self, k: int, pass_index: int) -> None:
+        frame = self.recording.frame(k, pass_index)
+        with self._lock:
+            streams = list(self.streams.values())
+        encoded: dict[tuple[Component, ...], bytes] = {}
+        for s in streams:
+            if (frame.frame_number - 1) % s.divisor:
+                continue
+            key = tuple(s.request.components)
+            data = encoded.get(key) or encoded.setdefault(key, data_packet(frame, s.request.components))
+            if s.udp_target is not None:
+                try:
+                    self.udp.sendto(data, s.udp_target)
+                except OSError:
+                    pass
+            else:
+                s.client.send(data)
+        self.frames_sent += 1
+
+    def _play(self) -> None:
+        self.started.wait()
+        rec = self.recording
+        period_ns = 1e9 / (rec.rate_hz * self.speed)
+        self.origin_ns = time.time_ns()
+        self.log(f"streaming {rec.source}: {rec.n_frames} frames at {rec.rate_hz * self.speed:g} Hz; capture clock "
+                 f"origin {self.origin_ns} ns (CLOCK_REALTIME) at timestamp 0", flush=True)
+        pass_index = 0
+        while not self.stopped.is_set():
+            for k in range(rec.n_frames):
+                number = pass_index * rec.n_frames + k
+                self._wait_until(self.origin_ns + int(round(number* period_ns)))
+                if self.stopped.is_set():
+                    return
+                self._send_frame(k, pass_index)
+            pass_index += 1
+            if not self.loop:
+                break
+        self._end()
+
+    def _end(self) -> None:
+        with self._lock:
+            streams = list(self.streams.values())
+        for s in streams:
+            s.client.send(packet(PacketType.NO_MORE_DATA) + event_packet(Event.RT_FROM_FILE_STOPPED))
+        self.log(f"end of {self.recording.source}: {self.frames_sent} frames sent", flush=True)
+
+    # --- running ---------------------------------------------------------------------------------------------
+    def serve(self, exit_at_end: bool = True) -> int:
+        """Accept clients and play the recording; returns when it has been played (``exit_at_end``), on
+        :meth:`stop`, or never with ``loop``."""
+        player = threading.Thread(target=self._play, name="frame-clock", daemon=True)
+        player.start()
+        self.listener.settimeout(0.2)
+        try:
+            while not self.stopped.is_set():
+                if exit_at_end and not player.is_alive():
+                    time.sleep(0.5)          # the end packets reach the clients before the sockets close
+                    break
+                try:
+                    sock, address = self.listener.accept()
+                except TimeoutError:
+                    continue
+                except OSError:          # stop() closed the socket from another thread
+                    break
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)   # as the protocol asks: no Nagle
+                client = _Client(self, sock, address)
+                with self._lock:
+                    self.clients.append(client)
+                client.start()
+        finally:
+            self.stop()
+        return 0
+
+    def stop(self) -> None:
+        """Stop playing, close every client and the listening socket."""
+        self.stopped.set()
+        self.started.set()
+        with self._lock:
+            clients = list(self.clients)
+        for c in clients:
+            c.close()
+        self.listener.close()
+        self.udp.close()
