@@ -68,7 +68,7 @@ def test_implausible_winner_is_skipped():
     rng = np.random.default_rng(1)
     n = 2000
     x = rng.normal(size=(n, 1))
-    twin = Candidate("k", "implausible", ["p"], x.copy(), plausible=lambda th: False)
+    twin = Candidate("k", "implausible", ["p"], x.copy(), plausible=lambda th: "never")
     real = Candidate("k", "real", ["p"], x + 1e-3 * rng.normal(size=(n, 1)))
     y = 0.5 * x[:, 0] + rng.normal(size=n)
     sel = select(y, [twin, real], noise_rss=float(n))

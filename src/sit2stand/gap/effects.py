@@ -1,19 +1,35 @@
-"""The named effects as a plant's ``unmodeled`` section: one mapping for the hidden-effect plants, the augmented
-model file and the re-simulation.
+"""The named effects as a plant's ``unmodeled`` section, or as changes to the compiled MuJoCo model: one mapping for
+the hidden-effect plants, the augmented model file and the re-simulation.
 
 An effect is a dict as the workflow reports it: ``kind``, ``location`` (a link, a joint, ``ft_<side>/<axis>`` or
-"all joints"), and ``mass_kg`` + ``pos_m`` (extra mass) or ``value`` (the rest; a torque gain as measured / true).
+"all joints"), and ``mass_kg`` + ``pos_m`` (extra mass) or ``value`` (the rest; a torque gain as measured / true;
+a spring also has ``rest_rad``).
+
+The plant file's ``unmodeled`` section has no field for a joint spring or a rotor inertia, nor for the kinematic and
+contact errors the hidden-effect suite hides outside the workflow's library (link length, joint axis, sole contact
+stiffness): :func:`alter_model` applies those to a compiled model (``MODEL_KINDS``).
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict
+from fnmatch import fnmatchcase
 
+import mujoco
+import numpy as np
+
+from ..errors import InputError
 from ..robot.model import ExtraBodyMass, Unmodeled
 
 FT_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
 JOINT_TABLES = {"viscous_friction": "viscous_friction", "coulomb_friction": "coulomb_friction",
                 "torque_bias": "torque_bias_nm", "torque_gain": "torque_gain", "joint_offset": "joint_offset_rad"}
+
+
+# joint spring [N m/rad] about rest_rad, rotor inertia [kg m^2] added to the armature, a link's offset from its
+# parent scaled by value, a joint axis tilted by value [rad], the soles' contact time constant [s] (MuJoCo solref)
+MODEL_KINDS = ("joint_spring", "rotor_inertia", "link_length", "joint_axis", "contact_softness")
+DAMPING_RATIO = 1.0          # the soles' contact damping ratio (MuJoCo's default), kept when the stiffness changes
 
 
 def ft_location(location: str) -> tuple[str, int]:
@@ -40,6 +56,8 @@ def unmodeled_from(effects: list[dict], mass_prefix: str = "found") -> Unmodeled
             um.ft_bias[side] = tuple(bias)
         elif k == "actuator_delay":
             um.actuator_delay_s += float(e["value"])
+        elif k in MODEL_KINDS:
+            continue                     # applied to the compiled model (alter_model)
         else:
             table = getattr(um, JOINT_TABLES[k])
             old = table.get(e["location"], 1.0 if k == "torque_gain" else 0.0)
@@ -59,3 +77,43 @@ def unmodeled_dict(um: Unmodeled) -> dict:
             continue
         out[key] = value
     return out
+
+
+def alter_model(model: mujoco.MjModel, effects: list[dict]) -> None:
+    """Apply the ``MODEL_KINDS`` effects of ``effects`` to a compiled plant model in place (a location may be a glob
+    such as ``leg_*_4_link``); the other kinds are left to :func:`unmodeled_from`."""
+    for e in effects:
+        k, v = e["kind"], float(e.get("value", 0.0))
+        if k not in MODEL_KINDS:
+            continue
+        if k == "contact_softness":
+            for g in _matching(model, mujoco.mjtObj.mjOBJ_GEOM, model.ngeom, "sole_box_*"):
+                model.geom_solref[g] = [v, DAMPING_RATIO]
+            continue
+        obj = mujoco.mjtObj.mjOBJ_BODY if k == "link_length" else mujoco.mjtObj.mjOBJ_JOINT
+        ids = _matching(model, obj, model.nbody if k == "link_length" else model.njnt, e["location"])
+        if not ids:
+            raise InputError(f"{k}: no {'link' if k == 'link_length' else 'joint'} matches {e['location']!r}")
+        for i in ids:
+            _alter_one(model, k, i, v, e)
+
+
+def _alter_one(model: mujoco.MjModel, kind: str, i: int, v: float, effect: dict) -> None:
+    """One body or joint ``i`` of ``model`` changed by effect ``kind`` of size ``v``."""
+    if kind == "link_length":
+        model.body_pos[i] *= v
+    elif kind == "joint_spring":
+        model.jnt_stiffness[i] = v
+        model.qpos_spring[model.jnt_qposadr[i]] = float(effect.get("rest_rad", 0.0))
+    elif kind == "rotor_inertia":
+        model.dof_armature[model.jnt_dofadr[i]] += v
+    elif kind == "joint_axis":         # tilt the axis by v toward a direction perpendicular to it
+        axis = model.jnt_axis[i]
+        perp = np.cross(axis, [0.0, 0.0, 1.0] if abs(axis[2]) < 0.9 else [1.0, 0.0, 0.0])
+        perp /= np.linalg.norm(perp)
+        model.jnt_axis[i] = np.cos(v) * axis + np.sin(v) * perp
+
+
+def _matching(model: mujoco.MjModel, obj: mujoco.mjtObj, count: int, pattern: str) -> list[int]:
+    """Ids of the objects of type ``obj`` whose name matches ``pattern``."""
+    return [i for i in range(count) if fnmatchcase(mujoco.mj_id2name(model, obj, i) or "", pattern)]

@@ -27,6 +27,7 @@ from ..io.bag import BagWriter
 from ..robot.model import SIDES, PlantConfig
 from ..robot.plant import Plant
 from ..robot.postures import home_com_bias, plan_postures
+from .effects import alter_model
 
 
 def quintic(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -36,9 +37,15 @@ def quintic(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def excite(cfg: PlantConfig, out: str | Path, seed: int = 0, n_moves: int = 8, move_s: float = 2.5,
-           hold_s: float = 0.5, rate_hz: float = 100.0, progress: bool = False) -> dict:
-    """Run and record an excitation (see the module docstring); returns a summary (duration, fell)."""
+           hold_s: float = 0.5, rate_hz: float = 100.0, progress: bool = False,
+           alterations: list[dict] | None = None) -> dict:
+    """Run and record an excitation (see the module docstring); returns a summary (duration, fell).
+    ``alterations``: effects applied to the compiled plant (``gap.effects.alter_model``: springs, rotor inertia,
+    kinematic and contact errors)."""
     plant = Plant(replace(cfg, fall_tilt_rad=np.pi), with_chair=False)
+    if alterations:
+        alter_model(plant.model, alterations)
+        plant.reset()
     bias = home_com_bias(plant)
     stances = plan_postures(plant, n_moves, seed=seed, com_bias_m=bias)
     if len(stances) < n_moves:

@@ -28,7 +28,8 @@ from ..io.bag import BagError
 from .residuals import base_to_world
 from .select import Candidate, Selection, select
 from .dataset import fast_part_floor
-from .workflow import SIGNIFICANT_Z, _mass_within_reach, effect_summary
+from .bounds import Limits, refusal
+from .workflow import MASS_PARAMS, SIGNIFICANT_Z, effect_summary
 
 
 @dataclass
@@ -85,9 +86,13 @@ def human_gap(bag: str | Path, progress=None) -> HumanGap:
         X[:, :, 0] -= own[:, :, 0] / total
         return X
 
-    cands = [Candidate("extra_mass", seg, ["mass [kg]", "mass*com_x [kg m]", "mass*com_y [kg m]",
-                                           "mass*com_z [kg m]"], stack(within_scale_mass(seg)),
-                       plausible=_mass_within_reach) for seg in SEGMENTS]
+    def bounded(seg: str):
+        """The extra mass's bounds on ``seg`` (gap.bounds; a lighter segment: at most its own mass)."""
+        limits = Limits(link_mass_kg=float(model.inertias[human.segment_joint[seg]].mass))
+        return lambda theta: refusal("extra_mass", seg, theta, limits)
+
+    cands = [Candidate("extra_mass", seg, MASS_PARAMS, stack(within_scale_mass(seg)), plausible=bounded(seg))
+             for seg in SEGMENTS]
     cands.append(Candidate("mass_scale", "whole body", ["scale - 1"], stack(own)))
     if progress:
         progress(f"  {len(keep)} supported frames, {len(cands)} candidates: selecting")

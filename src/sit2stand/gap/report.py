@@ -22,8 +22,7 @@ import matplotlib
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..robot.model import PlantConfig
-from .resimulate import compare, plant_from_effects, simulate
+from .resimulate import compare
 from .workflow import GapResult, describe, load_nominal, run, write_augmented, write_json
 
 PHASE_COLOURS = {"seated": "#dde8f5", "seat-off": "#f5dcc8", "rising": "#f7f0c8", "standing": "#ddf2dd",
@@ -168,8 +167,11 @@ def markdown(result: GapResult) -> str:
     lines = ["# Model gap report", "",
              f"- nominal model: `{result.model_source}`",
              f"- measured: {', '.join(f'`{b}`' for b in result.bags)}",
-             f"- gap above the noise on the channels that disagreed: **{result.gap_before:.2f} -> "
-             f"{result.gap_after:.2f}** (shrink {100 * result.shrink:.0f} %)", ""]
+             f"- gap above the noise on the channels that disagreed, the named effects applied for real: "
+             f"**{result.gap_before:.2f} -> {result.gap_after:.2f}** (shrink {100 * result.shrink:.0f} %; to first "
+             f"order {result.gap_after_first_order:.2f}, {100 * result.shrink_first_order:.0f} %)",
+             f"- the re-simulation's gap on its channels that disagreed (COP x, feet force, joint positions): "
+             f"{result.replay_gap_before:.2f} -> {result.replay_gap_after:.2f}", ""]
     for r, (b, a) in enumerate(cop_rms(result)):
         lines.append(f"- model COP error (recording {r}): {100 * b:.2f} cm -> {100 * a:.2f} cm RMS")
     lines += ["", "## Verdict", ""]
@@ -182,23 +184,28 @@ def markdown(result: GapResult) -> str:
     else:
         lines.append(f"**{result.verdict}**")
     lines += [""]
+    if result.refused:
+        lines += ["Refused (the residual they would have absorbed is left unexplained):", ""]
+        lines += [f"- {d['effect']}: {d['why']}" for d in result.refused[:15]] + [""]
     if result.unexplained:
         lines += ["**A residual is left that no candidate explains:**", "",
-                  "| recording | channel | RMS after | floor | ratio |", "| --- | --- | --- | --- | --- |"]
-        lines += [f"| {u['recording']} | {u['channel']} | {u['rms']:.3g} | {u['floor']:.3g} | {u['z']:.1f} |"
-                  for u in result.unexplained[:15]]
+                  "| recording | channel | RMS after | floor | ratio | above 3 floors [s] | shape |",
+                  "| --- | --- | --- | --- | --- | --- | --- |"]
+        lines += [f"| {u['recording']} | {u['channel']} | {u['rms']:.3g} | {u['floor']:.3g} | {u['z']:.1f} | "
+                  f"{_span(u['above_s'])} | {u['shape']} |" for u in result.unexplained[:15]]
     elif result.effects:
         lines.append("Nothing is left above 3 x the noise floor on any channel.")
     if result.replay:
         lines += ["", "## The recorded commands replayed in simulation", "",
-                  "| recording | model | COP x RMS vs measured | feet vertical force RMS | fell |",
-                  "| --- | --- | --- | --- | --- |"]
+                  "| recording | model | COP x RMS vs measured | feet vertical force RMS | worst joint position RMS "
+                  "| fell |", "| --- | --- | --- | --- | --- | --- |"]
         for rp in result.replay:
             for name, v in rp.items():
                 if name == "recording":
                     continue
                 cop = f"{100 * v['cop_x_rms_m']:.2f} cm" if v["cop_x_rms_m"] is not None else "n/a"
-                lines.append(f"| {rp['recording']} | {name} | {cop} | {v['feet_fz_rms_n']:.1f} N | {v['fell']} |")
+                lines.append(f"| {rp['recording']} | {name} | {cop} | {v['feet_fz_rms_n']:.1f} N | "
+                             f"{1000 * v['q_rms_max_rad']:.2f} mrad | {v['fell']} |")
     lines += ["", "## Where the nominal model was wrong (ranked)", "",
               "| # | recording | channel | phase | RMS | floor | ratio | worst at [s] |",
               "| --- | --- | --- | --- | --- | --- | --- | --- |"]
@@ -220,23 +227,20 @@ def markdown(result: GapResult) -> str:
     return "\n".join(lines)
 
 
-def replay_all(result: GapResult, progress=None) -> list[dict]:
-    """Re-simulate each run that carries its commands, in the nominal model (CAD) and with the named effects added
-    (see :mod:`sit2stand.gap.resimulate`); identified nominal models are not re-simulated (their per-link masses are
-    not a plant file)."""
+def _span(above: list[float] | None) -> str:
+    """A time span [s] as text."""
+    return f"{above[0]:.1f}-{above[1]:.1f}" if above else "-"
 
+
+def replay_all(result: GapResult) -> list[dict]:
+    """The workflow's re-simulations (nominal model and with the named effects; see :mod:`sit2stand.gap.validate`)
+    per recording, with their RMS against the measurements."""
     out = []
-    if result.model_source != "cad":
-        return out
-    for r, rec in enumerate(result.dataset.recordings):
-        if rec.static or rec.commands is None:
-            continue
-        seated = bool(result.dataset.events[r])
-        if progress:
-            progress(f"  re-simulating {Path(rec.source).name}: nominal model, then with the named effects")
-        sims = {"nominal model": simulate(PlantConfig(), rec, seated),
-                "with the named effects": simulate(plant_from_effects(result.known + result.effects), rec, seated)}
-        out.append({"recording": r, "sims": sims, "rms": compare(rec, sims)})
+    sims = result.sims
+    for r in sims.get("nominal model", {}):
+        rec = result.dataset.recordings[r]
+        pair = {name: sims[name][r] for name in sims}
+        out.append({"recording": r, "sims": pair, "rms": compare(rec, pair)})
     return out
 
 
@@ -272,11 +276,9 @@ def replay_figure(result: GapResult, replays: list[dict], png: Path) -> None:
 def write_report(result: GapResult, out: str | Path, progress=None) -> dict:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    replays = replay_all(result, progress)
+    replays = replay_all(result)
     if replays:
         replay_figure(result, replays, out / "gap_replay.png")
-    result.replay = [{"recording": rp["recording"], **{k: {kk: vv for kk, vv in v.items() if kk != "tau_rms_nm"}
-                                                      for k, v in rp["rms"].items()}} for rp in replays]
     nominal, _, _ = load_nominal(None if result.model_source == "cad" else result.model_source)
     doc = write_augmented(result, nominal, out / "augmented_model.yaml")
     write_json(result, out / "gap.json")

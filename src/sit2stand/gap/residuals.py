@@ -18,6 +18,8 @@ Every candidate physical effect enters e linearly, to first order, through a **s
   first-moment columns of ``pin.computeJointTorqueRegressor`` (its rotational inertia m |c|^2 is neglected);
 * joint viscous friction [N m s/rad]: q'_j on row j; Coulomb friction [N m]: sat(q'_j / v0) on row j
   (:func:`coulomb_signature`);
+* joint spring (stiffness k [N m/rad], preload -k q_rest [N m]): q_j and 1 on row j (the actuator holds the spring);
+* rotor inertia (armature beyond the model's) [kg m^2]: q''_j on row j;
 * joint-torque sensor bias [N m]: 1 on row j; gain error (measured / true - 1): the model torque on row j;
 * joint encoder offset (reading - true angle) [rad]: d e / d q_j, by finite differences of the whole evaluation;
 * force/torque sensor bias per foot (sensor axes, [N], [N m]): J_sole^T of the bias carried to the ground reaction.
@@ -35,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from ..errors import InputError
 from ..robot.model import SIDES, SOLE_OFFSET_M
 from .recording import Recording, _joint_index
 
@@ -166,9 +169,10 @@ def _to_channels(x: np.ndarray, perm: np.ndarray, T: np.ndarray) -> np.ndarray:
 
 
 def evaluate(model: pin.Model, rec: Recording, seated: np.ndarray | None = None,
-             offsets: bool = True) -> Evaluation:
+             offsets: bool = True, signatures: bool = True) -> Evaluation:
     """Evaluate ``model`` along ``rec`` (see the module docstring); ``seated`` (N,) marks samples with the seat
-    loaded (base and hip rows invalid)."""
+    loaded (base and hip rows invalid); ``offsets`` / ``signatures``: the encoder-offset signatures / all the
+    candidates' signatures (left at zero without: the residual alone costs a third of the time)."""
     n = len(rec.joint_names)
     N = len(rec)
     C = 6 + n
@@ -192,6 +196,8 @@ def evaluate(model: pin.Model, rec: Recording, seated: np.ndarray | None = None,
         T = base_to_world(smp.q, centre[k])
         e[k] = _to_channels(r, perm, T)
         tau_model[k] = rec.tau[k] - e[k, 6:]
+        if not signatures:
+            continue
         Y = pin.computeJointTorqueRegressor(model, rows.data, smp.q, smp.v, smp.a)
         mass_cols[k] = _to_channels(Y.reshape(model.nv, nb, 10)[:, :, :4], perm, T)
         for s in SIDES:
@@ -252,11 +258,14 @@ def joints_at_limit(model: pin.Model, rec: Recording, idx_v: np.ndarray, margin_
     return (rec.q <= lo[None, :] + margin_rad) | (rec.q >= hi[None, :] - margin_rad)
 
 
+JOINT_EFFECT_PARAMS = {"joint_spring": 2}     # parameters of a single-joint effect (1 unless given here)
+
+
 def joint_columns(rec: Recording, ev: Evaluation, kind: str, j: int) -> np.ndarray:
-    """(N, C, 1) signature of a single-joint effect ``kind`` on joint ``j`` (see the module docstring); with
+    """(N, C, p) signature of a single-joint effect ``kind`` on joint ``j`` (see the module docstring); with
     ``actuator_delay`` (all joints, ``j`` ignored) the delay's signature on the controller channels."""
     N, C = ev.e.shape
-    col = np.zeros((N, C, 1))
+    col = np.zeros((N, C, JOINT_EFFECT_PARAMS.get(kind, 1)))
     row = 6 + j
     ctrl = 6 + ev.n_joints + j if ev.ctrl_law is not None else None
     if kind == "actuator_delay":
@@ -277,6 +286,11 @@ def joint_columns(rec: Recording, ev: Evaluation, kind: str, j: int) -> np.ndarr
             col[:, ctrl, 0] = ev.ctrl_law[:, j]
     elif kind == "joint_offset":
         col[:, :, 0] = ev.offset_cols[:, :, j]
+    elif kind == "joint_spring":
+        col[:, row, 0] = rec.q[:, j]
+        col[:, row, 1] = 1.0
+    elif kind == "rotor_inertia":
+        col[:, row, 0] = rec.qdd[:, j]
     else:
-        raise ValueError(f"unknown joint effect {kind!r}")
+        raise InputError(f"unknown joint effect {kind!r}")
     return col

@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import InputError
 from ..robot.model import SIDES, PlantConfig
 from ..robot.plant import Plant
-from .effects import unmodeled_from
+from .effects import alter_model, unmodeled_from
 from .recording import Recording
 
 
@@ -28,12 +28,16 @@ def plant_from_effects(effects: list[dict]) -> PlantConfig:
     return cfg
 
 
-def simulate(cfg: PlantConfig, rec: Recording, seated: bool) -> dict[str, np.ndarray]:
-    """Replay ``rec``'s commands in the plant ``cfg``; returns the simulated measured torque (N, n), feet vertical
-    force (N,), COP x (N,) and whether the simulated robot fell, at ``rec.t_s``."""
+def simulate(cfg: PlantConfig, rec: Recording, seated: bool, alterations: list[dict] | None = None
+             ) -> dict[str, np.ndarray]:
+    """Replay ``rec``'s commands in the plant ``cfg`` (with ``alterations``: effects applied to the compiled model,
+    ``gap.effects.alter_model``); returns the simulated measured torque (N, n), joint positions (N, n), feet
+    vertical force (N,), COP x (N,) and whether the simulated robot fell, at ``rec.t_s``."""
     if rec.commands is None:
         raise InputError(f"{rec.source}: no /robot/joint_command to replay")
     plant = Plant(replace(cfg, fall_tilt_rad=np.pi), with_chair=seated)
+    if alterations:
+        alter_model(plant.model, alterations)
     if seated:
         plant.reset()
     else:
@@ -47,6 +51,7 @@ def simulate(cfg: PlantConfig, rec: Recording, seated: bool) -> dict[str, np.nda
     dt = plant.cfg.timestep_s
     n = len(rec.t_s)
     tau = np.zeros((n, len(rec.joint_names)))
+    q = np.zeros((n, len(rec.joint_names)))
     fz = np.zeros(n)
     cop = np.full(n, np.nan)
     c = -1
@@ -60,13 +65,13 @@ def simulate(cfg: PlantConfig, rec: Recording, seated: bool) -> dict[str, np.nda
                 plant.command(cmd.q[c], cmd.qd[c], cmd.qdd[c], feedforward="inverse_dynamics")
         while k < n and rec.t_s[k] <= t + 0.5 * dt:
             s = plant.sensors()
-            tau[k] = s.tau
+            tau[k], q[k] = s.tau, s.q
             fz[k] = sum(s.wrench_world[side][2] for side in SIDES)
             cop[k] = s.cop_m[0] if s.cop_valid else np.nan
             k += 1
         plant.step(1)
         t += dt
-    return {"tau": tau, "feet_fz": fz, "cop_x": cop, "fell": bool(plant.fallen)}
+    return {"tau": tau, "q": q, "feet_fz": fz, "cop_x": cop, "fell": bool(plant.fallen)}
 
 
 def compare(rec: Recording, sims: dict[str, dict]) -> dict[str, dict]:

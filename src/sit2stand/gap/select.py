@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+MIN_SHARE = 0.02             # an effect must lower the sum of squares by this share of what noise leaves
+
 
 @dataclass
 class Candidate:
@@ -42,7 +44,7 @@ class Candidate:
     params: list[str]
     X: np.ndarray
     members: list[str] = field(default_factory=list)
-    plausible: Callable[[np.ndarray], bool] | None = None    # physical check of a parameter estimate
+    plausible: Callable[[np.ndarray], str | None] | None = None   # why an estimate is not physical (None: it is)
 
     @property
     def key(self) -> str:
@@ -118,7 +120,7 @@ class _Search:
 
 
 def select(y: np.ndarray, candidates: list[Candidate], series_id: np.ndarray | None = None,
-           bic_threshold: float = 10.0, min_share: float = 0.02, max_effects: int = 40,
+           bic_threshold: float = 10.0, min_share: float = MIN_SHARE, max_effects: int = 40,
            ambiguity: float = 0.05, noise_rss: float | None = None, progress=None) -> Selection:
     """Greedy forward selection (see the module docstring); ``noise_rss`` is what pure noise would leave (the number
     of rows when y is in units of the noise floor)."""
@@ -192,8 +194,10 @@ def _first_plausible(s: _Search, scores: list[tuple[float, float, int]],
         cand = s.candidates[k]
         if cand.plausible is not None:
             theta, *_ = np.linalg.lstsq(np.hstack(X_sel + [cand.X]), s.y, rcond=None)
-            if not cand.plausible(theta[-cand.X.shape[1]:]):
-                s.steps.append({"step": len(s.chosen) + 1, "implausible": cand.key, "delta_bic": float(dbic)})
+            why = cand.plausible(theta[-cand.X.shape[1]:])
+            if why is not None:
+                s.steps.append({"step": len(s.chosen) + 1, "implausible": cand.key, "why": why,
+                                "delta_bic": float(dbic)})
                 continue
         return k, dbic, g
     return None, 0.0, 0.0

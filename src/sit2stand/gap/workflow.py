@@ -34,21 +34,22 @@ import yaml
 
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import PlantConfig, controller_model
-from .dataset import Dataset, GapError, fast_part_floor, load_dataset
+from .dataset import MOVING_RADPS, Dataset, GapError, fast_part_floor, load_dataset
 from .recording import RecordingError
-from .effects import FT_AXES, ft_location, unmodeled_dict, unmodeled_from
+from .effects import FT_AXES, unmodeled_dict, unmodeled_from
 from .residuals import body_link_names, joint_columns
-from .select import Candidate, Selection, select
+from .bounds import Limits, refusal
+from .select import MIN_SHARE, Candidate, Selection, select
+from .symmetry import lopsided
+from .unexplained import SIGNIFICANT_Z, contact_note, where_and_shape
+from .validate import (effect_columns, effect_theta, exact_residuals, gap_size, merged_model, replay_effects,
+                       replay_floor, replay_gap, replay_residuals, replay_z)
 
 MOVED_RAD = 0.1              # a joint whose range in the data is below this did not move: its links are one body
-MOVING_RADPS = 0.05          # RMS speed above which a joint's friction can be seen
-MIN_DELAY_S = 0.001          # one control step of the simulated robot
-MASS_REACH_M = 0.6           # an extra mass further than this from its link's origin is not a mass on that link
-MASS_MAX_KG = 40.0           # an extra mass above this on one link of a 90 kg robot is not a missing part
-SIGNIFICANT_Z = 3.0          # a channel's RMS residual this many times its floor is a disagreement
+MAX_REFUSAL_ROUNDS = 4      # selection re-run without the refused candidates at most this often
 UNITS = {"extra_mass": ("kg", "m"), "viscous_friction": "N m s/rad", "coulomb_friction": "N m",
          "torque_bias": "N m", "torque_gain": "1", "joint_offset": "rad", "actuator_delay": "s",
-         "mass_scale": "true / model"}
+         "mass_scale": "true / model", "joint_spring": "N m/rad", "rotor_inertia": "kg m^2"}
 
 
 # -- nominal model --------------------------------------------------------------------------------------------------
@@ -89,11 +90,22 @@ def rigid_groups(model: pin.Model, ds: Dataset) -> dict[int, list[int]]:
     return groups
 
 
-def _mass_within_reach(theta: np.ndarray) -> bool:
-    """An extra point mass is plausible within MASS_REACH_M of its link's origin, not vanishingly small, and under
-    MASS_MAX_KG (larger ones are two candidates trading off along a direction the data do not see)."""
-    m = float(theta[0])
-    return 1e-3 < abs(m) <= MASS_MAX_KG and float(np.linalg.norm(theta[1:] / m)) <= MASS_REACH_M
+def _limits(model: pin.Model, links: list[str], kind: str, location: str) -> Limits:
+    """The bounds' context of a candidate: its joint's effort and range, or its link's modelled mass."""
+    if kind == "extra_mass":
+        return Limits(link_mass_kg=float(model.inertias[links.index(location) + 1].mass))
+    if model.existJointName(location):
+        jid = model.getJointId(location)
+        iq, iv = model.joints[jid].idx_q, model.joints[jid].idx_v
+        return Limits(effort_nm=float(model.effortLimit[iv]),
+                      range_rad=float(model.upperPositionLimit[iq] - model.lowerPositionLimit[iq]))
+    return Limits()
+
+
+def _bounded(model: pin.Model, links: list[str], kind: str, location: str):
+    """The candidate's plausibility check (gap.bounds): estimate -> why it is refused, or None."""
+    limits = _limits(model, links, kind, location)
+    return lambda theta: refusal(kind, location, theta, limits)
 
 
 def _stack(ds: Dataset, cols: list[np.ndarray]) -> np.ndarray:
@@ -116,42 +128,60 @@ def _series_id(ds: Dataset) -> np.ndarray:
     return np.concatenate(ids)
 
 
-def build_candidates(model: pin.Model, ds: Dataset) -> list[Candidate]:
-    """Every effect of the library that these data can show (see the module docstring), with its signature rows."""
+MASS_PARAMS = ["mass [kg]", "mass*com_x [kg m]", "mass*com_y [kg m]", "mass*com_z [kg m]"]
+
+
+def build_candidates(model: pin.Model, ds: Dataset, exclude: frozenset[str] = frozenset()) -> list[Candidate]:
+    """Every effect of the library that these data can show (see the module docstring), with its signature rows;
+    ``exclude``: candidate keys refused earlier."""
     links = body_link_names(model)
-    names = ds.joint_names
-    static = all(r.static for r in ds.recordings)
     cands: list[Candidate] = []
-    for root, members in rigid_groups(model, ds).items():
-        cands.append(Candidate("extra_mass", links[root], ["mass [kg]", "mass*com_x [kg m]", "mass*com_y [kg m]",
-                                                           "mass*com_z [kg m]"],
-                               _stack(ds, [ev.mass_cols[:, :, root, :] for ev in ds.evaluations]),
-                               members=[links[m] for m in members], plausible=_mass_within_reach))
+    for members in rigid_groups(model, ds).values():
+        # a mass on each link of the group: rigid with the group's root in these data, but a hand's mass still
+        # loads the wrist joints that did not move, which a mass on the forearm does not
+        for m in members:
+            cands.append(Candidate("extra_mass", links[m], MASS_PARAMS,
+                                   _stack(ds, [ev.mass_cols[:, :, m, :] for ev in ds.evaluations]),
+                                   members=[links[k] for k in members],
+                                   plausible=_bounded(model, links, "extra_mass", links[m])))
+    cands += _joint_candidates(model, links, ds)
+    if any(ev.ctrl_delay is not None for ev in ds.evaluations):
+        cands.append(Candidate("actuator_delay", "all joints", ["delay [s]"],
+                               _stack(ds, [joint_columns(r, ev, "actuator_delay", 0)
+                                           for r, ev in zip(ds.recordings, ds.evaluations)]),
+                               plausible=_bounded(model, links, "actuator_delay", "all joints")))
+    for side in ("left", "right"):          # one candidate per sensor axis: a bias is per channel
+        for a, axis in enumerate(FT_AXES):
+            loc = f"ft_{side}/{axis}"
+            cands.append(Candidate("ft_bias", loc, [f"{axis} [{'N' if a < 3 else 'N m'}]"],
+                                   _stack(ds, [ev.ft_cols[side][:, :, a:a + 1] for ev in ds.evaluations]),
+                                   plausible=_bounded(model, links, "ft_bias", loc)))
+    return [c for c in cands if c.key not in exclude]
+
+
+def _joint_candidates(model: pin.Model, links: list[str], ds: Dataset) -> list[Candidate]:
+    """The single-joint candidates: sensor faults on every joint; friction, a spring and rotor inertia on the joints
+    that moved (a spring on a still joint is a bias, its inertia shows no acceleration)."""
+    static = all(r.static for r in ds.recordings)
     speed = np.sqrt(np.mean(np.concatenate([r.qd for r in ds.recordings]) ** 2, axis=0))
     tau_sd = np.std(np.concatenate([ev.tau_model for ev in ds.evaluations]), axis=0)
-    for j, name in enumerate(names):
+    moved = moved_joints(ds)
+    out = []
+    for j, name in enumerate(ds.joint_names):
         kinds = ["torque_bias", "joint_offset"]
         if tau_sd[j] > 1.0:
             kinds.append("torque_gain")
         if not static and speed[j] > MOVING_RADPS:
-            kinds += ["viscous_friction", "coulomb_friction"]
+            kinds += ["viscous_friction", "coulomb_friction", "rotor_inertia"]
+        if not static and moved[j]:
+            kinds.append("joint_spring")
         for kind in kinds:
             X = _stack(ds, [joint_columns(r, ev, kind, j) for r, ev in zip(ds.recordings, ds.evaluations)])
             if np.linalg.norm(X) < 1e-6:
                 continue
-            cands.append(Candidate(kind, name, [f"{kind} [{UNITS[kind]}]"], X))
-    if any(ev.ctrl_delay is not None for ev in ds.evaluations):
-        # a delay is causal and, to matter, at least one control step (1 ms): below that it is the residue of
-        # re-evaluating the law from 50 Hz samples
-        cands.append(Candidate("actuator_delay", "all joints", ["delay [s]"],
-                               _stack(ds, [joint_columns(r, ev, "actuator_delay", 0)
-                                           for r, ev in zip(ds.recordings, ds.evaluations)]),
-                               plausible=lambda theta: float(theta[0]) >= MIN_DELAY_S))
-    for side in ("left", "right"):          # one candidate per sensor axis: a bias is per channel
-        for a, axis in enumerate(FT_AXES):
-            cands.append(Candidate("ft_bias", f"ft_{side}/{axis}", [f"{axis} [{'N' if a < 3 else 'N m'}]"],
-                                   _stack(ds, [ev.ft_cols[side][:, :, a:a + 1] for ev in ds.evaluations])))
-    return cands
+            params = [f"{kind} [{UNITS[kind]}]"] + (["preload [N m]"] if kind == "joint_spring" else [])
+            out.append(Candidate(kind, name, params, X, plausible=_bounded(model, links, kind, name)))
+    return out
 
 
 # -- the whole workflow ------------------------------------------------------------------------------------------
@@ -176,30 +206,28 @@ class GapResult:
     dataset: Dataset
     after: list[np.ndarray]                # per recording: (N, C) residual of the augmented model
     known: list[dict] = field(default_factory=list)   # joint/sensor effects the nominal model file already had
-    replay: list[dict] = field(default_factory=list)  # re-simulation figures (report.replay_all)
+    replay: list[dict] = field(default_factory=list)  # re-simulation figures per recording (RMS per model)
+    gap_after_first_order: float = 0.0     # the gap with the effects' linear signatures subtracted (selection's view)
+    refused: list[dict] = field(default_factory=list)  # candidates refused (bounds, symmetry, no real improvement)
+    replay_gap_before: float = 0.0         # the re-simulation's gap over the replay channels that disagreed
+    replay_gap_after: float = 0.0
+    sims: dict = field(default_factory=dict)   # "nominal model" / "with the named effects" -> recording -> signals
 
     @property
     def shrink(self) -> float:
-        """Share of the gap the named effects removed (1 - after / before)."""
+        """Share of the gap the named effects removed, applied for real (1 - after / before)."""
         return 1.0 - self.gap_after / self.gap_before if self.gap_before > 0 else 0.0
+
+    @property
+    def shrink_first_order(self) -> float:
+        """The share the selection's linear signatures promise (1 - first-order after / before)."""
+        return 1.0 - self.gap_after_first_order / self.gap_before if self.gap_before > 0 else 0.0
 
 
 def _rms(e: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """(C,) RMS of each channel over its valid samples (NaN: none)."""
     return np.array([np.sqrt(np.mean(e[valid[:, c], c] ** 2)) if valid[:, c].any() else np.nan
                      for c in range(e.shape[1])])
-
-
-def gap_size(es: list[np.ndarray], ds: Dataset, pairs: list[tuple[int, int, str]]) -> float:
-    """The gap above the noise over ``pairs`` (recording, channel, phase): sqrt(mean of max((rms / floor)^2 - 1, 0))
-    with each pair's RMS of the residuals ``es``; 0 when no pair is given."""
-    if not pairs:
-        return 0.0
-    z2 = []
-    for r, c, phase in pairs:
-        m = (ds.labels[r] == phase) & ds.evaluations[r].valid[:, c]
-        z2.append(np.mean(es[r][m, c] ** 2) / ds.floors[r][c] ** 2)
-    return float(np.sqrt(np.mean(np.maximum(np.array(z2) - 1.0, 0.0))))
 
 
 def ranked_table(ds: Dataset) -> list[dict]:
@@ -246,6 +274,10 @@ def effect_summary(sel: Selection) -> list[dict]:
             if c.kind in ("torque_gain", "mass_scale"):   # fitted as the departure from 1
                 d.update({"value": 1.0 + v, "ci95": 1.96 * float(se[0]),
                           "unit": "measured / true" if c.kind == "torque_gain" else UNITS[c.kind]})
+            elif c.kind == "joint_spring":    # k and the preload -k q_rest
+                k = v
+                d.update({"value": k, "ci95": 1.96 * float(se[0]), "unit": UNITS[c.kind],
+                          "rest_rad": -float(s.theta[1]) / k if abs(k) > 1e-9 else 0.0})
             elif c.kind == "ft_bias":
                 d.update({"value": v, "ci95": 1.96 * float(se[0]),
                           "unit": "N" if c.location.endswith(("fx", "fy", "fz")) else "N m"})
@@ -267,7 +299,7 @@ def describe(effect: dict) -> str:
     label = {"viscous_friction": "viscous friction", "coulomb_friction": "Coulomb friction",
              "torque_bias": "torque-sensor bias", "torque_gain": "torque-sensor gain",
              "joint_offset": "encoder offset", "ft_bias": "force/torque sensor bias (sensor axes)",
-             "actuator_delay": "actuator delay"}[k]
+             "actuator_delay": "actuator delay", "joint_spring": "joint spring", "rotor_inertia": "rotor inertia"}[k]
     return f"{label} at {effect['location']}: {effect['value']:.4g} +- {effect['ci95']:.2g} {effect['unit']}"
 
 
@@ -284,30 +316,16 @@ def _after(ds: Dataset, sel: Selection, cands_unweighted) -> list[np.ndarray]:
     return out
 
 
-def effect_columns(ds: Dataset, links: list[str], r: int, kind: str, location: str) -> np.ndarray:
-    """(N, C, p) signature of effect ``kind`` at ``location`` along recording ``r`` (physical units)."""
-    ev, rec = ds.evaluations[r], ds.recordings[r]
-    if kind == "extra_mass":
-        return ev.mass_cols[:, :, links.index(location), :]
-    if kind == "ft_bias":
-        side, a = ft_location(location)
-        return ev.ft_cols[side][:, :, a:a + 1]
-    if kind == "actuator_delay":
-        return joint_columns(rec, ev, kind, 0)
-    if location not in rec.joint_names:
-        raise GapError(f"effect {kind} at unknown joint {location!r}")
-    return joint_columns(rec, ev, kind, rec.joint_names.index(location))
-
-
 def _quiet(_msg: str) -> None:
     """A progress callback that says nothing."""
 
 
 def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: float = 50.0,
-        progress=None, controller: str | Path | None = None) -> GapResult:
+        progress=None, controller: str | Path | None = None, replay: bool = True) -> GapResult:
     """The workflow on ``bags`` against the nominal model (see the module docstring). ``controller``: the link
     parameters the robot's controller ran with when the bags were recorded (the driver's ``controller_params``;
-    None: CAD), for the controller channels; it is not the model under test."""
+    None: CAD), for the controller channels; it is not the model under test. ``replay``: re-simulate the runs
+    that carry their commands (CAD nominal only: an identified model's links are not a plant file)."""
     say = progress or _quiet
     model, source, known = load_nominal(model_path)
     if not bags:
@@ -321,26 +339,125 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
     if any(r.static for r in ds.recordings):
         _static_floors(ds, cands)
         cands = build_candidates(model, ds)
-    y = _stack(ds, [ev.e[:, :, None] for ev in ds.evaluations])[:, 0]
-    sid = _series_id(ds)
-    say(f"  {len(cands)} candidate effects, {len(y)} residual rows: selecting")
-    sel = select(y, cands, series_id=sid, noise_rss=float(len(y)), progress=say)
-
-    def unweighted(r: int, cand: Candidate) -> np.ndarray:
-        """The candidate's signature on recording r, not divided by the noise floors."""
-        return effect_columns(ds, links, r, cand.kind, cand.location)
-
-    after = _after(ds, sel, unweighted)
-    rms_b = np.array([_rms(ev.e, ev.valid) for ev in ds.evaluations])
-    rms_a = np.array([_rms(e, ev.valid) for e, ev in zip(after, ds.evaluations)])
-    effects = effect_summary(sel)
-    floors = np.array(ds.floors)
+    sel, refused = _select_checked(ds, cands, links, say)
     table = ranked_table(ds)
     pairs = [(d["recording"], ds.channels.index(d["channel"]), d["phase"]) for d in table if d["z"] >= SIGNIFICANT_Z]
+    effects = effect_summary(sel)
+    effects, exact = _confirm_exact(ds, model, effects, known, refused, say)
+    sims = {}
+    if replay and source == "cad" and any(r.commands is not None and not r.static for r in ds.recordings):
+        effects, exact, sims = _confirm_replay(ds, model, effects, exact, refused, say)
+    sel.effects = [s for s in sel.effects if s.candidate.key in {f"{e['kind']}@{e['location']}" for e in effects}]
+    first_order = _after(ds, sel, lambda r, c: effect_columns(ds, links, r, c.kind, c.location))
+    rms_b = np.array([_rms(ev.e, ev.valid) for ev in ds.evaluations])
+    rms_a = np.array([_rms(e, ev.valid) for e, ev in zip(exact, ds.evaluations)])
     g0 = gap_size([ev.e for ev in ds.evaluations], ds, pairs)
-    g1 = gap_size(after, ds, pairs)
-    return GapResult(source, [str(b) for b in bags], ds.channels, floors, rms_b, rms_a, table, sel,
-                     effects, _verdict(effects, table), _unexplained(ds, rms_a), g0, g1, ds.notes, ds, after, known)
+    res = GapResult(source, [str(b) for b in bags], ds.channels, np.array(ds.floors), rms_b, rms_a, table, sel,
+                    effects, "", [], g0, gap_size(exact, ds, pairs), ds.notes, ds, exact, known,
+                    gap_after_first_order=gap_size(first_order, ds, pairs), refused=refused, sims=sims)
+    _replay_summary(res)
+    res.unexplained = _unexplained(res)
+    res.verdict = _verdict(res)
+    return res
+
+
+def _select_checked(ds: Dataset, cands: list[Candidate], links: list[str], say) -> tuple[Selection, list[dict]]:
+    """Selection, re-run without each chosen effect whose joint estimate is past its bounds (gap.bounds) or that is
+    lopsided where the evidence is symmetric (gap.symmetry); the refused, with why."""
+    y = _stack(ds, [ev.e[:, :, None] for ev in ds.evaluations])[:, 0]
+    sid = _series_id(ds)
+    exclude: set[str] = set()
+    refused: list[dict] = []
+    for _ in range(MAX_REFUSAL_ROUNDS):
+        pool = [c for c in cands if c.key not in exclude]
+        say(f"  {len(pool)} candidate effects, {len(y)} residual rows: selecting")
+        sel = select(y, pool, series_id=sid, noise_rss=float(len(y)), progress=say)
+        bad = [(s.candidate.key, why) for s in sel.effects
+               if s.candidate.plausible and (why := s.candidate.plausible(s.theta)) is not None]
+        bad += lopsided(ds, sel.effects, lambda r, s: np.tensordot(
+            effect_columns(ds, links, r, s.candidate.kind, s.candidate.location), s.theta, axes=(2, 0)))
+        if not bad:
+            break
+        for key, why in bad:
+            say(f"  refused {key}: {why}")
+            refused.append({"effect": key, "why": why})
+            exclude.add(key)
+    for step in sel.steps:                  # skipped during the forward pass for implausible estimates
+        if "implausible" in step and step["implausible"] not in {r["effect"] for r in refused}:
+            refused.append({"effect": step["implausible"], "why": step.get("why", "implausible")})
+    return sel, refused
+
+
+def _weighted_rss(es: list[np.ndarray], ds: Dataset) -> float:
+    """Sum over recordings, channels and valid samples of (residual / floor)^2: the selection's objective."""
+    return float(sum(np.sum((e / f[None, :])[ev.valid] ** 2) for e, f, ev in zip(es, ds.floors, ds.evaluations)))
+
+
+def _confirm_exact(ds: Dataset, model: pin.Model, effects: list[dict], known: list[dict], refused: list[dict],
+                   say) -> tuple[list[dict], list[np.ndarray]]:
+    """Drop, weakest first, each effect that does not lower the nonlinear residual (gap.validate) by the selection's
+    practical floor; the kept effects and their nonlinear residuals."""
+    n_rows = sum(int(ev.valid.sum()) for ev in ds.evaluations)
+    exact = exact_residuals(ds, model, effects, known)
+    for e in sorted(effects, key=lambda d: d["share_of_gap"]):
+        rest = [d for d in effects if d is not e]
+        without = exact_residuals(ds, model, rest, known) if e["kind"] in ("extra_mass", "joint_offset") else \
+            [x + np.tensordot(effect_columns(ds, body_link_names(model), r, e["kind"], e["location"]),
+                              effect_theta(e), axes=(2, 0)) for r, x in enumerate(exact)]
+        gain = _weighted_rss(without, ds) - _weighted_rss(exact, ds)
+        if gain < MIN_SHARE * n_rows:
+            key = f"{e['kind']}@{e['location']}"
+            say(f"  not confirmed: {key} (applied for real it lowers the residual by {gain:.3g})")
+            refused.append({"effect": key, "why": "applied for real (nonlinear residuals) it does not improve the "
+                                                 "model"})
+            effects, exact = rest, without
+    return effects, exact
+
+
+def _confirm_replay(ds: Dataset, model: pin.Model, effects: list[dict], exact: list[np.ndarray],
+                    refused: list[dict], say) -> tuple[list[dict], list[np.ndarray], dict]:
+    """Re-simulate with the nominal model and with the effects; while the effects make the re-simulation worse,
+    drop the one whose removal improves it most."""
+    say("  re-simulating the recorded commands: nominal model, then with the named effects")
+    nominal = replay_effects(ds, [])
+    z0 = replay_z(replay_residuals(ds, nominal))
+    keys = [k for k, z in z0.items() if z >= SIGNIFICANT_Z] or list(z0)
+    sims = replay_effects(ds, effects) if effects else nominal
+    score = replay_gap(replay_z(replay_residuals(ds, sims)), keys)
+    while effects and score > replay_gap(z0, keys):
+        trials = [(replay_gap(replay_z(replay_residuals(ds, sim)), keys), i, sim)
+                  for i, sim in ((i, replay_effects(ds, effects[:i] + effects[i + 1:])) for i in range(len(effects)))]
+        best, i, sim = min(trials, key=lambda t: t[0])
+        if best >= score:
+            break
+        e = effects[i]
+        say(f"  not confirmed: {e['kind']}@{e['location']} (the re-simulation is closer without it)")
+        refused.append({"effect": f"{e['kind']}@{e['location']}", "why": "the re-simulation is closer without it"})
+        effects = effects[:i] + effects[i + 1:]
+        score, sims = best, sim
+        exact = exact_residuals(ds, model, effects, [])
+    return effects, exact, {"nominal model": nominal, "with the named effects": sims}
+
+
+def _replay_summary(res: GapResult) -> None:
+    """The re-simulation's RMS per model and recording (``res.replay``) and its gap before and after."""
+    if not res.sims:
+        return
+    ds = res.dataset
+    z = {name: replay_z(replay_residuals(ds, sims)) for name, sims in res.sims.items()}
+    z0, z1 = z["nominal model"], z["with the named effects"]
+    keys = [k for k, v in z0.items() if v >= SIGNIFICANT_Z]
+    res.replay_gap_before, res.replay_gap_after = replay_gap(z0, keys), replay_gap(z1, keys)
+    res.replay = []
+    for r in res.sims["nominal model"]:
+        row = {"recording": r}
+        for name, zz in z.items():
+            q = max(zz[(r, c)] for c in [k for (rr, k) in zz if rr == r and k.startswith("replay/q/")])
+            row[name] = {"cop_x_rms_m": zz[(r, "replay/cop_x")] * replay_floor("replay/cop_x"),
+                         "feet_fz_rms_n": zz[(r, "replay/feet_fz")] * replay_floor("replay/feet_fz"),
+                         "q_rms_max_rad": q * replay_floor("replay/q/x"),
+                         "fell": bool(res.sims[name][r]["fell"])}
+        res.replay.append(row)
 
 
 def _controller_params(controller: str | Path | None) -> dict | None:
@@ -393,23 +510,44 @@ def _static_floors(ds: Dataset, cands: list[Candidate]) -> None:
         i += nrow
 
 
-def _unexplained(ds: Dataset, rms_after: np.ndarray) -> list[dict]:
-    """Channels still above SIGNIFICANT_Z floors after the chosen effects, largest first."""
-    unexplained = []
-    for r, (a, f) in enumerate(zip(rms_after, ds.floors)):
+def _unexplained(res: GapResult) -> list[dict]:
+    """Channels still above SIGNIFICANT_Z floors with the named effects applied for real, and the re-simulation's,
+    largest first; each with when and what its shape suggests (gap.unexplained)."""
+    ds = res.dataset
+    out = []
+    for r, (a, f) in enumerate(zip(res.rms_after, ds.floors)):
         for c, ch in enumerate(ds.channels):
             if np.isfinite(a[c]) and a[c] > SIGNIFICANT_Z * f[c]:
-                unexplained.append({"recording": r, "channel": ch, "rms": float(a[c]), "floor": float(f[c]),
-                                    "z": float(a[c] / f[c])})
-    unexplained.sort(key=lambda d: -d["z"])
-    return unexplained
+                out.append({"recording": r, "channel": ch, "rms": float(a[c]), "floor": float(f[c]),
+                            "z": float(a[c] / f[c]),
+                            **where_and_shape(ds, r, ch, res.after[r][:, c], ds.evaluations[r].valid[:, c], f[c])})
+    id_quiet = {r: not any(u["recording"] == r for u in out) for r in range(len(ds.recordings))}
+    sims = res.sims.get("with the named effects", {})
+    for r, chans in replay_residuals(ds, sims).items():
+        for ch, x in chans.items():
+            ok = np.isfinite(x)
+            z = float(np.sqrt(np.mean(x[ok] ** 2)) / replay_floor(ch)) if ok.any() else 0.0
+            if z > SIGNIFICANT_Z:
+                d = {"recording": r, "channel": ch, "rms": z * replay_floor(ch), "floor": replay_floor(ch), "z": z,
+                     **where_and_shape(ds, r, ch, np.nan_to_num(x), ok, replay_floor(ch))}
+                d["shape"] = contact_note(id_quiet[r], ch) or d["shape"]
+                out.append(d)
+    out.sort(key=lambda d: -d["z"])
+    return out
 
 
-def _verdict(effects: list[dict], table: list[dict]) -> str:
-    """One line: the named effects, or whether there was a disagreement at all."""
-    if effects:
-        return "; ".join(describe(e) for e in effects)
-    worst = table[0]["z"] if table else 0.0
+def _verdict(res: GapResult) -> str:
+    """One line: the named effects and what is left unexplained, or whether there was a disagreement at all."""
+    worst = res.table[0]["z"] if res.table else 0.0
+    left = ""
+    if res.unexplained:
+        u = res.unexplained[0]
+        left = (f"a residual no candidate explains on {len(res.unexplained)} channel(s), worst {u['channel']} at "
+                f"{u['z']:.1f} floors: {u['shape']}")
+    if res.effects:
+        return "; ".join(describe(e) for e in res.effects) + (f"; unexplained: {left}" if left else "")
+    if left:
+        return f"disagreement found, but no candidate effect explains it: {left}"
     return ("no significant discrepancy" if worst < SIGNIFICANT_Z
             else "disagreement found, but no candidate effect explains it")
 
@@ -417,19 +555,8 @@ def _verdict(effects: list[dict], table: list[dict]) -> str:
 # -- augmented model -------------------------------------------------------------------------------------------------
 def augmented_model(result: GapResult, nominal: pin.Model) -> dict:
     """The augmented model file's content (see the module docstring)."""
-    links = body_link_names(nominal)
-    model = nominal.copy()
     effects = result.known + result.effects
-    for e in effects:
-        if e["kind"] != "extra_mass":
-            continue
-        jid = links.index(e["location"]) + 1
-        old, m, p = model.inertias[jid], e["mass_kg"], np.asarray(e["pos_m"])
-        if m > 0:
-            model.inertias[jid] = old + pin.Inertia(m, p, np.eye(3) * 1e-4 * m)
-        else:   # a lighter link than modelled: remove the mass at that point
-            total = max(old.mass + m, 1e-6)
-            model.inertias[jid] = pin.Inertia(total, (old.mass * old.lever + m * p) / total, old.inertia)
+    model = merged_model(nominal, effects)
     link_params = {model.names[j]: {"mass": float(model.inertias[j].mass),
                                     "com": [float(v) for v in model.inertias[j].lever]}
                    for j in range(1, model.njoints)}
@@ -466,7 +593,10 @@ def summary(result: GapResult) -> dict:
     return _plain({
         "model": result.model_source, "bags": result.bags, "verdict": result.verdict,
         "effects": result.effects, "gap_before": result.gap_before, "gap_after": result.gap_after,
-        "gap_shrink": result.shrink, "unexplained": result.unexplained[:20], "ranked": result.table[:30],
+        "gap_shrink": result.shrink, "gap_after_first_order": result.gap_after_first_order,
+        "gap_shrink_first_order": result.shrink_first_order, "replay_gap_before": result.replay_gap_before,
+        "replay_gap_after": result.replay_gap_after, "refused": result.refused,
+        "unexplained": result.unexplained[:20], "ranked": result.table[:30],
         "channels": {ch: {"floor": result.floors[:, c].tolist(), "rms_before": result.rms_before[:, c].tolist(),
                           "rms_after": result.rms_after[:, c].tolist()} for c, ch in enumerate(result.channels)},
         "replay": result.replay, "selection_steps": result.selection.steps, "n_rows": result.selection.n_rows,
