@@ -1,0 +1,92 @@
+"""A live view for Foxglove: ROS 2 topics served over WebSocket as they arrive (``foxglove_bridge`` is not on PyPI).
+
+foxglove-sdk's server speaks Foxglove's WebSocket protocol (subprotocol ``foxglove.sdk.v1``): a client connects, gets
+``serverInfo`` and an ``advertise`` of the channels, subscribes to some and then receives binary ``messageData``
+frames (opcode 1, subscription id, log time [ns], payload). A channel here is one ROS topic: message encoding
+``cdr`` with the serialized bytes exactly as they came over DDS, schema encoding ``ros2msg`` with the full message
+definition (the type's text and each type it uses, as rosbag2's MCAP writer stores it), which is what Foxglove
+decodes ROS 2 data with. So the 3D panel draws ``/tf``, ``/robot_description`` and ``MarkerArray`` topics, and the
+plots read any field, with no conversion here.
+
+Latched topics (transient local: ``/tf_static``, the descriptions, the subject) have no counterpart in the protocol:
+a client that subscribes later is sent the last message again (:meth:`LiveView.relatch`).
+"""
+
+from __future__ import annotations
+
+import threading
+
+import foxglove
+
+from .typestore import typestore
+
+ROS2_SCHEMA_ENCODING = "ros2msg"
+CDR_ENCODING = "cdr"
+SUBPROTOCOL = "foxglove.sdk.v1"
+
+
+def ros2msg_schema(msgtype: str) -> foxglove.Schema:
+    """The ``ros2msg`` schema of ``pkg/msg/Type``: its definition followed by those of the types it uses."""
+    text, _ = typestore().generate_msgdef(msgtype, ros_version=2)
+    return foxglove.Schema(name=msgtype, encoding=ROS2_SCHEMA_ENCODING, data=text.encode())
+
+
+class _Subscriptions(foxglove.ServerListener):
+    """Notes the latched topics a client subscribed to (called on the server's thread: only a note is taken)."""
+
+    def __init__(self, view: LiveView) -> None:
+        self.view = view
+
+    def on_subscribe(self, client, channel) -> None:
+        with self.view._lock:
+            self.view._to_relatch.add(channel.topic)
+
+
+class LiveView:
+    """A Foxglove WebSocket server on ``host``:``port`` (0: any free port, see :attr:`port`) for ROS topics."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 8765, name: str = "sit2stand") -> None:
+        self._lock = threading.Lock()
+        self._to_relatch: set[str] = set()
+        self._channels: dict[str, foxglove.Channel] = {}
+        self._latched: dict[str, tuple[bytes, int]] = {}      # topic -> (last message, its log time [ns])
+        self.context = foxglove.Context()
+        self.server = foxglove.start_server(name=name, host=host, port=port, context=self.context,
+                                            server_listener=_Subscriptions(self))
+
+    @property
+    def port(self) -> int:
+        return self.server.port
+
+    @property
+    def topics(self) -> list[str]:
+        return sorted(self._channels)
+
+    def add_topic(self, topic: str, msgtype: str, latched: bool = False) -> None:
+        """Advertise ``topic`` of ``msgtype`` (``pkg/msg/Type``); ``latched``: resend its last message to late
+        subscribers."""
+        self._channels[topic] = foxglove.Channel(topic, schema=ros2msg_schema(msgtype), message_encoding=CDR_ENCODING,
+                                                 context=self.context)
+        if latched:
+            self._latched.setdefault(topic, (b"", 0))
+
+    def log(self, topic: str, data: bytes, log_time_ns: int) -> None:
+        """Send ``data`` (serialized CDR) on ``topic`` to its subscribers, logged at ``log_time_ns``."""
+        self._channels[topic].log(bytes(data), log_time=int(log_time_ns))
+        if topic in self._latched:
+            self._latched[topic] = (bytes(data), int(log_time_ns))
+
+    def relatch(self) -> int:
+        """Resend the last message of each latched topic a client subscribed to since the last call; how many."""
+        with self._lock:
+            topics, self._to_relatch = self._to_relatch, set()
+        sent = 0
+        for topic in topics:
+            data, t_ns = self._latched.get(topic, (b"", 0))
+            if data:
+                self._channels[topic].log(data, log_time=t_ns)
+                sent += 1
+        return sent
+
+    def close(self) -> None:
+        self.server.stop()
