@@ -132,6 +132,8 @@ class QtmStream:
                                     on_disconnect=lambda exc: lost.done() or lost.set_result(exc))
         if conn is None:
             reason = self._errors.message or "no answer"
+            if reason.startswith(("b'", 'b"')):          # qtm-rt logs the server's error string as bytes' repr
+                reason = reason[2:-1]
             if "Version" in reason or "version" in reason:
                 reason = f"the server refused protocol version {self.version} ({reason})"
             raise CaptureError(f"cannot connect to {self.where}: {reason}")

@@ -76,7 +76,10 @@ class MocapBridge(Node):
         self.port = port or (22223 if self.protocol == "qtm" else 1510)
         self.qos = qos_from_bag(None)
         self.marker_pub = self.create_publisher(MocapFrame, MARKERS_TOPIC, self.qos)
-        self.plate_pubs: dict[str, object] = {}
+        # the chair's and feet's topics exist from the start, as a replayer's do: a subscriber matched before the
+        # first frame gets every sample (a reliable, volatile topic gives a late subscriber nothing it missed)
+        self.plate_pubs = {name: self.create_publisher(ForcePlateSample, plate_topic(name), self.qos)
+                           for name, index in (("chair", self.chair), ("feet", self.feet)) if index >= 0}
         self.status_pub = self.create_publisher(DiagnosticStatus, "~/status", 10)
         self.clock, self.drops = ClockMap(), DropCounter()
         self.policy = ReconnectPolicy(max_s=reconnect_max_s)
