@@ -1,5 +1,6 @@
-"""The files shipped inside the package: plants (``plants/*.yaml``), graphs (``graphs/*.yaml``) and ROS parameter
-files (``params/*.yaml``), found with :mod:`importlib.resources` so that an installed copy finds them too.
+"""The files shipped inside the package: plants (``plants/*.yaml``), graphs (``graphs/*.yaml``), ROS parameter
+files (``params/*.yaml``) and Foxglove layouts (``layouts/*.json``), found with :mod:`importlib.resources` so that
+an installed copy finds them too.
 
 Each lookup takes a packaged file's name (``"default"``, ``"standup"``; ``.yaml`` optional) or a path: a name
 resolves to the packaged file, an existing file is returned as it is, anything else raises
@@ -22,7 +23,7 @@ from pathlib import Path
 
 from ..errors import Sit2StandError
 
-KINDS = ("plants", "graphs", "params")
+KINDS = ("plants", "graphs", "params", "layouts")
 SUFFIXES = (".yaml", ".yml")
 
 

@@ -17,7 +17,10 @@ from __future__ import annotations
 import threading
 
 import foxglove
+import foxglove.layouts as fl
 
+from .topics import (HUMAN_COM_TOPIC, HUMAN_DESCRIPTION_TOPIC, HUMAN_MEASURED_COP_TOPIC, LAB_FRAME, ROBOT_COP_TOPIC,
+                     ROBOT_DESCRIPTION_TOPIC, ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC)
 from .typestore import typestore
 
 ROS2_SCHEMA_ENCODING = "ros2msg"
@@ -90,3 +93,34 @@ class LiveView:
 
     def close(self) -> None:
         self.server.stop()
+
+
+def _plot(title: str, series: list[tuple[str, str]], ylabel: str) -> fl.PlotPanel:
+    """A time plot of ``(label, FoxQL path)`` series, ordered by header stamp (the demonstration's time)."""
+    return fl.PlotPanel(title=title, config=fl.PlotConfig(
+        paths=[fl.PlotSeries(value=path, label=label, timestamp_method="headerStamp") for label, path in series],
+        y_axis_label=ylabel))
+
+
+def standup_layout() -> str:
+    """Foxglove layout JSON of a stand-up (``sit2stand/data/layouts/standup.json`` is this): the robot (URDF from
+    /robot_description) and the human (/human/robot_description), both under /tf, with the plan's and the human's
+    markers in 3D, fixed in ``lab``; beside it the paper's Fig. 6: the robot's planned COM against the human's (x
+    and z), and the robot's COP against the planned ZMP."""
+    urdf = {name: fl.BaseRendererUrdfLayerSettings(label=name, source_type="topic", topic=topic)
+            for name, topic in (("robot", ROBOT_DESCRIPTION_TOPIC), ("human", HUMAN_DESCRIPTION_TOPIC))}
+    three_d = fl.ThreeDeePanel(title="robot and human", config=fl.ThreeDeeConfig(
+        follow_tf=LAB_FRAME, fixed_frame=LAB_FRAME, layers={"grid": fl.BaseRendererGridLayerSettings(), **urdf}))
+    plots = [
+        _plot("COM x (Fig. 6)", [("human", f"{HUMAN_COM_TOPIC}.position.x"),
+                                 ("robot (plan)", f"{ROBOT_PLANNED_COM_TOPIC}.position.x")], "x [m]"),
+        _plot("COM z (Fig. 6)", [("human", f"{HUMAN_COM_TOPIC}.position.z"),
+                                 ("robot (plan)", f"{ROBOT_PLANNED_COM_TOPIC}.position.z")], "z [m]"),
+        _plot("COP x", [("robot COP", f"{ROBOT_COP_TOPIC}.point.x"),
+                        ("planned ZMP", f"{ROBOT_PLANNED_ZMP_TOPIC}.point.x"),
+                        ("human COP", f"{HUMAN_MEASURED_COP_TOPIC}.point.x")], "x [m]"),
+    ]
+    column = fl.SplitContainer(direction="column", items=[fl.SplitItem(content=p) for p in plots])
+    layout = fl.Layout(content=fl.SplitContainer(direction="row", items=[
+        fl.SplitItem(proportion=3, content=three_d), fl.SplitItem(proportion=2, content=column)]))
+    return layout.to_json()

@@ -1,0 +1,136 @@
+"""The live view: a real WebSocket client (the `websockets` package) does Foxglove's handshake (subprotocol
+foxglove.sdk.v1), reads the advertised channels, subscribes and receives messages; from io/live_view.py directly,
+then from the foxglove node serving a replayed run. The shipped layout is what standup_layout() makes."""
+
+import json
+import re
+import struct
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from websockets.sync.client import connect
+
+from sit2stand.data import folder
+from sit2stand.io.live_view import SUBPROTOCOL, LiveView, standup_layout
+from sit2stand.io.typestore import typestore
+
+ROOT = Path(__file__).resolve().parents[1]
+MESSAGE_DATA = 0x01          # Foxglove WebSocket protocol: binary opcode of a message
+
+
+class Client:
+    """A Foxglove WebSocket client: handshake, channels by topic, subscriptions, message frames."""
+
+    def __init__(self, port: int) -> None:
+        self._connection = connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL], open_timeout=10)
+        self.ws = self._connection.__enter__()
+        self.channels: dict[str, dict] = {}
+        self.server_info = json.loads(self.ws.recv(timeout=10))
+
+    def wait_for_channels(self, topics: set[str], timeout_s: float = 20.0) -> None:
+        """Read advertise operations until every one of ``topics`` has a channel."""
+        while not topics <= set(self.channels):
+            op = json.loads(self.ws.recv(timeout=timeout_s))
+            if op["op"] == "advertise":
+                self.channels.update({c["topic"]: c for c in op["channels"]})
+
+    def subscribe(self, topics: list[str]) -> dict[int, str]:
+        subs = {i: t for i, t in enumerate(topics, start=1)}
+        self.ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": i, "channelId": self.channels[t]["id"]} for i, t in subs.items()]}))
+        return subs
+
+    def messages(self, subs: dict[int, str], count: int, timeout_s: float = 20.0):
+        """``count`` (topic, log time [ns], payload) of the subscriptions ``subs``; other frames skipped."""
+        out = []
+        while len(out) < count:
+            frame = self.ws.recv(timeout=timeout_s)
+            if isinstance(frame, bytes) and frame[0] == MESSAGE_DATA:
+                sub_id, log_ns = struct.unpack_from("<IQ", frame, 1)
+                out.append((subs[sub_id], log_ns, frame[13:]))
+        return out
+
+    def close(self) -> None:
+        self._connection.__exit__(None, None, None)
+
+
+def _subject(height_m: float) -> bytes:
+    store = typestore()
+    Subject, Header, Time = (store.types[t] for t in ("sit2stand_msgs/msg/Subject", "std_msgs/msg/Header",
+                                                      "builtin_interfaces/msg/Time"))
+    msg = Subject(header=Header(stamp=Time(sec=3, nanosec=0), frame_id=""), height_m=height_m, mass_kg=61.0,
+                  sex="female", age_years=float("nan"))
+    return bytes(store.serialize_cdr(msg, "sit2stand_msgs/msg/Subject"))
+
+
+def test_a_client_does_the_handshake_and_receives_cdr_as_logged():
+    view = LiveView(port=0)
+    try:
+        view.add_topic("/human/subject", "sit2stand_msgs/msg/Subject", latched=True)
+        client = Client(view.port)
+        assert client.ws.subprotocol == SUBPROTOCOL and client.server_info["op"] == "serverInfo"
+        client.wait_for_channels({"/human/subject"})
+        channel = client.channels["/human/subject"]
+        assert (channel["encoding"], channel["schemaEncoding"], channel["schemaName"]) == \
+            ("cdr", "ros2msg", "sit2stand_msgs/msg/Subject")
+        assert channel["schema"].startswith("std_msgs/Header header\nfloat64 height_m") and "MSG: std_msgs/Header" \
+            in channel["schema"]
+        subs = client.subscribe(["/human/subject"])
+        view.relatch()                      # nothing logged yet: nothing resent
+        data = _subject(1.62)
+        view.log("/human/subject", data, 7_000_000_000)
+        [(topic, log_ns, payload)] = client.messages(subs, 1)
+        assert (topic, log_ns, payload) == ("/human/subject", 7_000_000_000, data)
+        msg = typestore().deserialize_cdr(payload, "sit2stand_msgs/msg/Subject")
+        assert (msg.height_m, msg.mass_kg, msg.sex) == (1.62, 61.0, "female")
+        client.close()
+        late = Client(view.port)            # latched: a client that subscribes later gets the last message
+        late.wait_for_channels({"/human/subject"})
+        subs = late.subscribe(["/human/subject"])
+        deadline = time.monotonic() + 5.0        # the server notes the subscription on its own thread
+        while not view.relatch() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        [(_, log_ns, payload)] = late.messages(subs, 1)
+        assert (log_ns, payload) == (7_000_000_000, data)
+        late.close()
+    finally:
+        view.close()
+
+
+@pytest.mark.graph
+def test_the_foxglove_node_serves_a_replayed_run(run_node):
+    """The foxglove node (port 0) and a replayer of bags/natural: the client gets the run's markers as MocapFrames
+    (their log times the replayer's /clock: bag time) and the plates."""
+    fox = run_node("sit2stand.nodes.foxglove", "--ros-args", "-p", "port:=0", "-p", "use_sim_time:=true")
+    assert fox.wait_for_output("WebSocket server on", 30), fox.output
+    port = int(re.search(r"ws://127\.0\.0\.1:(\d+)", fox.output).group(1))
+    client = Client(port)
+    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={ROOT / 'bags' / 'natural'}",
+                    "-p", "topics:=['/mocap/markers', '/force_plate/feet']", "-p", "wait_for_subscribers:=1")
+    try:
+        client.wait_for_channels({"/mocap/markers", "/force_plate/feet"}, 30)
+        subs = client.subscribe(["/mocap/markers", "/force_plate/feet"])
+        got = client.messages(subs, 200, 30)
+    finally:
+        client.close()
+    topics = {t for t, _, _ in got}
+    assert topics == {"/mocap/markers", "/force_plate/feet"}
+    frames = [typestore().deserialize_cdr(p, "sit2stand_msgs/msg/MocapFrame") for t, _, p in got
+              if t == "/mocap/markers"]
+    assert frames and "LASI" in frames[0].marker_names and frames[0].header.frame_id == "lab"
+    stamps = np.array([f.header.stamp.sec + f.header.stamp.nanosec * 1e-9 for f in frames])
+    logs = np.array([log for t, log, _ in got if t == "/mocap/markers"]) * 1e-9
+    assert np.all(np.abs(logs - stamps) < 0.5), "log times are the replay's /clock, the stamps' time base"
+    assert play.stop() == 0 and fox.stop() == 0
+    assert "[foxglove] served" in fox.output
+
+
+def test_the_shipped_layout_is_the_stand_up_layout():
+    shipped = json.loads((folder("layouts") / "standup.json").read_text())
+    assert shipped == json.loads(standup_layout())
+    text = json.dumps(shipped)
+    for needed in ('"/robot_description"', '"/human/robot_description"', "ThreeDee", "/human/com.position.z",
+                   "/robot/planned_com.position.z"):
+        assert needed in text
