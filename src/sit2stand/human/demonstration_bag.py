@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..io import messages as M
-from ..io.bag import BagWriter
+from ..io.bag import BagWriter, reliable_qos
 from ..io.topics import (COM_TYPE, GROUND_TRUTH_COM_TOPIC, GROUND_TRUTH_JOINTS_TOPIC, GROUND_TRUTH_PARAMETERS_TOPIC,
-                         MARKERS_TOPIC, MOCAP_TYPE, PLATE_TYPE, plate_topic)
+                         MARKERS_TOPIC, MOCAP_TYPE, PLATE_TYPE, SUBJECT_TOPIC, SUBJECT_TYPE, plate_topic)
 from ..io.typestore import typestore
 from .skeleton import SEGMENTS, HumanModel
 from .synth import Demonstration
@@ -59,6 +59,9 @@ def write_demonstration_bag(demo: Demonstration, out) -> dict[str, int]:
     joint_names = demo.human.joint_names()
     with BagWriter(out, custom_data=custom) as bag:
         bag.add_topic(MARKERS_TOPIC, MOCAP_TYPE)
+        # the subject in the stream too (latched): a conversion that drops custom_data (ROS 1) keeps it
+        bag.add_topic(SUBJECT_TOPIC, SUBJECT_TYPE, [reliable_qos(1, transient_local=True)])
+        bag.write(SUBJECT_TOPIC, _to_ns(0.0), M.subject(_to_ns(0.0), cfg.height_m, demo.human.total_mass, cfg.sex))
         for name in ("chair", "feet"):
             bag.add_topic(plate_topic(name), PLATE_TYPE)
         bag.add_topic(GROUND_TRUTH_COM_TOPIC, COM_TYPE)

@@ -84,9 +84,10 @@ def human_urdf(human: HumanModel, name: str = "human") -> str:
         joint = model.joints[jid]
         placement = model.jointPlacements[jid]
         lo, hi = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
+        rpy = pin.rpy.matrixToRpy(placement.rotation)
         lines.append(f'  <joint name="{model.names[jid]}" type="revolute"><parent link="{links[model.parents[jid]]}"/>'
-                     f'<child link="{links[jid]}"/><origin xyz="{_fmt(placement.translation)}" '
-                     f'rpy="{_fmt(pin.rpy.matrixToRpy(placement.rotation))}"/><axis xyz="{_fmt(AXES[joint.shortname()])}"/>'
+                     f'<child link="{links[jid]}"/><origin xyz="{_fmt(placement.translation)}" rpy="{_fmt(rpy)}"/>'
+                     f'<axis xyz="{_fmt(AXES[joint.shortname()])}"/>'
                      f'<limit lower="{lo:.6g}" upper="{hi:.6g}" effort="200" velocity="20"/></joint>')
     lines.append("</robot>")
     return "\n".join(lines)

@@ -30,7 +30,8 @@ from ..io import messages as M
 from ..io.bag import BagError, BagReader, BagWriter
 from ..io.forceplate import PlateSeries
 from ..io.topics import (COM_TYPE, FORCE_PLATE_PREFIX, GROUND_TRUTH_COM_TOPIC, HUMAN_COM_TOPIC, HUMAN_JOINTS_TOPIC,
-                         HUMAN_MODEL_COP_TOPIC, HUMAN_SCALING_TOPIC, MARKERS_TOPIC, REFERENCE_COM_TOPIC)
+                         HUMAN_MODEL_COP_TOPIC, HUMAN_SCALING_TOPIC, MARKERS_TOPIC, REFERENCE_COM_TOPIC,
+                         SUBJECT_TOPIC)
 from ..dynamics import G, savgol_series
 from ..io.typestore import typestore
 from .calibration import calibrate_stream, static_frames
@@ -79,6 +80,7 @@ def read_trial(bag_path: str | Path) -> Trial:
         plates = [M.plate_series(topic[len(FORCE_PLATE_PREFIX):], bag.read(topic))
                   for topic in sorted(topics) if topic.startswith(FORCE_PLATE_PREFIX)]
         custom = bag.custom_data
+        subject_msg = bag.read(SUBJECT_TOPIC)[-1][1] if bag.topics().get(SUBJECT_TOPIC) else None
         truth = reference = None
         if GROUND_TRUTH_COM_TOPIC in topics:
             msgs = bag.read(GROUND_TRUTH_COM_TOPIC)
@@ -90,8 +92,10 @@ def read_trial(bag_path: str | Path) -> Trial:
                          np.array([[m.position.x, m.position.y, m.position.z] for _, m in msgs]),
                          np.array([m.valid for _, m in msgs]))
     num = lambda key: float(custom[key]) if key in custom else None  # noqa: E731
-    return Trial(t, names, pos, valid, plates, num("height_m"), num("body_mass_kg"), custom.get("sex", "male"),
-                 truth, reference)
+    height_m, mass_kg, sex = num("height_m"), num("body_mass_kg"), custom.get("sex", "male")
+    if (height_m is None or mass_kg is None) and subject_msg is not None:     # custom_data lost (ROS 1, recorder)
+        height_m, mass_kg, sex = subject_msg.height_m, subject_msg.mass_kg, subject_msg.sex or sex
+    return Trial(t, names, pos, valid, plates, height_m, mass_kg, sex, truth, reference)
 
 
 def standing_phase(result: ComResult, fraction: float = 0.95) -> np.ndarray:

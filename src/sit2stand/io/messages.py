@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 
 from .topics import (BASE_FRAME, COM_TYPE, LAB_FRAME, MOCAP_TYPE, PLATE_TYPE, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC,
-                     ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC, ROBOT_JOINT_STATES_TOPIC, WORLD_FRAME, ft_topic,
-                     sole_world_aligned_frame)
+                     ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC, ROBOT_JOINT_STATES_TOPIC, SUBJECT_TYPE, WORLD_FRAME,
+                     ft_topic, sole_world_aligned_frame)
 from .forceplate import PlateSeries
 from .typestore import typestore
 
@@ -182,3 +182,9 @@ def joint_trajectory_point(t_ns: int, joint_names: list[str], q: np.ndarray, qd:
         effort=np.zeros(0), time_from_start=s["builtin_interfaces/msg/Duration"](sec=0, nanosec=0))
     return s["trajectory_msgs/msg/JointTrajectory"](header=header(t_ns, "base_link"), joint_names=list(joint_names),
                                                     points=[point])
+
+
+def subject(t_ns: int, height_m: float, mass_kg: float, sex: str, age_years: float = float("nan")) -> Any:
+    """sit2stand_msgs/Subject: the person a demonstration recorded (stature [m], body mass [kg], sex, age)."""
+    return typestore().types[SUBJECT_TYPE](header=header(t_ns, ""), height_m=float(height_m),
+                                           mass_kg=float(mass_kg), sex=str(sex), age_years=float(age_years))
