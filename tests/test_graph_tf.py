@@ -19,7 +19,7 @@ import pytest
 from conftest import GRAPHS
 from sit2stand.data import plant_path
 from sit2stand.io.bag import BagReader
-from sit2stand.io.topics import BASE_FRAME, LAB_FRAME, WORLD_FRAME, sole_world_aligned_frame
+from sit2stand.io.topics import BASE_FRAME, HUMAN_ROOT_FRAME, LAB_FRAME, WORLD_FRAME, sole_world_aligned_frame
 from sit2stand.robot.model import SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, controller_model
 
 pytestmark = pytest.mark.graph
@@ -30,7 +30,8 @@ LEG_LINKS = [f"leg_{s}_{i}_link" for s in SIDES for i in range(1, 7)]
 # base) say base_link; those carrying a base pose as root_* / pelvis_* entries say where that pose is given.
 EXPECTED_FRAME = {
     "/mocap/markers": LAB_FRAME, "/force_plate/chair": LAB_FRAME, "/force_plate/feet": LAB_FRAME,
-    "/human/com": LAB_FRAME, "/human/joint_states": LAB_FRAME, "/human/model_cop": LAB_FRAME,
+    "/human/com": LAB_FRAME, "/human/joint_states": HUMAN_ROOT_FRAME, "/human/model_cop": LAB_FRAME,
+    "/human/pelvis_pose": LAB_FRAME, "/viz/human": LAB_FRAME,
     "/human/measured_cop": LAB_FRAME, "/ground_truth/com": LAB_FRAME,
     "/robot/base_pose": WORLD_FRAME, "/robot/cop": WORLD_FRAME, "/robot/planned_com": WORLD_FRAME,
     "/robot/planned_zmp": WORLD_FRAME, "/robot/com_feedback": WORLD_FRAME, "/robot/retarget/ik": WORLD_FRAME,
@@ -95,12 +96,19 @@ def frames(bag):
     js = {_ns(m.header): m for _, m in read("/robot/joint_states")}
     base = {_ns(m.header): m for _, m in read("/robot/base_pose")}
     out = {}
-    for _, m in read("/tf"):
+    for m in _robot_tf(read):
         stamp = {_ns(tr.header) for tr in m.transforms}
         assert len(stamp) == 1, "one stamp per /tf message (one state sample)"
         s = stamp.pop()
-        out[s] = (_edges(*static, m), js[s], base[s])
+        if s in js and s in base:        # (the recorder may find /tf a sample before the state topics)
+            out[s] = (_edges(*static, m), js[s], base[s])
+    assert len(out) >= len(_robot_tf(read)) - 2
     return out
+
+
+def _robot_tf(read) -> list:
+    """The driver's /tf messages (world -> base_link first); the human_com node's start with lab -> pelvis."""
+    return [m for _, m in read("/tf") if m.transforms[0].header.frame_id == WORLD_FRAME]
 
 
 @cache
@@ -127,7 +135,8 @@ def test_the_robot_stands_up_and_the_bag_holds_tf_and_the_description(run, bag):
     assert "upright" in stdout and "FALLEN" not in stdout, stdout[-3000:]
     z = np.array([m.pose.position.z for _, m in read("/robot/base_pose")])
     assert z[0] < 0.65 and z[-1] > 0.85, f"pelvis from {z[0]:.2f} m to {z[-1]:.2f} m: did not stand up"
-    assert topics["/tf"].msgtype == "tf2_msgs/msg/TFMessage" and topics["/tf"].count > 500
+    robot_tf = _robot_tf(read)
+    assert topics["/tf"].msgtype == "tf2_msgs/msg/TFMessage" and len(robot_tf) > 500
     assert topics["/tf_static"].count == 1 and topics["/robot_description"].count == 1
     for latched in ("/tf_static", "/robot_description"):
         assert [q.durability.name for q in reader.qos(latched)] == ["TRANSIENT_LOCAL"], latched
@@ -139,7 +148,7 @@ def test_the_robot_stands_up_and_the_bag_holds_tf_and_the_description(run, bag):
     # the driver measures what /tf costs it
     cost = re.search(r"/tf at 50 Hz: (\d+) messages of 35 transforms, (\d+) us median, (\d+) us p99", stdout)
     # (the recorder finds the driver's topics a little after it starts publishing)
-    assert cost and 0.8 * int(cost.group(1)) < topics["/tf"].count <= int(cost.group(1)), stdout[-2000:]
+    assert cost and 0.8 * int(cost.group(1)) < len(robot_tf) <= int(cost.group(1)), stdout[-2000:]
 
 
 def test_tf_has_world_to_base_link_and_every_leg_link_at_50_hz(bag, frames):
@@ -152,8 +161,7 @@ def test_tf_has_world_to_base_link_and_every_leg_link_at_50_hz(bag, frames):
     for link in LEG_LINKS + ["left_sole_link", "right_sole_link", "sole_left", "sole_right", "arm_left_7_link",
                              "head_2_link", sole_world_aligned_frame("left")]:
         assert _in(edges, link, LAB_FRAME) is not None
-    [(_, msg)] = read("/tf")[:1]
-    assert len(msg.transforms) == 35
+    assert len(_robot_tf(read)[0].transforms) == 35
 
 
 def test_the_sole_tf_is_where_pinocchio_puts_it_for_the_recorded_state(frames):
@@ -315,11 +323,11 @@ def test_the_human_topics_are_in_lab(bag):
          for _, m in read("/human/com") if (s := _ns(m.header)) in truth]
     assert len(d) > 400 and np.median(d) < 0.05
     pelvis = ["LASI", "RASI", "LPSI", "RPSI"]
-    for _, js in read("/human/joint_states")[::50]:
-        names = list(js.name)
-        p = np.array([js.position[names.index(f"pelvis_{c}")] for c in "xyz"])
-        centre = np.nanmean(_markers(by_stamp[_ns(js.header)], pelvis), axis=0)
+    for _, pose in read("/human/pelvis_pose")[::50]:
+        p = np.array([pose.pose.position.x, pose.pose.position.y, pose.pose.position.z])
+        centre = np.nanmean(_markers(by_stamp[_ns(pose.header)], pelvis), axis=0)
         assert np.linalg.norm(p - centre) < 0.15
+    assert not any(n.startswith("pelvis_") for n in read("/human/joint_states")[0][1].name), "no pseudo-joints"
 
 
 def test_the_plan_markers_are_recorded_in_world_at_the_plans_com_and_zmp(bag):
@@ -329,15 +337,86 @@ def test_the_plan_markers_are_recorded_in_world_at_the_plans_com_and_zmp(bag):
     markers = read("/viz/markers")
     commands = reader.topics()["/robot/joint_command"].count
     assert abs(len(markers) - commands / 5) <= 2
-    com = {_ns(m.header): m.position for _, m in read("/robot/planned_com")}
-    zmp = {_ns(m.header): m.point for _, m in read("/robot/planned_zmp")}
+    # stamps are /clock time (1 ms ticks): a burst of commands can share one, so any of that stamp's will do
+    com, zmp = {}, {}
+    for _, m in read("/robot/planned_com"):
+        com.setdefault(_ns(m.header), []).append((m.position.x, m.position.y, m.position.z))
+    for _, m in read("/robot/planned_zmp"):
+        zmp.setdefault(_ns(m.header), []).append((m.point.x, m.point.y))
     for _, msg in markers:
         by_id = {m.id: m for m in msg.markers}
         s = _ns(by_id[0].header)
-        c, z = com[s], zmp[s]
-        assert (by_id[0].pose.position.x, by_id[0].pose.position.y, by_id[0].pose.position.z) == (c.x, c.y, c.z)
-        assert (by_id[2].pose.position.x, by_id[2].pose.position.y) == (z.x, z.y)
+        assert (by_id[0].pose.position.x, by_id[0].pose.position.y, by_id[0].pose.position.z) in com[s]
+        assert (by_id[2].pose.position.x, by_id[2].pose.position.y) in zmp[s]
+        z = by_id[2].pose.position
     polygon = np.array([[p.x, p.y] for p in by_id[3].points[:-1]])
     edges = np.roll(polygon, -1, axis=0) - polygon
     rel = np.array([z.x, z.y]) - polygon
     assert np.all(edges[:, 0] * rel[:, 1] - edges[:, 1] * rel[:, 0] > 0), "the last ZMP inside the support polygon"
+
+
+# --- the human in 3D, one time base ------------------------------------------------------------------------------
+def test_the_human_skeleton_is_in_tf_under_lab_with_its_description(bag):
+    """/tf also holds lab -> pelvis -> segments (the fitted skeleton): the pelvis at /human/pelvis_pose of the same
+    stamp, the feet near the lab floor once standing; /human/robot_description (latched) is the skeleton's URDF
+    with a link per segment; /viz/human holds the markers, the COM at /human/com and both COPs."""
+    read, reader = bag
+    human_tf = [m for _, m in read("/tf") if m.transforms[0].child_frame_id == HUMAN_ROOT_FRAME]
+    assert len(human_tf) > 250           # 50 Hz of a 5.3 s recording
+    pelvis = {_ns(m.header): m.pose for _, m in read("/human/pelvis_pose")}
+    for m in human_tf[::20]:
+        edges = _edges(m)
+        X = _in(edges, HUMAN_ROOT_FRAME, LAB_FRAME)
+        p = pelvis[_ns(m.transforms[0].header)].position
+        np.testing.assert_allclose(X.translation, [p.x, p.y, p.z], atol=1e-9)
+    edges = _edges(human_tf[-1])
+    for foot in ("foot_l", "foot_r"):
+        assert -0.05 < _in(edges, foot, LAB_FRAME).translation[2] < 0.2, foot
+    assert [q.durability.name for q in reader.qos("/human/robot_description")] == ["TRANSIENT_LOCAL"]
+    urdf = read("/human/robot_description")[-1][1].data
+    for link in ("pelvis", "torso", "head", "thigh_l", "shank_r", "foot_l", "toes_r"):
+        assert f'<link name="{link}">' in urdf
+    com = {_ns(m.header): m.position for _, m in read("/human/com")}
+    viz = read("/viz/human")
+    assert len(viz) > 250
+    ids = set()
+    for _, msg in viz:
+        by_id = {m.id: m for m in msg.markers}
+        ids |= set(by_id)
+        if 1 in by_id:
+            c, p = com[_ns(by_id[1].header)], by_id[1].pose.position
+            assert (p.x, p.y, p.z) == (c.x, c.y, c.z)
+    assert ids == {0, 1, 2, 3, 4} and len(viz[-1][1].markers[0].points) > 20
+
+
+def test_one_time_base_header_stamps_within_the_log_times(bag):
+    """Every header stamp of every topic lies within the bag's log-time span. Stamps and log times are read off one
+    clock (the replayer's /clock), so their difference is a latency: the sources (replayed capture, the robot's
+    state) are logged within a frame (10 ms) of their stamps whenever the recorder keeps up (10th percentile; on 2
+    cores the calibrating estimator and the real-time retargeter starve it for seconds at times), and no stamp is
+    more than half a second after its log time (each process sees /clock with its own delay); before, robot stamps
+    were wall time, 56 years after the bag's."""
+    read, reader = bag
+    span = (reader.start_ns, reader.end_ns)
+    frame_ns = 10_000_000
+    for topic in sorted(reader.topics()):
+        lags = []
+        for log_ns, msg in read(topic):
+            for h in _headers(msg):
+                s = _ns(h)
+                assert span[0] <= s <= span[1], f"{topic}: stamp {s * 1e-9:.3f} s outside the log times " \
+                    f"{span[0] * 1e-9:.3f}..{span[1] * 1e-9:.3f} s"
+                lags.append(log_ns - s)
+        if not lags:
+            continue
+        assert min(lags) > -50 * frame_ns, f"{topic}: a stamp {-min(lags) * 1e-6:.1f} ms after its log time"
+        if topic.startswith(("/mocap/", "/force_plate/", "/robot/joint_states", "/robot/base_pose", "/robot/ft/")):
+            p10 = np.percentile(lags, 10)
+            assert abs(p10) < frame_ns, f"{topic}: logged {p10 * 1e-6:.1f} ms after its stamps (10th percentile)"
+
+
+def _headers(msg):
+    """The headers of a message: its own, each transform's, each marker's."""
+    if hasattr(msg, "header"):
+        return [msg.header]
+    return [m.header for m in getattr(msg, "transforms", [])] + [m.header for m in getattr(msg, "markers", [])]
