@@ -20,6 +20,8 @@ from ..robot.plant import Plant
 from .effects import alter_model, unmodeled_from
 from .recording import Recording
 
+SETTLE_S = 1.0               # the replay holds the first command this long before t = 0 (as `excite` does)
+
 
 def plant_from_effects(effects: list[dict]) -> PlantConfig:
     """CAD plus the named effects (the workflow's effect dicts) as a plant configuration."""
@@ -45,9 +47,12 @@ def simulate(cfg: PlantConfig, rec: Recording, seated: bool, alterations: list[d
         q[:7] = rec.base_pose[0]
         q[plant.qadr] = rec.q[0] - plant.q_offset
         plant.reset(q)
-    plant.command(rec.q[0], feedforward="inverse_dynamics")
-    plant.settle(0.5)
     cmd = rec.commands
+    # hold the first command, not the measured angles: what the robot was told; an effect that loads a joint (a
+    # spring, a mass) makes the measured angle lag the command, and holding the lagged angle would settle elsewhere
+    first = cmd.q[0] if np.all(np.isfinite(cmd.q[0])) else rec.q[0]
+    plant.command(first, feedforward="inverse_dynamics")
+    plant.settle(SETTLE_S)
     dt = plant.cfg.timestep_s
     n = len(rec.t_s)
     tau = np.zeros((n, len(rec.joint_names)))
