@@ -17,11 +17,16 @@ A graph file::
         env: {ROS_LOG_DIR: /tmp}
         scheduling: {policy: fifo, priority: 50}   # or {nice: 10}; default: the launcher's own (see below)
         delay_s: 0.0                 # start this long after the graph
+        host: robot                  # a label: `sit2stand launch GRAPH --host robot` starts only these nodes
         on_exit: ignore              # or "shutdown": when this node ends, stop the whole graph
       - name: replayer
         executable: replayer
         parameters: [{bag: $(var bag), wait_for_subscribers: 1}]
         on_exit: shutdown
+
+A graph spread over several machines is launched once per machine, each starting its share: ``--host NAME``
+(the nodes labelled ``host: NAME``) or ``--only a,b`` (these nodes by name). The shares find each other through
+DDS discovery (same ``ROS_DOMAIN_ID``; see docs/method.md, "Live capture", for multicast and static peers).
 
 Substitutions: ``$(var NAME)``, ``$(env NAME)`` / ``$(env NAME default)``, ``$(dirname)`` (the graph file's folder).
 
@@ -137,6 +142,7 @@ class NodeSpec:
     delay_s: float = 0.0
     shutdown_on_exit: bool = False
     scheduling: Scheduling | None = None
+    host: str = ""
 
 
 @dataclass
@@ -213,6 +219,30 @@ def load_graph(path: str | Path, overrides: dict[str, str] | None = None, namesp
     return Graph(str(doc.get("name", path.stem)), nodes, tmpdir)
 
 
+def select_nodes(graph: Graph, only: list[str] | None = None, host: str | None = None) -> Graph:
+    """The share of ``graph`` one machine runs: the nodes named in ``only`` and/or labelled ``host: <host>``.
+
+    Raises:
+        LaunchError: a name no node has, or a host label no node carries (the message lists what there is).
+    """
+    nodes = graph.nodes
+    if only:
+        unknown = sorted(set(only) - {n.name for n in nodes})
+        if unknown:
+            raise LaunchError(f"graph {graph.name}: no node {', '.join(unknown)} (it has "
+                              f"{', '.join(n.name for n in nodes)})")
+        nodes = [n for n in nodes if n.name in only]
+    if host:
+        hosts = sorted({n.host for n in graph.nodes if n.host})
+        if host not in hosts:
+            raise LaunchError(f"graph {graph.name}: no node is labelled host: {host} (labels: "
+                              f"{', '.join(hosts) or 'none'})")
+        nodes = [n for n in nodes if n.host == host]
+    if not nodes:
+        raise LaunchError(f"graph {graph.name}: --only and --host leave no node to start")
+    return Graph(graph.name, nodes, graph.tmpdir)
+
+
 def _namespace(namespace: str) -> str:
     """``robot2`` or ``/robot2`` as ``/robot2`` ('' for none); names the rule a ROS namespace breaks."""
     ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
@@ -259,7 +289,7 @@ def _node_spec(spec: dict, name: str, where: str, graph_dir: Path, tmpdir: Path,
         raise LaunchError(f"{where} ({name}): on_exit must be 'ignore' or 'shutdown', not {on_exit!r}")
     env = {str(k): str(v) for k, v in (spec.get("env") or {}).items()}
     return NodeSpec(name, command, env, float(spec.get("delay_s", 0.0)), on_exit == "shutdown",
-                    parse_scheduling(spec.get("scheduling"), f"{where} ({name})"))
+                    parse_scheduling(spec.get("scheduling"), f"{where} ({name})"), str(spec.get("host", "")))
 
 
 def _set_parent_death_signal() -> None:

@@ -89,10 +89,12 @@ def add_bag(sub) -> None:
 def add_launch(sub) -> None:
     p = sub.add_parser("launch", help="start a graph of nodes from a YAML graph file")
     p.add_argument("graph", type=Path, help="graph YAML file, or a packaged graph's name (standup, human_com, "
-                   "retarget, robot_seated, roundtrip, identification)")
+                   "retarget, robot_seated, roundtrip, identification, live)")
     p.add_argument("overrides", nargs="*", help="NAME:=VALUE for the graph's arguments")
     p.add_argument("--timeout", type=float, help="stop the graph after this many seconds")
     p.add_argument("--grace", type=float, default=10.0, help="seconds between SIGINT and SIGTERM at shutdown")
+    p.add_argument("--only", help="start only these nodes (comma-separated names): this machine's share")
+    p.add_argument("--host", help="start only the nodes labelled host: HOST in the graph file")
     p.add_argument("--namespace", default="", help="run every node (and so every topic, /clock included) in this "
                    "ROS namespace, e.g. robot2: two graphs side by side on one domain")
     p.set_defaults(func=_launch)

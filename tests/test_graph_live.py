@@ -1,0 +1,57 @@
+"""The live stand-up: serve-c3d (a QTM stand-in) -> mocap_bridge -> human_com -> retargeter -> driver -> recorder."""
+
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from conftest import GRAPHS, NodeProcess
+from live_support import capture_origin_ns, latencies_ms, p50_p99
+from sit2stand.data import plant_path
+from sit2stand.io.bag import BagReader
+
+pytestmark = pytest.mark.graph
+ROOT = Path(__file__).resolve().parents[1]
+HERE = Path(__file__).resolve().parent
+
+
+def test_the_robot_stands_up_from_a_live_qtm_stream_of_the_shipped_elderly_demonstration(tmp_path, ros_env):
+    calibration = tmp_path / "calibration.yaml"
+    subprocess.run([sys.executable, "-m", "sit2stand.cli", "human-calibrate", str(ROOT / "bags" / "elderly"),
+                    "--out", str(calibration)], check=True, env=ros_env, capture_output=True, timeout=120)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    out, probe_out = tmp_path / "run", tmp_path / "latency.json"
+    graph = NodeProcess(["sit2stand.cli", "launch", str(GRAPHS / "live.yaml"), f"out:={out}",
+                         f"plant:={plant_path('cad')}", f"capture_port:={port}", f"calibration:={calibration}",
+                         "--timeout", "200"], ros_env, tmp_path / "launch.log")
+    probe = NodeProcess(["latency_probe", str(probe_out), "/mocap/markers", "/robot/retarget/ik"],
+                        {**ros_env, "PYTHONPATH": str(HERE)}, tmp_path / "probe.log")
+    server = None
+    try:
+        assert graph.wait_for_output("TALOS seated", 120), graph.output[-3000:]
+        assert graph.wait_for_output("/human/com publisher found", 60), graph.output[-3000:]
+        assert probe.wait_for_output("probe ready", 30), probe.output
+        server = NodeProcess(["sit2stand.cli", "serve-c3d", str(ROOT / "bags" / "elderly"), "--port", str(port),
+                              "--host", "127.0.0.1"], ros_env, tmp_path / "serve.log")
+        assert server.wait(60) == 0, server.output
+        assert graph.wait(240) == 0 or "FALLEN" in graph.output, graph.output[-4000:]
+    finally:
+        probe.stop()
+        for p in (graph, server):
+            if p is not None:
+                p.kill()
+    log = graph.log_path.read_text(errors="replace")
+    origin = capture_origin_ns(server.log_path.read_text())
+    markers, commands = latencies_ms(probe_out, "/mocap/markers", origin, 100.0), \
+        latencies_ms(probe_out, "/robot/retarget/ik", origin, 100.0)
+    print(f"capture -> /mocap/markers {p50_p99(markers)}; capture -> joint command {p50_p99(commands)}")
+    assert "[mocap_bridge] 531 frames, 0 lost, 1 connection(s)" in log, log[-4000:]
+    assert "[retargeter] 531 frames" in log, log[-4000:]
+    assert len(markers) == 531
+    with BagReader(out) as bag:
+        z = [m.pose.position.z for _, m in bag.read("/robot/base_pose")]
+    assert "FALLEN" not in log and z[0] < 0.65 and z[-1] > 0.85, f"pelvis {z[0]:.2f} -> {z[-1]:.2f} m\n{log[-3000:]}"
