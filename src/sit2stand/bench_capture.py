@@ -1,0 +1,114 @@
+"""Benchmark (not a test): the mocap bridge streaming for a long time at 200 Hz: frames lost, memory growth, latency.
+
+    python -m sit2stand.bench_capture [--duration-s 600] [--out bench/results/bench.json]   (make bench-capture)
+
+A QTM stand-in (:class:`~sit2stand.capture.server.QtmServer`, in this process) loops the shipped elderly
+demonstration at 2x its rate (markers at 200 Hz, two plates at 2 kHz); the ``mocap_bridge`` node runs as its own
+process; a subscriber here counts ``/mocap/markers`` and times each frame's arrival against its capture time. The
+bridge's resident memory (VmRSS) is sampled every 5 s; growth is the slope of a line fitted after the first 30 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sit2stand_msgs.msg import MocapFrame
+
+from .capture.recording import load_recording
+from .capture.server import QtmServer
+
+RATE_HZ = 200.0
+
+
+def _rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def _serve(root: Path) -> QtmServer:
+    rec = load_recording(root / "bags" / "elderly")
+    server = QtmServer(rec, "127.0.0.1", 0, speed=RATE_HZ / rec.rate_hz, loop=True, log=lambda *a, **k: None)
+    threading.Thread(target=server.serve, daemon=True).start()
+    return server
+
+
+def run(duration_s: float, root: Path) -> dict[str, object]:
+    """Stream for ``duration_s`` and return the figures."""
+    server = _serve(root)
+    env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "92"),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    bridge = subprocess.Popen([sys.executable, "-m", "sit2stand.nodes.mocap_bridge", "--ros-args", "-p",
+                               f"port:={server.port}"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                              text=True)
+    os.environ["ROS_DOMAIN_ID"], os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = env["ROS_DOMAIN_ID"], "LOCALHOST"
+    rclpy.init()
+    node = rclpy.create_node("bench_capture")
+    arrivals: list[tuple[int, int]] = []
+    node.create_subscription(MocapFrame, "/mocap/markers", lambda m: arrivals.append(
+        (m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, time.time_ns())),
+        QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+    rss, t0, next_sample = [], time.monotonic(), 0.0
+    while time.monotonic() - t0 < duration_s + 2.0:
+        rclpy.spin_once(node, timeout_sec=0.05)
+        if time.monotonic() - t0 >= next_sample:
+            rss.append((time.monotonic() - t0, _rss_mb(bridge.pid)))
+            next_sample += 5.0
+    server.stop()
+    time.sleep(0.5)
+    for _ in range(40):
+        rclpy.spin_once(node, timeout_sec=0.05)
+    bridge.send_signal(signal.SIGINT)
+    report = bridge.communicate(timeout=30)[0].strip().splitlines()[-1]
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return _figures(arrivals, rss, server, report, duration_s)
+
+
+def _figures(arrivals, rss, server: QtmServer, report: str, duration_s: float) -> dict[str, object]:
+    a = np.array(arrivals, np.int64)
+    k = np.round((a[:, 0] - a[0, 0]) * RATE_HZ * 1e-9).astype(np.int64)
+    latency_ms = (a[:, 1] - (server.origin_ns + np.round(k * 1e9 / RATE_HZ).astype(np.int64))) * 1e-6
+    r = np.array(rss)
+    late = r[r[:, 0] >= 30.0]
+    slope = float(np.polyfit(late[:, 0] / 60.0, late[:, 1], 1)[0]) if len(late) > 2 else float("nan")
+    return {"duration_s": duration_s, "rate_hz": RATE_HZ, "frames_sent": server.frames_sent,
+            "frames_received": int(len(a)), "frames_lost": int(server.frames_sent - len(a)),
+            "frame_numbers_missing": int(k[-1] + 1 - len(np.unique(k))), "bridge_report": report,
+            "capture_to_markers_p50_ms": round(float(np.percentile(latency_ms, 50)), 3),
+            "capture_to_markers_p99_ms": round(float(np.percentile(latency_ms, 99)), 3),
+            "bridge_rss_mb_first": round(float(r[0, 1]), 1), "bridge_rss_mb_at_30s": round(float(late[0, 1]), 1)
+            if len(late) else None, "bridge_rss_mb_last": round(float(r[-1, 1]), 1),
+            "bridge_rss_growth_mb_per_min_after_30s": round(slope, 3), "load_average": os.getloadavg()[0]}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="sit2stand-bench-capture", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--duration-s", type=float, default=600.0, help="how long to stream (the target: 600 s)")
+    parser.add_argument("--out", type=Path, default=Path("bench/results/bench.json"))
+    args = parser.parse_args(argv)
+    figures = run(args.duration_s, Path(__file__).resolve().parents[2])
+    for key, value in figures.items():
+        print(f"{key:42s} {value}")
+    results = json.loads(args.out.read_text()) if args.out.exists() else {}
+    results["capture"] = figures
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(results, indent=2) + "\n")
+    print(f"\nmerged into {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
