@@ -14,6 +14,7 @@ import argparse
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -38,21 +39,23 @@ def _rss_mb(pid: int) -> float:
     return float("nan")
 
 
-def _serve(root: Path) -> QtmServer:
+def _serve(root: Path, port: int) -> QtmServer:
     rec = load_recording(root / "bags" / "elderly")
-    server = QtmServer(rec, "127.0.0.1", 0, speed=RATE_HZ / rec.rate_hz, loop=True, log=lambda *a, **k: None)
+    server = QtmServer(rec, "127.0.0.1", port, speed=RATE_HZ / rec.rate_hz, loop=True, log=lambda *a, **k: None)
     threading.Thread(target=server.serve, daemon=True).start()
     return server
 
 
 def run(duration_s: float, root: Path) -> dict[str, object]:
     """Stream for ``duration_s`` and return the figures."""
-    server = _serve(root)
     env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "92"),
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
     bridge = subprocess.Popen([sys.executable, "-m", "sit2stand.nodes.mocap_bridge", "--ros-args", "-p",
-                               f"port:={server.port}"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                              text=True)
+                               f"port:={port}", "-p", "reconnect_max_s:=0.5"], env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True)
     os.environ["ROS_DOMAIN_ID"], os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = env["ROS_DOMAIN_ID"], "LOCALHOST"
     rclpy.init()
     node = rclpy.create_node("bench_capture")
@@ -60,6 +63,10 @@ def run(duration_s: float, root: Path) -> dict[str, object]:
     node.create_subscription(MocapFrame, "/mocap/markers", lambda m: arrivals.append(
         (m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, time.time_ns())),
         QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+    while node.count_publishers("/mocap/markers") == 0:      # matched before the first frame: count them all
+        rclpy.spin_once(node, timeout_sec=0.1)
+    time.sleep(1.0)
+    server = _serve(root, port)
     rss, t0, next_sample = [], time.monotonic(), 0.0
     while time.monotonic() - t0 < duration_s + 2.0:
         rclpy.spin_once(node, timeout_sec=0.05)

@@ -55,15 +55,16 @@ class CaptureRecording:
         """The plate's samples per marker frame (its rate over the marker rate)."""
         return max(1, int(round(len(plate.samples) / self.n_frames)))
 
-    def frame(self, k: int, pass_index: int = 0) -> DataFrame:
+    def frame(self, k: int, pass_index: int = 0, speed: float = 1.0) -> DataFrame:
         """Frame ``k`` of pass ``pass_index`` (a looping server's frame numbers and times go on across passes):
-        timestamp [us from the first frame], frame number (from 1), markers and the plates' samples of the frame."""
+        timestamp [us from the first frame, at ``speed`` x the file's rate], frame number (from 1), markers and the
+        plates' samples of the frame."""
         number = pass_index * self.n_frames + k
         chunks = []
         for p in self.plates:
             r = self.samples_per_frame(p)
             chunks.append(PlateChunk(p.info.plate_id, number * r, p.samples[k * r:(k + 1) * r]))
-        return DataFrame(int(round(number * 1e6 / self.rate_hz)), number + 1, self.markers_mm[k],
+        return DataFrame(int(round(number * 1e6 / (self.rate_hz * speed))), number + 1, self.markers_mm[k],
                          self.residuals_mm[k], chunks)
 
 

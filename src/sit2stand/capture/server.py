@@ -21,7 +21,7 @@ from __future__ import annotations
 import socket
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from .qtm_protocol import (OLDEST_VERSION, PROTOCOL_VERSION, WELCOME, Component, Event, PacketType, ProtocolError,
                            StreamRequest, data_packet, event_packet, packet, parameters_xml, parse_stream_frames,
@@ -154,7 +154,8 @@ class QtmServer:
         rec = self.recording
         every = "all" in what
         labels = rec.labels if every or "3d" in what else None
-        plates = [p.info for p in rec.plates] if every or "force" in what else None
+        plates = [replace(p.info, rate_hz=p.info.rate_hz * self.speed) for p in rec.plates] \
+            if every or "force" in what else None      # served at speed x the file's rate: so are the plates
         return string_packet(PacketType.XML, parameters_xml(labels, plates, rec.rate_hz * self.speed, client.version))
 
     def _stream(self, client: _Client, args: list[str]) -> None:
@@ -188,7 +189,7 @@ class QtmServer:
                 time.sleep(left - SPIN_S)
 
     def _send_frame(self, k: int, pass_index: int) -> None:
-        frame = self.recording.frame(k, pass_index)
+        frame = self.recording.frame(k, pass_index, self.speed)
         with self._lock:
             streams = list(self.streams.values())
         encoded: dict[tuple[Component, ...], bytes] = {}
