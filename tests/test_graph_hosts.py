@@ -89,13 +89,13 @@ def test_the_live_stand_up_runs_with_capture_control_and_robot_on_three_hosts(tm
     graph = str(GRAPHS / "live.yaml")
     common = [f"plant:={plant_path('cad')}", f"calibration:={calibration}"]
     procs = {
-        "robot": _start(lab["robot"], ["sit2stand.cli", "launch", graph, "--host", "robot", f"out:={out}",
-                                       *common, "--timeout", "200"], env, tmp_path / "robot.log"),
-        "control": _start(lab["control"], ["sit2stand.cli", "launch", graph, "--host", "control", *common,
+        "robot": _start(lab["robot"], ["sit2stand.cli", "launch", graph, f"out:={out}", *common, "--host",
+                                       "robot", "--timeout", "200"], env, tmp_path / "robot.log"),
+        "control": _start(lab["control"], ["sit2stand.cli", "launch", graph, *common, "--host", "control",
                                            "--timeout", "200"], env, tmp_path / "control.log"),
-        "capture": _start(lab["capture"], ["sit2stand.cli", "launch", graph, "--host", "capture",
-                                           f"capture_host:={HOSTS['capture']}", f"capture_port:={PORT}",
-                                           "--timeout", "200"], env, tmp_path / "capture.log"),
+        "capture": _start(lab["capture"], ["sit2stand.cli", "launch", graph,
+                                           f"capture_host:={HOSTS['capture']}", f"capture_port:={PORT}", "--host",
+                                           "capture", "--timeout", "200"], env, tmp_path / "capture.log"),
         "probe": _start(lab["robot"], ["latency_probe", str(probe_out), "/mocap/markers", "/robot/retarget/ik"],
                         env, tmp_path / "probe.log"),
     }
