@@ -30,7 +30,7 @@ from rosbags.rosbag2 import Reader
 
 from .bench_human import bench_human_real, print_table
 from .data import graph_path, plant_path
-from .gap.hidden import KINDS, draw, run_case
+from .gap.hidden import KINDS, OUT_OF_LIBRARY, draw, run_case
 from .human.com import estimate_com
 from .human.com_stream import StreamingComEstimator
 from .human.offline import calibrate_from_bag, read_trial
@@ -288,19 +288,24 @@ def _print_sections(results: dict, sections: list[str]) -> None:
                 print(f"  {key:<{width}}  {text}")
 
 
-def bench_gap(n_per_kind: int = 20, n_two: int = 10, workers: int = 2, progress: bool = True) -> dict:
-    """Hit rates of the model-gap workflow on hidden-effect plants: ``n_per_kind`` seeds per effect kind, as many
-    plants with nothing hidden, and ``n_two`` with two effects of different kinds. A hit names the hidden effect's
-    kind and location with its magnitude within 20 %; "clean" also names nothing else."""
-
-
-    cases = [(kind, [draw(kind, seed)], seed) for kind in KINDS for seed in range(n_per_kind)]
+def gap_cases(n_per_kind: int, n_two: int, kinds: tuple[str, ...] = KINDS + OUT_OF_LIBRARY) -> list[tuple]:
+    """(kind, hidden effects, seed) of the model-gap benchmark: ``n_per_kind`` seeds per kind in ``kinds`` (in the
+    library and outside it), as many plants with nothing hidden, and ``n_two`` with two in-library kinds."""
+    cases = [(kind, [draw(kind, seed)], seed) for kind in kinds for seed in range(n_per_kind)]
     cases += [("none", [], seed) for seed in range(n_per_kind)]
     rng = np.random.default_rng(7)
     for seed in range(n_two):
         a, b = rng.choice(len(KINDS), 2, replace=False)
         cases.append(("two", [draw(KINDS[a], 100 + seed), draw(KINDS[b], 200 + seed)], 100 + seed))
-    out: dict[str, object] = {}
+    return cases
+
+
+def bench_gap(n_per_kind: int = 20, n_two: int = 10, workers: int = 2, progress: bool = True,
+              kinds: tuple[str, ...] = KINDS + OUT_OF_LIBRARY) -> dict:
+    """Hit rates of the model-gap workflow on hidden-effect plants (see :func:`gap_cases`). In-library: a hit names
+    the hidden effect's kind and location with its magnitude within 20 %, "clean" names nothing else. Outside the
+    library: honest when a residual is flagged as unexplained (a close proxy may be named beside it)."""
+    cases = gap_cases(n_per_kind, n_two, kinds)
     rows = []
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp, ProcessPoolExecutor(workers) as pool:
@@ -310,31 +315,51 @@ def bench_gap(n_per_kind: int = 20, n_two: int = 10, workers: int = 2, progress:
             r["kind"] = kind
             rows.append(r)
             if progress:
-                hit = r["hit"] or (kind == "none" and not r["named"])
-                print(f"  [{i + 1}/{len(cases)}] {'hit ' if hit else 'MISS'} {kind}: hidden {r['hidden']} -> named "
-                      f"{r['named']}", flush=True)
-    wall = time.perf_counter() - t0
-    for kind in (*KINDS, "none", "two"):
+                print(f"  [{i + 1}/{len(cases)}] {'hit ' if _gap_ok(r) else 'MISS'} {kind}: hidden {r['hidden']} -> "
+                      f"named {r['named']}" + (f"; unexplained {r['unexplained'][:1]}" if r["unexplained"] else ""),
+                      flush=True)
+    out = _gap_rates(rows)
+    out["wall_s"] = time.perf_counter() - t0
+    return out
+
+
+def _gap_ok(r: dict) -> bool:
+    """A case scored right: a hit (in the library), honest (outside), nothing named (nothing hidden)."""
+    return r["hit"] or (r["kind"] == "none" and not r["named"] and not r["unexplained"])
+
+
+def _gap_rates(rows: list[dict]) -> dict:
+    """The benchmark's figures per kind from the case rows."""
+    out: dict[str, object] = {}
+    for kind in dict.fromkeys(r["kind"] for r in rows):
         rs = [r for r in rows if r["kind"] == kind]
-        if not rs:
-            continue
         if kind == "none":
             out["none_no_effect_rate"] = float(np.mean([not r["named"] for r in rs]))
+            out["none_no_alarm_rate"] = float(np.mean([_gap_ok(r) for r in rs]))
             continue
-        found = [all(r["found"]) for r in rs]
-        within = [all(r["found"]) and max(r["errors"]) <= 0.2 for r in rs]
-        shrink = [r["shrink"] for r in rs if r["gap_before"] > 0]
-        out[f"{kind}_hit_rate"] = float(np.mean(within))
-        out[f"{kind}_clean_hit_rate"] = float(np.mean([r["hit"] for r in rs]))
-        out[f"{kind}_located_rate"] = float(np.mean(found))
-        out[f"{kind}_median_error_pct"] = float(100 * np.nanmedian([max(r["errors"]) for r in rs]))
-        out[f"{kind}_median_gap_shrink_pct"] = float(100 * np.median(shrink)) if shrink else float("nan")
+        if kind in OUT_OF_LIBRARY:
+            out[f"{kind}_honest_rate"] = float(np.mean([r["hit"] for r in rs]))
+            out[f"{kind}_confident_wrong_rate"] = float(np.mean([bool(r["named"]) and not r["unexplained"]
+                                                                 for r in rs]))
+        else:
+            out[f"{kind}_hit_rate"] = float(np.mean([all(r["found"]) and max(r["errors"]) <= 0.2 for r in rs]))
+            out[f"{kind}_clean_hit_rate"] = float(np.mean([r["hit"] for r in rs]))
+            out[f"{kind}_located_rate"] = float(np.mean([all(r["found"]) for r in rs]))
+            out[f"{kind}_median_error_pct"] = float(100 * np.nanmedian([max(r["errors"]) for r in rs]))
+        moved = [r for r in rs if r["gap_before"] > 0 and r["named"]]
+        for name in ("shrink", "shrink_first_order"):
+            out[f"{kind}_median_{name}_pct"] = float(100 * np.median([r[name] for r in moved])) if moved \
+                else float("nan")
+        out[f"{kind}_median_replay_gap"] = [float(np.median([r[k] for r in rs]))
+                                            for k in ("replay_gap_before", "replay_gap_after")]
+    named = [r for r in rows if r["named"] and r["gap_before"] > 0]
+    out["shrink_gap_max_points"] = float(max((100 * abs(r["shrink"] - r["shrink_first_order"]) for r in named),
+                                             default=0.0))
     out["cases"] = len(rows)
     out["excite_s_median"] = float(np.median([r["excite_s"] for r in rows]))
     out["workflow_s_median"] = float(np.median([r["workflow_s"] for r in rows]))
-    out["wall_s"] = wall
-    out["misses"] = [{k: r[k] for k in ("kind", "hidden", "named", "errors", "shrink")} for r in rows
-                     if not (r["hit"] or (r["kind"] == "none" and not r["named"]))]
+    out["misses"] = [{k: r[k] for k in ("kind", "hidden", "named", "errors", "unexplained", "refused", "shrink",
+                                        "shrink_first_order")} for r in rows if not _gap_ok(r)]
     return out
 
 
@@ -353,9 +378,13 @@ def _human_real_section() -> dict:
     return out
 
 
-def _gap_section(seeds: int) -> dict:
-    print(f"model gap: hidden-effect plants, {seeds} seeds per effect kind ...", flush=True)
-    return bench_gap(seeds)
+def _gap_section(seeds: int, two: int | None = None, kinds: str | None = None) -> dict:
+    chosen = tuple(k for k in kinds.split(",") if k) if kinds else KINDS + OUT_OF_LIBRARY
+    bad = set(chosen) - set(KINDS + OUT_OF_LIBRARY)
+    if bad:
+        raise SystemExit(f"--gap-kinds: unknown {sorted(bad)} (known: {', '.join(KINDS + OUT_OF_LIBRARY)})")
+    print(f"model gap: hidden-effect plants, {seeds} seeds per effect kind ({len(chosen)} kinds) ...", flush=True)
+    return bench_gap(seeds, n_two=seeds // 2 if two is None else two, kinds=chosen)
 
 
 def _write(results: dict, out: Path, sections: list[str]) -> None:
@@ -373,13 +402,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", choices=["gap", "retarget", "human"],
                         help="run one section and merge it into the JSON file")
     parser.add_argument("--gap-seeds", type=int, default=20, help="hidden-effect cases per effect kind")
+    parser.add_argument("--gap-two", type=int, default=None, help="cases with two hidden effects (default: seeds / 2)")
+    parser.add_argument("--gap-kinds", default=None, help="comma-separated kinds (default: all, in and outside "
+                        "the library)")
     args = parser.parse_args(argv)
     root = Path(__file__).resolve().parents[2]
     env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "91"),
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     if args.only:
         results = json.loads(args.out.read_text()) if args.out.exists() else {}
-        sections = {"gap": lambda: _gap_section(args.gap_seeds), "retarget": lambda: _retarget_section(root, env),
+        sections = {"gap": lambda: _gap_section(args.gap_seeds, args.gap_two, args.gap_kinds),
+                    "retarget": lambda: _retarget_section(root, env),
                     "human": _human_real_section}
         key = "human_real" if args.only == "human" else args.only
         results[key] = sections[args.only]()
@@ -412,7 +445,7 @@ def main(argv: list[str] | None = None) -> int:
     results["robot"] = bench_robot()
     results["human_real"] = _human_real_section()
     results["retarget"] = _retarget_section(root, env)
-    results["gap"] = _gap_section(args.gap_seeds)
+    results["gap"] = _gap_section(args.gap_seeds, args.gap_two, args.gap_kinds)
     _write(results, args.out, [s for s in ("bag", "replayer", "human_com", "robot", "retarget", "gap") if s in results])
     return 0
 

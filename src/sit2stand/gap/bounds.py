@@ -37,6 +37,7 @@ SPRING_MAX_NM_PER_RAD = 2000.0
 ROTOR_INERTIA_MAX_KGM2 = 2.0
 DELAY_MIN_S = 0.001          # one control step of the simulated robot: below it, the residue of 50 Hz samples
 DELAY_MAX_S = 0.1
+RESIDUE = "residue: "        # a refusal for being too small to be an effect at all (not reported as refused)
 
 
 @dataclass(frozen=True)
@@ -73,7 +74,9 @@ def refusal(kind: str, location: str, theta: np.ndarray, limits: Limits) -> str 
     if kind in caps:
         return None if 0.0 < v <= caps[kind] else f"{kind.replace('_', ' ')} {v:.3g} outside 0..{caps[kind]:.3g}"
     if kind == "actuator_delay":
-        return None if DELAY_MIN_S <= v <= DELAY_MAX_S else f"delay {v:.3g} s outside {DELAY_MIN_S}..{DELAY_MAX_S} s"
+        if v < DELAY_MIN_S:
+            return f"{RESIDUE}delay {v:.3g} s below one control step"
+        return None if v <= DELAY_MAX_S else f"delay {v:.3g} s above {DELAY_MAX_S} s"
     return None
 
 
@@ -81,7 +84,7 @@ def _mass_refusal(theta: np.ndarray, limits: Limits) -> str | None:
     """An extra point mass: see the module docstring."""
     m = float(theta[0])
     if abs(m) <= MASS_MIN_KG:
-        return f"mass {m:.2g} kg too small to place"
+        return f"{RESIDUE}mass {m:.2g} kg too small to place"
     if m > MASS_MAX_KG:
         return f"mass {m:.3g} kg above {MASS_MAX_KG:g} kg"
     if m < 0 and -m > limits.link_mass_kg:

@@ -41,7 +41,7 @@ def ft_location(location: str) -> tuple[str, int]:
 def unmodeled_from(effects: list[dict], mass_prefix: str = "found") -> Unmodeled:
     """The effects as a plant's unmodeled section; effects of one kind at one place add up (gains multiply). A
     negative extra mass (a link lighter than modelled) has no plant body: it is left out here (the augmented
-    model's ``links`` carry it)."""
+    model's ``links`` carry it, and :func:`alter_model` takes it off the compiled plant's link)."""
     um = Unmodeled()
     for e in effects:
         k = e["kind"]
@@ -84,6 +84,8 @@ def alter_model(model: mujoco.MjModel, effects: list[dict]) -> None:
     such as ``leg_*_4_link``); the other kinds are left to :func:`unmodeled_from`."""
     for e in effects:
         k, v = e["kind"], float(e.get("value", 0.0))
+        if k == "extra_mass" and e["mass_kg"] < 0:
+            _lighten(model, e)
         if k not in MODEL_KINDS:
             continue
         if k == "contact_softness":
@@ -96,6 +98,18 @@ def alter_model(model: mujoco.MjModel, effects: list[dict]) -> None:
             raise InputError(f"{k}: no {'link' if k == 'link_length' else 'joint'} matches {e['location']!r}")
         for i in ids:
             _alter_one(model, k, i, v, e)
+
+
+def _lighten(model: mujoco.MjModel, effect: dict) -> None:
+    """A negative extra mass: the link's mass lowered and its centre of mass moved away from the removed point (the
+    body frame of a URDF link is its joint's frame, as in the workflow's model)."""
+    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, effect["location"])
+    if i < 0:
+        raise InputError(f"extra_mass: no link {effect['location']!r}")
+    m, old = float(effect["mass_kg"]), float(model.body_mass[i])
+    total = max(old + m, 1e-6)
+    model.body_ipos[i] = (old * model.body_ipos[i] + m * np.asarray(effect["pos_m"], float)) / total
+    model.body_mass[i] = total
 
 
 def _alter_one(model: mujoco.MjModel, kind: str, i: int, v: float, effect: dict) -> None:

@@ -10,6 +10,7 @@ on any link of the rigid group named), its magnitude within ``tolerance`` (20 %)
 from __future__ import annotations
 
 import shutil
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -165,9 +166,8 @@ def score(hidden: list[Hidden], named: list[dict]) -> Score:
 
 def run_case(hidden: list[Hidden], seed: int, workdir: str, n_moves: int = 8) -> dict:
     """Build the plant, record its excitation bag, run the workflow on the bag alone and score it."""
-
-
-    bag = Path(workdir) / f"case_{seed}_{'_'.join(h.kind for h in hidden) or 'none'}"
+    # a folder of its own: two cases of one kind and seed may run at once
+    bag = Path(tempfile.mkdtemp(prefix=f"case_{seed}_{'_'.join(h.kind for h in hidden) or 'none'}_", dir=workdir))
     shutil.rmtree(bag, ignore_errors=True)
     t0 = time.monotonic()
     alter = [h.as_effect() for h in hidden if h.kind in MODEL_KINDS]

@@ -35,7 +35,8 @@ from .residuals import body_link_names, evaluate, joint_columns
 # soles 2.5 x softer: 0.25 cm COP x, 0.5 mrad at an ankle; a 40 N m/rad knee spring: 0.4 cm, 10 N, 9 mrad)
 REPLAY_FLOORS = {"cop_x": 0.0005, "feet_fz": 1.5, "q": 0.0003}
 REPLAY_UNITS = {"cop_x": "m", "feet_fz": "N", "q": "rad"}
-NOT_BETTER = 0.98            # an effect whose removal keeps the gap within 2 % of the full set's does not improve it
+# faults of the sensors alone: the robot moves the same with them, so its replay is the nominal one
+SENSOR_KINDS = ("torque_bias", "torque_gain", "ft_bias")
 
 
 def gap_size(es: list[np.ndarray], ds: Dataset, pairs: list[tuple[int, int, str]]) -> float:
@@ -131,9 +132,13 @@ def _contribution(ds: Dataset, links: list[str], r: int, effect: dict) -> np.nda
 
 
 # -- the re-simulation ------------------------------------------------------------------------------------------------
-def replay_effects(ds: Dataset, effects: list[dict]) -> dict[int, dict]:
+def replay_effects(ds: Dataset, effects: list[dict], nominal: dict[int, dict] | None = None) -> dict[int, dict]:
     """Recording index -> the simulated signals of its commands replayed in the plant with ``effects`` (runs that
-    carry their commands only)."""
+    carry their commands only); ``nominal``: the nominal replay, returned as it is when the effects are all
+    sensor faults (``SENSOR_KINDS``)."""
+    physical = [e for e in effects if e["kind"] not in SENSOR_KINDS]
+    if nominal is not None and not physical:
+        return nominal
     cfg = plant_from_effects(effects) if effects else PlantConfig()
     out = {}
     for r, rec in enumerate(ds.recordings):

@@ -38,7 +38,7 @@ from .dataset import MOVING_RADPS, Dataset, GapError, fast_part_floor, load_data
 from .recording import RecordingError
 from .effects import FT_AXES, unmodeled_dict, unmodeled_from
 from .residuals import body_link_names, joint_columns
-from .bounds import Limits, refusal
+from .bounds import RESIDUE, Limits, refusal
 from .select import MIN_SHARE, Candidate, Selection, select
 from .symmetry import lopsided
 from .unexplained import SIGNIFICANT_Z, contact_note, where_and_shape
@@ -368,7 +368,7 @@ def _select_checked(ds: Dataset, cands: list[Candidate], links: list[str], say) 
     sid = _series_id(ds)
     exclude: set[str] = set()
     refused: list[dict] = []
-    for _ in range(MAX_REFUSAL_ROUNDS):
+    for round_ in range(MAX_REFUSAL_ROUNDS + 1):
         pool = [c for c in cands if c.key not in exclude]
         say(f"  {len(pool)} candidate effects, {len(y)} residual rows: selecting")
         sel = select(y, pool, series_id=sid, noise_rss=float(len(y)), progress=say)
@@ -376,14 +376,16 @@ def _select_checked(ds: Dataset, cands: list[Candidate], links: list[str], say) 
                if s.candidate.plausible and (why := s.candidate.plausible(s.theta)) is not None]
         bad += lopsided(ds, sel.effects, lambda r, s: np.tensordot(
             effect_columns(ds, links, r, s.candidate.kind, s.candidate.location), s.theta, axes=(2, 0)))
-        if not bad:
-            break
         for key, why in bad:
             say(f"  refused {key}: {why}")
             refused.append({"effect": key, "why": why})
             exclude.add(key)
+        if not bad or round_ == MAX_REFUSAL_ROUNDS:     # the last round's refused are dropped, not replaced
+            sel.effects = [s for s in sel.effects if s.candidate.key not in exclude]
+            break
     for step in sel.steps:                  # skipped during the forward pass for implausible estimates
-        if "implausible" in step and step["implausible"] not in {r["effect"] for r in refused}:
+        if "implausible" in step and step["implausible"] not in {r["effect"] for r in refused} \
+                and not step.get("why", "").startswith(RESIDUE):
             refused.append({"effect": step["implausible"], "why": step.get("why", "implausible")})
     return sel, refused
 
@@ -422,11 +424,12 @@ def _confirm_replay(ds: Dataset, model: pin.Model, effects: list[dict], exact: l
     nominal = replay_effects(ds, [])
     z0 = replay_z(replay_residuals(ds, nominal))
     keys = [k for k, z in z0.items() if z >= SIGNIFICANT_Z] or list(z0)
-    sims = replay_effects(ds, effects) if effects else nominal
+    sims = replay_effects(ds, effects, nominal)
     score = replay_gap(replay_z(replay_residuals(ds, sims)), keys)
     while effects and score > replay_gap(z0, keys):
         trials = [(replay_gap(replay_z(replay_residuals(ds, sim)), keys), i, sim)
-                  for i, sim in ((i, replay_effects(ds, effects[:i] + effects[i + 1:])) for i in range(len(effects)))]
+                  for i, sim in ((i, replay_effects(ds, effects[:i] + effects[i + 1:], nominal))
+                                 for i in range(len(effects)))]
         best, i, sim = min(trials, key=lambda t: t[0])
         if best >= score:
             break

@@ -1,0 +1,133 @@
+"""The model gap's honesty checks without simulation: plausibility bounds per kind, the symmetric-evidence check,
+the description of an unexplained residual, the new library signatures and the plant alterations."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from sit2stand.errors import InputError
+from sit2stand.gap.bounds import Limits, refusal
+from sit2stand.gap.effects import alter_model, unmodeled_from
+from sit2stand.gap.residuals import joint_columns
+from sit2stand.gap.select import Candidate, Selected
+from sit2stand.gap.symmetry import lopsided, mirror, side_of
+from sit2stand.gap.unexplained import where_and_shape
+from sit2stand.gap.validate import effect_theta
+from sit2stand.robot.model import PlantConfig
+from sit2stand.robot.plant import Plant
+
+ARM = Limits(effort_nm=17.86, range_rad=2.36, link_mass_kg=1.1)
+
+
+@pytest.mark.parametrize("kind, location, theta, ok", [
+    ("joint_offset", "arm_left_6_joint", [102.0], False),          # the issue's 102 rad offset
+    ("joint_offset", "arm_left_6_joint", [0.03], True),
+    ("extra_mass", "arm_left_4_link", [-2.0, 0.0, 0.0, -0.2], False),   # lighter than the link itself
+    ("extra_mass", "arm_left_4_link", [-0.5, 0.0, 0.0, -0.05], True),
+    ("extra_mass", "arm_left_4_link", [2.0, 0.0, 0.0, -1.4], False),    # 0.7 m from its link
+    ("extra_mass", "arm_left_4_link", [45.0, 0.0, 0.0, 0.0], False),
+    ("torque_bias", "arm_left_4_joint", [12.0], False),            # beyond half the sensor's 17.9 N m range
+    ("torque_bias", "arm_left_4_joint", [4.0], True),
+    ("torque_gain", "arm_left_4_joint", [-0.6], False),
+    ("ft_bias", "ft_left/fz", [80.0], False),
+    ("ft_bias", "ft_left/tx", [3.0], True),
+    ("viscous_friction", "arm_left_4_joint", [-1.0], False),       # negative friction is not friction
+    ("joint_spring", "arm_left_4_joint", [40.0, 1.0], True),
+    ("rotor_inertia", "arm_left_4_joint", [-0.2], False),
+    ("actuator_delay", "all joints", [0.0004], False),
+])
+def test_bounds_refuse_what_is_not_physical(kind, location, theta, ok):
+    why = refusal(kind, location, np.array(theta), ARM)
+    assert (why is None) == ok, why
+
+
+def test_mirror_and_side():
+    assert mirror("tau/leg_left_4_joint") == "tau/leg_right_4_joint"
+    assert mirror("ft_right/fz") == "ft_left/fz"
+    assert side_of("leg_left_3_link") == "left" and side_of("torso_2_link") is None
+
+
+def _fake_dataset(left: np.ndarray, right: np.ndarray):
+    """Two joint channels, one recording, unit floors."""
+    e = np.column_stack([left, right])
+    ev = SimpleNamespace(e=e, valid=np.ones_like(e, bool))
+    return SimpleNamespace(channels=["tau/leg_left_4_joint", "tau/leg_right_4_joint"], evaluations=[ev],
+                           floors=[np.ones(2)])
+
+
+def test_one_sided_effect_is_refused_only_when_the_mirror_shows_the_same():
+    rng = np.random.default_rng(0)
+    shape = np.sin(np.linspace(0, 20, 800)) * 10
+    cand = Candidate("extra_mass", "leg_left_4_link", ["m"], np.zeros((800, 1)))
+    sel = Selected(cand, np.array([1.0]), np.eye(1), 0.9, -100.0)
+
+    def contribution(r, s):
+        return np.column_stack([shape, np.zeros(800)])
+
+    symmetric = _fake_dataset(shape + rng.normal(size=800), shape + rng.normal(size=800))
+    assert [k for k, _ in lopsided(symmetric, [sel], contribution)] == ["extra_mass@leg_left_4_link"]
+    one_sided = _fake_dataset(shape + rng.normal(size=800), rng.normal(size=800))
+    assert lopsided(one_sided, [sel], contribution) == []
+
+
+def _fake_recording(n: int = 600):
+    t = np.linspace(0, 12, n)
+    q = np.column_stack([0.5 * np.sin(t), 0.3 * np.cos(0.7 * t)])
+    qd = np.gradient(q, t, axis=0)
+    qdd = np.gradient(qd, t, axis=0)
+    return SimpleNamespace(t_s=t, q=q, qd=qd, qdd=qdd, joint_names=["leg_left_4_joint", "torso_2_joint"])
+
+
+def test_unexplained_residual_is_described_by_where_and_shape():
+    rec = _fake_recording()
+    ds = SimpleNamespace(recordings=[rec], labels=[np.full(len(rec.t_s), "moving", dtype=object)])
+    ok = np.ones(len(rec.t_s), bool)
+    spring_like = 40.0 * rec.q[:, 0]
+    d = where_and_shape(ds, 0, "tau/leg_left_4_joint", spring_like, ok, floor=0.2)
+    assert d["shape"].startswith("position-dependent (follows leg_left_4_joint")
+    assert d["above_s"] is not None and d["z_by_phase"]["moving"] > 3
+    damper_like = 5.0 * rec.qd[:, 1]
+    assert where_and_shape(ds, 0, "base/force_z", damper_like, ok, 0.2)["shape"].startswith("velocity-dependent")
+    lab = np.where(rec.t_s < 1.0, "seat-off", "standing").astype(object)
+    ds.labels = [lab]
+    burst = np.where(rec.t_s < 1.0, 5.0, 0.0)
+    assert where_and_shape(ds, 0, "tau/torso_2_joint", burst, ok, 0.2)["shape"].startswith("one phase only")
+
+
+def test_spring_and_rotor_inertia_signatures():
+    rec = _fake_recording()
+    n = len(rec.t_s)
+    ev = SimpleNamespace(e=np.zeros((n, 8)), n_joints=2, ctrl_law=None)
+    spring = joint_columns(rec, ev, "joint_spring", 0)
+    assert spring.shape == (n, 8, 2)
+    assert np.allclose(spring[:, 6, 0], rec.q[:, 0]) and np.allclose(spring[:, 6, 1], 1.0)
+    assert np.allclose(joint_columns(rec, ev, "rotor_inertia", 1)[:, 7, 0], rec.qdd[:, 1])
+    # k (q - q_rest) = k q - k q_rest: the preload column carries -k q_rest
+    assert np.allclose(effect_theta({"kind": "joint_spring", "value": 40.0, "rest_rad": 0.1}), [40.0, -4.0])
+
+
+def test_alterations_change_the_compiled_plant():
+    plant = Plant(PlantConfig(), with_chair=False)
+    m = plant.model
+    knee = m.joint("leg_left_4_joint").id
+    shank = m.body("leg_left_5_link").id
+    arm0 = float(m.dof_armature[m.jnt_dofadr[knee]])
+    pos0 = m.body_pos[m.body("leg_right_5_link").id].copy()
+    forearm = m.body("arm_left_4_link").id
+    mass0 = float(m.body_mass[forearm])
+    effects = [{"kind": "extra_mass", "location": "arm_left_4_link", "mass_kg": -0.5, "pos_m": (0.0, 0.0, -0.1)},{"kind": "joint_spring", "location": "leg_left_4_joint", "value": 40.0, "rest_rad": 0.2},
+               {"kind": "rotor_inertia", "location": "leg_left_4_joint", "value": 0.5},
+               {"kind": "link_length", "location": "leg_*_5_link", "value": 1.05},
+               {"kind": "contact_softness", "location": "soles", "value": 0.05}]
+    alter_model(m, effects)
+    assert abs(m.body_mass[forearm] - (mass0 - 0.5)) < 1e-12     # a lighter link is lighter in the replay too
+    assert m.jnt_stiffness[knee] == 40.0 and m.qpos_spring[m.jnt_qposadr[knee]] == 0.2
+    assert abs(m.dof_armature[m.jnt_dofadr[knee]] - arm0 - 0.5) < 1e-12
+    assert np.allclose(m.body_pos[m.body("leg_right_5_link").id], 1.05 * pos0)
+    assert m.geom_solref[m.geom("sole_box_left").id][0] == 0.05 and shank > 0
+    assert unmodeled_from(effects).masses == []          # none of these is a plant-file field
+    with pytest.raises(InputError, match="no joint matches"):
+        alter_model(m, [{"kind": "joint_spring", "location": "knee", "value": 1.0}])
