@@ -184,17 +184,7 @@ def markdown(result: GapResult) -> str:
     else:
         lines.append(f"**{result.verdict}**")
     lines += [""]
-    if result.refused:
-        lines += ["Refused (the residual they would have absorbed is left unexplained):", ""]
-        lines += [f"- {d['effect']}: {d['why']}" for d in result.refused[:15]] + [""]
-    if result.unexplained:
-        lines += ["**A residual is left that no candidate explains:**", "",
-                  "| recording | channel | RMS after | floor | ratio | above 3 floors [s] | shape |",
-                  "| --- | --- | --- | --- | --- | --- | --- |"]
-        lines += [f"| {u['recording']} | {u['channel']} | {u['rms']:.3g} | {u['floor']:.3g} | {u['z']:.1f} | "
-                  f"{_span(u['above_s'])} | {u['shape']} |" for u in result.unexplained[:15]]
-    elif result.effects:
-        lines.append("Nothing is left above 3 x the noise floor on any channel.")
+    lines += _unexplained_lines(result)
     if result.replay:
         lines += ["", "## The recorded commands replayed in simulation", "",
                   "| recording | model | COP x RMS vs measured | feet vertical force RMS | worst joint position RMS "
@@ -225,6 +215,23 @@ def markdown(result: GapResult) -> str:
               "effects: "
               "`augmented_model.yaml`.", ""]
     return "\n".join(lines)
+
+
+def _unexplained_lines(result: GapResult) -> list[str]:
+    """The report's lines on the refused candidates and the residual no candidate explains."""
+    lines = []
+    if result.refused:
+        lines += ["Refused (the residual they would have absorbed is left unexplained):", ""]
+        lines += [f"- {d['effect']}: {d['why']}" for d in result.refused[:15]] + [""]
+    if result.unexplained:
+        lines += ["**A residual is left that no candidate explains:**", "",
+                  "| recording | channel | RMS after | floor | ratio | above 3 floors [s] | shape |",
+                  "| --- | --- | --- | --- | --- | --- | --- |"]
+        lines += [f"| {u['recording']} | {u['channel']} | {u['rms']:.3g} | {u['floor']:.3g} | {u['z']:.1f} | "
+                  f"{_span(u['above_s'])} | {u['shape']} |" for u in result.unexplained[:15]]
+    elif result.effects:
+        lines.append("Nothing is left above 3 x the noise floor on any channel.")
+    return lines
 
 
 def _span(above: list[float] | None) -> str:

@@ -475,8 +475,8 @@ def _subtract_known(ds: Dataset, links: list[str], known: list[dict]) -> None:
     """Take the model file's own joint and sensor effects out of the residuals (they are part of the model)."""
     for r, ev in enumerate(ds.evaluations):
         for eff in known:
-            theta = np.array([eff["value"] - 1.0 if eff["kind"] == "torque_gain" else eff["value"]])
-            ev.e -= np.tensordot(effect_columns(ds, links, r, eff["kind"], eff["location"]), theta, axes=(2, 0))
+            ev.e -= np.tensordot(effect_columns(ds, links, r, eff["kind"], eff["location"]), effect_theta(eff),
+                                 axes=(2, 0))
 
 
 def _noise_floors(ds: Dataset) -> None:
