@@ -19,7 +19,9 @@ def _retarget(args: argparse.Namespace) -> int:
     summary = run(Path(args.bag), Path(args.out), params=args.params, plant=args.plant,
                   human_com_bag=args.human_com, margin_m=args.margin, time_scale=args.time_scale,
                   **({"max_time_scale": args.max_time_scale} if args.max_time_scale else {}),
-                  simulate=args.simulate, com_feedback=not args.no_com_feedback, whole=args.whole)
+                  simulate=args.simulate, com_feedback=not args.no_com_feedback, whole=args.whole,
+                  dynamic=args.dynamic, controller=args.controller,
+                  **({"seat_off_dwell_s": args.seat_off_dwell} if args.seat_off_dwell is not None else {}))
     print(json.dumps(summary, indent=2))
     if args.simulate:
         print("stood up" if summary["stood_up"] else f"did not stand up: {summary['fall'] or 'pelvis too low'}")
@@ -115,6 +117,14 @@ def add_retarget(sub) -> None:
                    "seated is played up to the human's sit-down (the robot does not sit back down yet)")
     p.add_argument("--no-com-feedback", action="store_true",
                    help="simulate the commands as planned, without the COM feedback the node applies")
+    p.add_argument("--dynamic", action="store_true",
+                   help="experimental: pass the commands through the dynamics filter (whole-body QP: feet COP inside "
+                        "the soles, torque limits), stretching time only where it cannot follow")
+    p.add_argument("--controller", choices=("inverse_dynamics", "wbc"), default="inverse_dynamics",
+                   help="the simulated robot's controller: joint PD + inverse-dynamics feed-forward (default), or "
+                        "experimental whole-body torque control (QP at 500 Hz)")
+    p.add_argument("--seat-off-dwell", type=float, default=None,
+                   help="the player's wait at the robot's seat-off [s] (default 1)")
     p.set_defaults(func=_retarget)
 
 

@@ -32,6 +32,8 @@ from ..io.typestore import typestore
 from ..robot.identify import read_link_parameters
 from ..robot.model import PlantConfig
 from ..robot.plant import Plant
+from ..robot.wbc import WbcGains
+from .dynamic import DynamicsFilter
 from .phases import Phases, find_phases
 from .player import DEFAULT_MAX_TIME_SCALE, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig
@@ -71,13 +73,18 @@ def _cropped(trial: Trial, keep: np.ndarray) -> Trial:
 def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None = None,
         human_com_bag: Path | None = None, margin_m: float = 0.06, time_scale: float | None = None,
         max_time_scale: float = DEFAULT_MAX_TIME_SCALE, simulate: bool = False, config: RetargetConfig | None = None,
-        com_feedback: bool = True, stabiliser: StabiliserConfig | None = None, whole: bool = False) -> dict:
+        com_feedback: bool = True, stabiliser: StabiliserConfig | None = None, whole: bool = False,
+        dynamic: bool = False, controller: str = "inverse_dynamics", seat_off_dwell_s: float = 1.0,
+        gains: WbcGains | None = None) -> dict:
     """Retarget ``bag`` into ``out`` (see the module docstring); returns the summary. ``com_feedback``: the
     simulated robot's commands are corrected by :class:`~sit2stand.retarget.stabiliser.ComStabiliser` (gains
     ``stabiliser``, default :class:`~sit2stand.retarget.stabiliser.StabiliserConfig`), as the node does.
     ``time_scale``: play the plan this many times slower than the human (None: adapt, up to ``max_time_scale``).
     ``whole``: play the whole recording; by default a trial that ends seated is played up to the human's sit-down
-    (:mod:`sit2stand.retarget.phases`)."""
+    (:mod:`sit2stand.retarget.phases`). ``dynamic``: the commands go through the dynamics filter
+    (:mod:`sit2stand.retarget.dynamic`, QP gains ``gains``), which stretches time only where it cannot follow;
+    ``seat_off_dwell_s``: the player's wait at the robot's seat-off. ``controller``: the simulated robot's
+    (``inverse_dynamics``: joint PD with that feed-forward; ``wbc``: whole-body torque control)."""
     out.mkdir(parents=True, exist_ok=True)
     trial = read_trial(bag)
     com_h = human_com_series(bag, human_com_bag, trial)
@@ -98,8 +105,9 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     rt = Retargeter(robot, config or RetargetConfig())
     dt = float(np.median(np.diff(trial.marker_t_s)))
     rt.calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0]).save(out / "marker_map.yaml")
+    dynamics = DynamicsFilter(robot.model, dt, robot.support_xy, gains=gains) if dynamic else None
     player = PlanPlayer(robot.model, dt, robot.support_xy, margin_m=margin_m, fixed_time_scale=time_scale,
-                         max_time_scale=max_time_scale)
+                        max_time_scale=max_time_scale, seat_off_dwell_s=seat_off_dwell_s, dynamics=dynamics)
     frames, cmds = retarget_sequence(rt, player, trial.marker_t_s, trial.positions, trial.valid, com_h, fz)
     ik_ms = np.array([f.ik.seconds for f in frames]) * 1e3
     feasible = np.array([f.ik.feasible for f in frames])
@@ -111,6 +119,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         "com_equality_max_error_mm_feasible": float(com_err[feasible].max() * 1e3) if feasible.any() else None,
         "ik_ms_p50": float(np.percentile(ik_ms, 50)), "ik_ms_p99": float(np.percentile(ik_ms, 99)),
         "time_scale": float(player.time_scale), "commands": len(cmds), "plan_duration_s": len(cmds) * dt,
+        "duration_ratio": len(cmds) / max(1, len(frames)), **_filter_summary(cmds),
         "min_zmp_margin_on_feet_m": float(min(c.margin_m for c in on_feet)) if on_feet else None,
         "human_seat_off_frame": next((i for i, f in enumerate(frames) if f.human_seat_off), None),
         "robot_seat_off_frame": next((i for i, f in enumerate(frames) if not f.seated), None),
@@ -121,12 +130,26 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     }
     _write_bag(out / "retarget", cmds, robot.joint_names, float(trial.marker_t_s[0]), dt)
     if sim is not None:
+        com_feedback = com_feedback and controller != "wbc"      # the torque controller has its own COM task
         stab = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, stabiliser) if com_feedback else None
         summary["com_feedback"] = bool(com_feedback)
-        summary.update(_simulate(sim, cmds, dt, out, stabiliser=stab))
+        summary["controller"] = controller
+        summary.update(_simulate(sim, cmds, dt, out, stabiliser=stab, controller=controller))
     _figure(trial, com_h, frames, cmds, dt, out / "retarget.png", summary)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
+
+
+def _filter_summary(cmds) -> dict:
+    """What the dynamics filter did over the plan (nothing when it did not run)."""
+    reports = [c.filter for c in cmds if c.filter is not None]
+    if not reports:
+        return {}
+    return {"dynamic": True,
+            "filter_com_deviation_max_m": max(r.com_deviation_m for r in reports),
+            "filter_com_deviation_rms_m": float(np.sqrt(np.mean([r.com_deviation_m**2 for r in reports]))),
+            "filter_torque_ratio_max": max(r.torque_ratio for r in reports),
+            "filter_qp_solved_fraction": float(np.mean([r.solved for r in reports]))}
 
 
 def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float) -> None:
@@ -151,7 +174,7 @@ def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float)
 
 
 def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0,
-              stabiliser: ComStabiliser | None = None) -> dict:
+              stabiliser: ComStabiliser | None = None, controller: str = "inverse_dynamics") -> dict:
     """Drive the plant with the commands (PD + inverse-dynamics feed-forward), then hold the last one. Writes
     ``simulation.npy``: t, true COM (3), planned COM (3), COP (3), pelvis z, pelvis x, planned pelvis x, largest joint
     tracking error [rad] and its joint index, chair force [N], COM of the measured state with the controller's model
@@ -167,7 +190,7 @@ def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0,
             if stabiliser is not None:
                 fix = stabiliser.correct(c.q, c.com, plant.pin_configuration(plant.data.qpos), c.on_feet, dt)
                 q, offset = fix.q, fix.offset_m
-            plant.command(q[7:], c.v[6:], c.a[6:], feedforward="inverse_dynamics")
+            plant.command(q[7:], c.v[6:], c.a[6:], feedforward=controller)
         plant.step(steps)
         s = plant.sensors()
         err = plant.data.qpos[plant.qadr] - plant.q_ref
@@ -185,7 +208,15 @@ def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0,
     return {"stood_up": bool(stood), "fall": plant.status_text if plant.fallen else None,
             "pelvis_final_m": float(arr[-1, 10]), "pelvis_planned_final_m": stand_z,
             "com_tracking_rms_m": float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))),
-            "com_feedback_max_offset_m": float(np.abs(arr[:, 19:21]).max())}
+            "com_feedback_max_offset_m": float(np.abs(arr[:, 19:21]).max()), **_qp_times(plant)}
+
+
+def _qp_times(plant) -> dict:
+    """The torque controller's QP time per control step (p50, p99) [ms], when it ran."""
+    if plant.wbc is None or not plant.wbc.qp_times_s:
+        return {}
+    ms = np.array(plant.wbc.qp_times_s) * 1e3
+    return {"controller_qp_ms_p50": float(np.percentile(ms, 50)), "controller_qp_ms_p99": float(np.percentile(ms, 99))}
 
 
 def _figure(trial, com_h, frames, cmds, dt: float, png: Path, summary: dict) -> None:

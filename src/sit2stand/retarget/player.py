@@ -20,6 +20,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.signal import savgol_coeffs   # at import: a live node's first frames must not pay for it
 
+from .dynamic import DynamicsFilter, FilterReport
 from .feasibility import frame_time_scales, support_margin, zmp_at_scale
 
 DEFAULT_MAX_TIME_SCALE = 4.0
@@ -40,6 +41,8 @@ class Command:
     zmp: np.ndarray              # planned ZMP [m] on the floor at this time scale
     margin_m: float              # ZMP distance inside the feet (negative: outside); inf while seated
     on_feet: bool
+    com_kinematic: np.ndarray | None = None   # the kinematic plan's COM [m], when a dynamics filter changed it
+    filter: FilterReport | None = None        # what the dynamics filter did
 
 
 class PlanPlayer:
@@ -52,7 +55,8 @@ class PlanPlayer:
     def __init__(self, model: pin.Model, dt: float, polygon_xy: np.ndarray, *, margin_m: float = 0.06,
                  lookahead_s: float = 0.8, smooth_frames: int = 21, max_time_scale: float = DEFAULT_MAX_TIME_SCALE,
                  max_time_scale_rate: float = 1.5, fixed_time_scale: float | None = None,
-                 max_joint_speed: float = 0.6, seat_off_dwell_s: float = 1.0) -> None:
+                 max_joint_speed: float = 0.6, seat_off_dwell_s: float = 1.0,
+                 dynamics: DynamicsFilter | None = None) -> None:
         self.model, self.data = model, model.createData()
         self.dt = dt
         self.polygon = polygon_xy
@@ -80,6 +84,7 @@ class PlanPlayer:
         self.finished = False
         self._coef_cache: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._s_req: list[float] = []          # each frame's own smallest time scale
+        self.dynamics = dynamics
 
     # -- input -------------------------------------------------------------------------------------------------
     def push(self, q: np.ndarray, on_feet: bool) -> None:
@@ -151,11 +156,14 @@ class PlanPlayer:
         if known < 1 or (not self.started and not self.ready()):
             return None
         self.started = True
-        if self.fixed_time_scale is None:
+        if self.fixed_time_scale is None and self.dynamics is not None:
+            self.time_scale_goal = self.dynamics.stretch(self.max_time_scale)     # local: up and down
+        elif self.fixed_time_scale is None:
             ahead = range(int(self.u), min(known, int(self.u) + self.lookahead + 1))
             self.time_scale_goal = max(self.time_scale_goal, self.required_scale(ahead))
         s_prev = self.time_scale
-        self.time_scale = min(self.time_scale_goal, self.time_scale + self.max_time_scale_rate * self.dt)
+        rate = self.max_time_scale_rate * self.dt
+        self.time_scale = float(np.clip(self.time_scale_goal, self.time_scale - rate, self.time_scale + rate))
         s_dot = (self.time_scale - s_prev) / self.dt
         k = int(np.floor(self.u))
         if k >= known - 1:          # starved (live input late) or at the end: hold the last pose
@@ -184,7 +192,25 @@ class PlanPlayer:
         margin = float(support_margin(zmp[None, :2], self.polygon)[0]) if on_feet else np.inf
         if not hold:
             self.u += u_dot
-        return Command(k * self.dt + frac * self.dt, q, v, a, self.time_scale, com, zmp, margin, on_feet)
+        cmd = Command(k * self.dt + frac * self.dt, q, v, a, self.time_scale, com, zmp, margin, on_feet)
+        return cmd if self.dynamics is None else self._filtered(cmd, k)
+
+    def seconds_to_seat_off(self, k: int) -> float | None:
+        """Robot time [s] from plan frame ``k`` to the plan's seat-off (0 once on the feet); None when the known
+        frames do not reach it."""
+        for j in range(k, len(self._feet)):
+            if self._feet[j]:
+                return (j - k) * self.dt * self.time_scale
+        return None
+
+    def _filtered(self, cmd: Command, k: int) -> Command:
+        """The command through the dynamics filter: the feasible motion, its COP as the ZMP."""
+        dyn = self.dynamics
+        q, v, a, cop, report = dyn.step(cmd.q, cmd.v, cmd.a, cmd.on_feet, self.seconds_to_seat_off(k))
+        com = pin.centerOfMass(self.model, self.data, q, False).copy()
+        zmp = np.array([cop[0], cop[1], 0.0]) if np.all(np.isfinite(cop[:2])) else np.array([com[0], com[1], 0.0])
+        return Command(cmd.t_plan_s, q, v, a, cmd.time_scale, com, zmp, dyn.margin(cop, cmd.on_feet), cmd.on_feet,
+                       com_kinematic=cmd.com, filter=report)
 
     @property
     def done(self) -> bool:

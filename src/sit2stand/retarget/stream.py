@@ -36,9 +36,9 @@ import pinocchio as pin
 
 from ..errors import InputError
 from ..robot.identify import read_link_parameters
-from ..robot.model import (SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, UPPER_LIMB_PREFIXES, PlantConfig, build_spec,
-                           controller_model)
-from ..robot.plant import seated_configuration
+from ..robot.model import (SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, UPPER_LIMB_PREFIXES, PlantConfig, add_seat_frame,
+                           build_spec, controller_model)
+from ..robot.plant import seat_top_height, seated_configuration
 from .calibration import PELVIS_MARKERS, MarkerMap, calibrate_markers, marker_group
 from .feasibility import support_polygon
 from .ik import ComIk, IkResult
@@ -84,7 +84,9 @@ def robot_model(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
     links = link_parameters or (read_link_parameters(params_yaml) if params_yaml else None)
     model = controller_model(cfg, links)
     label = str(params_yaml) if params_yaml else "CAD"
-    qpos = seated_configuration(build_spec(cfg, plant=False).compile(), cfg)
+    probe = build_spec(cfg, plant=False).compile()
+    qpos = seated_configuration(probe, cfg)
+    add_seat_frame(model, seat_top_height(probe, qpos, cfg), float(qpos[2]))
     q = qpos.copy()
     q[3:7] = [qpos[4], qpos[5], qpos[6], qpos[3]]
     return model, q, label

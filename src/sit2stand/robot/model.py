@@ -327,6 +327,18 @@ def controller_model(cfg: PlantConfig | None = None, link_parameters: dict | Non
     return model
 
 
+SEAT_POINT_BEHIND_HIPS_M = 0.05
+"""Where a seat supports the pelvis: on the seat surface, this far behind the hip joints (the ischial tuberosities'
+place on a human; on TALOS the lowest points of the pelvis and thighs)."""
+
+
+def add_seat_frame(model, seat_top_z_m: float, base_z_m: float) -> int:
+    """Add the frame ``seat`` on the pelvis where a seat of top height ``seat_top_z_m`` supports it when the base is
+    at height ``base_z_m`` (upright); returns its id."""
+    return model.addFrame(pin.Frame("seat", 1, pin.SE3(np.eye(3), np.array(
+        [-SEAT_POINT_BEHIND_HIPS_M, 0.0, seat_top_z_m - base_z_m])), pin.FrameType.OP_FRAME))
+
+
 def actuated_joint_names(model) -> list[str]:
     """Names of the actuated joints of a Pinocchio model (all but the universe and the free flyer)."""
     return list(model.names[2:])

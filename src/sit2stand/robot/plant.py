@@ -28,8 +28,10 @@ import pinocchio as pin
 from ..dynamics import G
 from ..errors import InputError
 from ..io.forceplate import DEFAULT_COP_THRESHOLD_N
-from .model import SIDES, PlantConfig, add_chair, build_spec, controller_model, expand
+from .torque_control import WholeBodyController
+from .model import SIDES, PlantConfig, add_chair, add_seat_frame, build_spec, controller_model, expand
 
+WBC_RATE_HZ = 500.0          # the whole-body torque controller's rate (tsid's TALOS examples run at 1 kHz)
 EXTRAPOLATE_MAX_S = 0.05      # a reference is followed along its velocity for at most this long after its message
 
 
@@ -63,6 +65,19 @@ def seated_configuration(model: mujoco.MjModel, cfg: PlantConfig) -> np.ndarray:
     q[2] -= foot_z
     q[0] -= sole_x           # feet (sole centres) at x = 0
     return q
+
+
+def seat_top_height(model: mujoco.MjModel, q_seated: np.ndarray, cfg: PlantConfig) -> float:
+    """Height [m] of the chair's top: the plant file's, or 2 mm under the pelvis and thighs of the seated posture
+    ``q_seated`` (qpos)."""
+    if cfg.chair_height_m is not None:
+        return float(cfg.chair_height_m)
+    data = mujoco.MjData(model)
+    data.qpos[:] = q_seated
+    mujoco.mj_kinematics(model, data)
+    seat_z, _ = lowest_point(model, data, ("base_link",) + tuple(f"leg_{s}_{i}_link" for s in SIDES
+                                                                   for i in (1, 2, 3)))
+    return seat_z - 0.002
 
 
 def lowest_point(model: mujoco.MjModel, data: mujoco.MjData, bodies: tuple[str, ...]) -> tuple[float, float]:
@@ -99,10 +114,8 @@ class Plant:
         pd = mujoco.MjData(probe)
         pd.qpos[:] = self.q_seated
         mujoco.mj_kinematics(probe, pd)
-        seat_z, _ = lowest_point(probe, pd, ("base_link",) + tuple(f"leg_{s}_{i}_link" for s in SIDES
-                                                                       for i in (1, 2, 3)))
         heel_x = min(pd.site(f"sole_{s}").xpos[0] for s in SIDES) - 0.1   # the sole is ~0.2 m long
-        self.seat_height_m = cfg.chair_height_m if cfg.chair_height_m is not None else seat_z - 0.002
+        self.seat_height_m = seat_top_height(probe, self.q_seated, cfg)
         self.chair_front_x = heel_x - cfg.chair_front_gap_m
         if with_chair:
             add_chair(spec, cfg, self.seat_height_m, self.chair_front_x)
@@ -136,9 +149,7 @@ class Plant:
         self._tau_queue: deque[np.ndarray] = deque()
         # the controller's model (CAD unless identified parameters are given)
         self.ctrl = controller_model(cfg, controller_params)
-        # where the seat supports the pelvis when seated: on the seat surface, a little behind the hip joints
-        self.ctrl.addFrame(pin.Frame("seat", 1, pin.SE3(np.eye(3), np.array(
-            [-0.05, 0.0, self.seat_height_m - float(self.q_seated[2])])), pin.FrameType.OP_FRAME))
+        self.seat_frame = add_seat_frame(self.ctrl, self.seat_height_m, float(self.q_seated[2]))
         self.ctrl_data = self.ctrl.createData()
         self.ctrl_mass = float(pin.computeTotalMass(self.ctrl))
         self.kp = self.model.actuator_gainprm[self.pd_ids, 0].copy()
@@ -153,6 +164,8 @@ class Plant:
         feet = {s: self.ctrl.inertias[self.ctrl.getJointId(f"leg_{s}_6_joint")] for s in SIDES}
         self.foot = {s: (float(f.mass), f.lever.copy()) for s, f in feet.items()}
         self.ff_every = max(1, int(round(1.0 / (cfg.feedforward_rate_hz * cfg.timestep_s))))
+        self.wbc_every = max(1, int(round(1.0 / (WBC_RATE_HZ * cfg.timestep_s))))
+        self.wbc: WholeBodyController | None = None
         self._ff = np.zeros(self.n)
         self._ff_age = 10**9
         self.reset()
@@ -168,6 +181,7 @@ class Plant:
         self.qd_ref = np.zeros(self.n)
         self.qdd_ref = np.zeros(self.n)
         self.feedforward = "gravity"
+        self.wbc = None
         self._t_ref = float(self.data.time)
         self._ff_age = 10**9
         self.set_limp(False)
@@ -185,9 +199,7 @@ class Plant:
     def set_limp(self, limp: bool) -> None:
         """Go limp (zero joint torque, e.g. after a fall) or back to PD control."""
         self.limp = limp
-        gain, bias = self._gains
-        self.model.actuator_gainprm[self.pd_ids] = 0.0 if limp else gain
-        self.model.actuator_biasprm[self.pd_ids] = 0.0 if limp else bias
+        self._servos(not limp and self.feedforward != "wbc")
 
     @property
     def t_s(self) -> float:
@@ -195,7 +207,8 @@ class Plant:
 
     def command(self, q: np.ndarray, qd: np.ndarray | None = None, qdd: np.ndarray | None = None,
                 feedforward: str | None = None, refresh: bool = True) -> None:
-        """Set the joint reference; ``feedforward``: "none", "gravity" or "inverse_dynamics"; ``refresh=False``
+        """Set the joint reference; ``feedforward``: "none", "gravity" or "inverse_dynamics" (joint PD with that
+        feed-forward), or "wbc" (whole-body torque control, the servos off); ``refresh=False``
         keeps the feed-forward's own refresh rate (for references interpolated at every physics step)."""
         q = np.asarray(q, float)
         if q.shape != (self.n,):
@@ -205,6 +218,8 @@ class Plant:
         self.qdd_ref = np.zeros(self.n) if qdd is None else np.asarray(qdd, float).copy()
         self._t_ref = float(self.data.time)
         if feedforward is not None:
+            if (feedforward == "wbc") != (self.feedforward == "wbc") and not self.limp:
+                self._servos(feedforward != "wbc")
             self.feedforward = feedforward
         if refresh:
             self._ff_age = 10**9
@@ -226,11 +241,38 @@ class Plant:
         return contact_feedforward(self.ctrl, self.ctrl_data, q, self.qd_ref, self.qdd_ref,
                                    self.feedforward == "inverse_dynamics", seated)
 
+    def _torque_control(self) -> tuple[np.ndarray, np.ndarray]:
+        """Whole-body torque control (:mod:`sit2stand.robot.torque_control`) at its rate; the servos off."""
+        if self._ff_age >= self.wbc_every:
+            if self.wbc is None:
+                self.wbc = WholeBodyController(self.ctrl, self.seat_frame)
+            s = self.data
+            q = self.pin_configuration(s.qpos)
+            q[7:] += self.q_offset                     # what the encoders read
+            v = s.qvel.copy()
+            v[:3] = pin.Quaternion(s.qpos[3], s.qpos[4], s.qpos[5], s.qpos[6]).matrix().T @ s.qvel[:3]
+            q_t, qd_t = reference_at(self.q_ref, self.qd_ref, self.qdd_ref, float(s.time) - self._t_ref)
+            feet_fz = sum(self._ground_reaction(side)[2] for side in SIDES)
+            seat = 0.0
+            if feedforward_seated(s.qpos[2], self.seated_base_z, feet_fz, self.ctrl_mass):
+                seat = max(0.0, self.ctrl_mass * G - feet_fz)
+            self._ff, self._ff_age = self.wbc.torques(q, v, q_t, qd_t, self.qdd_ref, seat), 0
+        self._ff_age += 1
+        return self.data.qpos[self.qadr].copy(), np.clip(self._ff, -self.effort, self.effort)
+
+    def _servos(self, on: bool) -> None:
+        """Joint position servos on (PD) or off (torque control)."""
+        gain, bias = self._gains
+        self.model.actuator_gainprm[self.pd_ids] = gain if on else 0.0
+        self.model.actuator_biasprm[self.pd_ids] = bias if on else 0.0
+
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics steps under the PD + feed-forward law (limp: zero torque)."""
         for _ in range(n):
             if self.limp:
                 ctrl_pd, ctrl_ff = self.data.qpos[self.qadr].copy(), np.zeros(self.n)
+            elif self.feedforward == "wbc":
+                ctrl_pd, ctrl_ff = self._torque_control()
             else:
                 if self._ff_age >= self.ff_every:          # the feed-forward changes slowly: refresh at its rate
                     self._ff, self._ff_age = self._feedforward(), 0

@@ -1,0 +1,54 @@
+"""The simulated robot's whole-body torque controller: the QP of :mod:`sit2stand.robot.wbc` on the measured state.
+
+TALOS is torque controlled; this is the on-board controller a torque-controlled humanoid runs instead of joint PD
+(selected with the plant's ``feedforward="wbc"``). At its rate it reads the robot's state (joint encoders and the
+base pose and velocity of a state estimator), turns the latest joint command (positions, velocities, accelerations,
+followed along its velocity between commands) into a whole-body reference with the soles where they stand
+(:func:`sit2stand.robot.wbc.feet_anchored_reference`), and applies the QP's joint torques. The QP's contacts are the
+soles only: a robot has no force sensor under its pelvis, so while it sits the seat's force is estimated as the weight
+the feet's force sensors do not carry, and enters the dynamics as a known external force (a rigid seat contact in the
+QP would let it assume a seat force the real chair, which cannot pull, does not give). The controller's model has only
+the identified (or CAD) parameters, never the plant's hidden effects. Each QP's wall time is kept (``qp_times_s``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from .wbc import WbcGains, WholeBodyQP, feet_anchored_reference
+
+
+class WholeBodyController:
+    """Whole-body torque control of a :class:`~sit2stand.robot.plant.Plant` (see the module docstring)."""
+
+    def __init__(self, model: pin.Model, seat_frame: int, gains: WbcGains | None = None) -> None:
+        self.model, self.data = model, model.createData()
+        self.qp = WholeBodyQP(model, seat_frame, gains)
+        self.sole = model.getFrameId("sole_left")
+        self.oM_sole: pin.SE3 | None = None
+        self.qp_times_s: list[float] = []
+        self.last = None
+
+    def anchor(self, q: np.ndarray) -> None:
+        """Hold the reference's left sole where it is in the measured configuration ``q`` (flat on the floor)."""
+        pin.framesForwardKinematics(self.model, self.data, q)
+        M = self.data.oMf[self.sole]
+        yaw = np.arctan2(M.rotation[1, 0], M.rotation[0, 0])
+        self.oM_sole = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, yaw), np.array([*M.translation[:2], 0.0]))
+
+    def torques(self, q: np.ndarray, v: np.ndarray, q_ref: np.ndarray, v_ref: np.ndarray,
+                a_ref: np.ndarray, seat_load_n: float = 0.0) -> np.ndarray:
+        """Joint torques [N m] at the measured state (q, v) (Pinocchio order; base velocity in the base frame)
+        tracking the joint reference (q_ref, v_ref, a_ref); ``seat_load_n``: the seat's vertical force on the pelvis
+        as estimated from the feet's force sensors (the weight they do not carry) [N]."""
+        if self.oM_sole is None:
+            self.anchor(q)
+        q_full = q.copy()
+        q_full[7:] = q_ref
+        ref = feet_anchored_reference(self.model, self.data, q_full, v_ref, a_ref, self.oM_sole)
+        seat = np.array([0.0, 0.0, seat_load_n]) if seat_load_n > 0 else None
+        res = self.qp.solve(q, v, ref, 0.0, seat)
+        self.qp_times_s.append(res.qp_s)
+        self.last = res
+        return res.tau

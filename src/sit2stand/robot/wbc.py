@@ -1,0 +1,293 @@
+"""Whole-body inverse dynamics as one QP per control step: the robot's torque-controlled on-board controller.
+
+The formulation of task-space inverse dynamics (TSID; Del Prete et al., "Implementing torque control with high-rate,
+low-latency loops", and the `tsid` library's TALOS examples), written on Pinocchio and proxsuite. Unknowns:
+x = (a, f): the generalised acceleration (nv) and the contact forces, 3D forces at the four corners of each sole
+(shrunk by ``cop_margin_m``, so the feet's centre of pressure stays that far inside them) and at one seat point under
+the pelvis. Constraints:
+
+* the floating base's Newton-Euler rows:   M_b a + h_b = J_b^T f          (6; no actuator at the base)
+* both soles fixed (6D rigid contacts):    J_foot a + dJ_foot v = -kd_foot v_foot   (12)
+* the seat point fixed while it is active, otherwise its force zero (3)
+* unilateral forces in linearised friction cones (friction coefficient ``friction``); the seat's normal force at
+  most ``seat_force_max_n`` (ramped to zero before seat-off, as tsid removes a contact)
+* joint torques tau = M_j a + h_j - J_j^T f inside the URDF effort limits.
+
+Cost (weighted least squares): COM acceleration toward a_com* = a_ref + kp (c_ref - c) + kd (v_ref - v); every
+tangent coordinate (base orientation and joints; the base's translation is left to the COM) toward
+a* = a_ref + kp (q_ref - q) + kd (v_ref - v); the seat's force (the feet carry what they can); all forces (a small
+regularisation). The same QP is the plan's dynamics filter (:mod:`sit2stand.retarget.dynamic`: integrated on the
+model itself) and the simulated robot's controller (:class:`sit2stand.robot.plant.Plant`, ``controller="wbc"``).
+
+Units SI; world frame REP-103 (x forward, y left, z up); forces in world axes.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+import proxsuite
+
+from .model import SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M
+
+INF = 1e20           # proxsuite's "no bound"
+FORCE_UNIT_N = 100.0
+"""The QP's forces are in this unit: accelerations (~1-10 m/s^2) and forces (~100-1000 N) then weigh alike, and
+proxsuite does not mistake a badly scaled problem for an infeasible one."""
+
+
+@dataclass
+class WbcGains:
+    """Task gains and weights of the whole-body QP (SI units)."""
+
+    com_kp: float = 100.0          # [1/s^2]
+    com_kd: float = 20.0           # [1/s]
+    posture_kp: float = 200.0      # joints and base orientation [1/s^2]
+    posture_kd: float = 28.0       # [1/s]
+    com_weight: float = 100.0
+    posture_weight: float = 1.0
+    base_orientation_weight: float = 30.0
+    seat_force_weight: float = 1e-6     # per N^2 of the seat's normal force: the feet carry what they can
+    force_weight: float = 1e-7          # per N^2
+    foot_kd: float = 20.0          # contact stabilisation: a sole's residual velocity damped out [1/s]
+    friction: float = 0.5          # sole-floor and pelvis-seat friction coefficient (pyramid, inscribed)
+    cop_margin_m: float = 0.02     # the corners' forces act this far inside each sole edge
+    limit_horizon_s: float = 0.05  # joint position limits: the acceleration that stops a joint at its limit this
+    #                                far ahead
+    limit_contact_rad: float = 0.01  # a joint this close to its limit (now or ``limit_horizon_s`` ahead) rests on
+    #                                  its mechanical stop, which takes any torque pushing it further
+
+
+@dataclass
+class Reference:
+    """What the QP tracks at one instant: a full configuration with its velocity and acceleration (Pinocchio
+    tangent order, feet-consistent), and the COM's."""
+
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    com: np.ndarray
+    com_v: np.ndarray
+    com_a: np.ndarray
+
+
+@dataclass
+class WbcResult:
+    """One solved step."""
+
+    a: np.ndarray                  # (nv,) generalised acceleration
+    tau: np.ndarray                # (nv - 6,) joint torques [N m]
+    feet_forces: np.ndarray        # (8, 3) corner forces [N], left sole's four then right's
+    seat_force: np.ndarray         # (3,) [N]
+    cop: np.ndarray                # (3,) the feet's centre of pressure on the floor [m]; NaN when unloaded
+    corners: np.ndarray            # (8, 3) where the corner forces act [m]
+    com: np.ndarray                # (3,) COM of the state [m]
+    solved: bool
+    qp_s: float                    # wall time of matrix building + solve [s]
+
+
+def sole_corners_local(margin_m: float) -> np.ndarray:
+    """(4, 3) corners of a sole in its frame [m], ``margin_m`` inside its edges."""
+    hx, hy = SOLE_HALF_SIZE_M[0] - margin_m, SOLE_HALF_SIZE_M[1] - margin_m
+    return np.array([[SOLE_CENTRE_X_M + sx * hx, sy * hy, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
+
+
+def friction_rows(n_points: int, mu: float) -> np.ndarray:
+    """(4 n, 3 n) rows C with C f <= 0 for n 3D forces inside inscribed friction pyramids (world z normal)."""
+    mu_in = mu / np.sqrt(2.0)
+    block = np.array([[1, 0, -mu_in], [-1, 0, -mu_in], [0, 1, -mu_in], [0, -1, -mu_in]], float)
+    return np.kron(np.eye(n_points), block)
+
+
+def skew(r: np.ndarray) -> np.ndarray:
+    return np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
+
+
+class WholeBodyQP:
+    """Task-space inverse dynamics (see the module docstring).
+
+    Args:
+        model: the robot model with the parameters the controller knows (identified or CAD; never the plant's truth).
+        seat_frame: id of a frame on the pelvis at the seat surface (None: no seat contact).
+        gains: tasks' gains and weights.
+    """
+
+    def __init__(self, model: pin.Model, seat_frame: int | None, gains: WbcGains | None = None) -> None:
+        self.model, self.data = model, model.createData()
+        self.g = gains or WbcGains()
+        self.soles = [model.getFrameId(f"sole_{s}") for s in SIDES]
+        self.seat = seat_frame
+        self.nv, self.nj = model.nv, model.nv - 6
+        self.n_f = 3 * (4 * len(self.soles) + 1)
+        self.n = self.nv + self.n_f
+        self.tau_max = model.effortLimit[6:].copy()
+        self.q_lo, self.q_hi = model.lowerPositionLimit[7:].copy(), model.upperPositionLimit[7:].copy()
+        self.corner_local = sole_corners_local(self.g.cop_margin_m)
+        self.mass = float(pin.computeTotalMass(model))
+        n_pts = 4 * len(self.soles) + 1
+        self.C_fric = friction_rows(n_pts, self.g.friction)
+        self.qp = proxsuite.proxqp.dense.QP(self.n, 6 + 6 * len(self.soles) + 3, self.nj + 4 * n_pts, True)
+        self.qp.settings.eps_abs = 1e-6
+        self.qp.settings.verbose = False
+        self._initialised = False
+        self.weights = np.full(self.nv, self.g.posture_weight)
+        self.weights[:3] = 0.0                 # base translation: the COM task's
+        self.weights[3:6] = self.g.base_orientation_weight
+
+    # -- matrices ---------------------------------------------------------------------------------------------
+    def _kinematics(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """M (symmetric) and h = C v + g at (q, v); fills data with Jacobians and zero-acceleration drifts."""
+        model, data = self.model, self.data
+        pin.computeAllTerms(model, data, q, v)
+        M = np.triu(data.M) + np.triu(data.M, 1).T
+        h = data.nle.copy()
+        self._jcom = data.Jcom.copy()
+        pin.centerOfMass(model, data, q, v, np.zeros(self.nv))     # FK with a = 0: the drifts
+        pin.updateFramePlacements(model, data)
+        return M, h
+
+    def _contacts(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Force Jacobian Jf (n_f, nv) (the corner and seat points' linear Jacobians, stacked), the contact rows
+        (A_c, b_c) of the soles and the seat (A_c a = b_c), and the corners' positions (8, 3)."""
+        model, data = self.model, self.data
+        rows_f, A_c, b_c, corners = [], [], [], []
+        for fid in self.soles:
+            J6 = pin.getFrameJacobian(model, data, fid, pin.LOCAL)
+            drift = pin.getFrameAcceleration(model, data, fid, pin.LOCAL).vector
+            vel = pin.getFrameVelocity(model, data, fid, pin.LOCAL).vector
+            A_c.append(J6)
+            b_c.append(-drift - self.g.foot_kd * vel)
+            Jw = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+            oMf = data.oMf[fid]
+            for p in self.corner_local:
+                r = oMf.rotation @ p
+                rows_f.append(Jw[:3] - skew(r) @ Jw[3:])
+                corners.append(oMf.translation + r)
+        if self.seat is not None:
+            Js = pin.getFrameJacobian(model, data, self.seat, pin.LOCAL_WORLD_ALIGNED)[:3]
+            rows_f.append(Js)
+            A_c.append(Js)
+            b_c.append(-pin.getFrameClassicalAcceleration(model, data, self.seat, pin.LOCAL_WORLD_ALIGNED).linear)
+        else:
+            rows_f.append(np.zeros((3, self.nv)))
+            A_c.append(np.zeros((3, self.nv)))
+            b_c.append(np.zeros(3))
+        return np.vstack(rows_f), np.vstack(A_c), np.concatenate(b_c), np.array(corners)
+
+    def _cost(self, q: np.ndarray, v: np.ndarray, ref: Reference) -> tuple[np.ndarray, np.ndarray]:
+        """H, g of the weighted tasks over x = (a, f)."""
+        g, nv = self.g, self.nv
+        H = np.zeros((self.n, self.n))
+        c = np.zeros(self.n)
+        # posture (base orientation and joints): a = a*
+        a_post = ref.a + g.posture_kp * pin.difference(self.model, q, ref.q) + g.posture_kd * (ref.v - v)
+        H[:nv, :nv] += np.diag(self.weights)
+        c[:nv] -= self.weights * a_post
+        # COM: Jcom a + drift = a_com*
+        com, vcom, drift = self.data.com[0], self.data.vcom[0], self.data.acom[0]
+        a_com = ref.com_a + g.com_kp * (ref.com - com) + g.com_kd * (ref.com_v - vcom)
+        J = self._jcom
+        H[:nv, :nv] += g.com_weight * J.T @ J
+        c[:nv] -= g.com_weight * J.T @ (a_com - drift)
+        # forces (in FORCE_UNIT_N): all small, the seat's normal force more
+        fw = np.full(self.n_f, g.force_weight)
+        fw[-1] += g.seat_force_weight
+        H[nv:, nv:] += np.diag(fw * FORCE_UNIT_N**2)
+        return H, c
+
+    def _solve_qp(self, *problem) -> tuple[np.ndarray, str]:
+        """Warm-started from the last step; where that ends in a (spurious) infeasibility, solved again cold."""
+        if self._initialised:
+            self.qp.update(*problem)
+            self.qp.solve()
+            if "SOLVED" in str(self.qp.results.info.status):
+                return self.qp.results.x.copy(), str(self.qp.results.info.status)
+        self.qp.init(*problem)
+        self._initialised = True
+        self.qp.solve()
+        return self.qp.results.x.copy(), str(self.qp.results.info.status)
+
+    def _joint_stops(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Joints on (or reaching within ``limit_horizon_s``) their lower and upper mechanical stops."""
+        eps, H = self.g.limit_contact_rad, self.g.limit_horizon_s
+        q_ahead = q[7:] + v[6:] * H
+        return q_ahead <= self.q_lo + eps, q_ahead >= self.q_hi - eps
+
+    def _acceleration_bounds(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Joint accelerations that keep each joint inside its limits ``limit_horizon_s`` ahead."""
+        H = self.g.limit_horizon_s
+        qj, vj = q[7:], v[6:]
+        a_hi = 2.0 * (self.q_hi - qj - vj * H) / H**2
+        a_lo = 2.0 * (self.q_lo - qj - vj * H) / H**2
+        return a_lo, np.maximum(a_hi, a_lo)
+
+    # -- solve ------------------------------------------------------------------------------------------------
+    def solve(self, q: np.ndarray, v: np.ndarray, ref: Reference, seat_force_max_n: float = 0.0,
+              seat_force_known_n: np.ndarray | None = None) -> WbcResult:
+        """One QP at the state (q, v) for ``ref``; the seat point is a contact while ``seat_force_max_n`` > 0.
+        ``seat_force_known_n``: a measured (estimated) force of the seat on the pelvis [N, world axes], taken as a
+        known external force instead (what a robot without a sensor under its pelvis does)."""
+        t0 = time.perf_counter()
+        nv, nj = self.nv, self.nj
+        M, h = self._kinematics(q, v)
+        Jf, A_c, b_c, corners = self._contacts(v)
+        if seat_force_known_n is not None and self.seat is not None:
+            h = h - Jf[-3:].T @ np.asarray(seat_force_known_n, float)
+        seat_on = self.seat is not None and seat_force_max_n > 0
+        H, c = self._cost(q, v, ref)
+        A = np.zeros((6 + len(A_c), self.n))
+        b = np.zeros(len(A))
+        Jf_u = Jf * FORCE_UNIT_N
+        A[:6, :nv], A[:6, nv:], b[:6] = M[:6], -Jf_u[:, :6].T, -h[:6]
+        A[6:, :nv], b[6:] = A_c, b_c
+        if not seat_on:     # the seat's rows say its force is zero (zero rows would make proxsuite see infeasibility)
+            A[-3:], b[-3:] = 0.0, 0.0
+            A[-3:, -3:] = np.eye(3)
+        C = np.zeros((nj + len(self.C_fric), self.n))
+        C[:nj, :nv], C[:nj, nv:] = M[6:], -Jf_u[:, 6:].T
+        C[nj:, nv:] = self.C_fric
+        lo = np.concatenate([-self.tau_max - h[6:], np.full(len(self.C_fric), -INF)])
+        hi = np.concatenate([self.tau_max - h[6:], np.zeros(len(self.C_fric))])
+        at_lo, at_hi = self._joint_stops(q, v)
+        lo[:nj][at_hi] = -INF                  # the stop at the upper limit pushes down: any demand below
+        hi[:nj][at_lo] = INF
+        x_lo, x_hi = np.full(self.n, -INF), np.full(self.n, INF)
+        x_lo[6:nv], x_hi[6:nv] = self._acceleration_bounds(q, v)
+        x_lo[nv + 2:self.n:3] = 0.0                              # unilateral normal forces
+        x_lo[-3:] = (-INF, -INF, 0.0) if seat_on else 0.0           # the seat's force: (x, y, z)
+        x_hi[-3:] = (INF, INF, seat_force_max_n / FORCE_UNIT_N) if seat_on else 0.0
+        x, status = self._solve_qp(H, c, A, b, C, lo, hi, x_lo, x_hi)
+        a, f = x[:nv], x[nv:] * FORCE_UNIT_N
+        tau = np.clip(M[6:] @ a + h[6:] - Jf[:, 6:].T @ f, -self.tau_max, self.tau_max)   # the stops take the rest
+        feet = f[:-3].reshape(-1, 3)
+        fz = feet[:, 2].sum()
+        cop = (feet[:, 2] @ corners) / fz if fz > 1.0 else np.full(3, np.nan)
+        return WbcResult(a, tau, feet, f[-3:].copy(), cop, corners, self.data.com[0].copy(),
+                         "SOLVED" in status and "INACCURATE" not in status, time.perf_counter() - t0)
+
+
+def feet_anchored_reference(model: pin.Model, data: pin.Data, q: np.ndarray, v_joints: np.ndarray,
+                            a_joints: np.ndarray, oM_left_sole: pin.SE3) -> Reference:
+    """The full reference of joint positions, velocities and accelerations ``q[7:]``, ``v_joints``, ``a_joints``
+    with the left sole held at ``oM_left_sole``: the base placement, velocity and acceleration that keep it there
+    (both soles, when the joints are a double-support plan), and the COM's. ``q``'s base part is ignored."""
+    nv = model.nv
+    q = q.copy()
+    q[:7] = pin.SE3ToXYZQUAT(pin.SE3.Identity())
+    fid = model.getFrameId("sole_left")
+    pin.framesForwardKinematics(model, data, q)
+    q[:7] = pin.SE3ToXYZQUAT(oM_left_sole * data.oMf[fid].inverse())
+    v = np.zeros(nv)
+    v[6:] = v_joints
+    J6 = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
+    v[:6] = -np.linalg.solve(J6[:, :6], J6[:, 6:] @ v_joints)
+    a = np.zeros(nv)
+    a[6:] = a_joints
+    pin.forwardKinematics(model, data, q, v, a)
+    drift = pin.getFrameAcceleration(model, data, fid, pin.LOCAL).vector - J6[:, 6:] @ a_joints
+    a[:6] = -np.linalg.solve(J6[:, :6], J6[:, 6:] @ a_joints + drift)
+    pin.centerOfMass(model, data, q, v, a)
+    return Reference(q, v, a, data.com[0].copy(), data.vcom[0].copy(), data.acom[0].copy())

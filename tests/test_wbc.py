@@ -1,0 +1,150 @@
+"""The whole-body QP (robot/wbc.py), its torque controller on the plant and the plan's dynamics filter."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from sit2stand.dynamics import G, model_cop
+from sit2stand.retarget.dynamic import DynamicsFilter
+from sit2stand.retarget.feasibility import support_margin, support_polygon
+from sit2stand.robot.model import PlantConfig, add_seat_frame, controller_model
+from sit2stand.robot.plant import Plant
+from sit2stand.robot.wbc import Reference, WbcGains, WholeBodyQP, feet_anchored_reference, sole_corners_local
+
+
+@pytest.fixture(scope="module")
+def plant():
+    return Plant()
+
+
+def _at_rest(model, q):
+    data = model.createData()
+    pin.centerOfMass(model, data, q, False)
+    z = np.zeros(model.nv)
+    return Reference(q, z, z, data.com[0].copy(), np.zeros(3), np.zeros(3))
+
+
+def _standing(plant):
+    """A standing configuration: the seated one with straight legs and an upright trunk, feet on the floor."""
+    model = plant.ctrl
+    q = plant.pin_configuration(plant.q_seated)
+    q[7:] = 0.0
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    q[2] -= data.oMf[model.getFrameId("sole_left")].translation[2]
+    return q
+
+
+def test_seated_equilibrium_is_consistent(plant):
+    """Seated at rest: the base's Newton-Euler rows hold with the forces found, the seat and the feet share the
+    weight, the torques are inside the limits and the feet's COP inside their shrunk soles."""
+    qp = WholeBodyQP(plant.ctrl, plant.seat_frame)
+    q = plant.pin_configuration(plant.q_seated)
+    res = qp.solve(q, np.zeros(plant.ctrl.nv), _at_rest(plant.ctrl, q), seat_force_max_n=2000.0)
+    assert res.solved
+    total_fz = res.feet_forces[:, 2].sum() + res.seat_force[2]
+    assert total_fz == pytest.approx(qp.mass * G, rel=0.02)
+    assert res.seat_force[2] > 50.0            # the seated COM is behind the heels: the seat must carry some
+    assert np.all(np.abs(res.tau) <= qp.tau_max + 1e-6)
+    assert np.all(res.feet_forces[:, 2] >= -1e-6)
+    mu = qp.g.friction / np.sqrt(2)
+    assert np.all(np.abs(res.feet_forces[:, :2]) <= mu * res.feet_forces[:, 2:3] + 1e-3)
+    hx = sole_corners_local(qp.g.cop_margin_m)[:, 0]
+    assert hx.min() - 1e-9 <= res.cop[0] - res.corners[:, 0].mean() + 0.02 <= hx.max() + 1e-9
+
+
+def test_without_the_seat_the_seated_robot_must_move(plant):
+    """No seat, COM behind the heels: no force distribution holds it at rest; the QP puts the COP on the heel edge
+    and accelerates the robot."""
+    qp = WholeBodyQP(plant.ctrl, plant.seat_frame)
+    q = plant.pin_configuration(plant.q_seated)
+    res = qp.solve(q, np.zeros(plant.ctrl.nv), _at_rest(plant.ctrl, q), seat_force_max_n=0.0)
+    assert res.seat_force[2] == pytest.approx(0.0, abs=1e-6)
+    heel_edge = res.corners[:, 0].min()
+    assert res.cop[0] == pytest.approx(heel_edge, abs=2e-3)
+    assert np.abs(res.a).max() > 0.5
+
+
+def test_standing_holds_with_cop_under_com(plant):
+    q = _standing(plant)
+    qp = WholeBodyQP(plant.ctrl, plant.seat_frame)
+    res = qp.solve(q, np.zeros(plant.ctrl.nv), _at_rest(plant.ctrl, q))
+    assert res.solved
+    assert np.abs(res.a).max() < 1e-2
+    assert res.cop[:2] == pytest.approx(res.com[:2], abs=2e-3)        # static: COP under the COM
+
+
+def test_torque_limits_bind(plant):
+    """A reference asking for a fast knee bend while standing: the knees' torques stay at their limits."""
+    model = plant.ctrl
+    q = _standing(plant)
+    ref = _at_rest(model, q)
+    knee = [model.joints[model.getJointId(f"leg_{s}_4_joint")].idx_v for s in ("left", "right")]
+    ref.a[knee] = -400.0
+    res = WholeBodyQP(model, plant.seat_frame).solve(q, np.zeros(model.nv), ref)
+    assert np.all(np.abs(res.tau) <= model.effortLimit[6:] + 1e-6)
+
+
+def test_feet_anchored_reference_keeps_the_sole_still(plant):
+    model, data = plant.ctrl, plant.ctrl.createData()
+    q = plant.pin_configuration(plant.q_seated)
+    rng = np.random.default_rng(0)
+    v_j, a_j = rng.normal(0, 0.5, model.nv - 6), rng.normal(0, 2.0, model.nv - 6)
+    pin.framesForwardKinematics(model, data, q)
+    sole = model.getFrameId("sole_left")
+    oM = data.oMf[sole].copy()
+    ref = feet_anchored_reference(model, data, q, v_j, a_j, oM)
+    pin.forwardKinematics(model, data, ref.q, ref.v, ref.a)
+    pin.updateFramePlacements(model, data)
+    assert data.oMf[sole].isApprox(oM, 1e-9)
+    assert np.abs(pin.getFrameVelocity(model, data, sole, pin.LOCAL).vector).max() < 1e-9
+    assert np.abs(pin.getFrameAcceleration(model, data, sole, pin.LOCAL).vector).max() < 1e-9
+
+
+def test_dynamics_filter_keeps_the_cop_inside_where_the_kinematic_plan_does_not():
+    """A standing robot swinging its trunk fast (0.75 rad in 0.2 s): the kinematic plan's ZMP leaves the feet;
+    the filtered plan's COP stays the QP's margin inside, at the cost of following the swing less."""
+    cfg = PlantConfig()
+    model = controller_model(cfg)
+    add_seat_frame(model, 0.4, 1.0)
+    q0 = pin.neutral(model)
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q0)
+    q0[2] -= data.oMf[model.getFrameId("sole_left")].translation[2]
+    soles = [data.oMf[model.getFrameId(f"sole_{s}")] for s in ("left", "right")]
+    pin.framesForwardKinematics(model, data, q0)
+    corners = np.array([X.act(p)[:2] for X in soles for p in sole_corners_local(0.0)])
+    polygon = support_polygon(corners)
+    dt = 0.01
+    filt = DynamicsFilter(model, dt, polygon, gains=WbcGains(cop_margin_m=0.02))
+    torso = model.joints[model.getJointId("torso_2_joint")].idx_q
+    t = np.arange(0, 0.6, dt)
+    swing = 0.375 * (1 - np.cos(np.pi * np.clip(t / 0.2, 0, 1)))          # 0 -> 0.75 rad in 0.2 s, then held
+    margins, kinematic = [], []
+    for k in range(len(t)):
+        q = q0.copy()
+        q[torso] = swing[k]
+        v, a = np.zeros(model.nv), np.zeros(model.nv)
+        v[torso - 1] = np.gradient(swing, dt)[k]
+        a[torso - 1] = np.gradient(np.gradient(swing, dt), dt)[k]
+        kinematic.append(support_margin(model_cop(model, data, q, v, a)[3][None, :2], polygon)[0])
+        _, _, _, cop, report = filt.step(q, v, a, on_feet=True, seconds_to_seat_off=0.0)
+        margins.append(filt.margin(cop, True))
+        assert report.torque_ratio <= 1.0 + 1e-6
+    assert min(kinematic) < -0.05             # as planned, the swing needs the ZMP 5 cm or more outside the feet
+    assert min(margins) >= 0.02 - 1e-3
+
+
+def test_torque_controller_holds_the_seated_robot(plant):
+    """The plant under whole-body torque control (servos off), commanded to stay seated, stays seated for 1 s."""
+    plant.reset()
+    plant.settle(0.5)
+    q_hold = plant.data.qpos[plant.qadr].copy()
+    plant.command(q_hold, feedforward="wbc")
+    plant.step(1000)
+    assert not plant.fallen
+    assert plant.chair_force_n() > 100.0
+    assert np.abs(plant.data.qpos[plant.qadr] - q_hold).max() < 0.3
+    assert len(plant.wbc.qp_times_s) == pytest.approx(500, abs=2)
+    plant.reset()
+    assert plant.model.actuator_gainprm[plant.pd_ids, 0].min() > 0    # back under PD after a reset
