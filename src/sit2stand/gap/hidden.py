@@ -164,8 +164,9 @@ def score(hidden: list[Hidden], named: list[dict]) -> Score:
     return s
 
 
-def run_case(hidden: list[Hidden], seed: int, workdir: str, n_moves: int = 8) -> dict:
-    """Build the plant, record its excitation bag, run the workflow on the bag alone and score it."""
+def run_case(hidden: list[Hidden], seed: int, workdir: str, n_moves: int = 8, replay: bool = True) -> dict:
+    """Build the plant, record its excitation bag, run the workflow on the bag alone and score it (``replay``: with
+    the re-simulation, ~6 s a case)."""
     # a folder of its own: two cases of one kind and seed may run at once
     bag = Path(tempfile.mkdtemp(prefix=f"case_{seed}_{'_'.join(h.kind for h in hidden) or 'none'}_", dir=workdir))
     shutil.rmtree(bag, ignore_errors=True)
@@ -173,7 +174,7 @@ def run_case(hidden: list[Hidden], seed: int, workdir: str, n_moves: int = 8) ->
     alter = [h.as_effect() for h in hidden if h.kind in MODEL_KINDS]
     info = excite(plant_with(hidden, seed=seed), bag, seed=seed, n_moves=n_moves, alterations=alter)
     t1 = time.monotonic()
-    result = run([bag])
+    result = run([bag], replay=replay)
     t2 = time.monotonic()
     s = score(hidden, result.effects)
     shutil.rmtree(bag, ignore_errors=True)

