@@ -26,7 +26,7 @@ test-fast: setup  ## unit tests only (no node processes)
 bench: setup      ## speed figures (printed and written to bench/results/bench.json); not a test
 	@$(PY) -m sit2stand.bench --out bench/results/bench.json
 
-bench-gap: setup  ## only the model-gap hit rates (20 hidden-effect plants per effect kind), merged into bench.json
+bench-gap: setup  ## only the model-gap hit rates (10 hidden-effect plants per kind, 13 kinds), merged into bench.json
 	@$(PY) -m sit2stand.bench --only gap --out bench/results/bench.json
 
 bench-retarget: setup  ## only the retargeting figures (IK per frame, latency in the live graphs), merged into bench.json
