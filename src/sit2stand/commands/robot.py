@@ -90,10 +90,12 @@ def _gap(args: argparse.Namespace) -> int:
     else:
         print(result.verdict)
     if result.unexplained:
-        print(f"left unexplained on {len(result.unexplained)} channel(s), worst {result.unexplained[0]['channel']} "
-              f"at {result.unexplained[0]['z']:.1f} x its noise floor")
-    print(f"gap above the noise on the disagreeing channels: {result.gap_before:.2f} -> {result.gap_after:.2f} "
-          f"(shrink {100 * result.shrink:.0f} %)")
+        worst = result.unexplained[0]
+        print(f"left unexplained on {len(result.unexplained)} channel(s), worst {worst['channel']} "
+              f"at {worst['z']:.1f} x its noise floor: {worst['shape']}")
+    print(f"gap above the noise on the disagreeing channels, the effects applied: {result.gap_before:.2f} -> "
+          f"{result.gap_after:.2f} (shrink {100 * result.shrink:.0f} %; to first order "
+          f"{100 * result.shrink_first_order:.0f} %)")
     for r, (b, a) in enumerate(cop_rms(result)):
         print(f"model COP error, {result.bags[r]}: {100 * b:.2f} -> {100 * a:.2f} cm RMS")
     print(f"report: {args.out}/report.md (+ gap.json, augmented_model.yaml, gap_*.png)")
