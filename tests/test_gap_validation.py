@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from sit2stand.errors import InputError
+from sit2stand.gap import contact
 from sit2stand.gap.bounds import Limits, refusal
 from sit2stand.gap.effects import alter_model, unmodeled_from
 from sit2stand.gap.residuals import joint_columns
@@ -118,7 +119,8 @@ def test_alterations_change_the_compiled_plant():
     pos0 = m.body_pos[m.body("leg_right_5_link").id].copy()
     forearm = m.body("arm_left_4_link").id
     mass0 = float(m.body_mass[forearm])
-    effects = [{"kind": "extra_mass", "location": "arm_left_4_link", "mass_kg": -0.5, "pos_m": (0.0, 0.0, -0.1)},{"kind": "joint_spring", "location": "leg_left_4_joint", "value": 40.0, "rest_rad": 0.2},
+    effects = [{"kind": "extra_mass", "location": "arm_left_4_link", "mass_kg": -0.5, "pos_m": (0.0, 0.0, -0.1)},
+               {"kind": "joint_spring", "location": "leg_left_4_joint", "value": 40.0, "rest_rad": 0.2},
                {"kind": "rotor_inertia", "location": "leg_left_4_joint", "value": 0.5},
                {"kind": "link_length", "location": "leg_*_5_link", "value": 1.05},
                {"kind": "contact_softness", "location": "soles", "value": 0.05}]
@@ -131,3 +133,22 @@ def test_alterations_change_the_compiled_plant():
     assert unmodeled_from(effects).masses == []          # none of these is a plant-file field
     with pytest.raises(InputError, match="no joint matches"):
         alter_model(m, [{"kind": "joint_spring", "location": "knee", "value": 1.0}])
+
+
+def test_contact_time_constant_is_searched_on_the_replay(monkeypatch):
+    """The search alone, on a stand-in replay whose COP error grows with the distance to a 0.05 s sole."""
+    def replay(ds, effects, nominal=None):
+        tc = next((e["value"] for e in effects if e["kind"] == "contact_softness"), 0.02)
+        return {0: {"tc": tc}}
+
+    def z(res):
+        return {(0, "replay/cop_x"): 40.0 * abs(np.log(res[0]["tc"] / 0.05)) + 0.5, (0, "replay/feet_fz"): 0.5}
+
+    monkeypatch.setattr(contact, "replay_effects", replay)
+    monkeypatch.setattr(contact, "replay_residuals", lambda ds, sims: sims)
+    monkeypatch.setattr(contact, "replay_z", z)
+    found, sims = contact.fit_contact(None, [], {0: {"tc": 0.02}}, lambda msg: None)
+    assert found is not None and abs(found["value"] - 0.05) < 0.05 * 0.05, found
+    assert sims[0]["tc"] == found["value"]
+    # already agreeing: nothing searched, nothing named
+    assert contact.fit_contact(None, [], {0: {"tc": 0.05}}, lambda msg: None)[0] is None

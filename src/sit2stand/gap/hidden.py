@@ -24,9 +24,9 @@ from .excite import excite
 from .workflow import run
 
 KINDS = ("extra_mass", "viscous_friction", "coulomb_friction", "torque_bias", "torque_gain", "joint_offset",
-         "ft_bias", "actuator_delay", "joint_spring", "rotor_inertia")
+         "ft_bias", "actuator_delay", "joint_spring", "rotor_inertia", "contact_softness")
 # kinds the workflow's library does not hold: an honest answer flags the residual as unexplained
-OUT_OF_LIBRARY = ("link_length", "joint_axis", "contact_softness")
+OUT_OF_LIBRARY = ("link_length", "joint_axis")
 # a link of every rigid group of an excitation run, and links inside groups (a hand, the head, a wrist)
 MASS_LINKS = ("base_link", "torso_2_link", "leg_left_3_link", "leg_right_3_link", "leg_left_4_link",
               "leg_right_4_link", "leg_left_5_link", "leg_right_5_link", "arm_left_1_link", "arm_right_2_link",
@@ -93,6 +93,8 @@ def draw(kind: str, seed: int) -> Hidden:
         return Hidden(kind, str(rng.choice(LOADED_JOINTS)), float(rng.uniform(20.0, 80.0)))
     if kind == "rotor_inertia":
         return Hidden(kind, str(rng.choice(LOADED_JOINTS)), float(rng.uniform(0.5, 1.5)))
+    if kind == "contact_softness":    # the soles 2-4 times softer (contact time constant [s], MuJoCo's default 0.02)
+        return Hidden(kind, "soles", float(rng.uniform(0.04, 0.08)))
     raise InputError(f"unknown effect kind {kind!r} (known: {', '.join(KINDS)})")
 
 
@@ -100,15 +102,13 @@ EFFORT_NM = {"head_1_joint": 8.0, "head_2_joint": 4.0}     # the small joints am
 
 
 def draw_outside(kind: str, seed: int) -> Hidden:
-    """An effect outside the workflow's library: a link offset scaled on both legs (a symmetric length error), a
-    tilted joint axis, or softer soles (contact time constant [s], MuJoCo's default 0.02)."""
+    """An effect outside the workflow's library: a link offset scaled on both legs (a symmetric length error) or a
+    tilted joint axis."""
     rng = np.random.default_rng([100 + OUT_OF_LIBRARY.index(kind), seed])
     if kind == "link_length":
         return Hidden(kind, str(rng.choice(["leg_*_4_link", "leg_*_5_link"])), float(1.0 + rng.uniform(0.03, 0.06)))
     if kind == "joint_axis":
         return Hidden(kind, str(rng.choice(LOADED_JOINTS)), float(rng.choice([-1, 1]) * rng.uniform(0.05, 0.12)))
-    if kind == "contact_softness":
-        return Hidden(kind, "soles", float(rng.uniform(0.04, 0.08)))
     raise InputError(f"unknown effect kind {kind!r} (outside the library: {', '.join(OUT_OF_LIBRARY)})")
 
 

@@ -37,6 +37,7 @@ REPLAY_FLOORS = {"cop_x": 0.0005, "feet_fz": 1.5, "q": 0.0003}
 REPLAY_UNITS = {"cop_x": "m", "feet_fz": "N", "q": "rad"}
 # faults of the sensors alone: the robot moves the same with them, so its replay is the nominal one
 SENSOR_KINDS = ("torque_bias", "torque_gain", "ft_bias")
+REPLAY_ONLY_KINDS = ("contact_softness",)      # no inverse-dynamics signature: the measured forces carry it
 
 
 def gap_size(es: list[np.ndarray], ds: Dataset, pairs: list[tuple[int, int, str]]) -> float:
@@ -102,6 +103,7 @@ def exact_residuals(ds: Dataset, nominal: pin.Model, effects: list[dict], known:
     model = merged_model(nominal, effects)
     links = body_link_names(nominal)
     again = any(e["kind"] in ("extra_mass", "joint_offset") for e in effects)   # else the residual is linear
+    effects = [e for e in effects if e["kind"] not in REPLAY_ONLY_KINDS]
     out = []
     for r, (rec, ev, lab) in enumerate(zip(ds.recordings, ds.evaluations, ds.labels)):
         e_r = ev.e.copy()

@@ -39,11 +39,12 @@ from .recording import RecordingError
 from .effects import FT_AXES, unmodeled_dict, unmodeled_from
 from .residuals import body_link_names, joint_columns
 from .bounds import RESIDUE, Limits, refusal
+from .contact import fit_contact
 from .select import MIN_SHARE, Candidate, Selection, select
 from .symmetry import lopsided
 from .unexplained import SIGNIFICANT_Z, contact_note, where_and_shape
-from .validate import (effect_columns, effect_theta, exact_residuals, gap_size, merged_model, replay_effects,
-                       replay_floor, replay_gap, replay_residuals, replay_z)
+from .validate import (REPLAY_ONLY_KINDS, effect_columns, effect_theta, exact_residuals, gap_size, merged_model,
+                       replay_effects, replay_floor, replay_gap, replay_residuals, replay_z)
 
 MOVED_RAD = 0.1              # a joint whose range in the data is below this did not move: its links are one body
 MAX_REFUSAL_ROUNDS = 4      # selection re-run without the refused candidates at most this often
@@ -63,7 +64,8 @@ def load_nominal(path: str | Path | None) -> tuple[pin.Model, str, list[dict]]:
         doc = yaml.safe_load(Path(path).read_text())
     except (IdentificationError, OSError, KeyError, ValueError, yaml.YAMLError) as err:
         raise GapError(f"{path}: not a usable model file: {err}") from None
-    known = [e for e in doc.get("effects", []) or [] if e.get("kind") != "extra_mass"]
+    known = [e for e in doc.get("effects", []) or []
+             if e.get("kind") != "extra_mass" and e.get("kind") not in REPLAY_ONLY_KINDS]
     return model, str(path), known
 
 
@@ -299,7 +301,8 @@ def describe(effect: dict) -> str:
     label = {"viscous_friction": "viscous friction", "coulomb_friction": "Coulomb friction",
              "torque_bias": "torque-sensor bias", "torque_gain": "torque-sensor gain",
              "joint_offset": "encoder offset", "ft_bias": "force/torque sensor bias (sensor axes)",
-             "actuator_delay": "actuator delay", "joint_spring": "joint spring", "rotor_inertia": "rotor inertia"}[k]
+             "actuator_delay": "actuator delay", "joint_spring": "joint spring", "rotor_inertia": "rotor inertia",
+             "contact_softness": "soles' contact time constant (MuJoCo solref; the model's 0.02 s)"}[k]
     return f"{label} at {effect['location']}: {effect['value']:.4g} +- {effect['ci95']:.2g} {effect['unit']}"
 
 
@@ -439,6 +442,9 @@ def _confirm_replay(ds: Dataset, model: pin.Model, effects: list[dict], exact: l
         effects = effects[:i] + effects[i + 1:]
         score, sims = best, sim
         exact = exact_residuals(ds, model, effects, [])
+    found, sims = fit_contact(ds, effects, sims, say)
+    if found is not None:
+        effects = effects + [found]
     return effects, exact, {"nominal model": nominal, "with the named effects": sims}
 
 
