@@ -24,7 +24,9 @@ class Client:
     """A Foxglove WebSocket client: handshake, channels by topic, subscriptions, message frames."""
 
     def __init__(self, port: int) -> None:
-        self._connection = connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL], open_timeout=10)
+        # no keepalive pings: a flood of plate samples would queue their pongs behind it
+        self._connection = connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL], open_timeout=10,
+                                   ping_interval=None, max_queue=None)
         self.ws = self._connection.__enter__()
         self.channels: dict[str, dict] = {}
         self.server_info = json.loads(self.ws.recv(timeout=10))
@@ -42,10 +44,12 @@ class Client:
             {"id": i, "channelId": self.channels[t]["id"]} for i, t in subs.items()]}))
         return subs
 
-    def messages(self, subs: dict[int, str], count: int, timeout_s: float = 20.0):
-        """``count`` (topic, log time [ns], payload) of the subscriptions ``subs``; other frames skipped."""
+    def messages(self, subs: dict[int, str], count: int, timeout_s: float = 20.0, each: bool = False):
+        """``count`` (topic, log time [ns], payload) of the subscriptions ``subs`` (``each``: ``count`` of every
+        subscription; a fast topic would otherwise fill the count alone); other frames skipped."""
         out = []
-        while len(out) < count:
+        while (min((sum(t == topic for t, _, _ in out) for topic in subs.values()), default=0) < count if each
+               else len(out) < count):
             frame = self.ws.recv(timeout=timeout_s)
             if isinstance(frame, bytes) and frame[0] == MESSAGE_DATA:
                 sub_id, log_ns = struct.unpack_from("<IQ", frame, 1)
@@ -78,7 +82,10 @@ def test_a_client_does_the_handshake_and_receives_cdr_as_logged():
         assert channel["schema"].startswith("std_msgs/Header header\nfloat64 height_m") and "MSG: std_msgs/Header" \
             in channel["schema"]
         subs = client.subscribe(["/human/subject"])
-        view.relatch()                      # nothing logged yet: nothing resent
+        deadline = time.monotonic() + 20.0       # the server notes the subscription on its own thread
+        while not view.subscribed("/human/subject") and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert view.relatch() == 0          # nothing logged yet: nothing resent
         data = _subject(1.62)
         view.log("/human/subject", data, 7_000_000_000)
         [(topic, log_ns, payload)] = client.messages(subs, 1)
@@ -89,7 +96,7 @@ def test_a_client_does_the_handshake_and_receives_cdr_as_logged():
         late = Client(view.port)            # latched: a client that subscribes later gets the last message
         late.wait_for_channels({"/human/subject"})
         subs = late.subscribe(["/human/subject"])
-        deadline = time.monotonic() + 5.0        # the server notes the subscription on its own thread
+        deadline = time.monotonic() + 20.0       # the server notes the subscription on its own thread
         while not view.relatch() and time.monotonic() < deadline:
             time.sleep(0.02)
         [(_, log_ns, payload)] = late.messages(subs, 1)
@@ -108,11 +115,12 @@ def test_the_foxglove_node_serves_a_replayed_run(run_node):
     port = int(re.search(r"ws://127\.0\.0\.1:(\d+)", fox.output).group(1))
     client = Client(port)
     play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={ROOT / 'bags' / 'natural'}",
-                    "-p", "topics:=['/mocap/markers', '/force_plate/feet']", "-p", "wait_for_subscribers:=1")
+                    "-p", "topics:=['/mocap/markers', '/force_plate/feet']", "-p", "wait_for_subscribers:=1",
+                    "-p", "loop:=true")     # still playing whenever the client's subscription takes effect
     try:
         client.wait_for_channels({"/mocap/markers", "/force_plate/feet"}, 30)
         subs = client.subscribe(["/mocap/markers", "/force_plate/feet"])
-        got = client.messages(subs, 200, 30)
+        got = client.messages(subs, 20, 30, each=True)
     finally:
         client.close()
     topics = {t for t, _, _ in got}

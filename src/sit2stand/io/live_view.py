@@ -43,6 +43,7 @@ class _Subscriptions(foxglove.ServerListener):
     def on_subscribe(self, client, channel) -> None:
         with self.view._lock:
             self.view._to_relatch.add(channel.topic)
+            self.view._subscribed.add(channel.topic)
 
 
 class LiveView:
@@ -51,6 +52,7 @@ class LiveView:
     def __init__(self, host: str = "127.0.0.1", port: int = 8765, name: str = "sit2stand") -> None:
         self._lock = threading.Lock()
         self._to_relatch: set[str] = set()
+        self._subscribed: set[str] = set()                    # topics some client has subscribed to
         self._channels: dict[str, foxglove.Channel] = {}
         self._latched: dict[str, tuple[bytes, int]] = {}      # topic -> (last message, its log time [ns])
         self.context = foxglove.Context()
@@ -78,6 +80,11 @@ class LiveView:
         self._channels[topic].log(bytes(data), log_time=int(log_time_ns))
         if topic in self._latched:
             self._latched[topic] = (bytes(data), int(log_time_ns))
+
+    def subscribed(self, topic: str) -> bool:
+        """Whether a client has subscribed to ``topic`` (messages logged before that reach no one)."""
+        with self._lock:
+            return topic in self._subscribed
 
     def relatch(self) -> int:
         """Resend the last message of each latched topic a client subscribed to since the last call; how many."""
