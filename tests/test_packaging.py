@@ -24,13 +24,15 @@ COPY_IGNORE = shutil.ignore_patterns("*.egg-info", "__pycache__", "build", "dist
 IMPORT_TO_DIST = {"numpy": "numpy", "scipy": "scipy", "matplotlib": "matplotlib", "yaml": "pyyaml",
                   "pinocchio": "pin", "proxsuite": "proxsuite", "mujoco": "mujoco", "ezc3d": "ezc3d",
                   "rosbags": "rosbags", "mcap": "mcap", "rclpy": "ros-jazzy-rclpy",
-                  "zstandard": "mcap", "lz4": "mcap"}   # mcap's own dependencies (MCAP chunk compressions)
+                  "zstandard": "mcap", "lz4": "mcap",   # mcap's own dependencies (MCAP chunk compressions)
+                  "qtm_rt": "qtm-rt", "natnet": "natnet", "foxglove": "foxglove-sdk"}
 # ROS interface packages and where they come from on PyPI (sit2stand_msgs and tf2_msgs: msgs/, built with colcon)
 WITH_RCLPY = {"builtin_interfaces", "rcl_interfaces", "rosgraph_msgs"}
 COMMON_INTERFACES = {"std_msgs", "std_srvs", "sensor_msgs", "geometry_msgs", "trajectory_msgs", "diagnostic_msgs",
                      "visualization_msgs"}
 RUNTIME_DISTS = {"ros-jazzy-rclpy", "ros-jazzy-common-interfaces", "ros-jazzy-rmw-fastrtps-cpp", "rosbags", "mcap",
-                 "ezc3d", "pin", "proxsuite", "mujoco", "example-robot-data", "numpy", "scipy", "matplotlib", "pyyaml"}
+                 "ezc3d", "pin", "proxsuite", "mujoco", "example-robot-data", "numpy", "scipy", "matplotlib", "pyyaml",
+                 "qtm-rt", "natnet", "foxglove-sdk"}
 
 
 def _dist_name(requirement: str) -> str:
