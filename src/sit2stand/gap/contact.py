@@ -2,7 +2,8 @@
 
 The inverse-dynamics residuals use the measured contact forces, so a softer or stiffer sole leaves them at their
 noise floor; it shows only when the recorded commands are replayed (the COP and the feet's force move differently).
-When the replay with the named effects still disagrees on those channels, the soles' contact time constant (MuJoCo's
+When the replay with the named effects still disagrees on those channels while the inverse dynamics agree (the
+workflow's check), the soles' contact time constant (MuJoCo's
 ``solref``; the plant's default 0.02 s) is searched by golden section on its logarithm over
 ``TIME_CONSTANT_RANGE_S``, each trial a replay. It is named when it brings the COP and feet force below
 ``SIGNIFICANT_Z`` floors and at least halves the replay's gap on them; otherwise the disagreement stays unexplained.

@@ -35,8 +35,9 @@ from .residuals import body_link_names, evaluate, joint_columns
 # soles 2.5 x softer: 0.25 cm COP x, 0.5 mrad at an ankle; a 40 N m/rad knee spring: 0.4 cm, 10 N, 9 mrad)
 REPLAY_FLOORS = {"cop_x": 0.0005, "feet_fz": 1.5, "q": 0.0003}
 REPLAY_UNITS = {"cop_x": "m", "feet_fz": "N", "q": "rad"}
-# faults of the sensors alone: the robot moves the same with them, so its replay is the nominal one
-SENSOR_KINDS = ("torque_bias", "torque_gain", "ft_bias")
+# faults of the joint-torque sensors alone: the robot moves the same and the replay's channels (COP, feet force,
+# joint angles) read the same, so its replay is the nominal one (an F/T bias shows in the COP and force: not here)
+SENSOR_KINDS = ("torque_bias", "torque_gain")
 REPLAY_ONLY_KINDS = ("contact_softness",)      # no inverse-dynamics signature: the measured forces carry it
 
 
