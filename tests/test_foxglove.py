@@ -48,8 +48,11 @@ class Client:
         """``count`` (topic, log time [ns], payload) of the subscriptions ``subs`` (``each``: ``count`` of every
         subscription; a fast topic would otherwise fill the count alone); other frames skipped."""
         out = []
+        deadline = time.monotonic() + timeout_s
         while (min((sum(t == topic for t, _, _ in out) for topic in subs.values()), default=0) < count if each
                else len(out) < count):
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"{len(out)} messages in {timeout_s} s: {sorted({t for t, _, _ in out})}")
             frame = self.ws.recv(timeout=timeout_s)
             if isinstance(frame, bytes) and frame[0] == MESSAGE_DATA:
                 sub_id, log_ns = struct.unpack_from("<IQ", frame, 1)
@@ -121,6 +124,8 @@ def test_the_foxglove_node_serves_a_replayed_run(run_node):
         client.wait_for_channels({"/mocap/markers", "/force_plate/feet"}, 30)
         subs = client.subscribe(["/mocap/markers", "/force_plate/feet"])
         got = client.messages(subs, 20, 30, each=True)
+    except TimeoutError as err:
+        raise AssertionError(f"{err}\n--- foxglove node:\n{fox.output}\n--- replayer:\n{play.output}") from None
     finally:
         client.close()
     topics = {t for t, _, _ in got}
