@@ -29,7 +29,8 @@ from .residuals import base_to_world
 from .select import Candidate, Selection, select
 from .dataset import fast_part_floor
 from .bounds import Limits, refusal
-from .workflow import MASS_PARAMS, SIGNIFICANT_Z, effect_summary
+from .candidates import MASS_PARAMS
+from .workflow import SIGNIFICANT_Z, effect_summary
 
 
 @dataclass

@@ -4,7 +4,7 @@
 
 * ``report.md``: the verdict, the effects named with their parameters and 95 % intervals, the ranked table of where
   the nominal model was wrong, and the gap per channel before and after;
-* ``gap.json``: the same, machine-readable (``sit2stand.gap.workflow.summary``);
+* ``gap.json``: the same, machine-readable (``sit2stand.gap.report.summary``);
 * ``augmented_model.yaml``: the nominal model plus the effects (the driver's ``controller_params`` reads its
   ``links``; its ``unmodeled`` section re-simulates the effects);
 * ``gap_channels.png``: RMS residual / noise floor per channel, before and after;
@@ -16,6 +16,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import matplotlib
@@ -23,7 +24,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from .resimulate import compare
-from .workflow import GapResult, describe, load_nominal, run, write_augmented, write_json
+from .workflow import GapResult, describe, load_nominal, plain_data, run, write_augmented
 
 PHASE_COLOURS = {"seated": "#dde8f5", "seat-off": "#f5dcc8", "rising": "#f7f0c8", "standing": "#ddf2dd",
                  "moving": "#f2f2f2", "still": "#ffffff", "static": "#ffffff"}
@@ -302,3 +303,23 @@ def gap_command(bags: list[str | Path], out: str | Path, model: str | None = Non
     result = run(bags, model, rate_hz=rate_hz, progress=progress, controller=controller)
     write_report(result, out, progress)
     return result
+
+
+def summary(result: GapResult) -> dict:
+    """The result as plain data (``gap.json``)."""
+    return plain_data({
+        "model": result.model_source, "bags": result.bags, "verdict": result.verdict,
+        "effects": result.effects, "gap_before": result.gap_before, "gap_after": result.gap_after,
+        "gap_shrink": result.shrink, "gap_after_first_order": result.gap_after_first_order,
+        "gap_shrink_first_order": result.shrink_first_order, "replay_gap_before": result.replay_gap_before,
+        "replay_gap_after": result.replay_gap_after, "refused": result.refused,
+        "unexplained": result.unexplained[:20], "ranked": result.table[:30],
+        "channels": {ch: {"floor": result.floors[:, c].tolist(), "rms_before": result.rms_before[:, c].tolist(),
+                          "rms_after": result.rms_after[:, c].tolist()} for c, ch in enumerate(result.channels)},
+        "replay": result.replay, "selection_steps": result.selection.steps, "n_rows": result.selection.n_rows,
+        "n_eff": result.selection.n_eff, "events": result.dataset.events, "notes": result.notes})
+
+
+def write_json(result: GapResult, path: str | Path) -> None:
+    """Write :func:`summary` as JSON to ``path``."""
+    Path(path).write_text(json.dumps(summary(result), indent=1))

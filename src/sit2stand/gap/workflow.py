@@ -23,7 +23,6 @@ The workflow reads only the bags and the nominal model: never the plant's ``unmo
 
 from __future__ import annotations
 
-import json
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,11 +33,12 @@ import yaml
 
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import PlantConfig, controller_model
-from .dataset import MOVING_RADPS, Dataset, GapError, fast_part_floor, load_dataset
+from .dataset import Dataset, GapError, fast_part_floor, load_dataset
 from .recording import RecordingError
-from .effects import FT_AXES, unmodeled_dict, unmodeled_from
-from .residuals import body_link_names, joint_columns
-from .bounds import RESIDUE, Limits, refusal
+from .effects import unmodeled_dict, unmodeled_from
+from .residuals import body_link_names
+from .bounds import RESIDUE
+from .candidates import UNITS, build_candidates, series_ids, stack_rows
 from .contact import fit_contact
 from .select import MIN_SHARE, Candidate, Selection, select
 from .symmetry import lopsided
@@ -46,11 +46,7 @@ from .unexplained import SIGNIFICANT_Z, contact_note, where_and_shape
 from .validate import (REPLAY_ONLY_KINDS, effect_columns, effect_theta, exact_residuals, gap_size, merged_model,
                        replay_effects, replay_floor, replay_gap, replay_residuals, replay_z)
 
-MOVED_RAD = 0.1              # a joint whose range in the data is below this did not move: its links are one body
 MAX_REFUSAL_ROUNDS = 4      # selection re-run without the refused candidates at most this often
-UNITS = {"extra_mass": ("kg", "m"), "viscous_friction": "N m s/rad", "coulomb_friction": "N m",
-         "torque_bias": "N m", "torque_gain": "1", "joint_offset": "rad", "actuator_delay": "s",
-         "mass_scale": "true / model", "joint_spring": "N m/rad", "rotor_inertia": "kg m^2"}
 
 
 # -- nominal model --------------------------------------------------------------------------------------------------
@@ -67,123 +63,6 @@ def load_nominal(path: str | Path | None) -> tuple[pin.Model, str, list[dict]]:
     known = [e for e in doc.get("effects", []) or []
              if e.get("kind") != "extra_mass" and e.get("kind") not in REPLAY_ONLY_KINDS]
     return model, str(path), known
-
-
-# -- candidates --------------------------------------------------------------------------------------------------------
-def moved_joints(ds: Dataset) -> np.ndarray:
-    """(n,) joints whose range over the data exceeds MOVED_RAD."""
-    return np.max([np.ptp(r.q, axis=0) for r in ds.recordings], axis=0) > MOVED_RAD
-
-
-def rigid_groups(model: pin.Model, ds: Dataset) -> dict[int, list[int]]:
-    """Pinocchio body index (0-based: joint i+1) of each group's root -> member bodies: links joined by joints that
-    did not move are one rigid body in these data. The feet (below the F/T sensors) are left out."""
-    moved = moved_joints(ds)
-    by_name = {n: moved[i] for i, n in enumerate(ds.joint_names)}
-    groups: dict[int, list[int]] = {}
-    for jid in range(1, model.njoints):
-        name = model.names[jid]
-        if name.startswith("leg_") and name.endswith("_6_joint"):
-            continue
-        root = jid
-        while root > 1 and not by_name.get(model.names[root], True):
-            root = model.parents[root]
-        groups.setdefault(root - 1, []).append(jid - 1)
-    return groups
-
-
-def _limits(model: pin.Model, links: list[str], kind: str, location: str) -> Limits:
-    """The bounds' context of a candidate: its joint's effort and range, or its link's modelled mass."""
-    if kind == "extra_mass":
-        return Limits(link_mass_kg=float(model.inertias[links.index(location) + 1].mass))
-    if model.existJointName(location):
-        jid = model.getJointId(location)
-        iq, iv = model.joints[jid].idx_q, model.joints[jid].idx_v
-        return Limits(effort_nm=float(model.effortLimit[iv]),
-                      range_rad=float(model.upperPositionLimit[iq] - model.lowerPositionLimit[iq]))
-    return Limits()
-
-
-def _bounded(model: pin.Model, links: list[str], kind: str, location: str):
-    """The candidate's plausibility check (gap.bounds): estimate -> why it is refused, or None."""
-    limits = _limits(model, links, kind, location)
-    return lambda theta: refusal(kind, location, theta, limits)
-
-
-def _stack(ds: Dataset, cols: list[np.ndarray]) -> np.ndarray:
-    """Rows of every recording's valid samples (channel-major, time order within a channel), weighted by the floor;
-    ``cols`` per recording: (N, C, p)."""
-    out = []
-    for ev, X, floor in zip(ds.evaluations, cols, ds.floors):
-        Xw = X / floor[None, :, None]
-        out.append(np.concatenate([Xw[ev.valid[:, c], c, :] for c in range(X.shape[1])], axis=0))
-    return np.concatenate(out, axis=0)
-
-
-def _series_id(ds: Dataset) -> np.ndarray:
-    """Per stacked residual row, the id of its (recording, channel) series (time order within a series)."""
-    ids = []
-    for r, ev in enumerate(ds.evaluations):
-        C = ev.e.shape[1]
-        for c in range(C):
-            ids.append(np.full(int(ev.valid[:, c].sum()), r * 1000 + c))
-    return np.concatenate(ids)
-
-
-MASS_PARAMS = ["mass [kg]", "mass*com_x [kg m]", "mass*com_y [kg m]", "mass*com_z [kg m]"]
-
-
-def build_candidates(model: pin.Model, ds: Dataset, exclude: frozenset[str] = frozenset()) -> list[Candidate]:
-    """Every effect of the library that these data can show (see the module docstring), with its signature rows;
-    ``exclude``: candidate keys refused earlier."""
-    links = body_link_names(model)
-    cands: list[Candidate] = []
-    for members in rigid_groups(model, ds).values():
-        # a mass on each link of the group: rigid with the group's root in these data, but a hand's mass still
-        # loads the wrist joints that did not move, which a mass on the forearm does not
-        for m in members:
-            cands.append(Candidate("extra_mass", links[m], MASS_PARAMS,
-                                   _stack(ds, [ev.mass_cols[:, :, m, :] for ev in ds.evaluations]),
-                                   members=[links[k] for k in members],
-                                   plausible=_bounded(model, links, "extra_mass", links[m])))
-    cands += _joint_candidates(model, links, ds)
-    if any(ev.ctrl_delay is not None for ev in ds.evaluations):
-        cands.append(Candidate("actuator_delay", "all joints", ["delay [s]"],
-                               _stack(ds, [joint_columns(r, ev, "actuator_delay", 0)
-                                           for r, ev in zip(ds.recordings, ds.evaluations)]),
-                               plausible=_bounded(model, links, "actuator_delay", "all joints")))
-    for side in ("left", "right"):          # one candidate per sensor axis: a bias is per channel
-        for a, axis in enumerate(FT_AXES):
-            loc = f"ft_{side}/{axis}"
-            cands.append(Candidate("ft_bias", loc, [f"{axis} [{'N' if a < 3 else 'N m'}]"],
-                                   _stack(ds, [ev.ft_cols[side][:, :, a:a + 1] for ev in ds.evaluations]),
-                                   plausible=_bounded(model, links, "ft_bias", loc)))
-    return [c for c in cands if c.key not in exclude]
-
-
-def _joint_candidates(model: pin.Model, links: list[str], ds: Dataset) -> list[Candidate]:
-    """The single-joint candidates: sensor faults on every joint; friction, a spring and rotor inertia on the joints
-    that moved (a spring on a still joint is a bias, its inertia shows no acceleration)."""
-    static = all(r.static for r in ds.recordings)
-    speed = np.sqrt(np.mean(np.concatenate([r.qd for r in ds.recordings]) ** 2, axis=0))
-    tau_sd = np.std(np.concatenate([ev.tau_model for ev in ds.evaluations]), axis=0)
-    moved = moved_joints(ds)
-    out = []
-    for j, name in enumerate(ds.joint_names):
-        kinds = ["torque_bias", "joint_offset"]
-        if tau_sd[j] > 1.0:
-            kinds.append("torque_gain")
-        if not static and speed[j] > MOVING_RADPS:
-            kinds += ["viscous_friction", "coulomb_friction", "rotor_inertia"]
-        if not static and moved[j]:
-            kinds.append("joint_spring")
-        for kind in kinds:
-            X = _stack(ds, [joint_columns(r, ev, kind, j) for r, ev in zip(ds.recordings, ds.evaluations)])
-            if np.linalg.norm(X) < 1e-6:
-                continue
-            params = [f"{kind} [{UNITS[kind]}]"] + (["preload [N m]"] if kind == "joint_spring" else [])
-            out.append(Candidate(kind, name, params, X, plausible=_bounded(model, links, kind, name)))
-    return out
 
 
 # -- the whole workflow ------------------------------------------------------------------------------------------
@@ -367,8 +246,8 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
 def _select_checked(ds: Dataset, cands: list[Candidate], links: list[str], say) -> tuple[Selection, list[dict]]:
     """Selection, re-run without each chosen effect whose joint estimate is past its bounds (gap.bounds) or that is
     lopsided where the evidence is symmetric (gap.symmetry); the refused, with why."""
-    y = _stack(ds, [ev.e[:, :, None] for ev in ds.evaluations])[:, 0]
-    sid = _series_id(ds)
+    y = stack_rows(ds, [ev.e[:, :, None] for ev in ds.evaluations])[:, 0]
+    sid = series_ids(ds)
     exclude: set[str] = set()
     refused: list[dict] = []
     for round_ in range(MAX_REFUSAL_ROUNDS + 1):
@@ -502,7 +381,7 @@ def _noise_floors(ds: Dataset) -> None:
 def _static_floors(ds: Dataset, cands: list[Candidate]) -> None:
     """Static postures' floors: the robust scale per channel of what is left after fitting every candidate at once."""
     X = np.hstack([c.X for c in cands])
-    y = _stack(ds, [ev.e[:, :, None] for ev in ds.evaluations])[:, 0]
+    y = stack_rows(ds, [ev.e[:, :, None] for ev in ds.evaluations])[:, 0]
     theta, *_ = np.linalg.lstsq(X, y, rcond=1e-8)
     res = y - X @ theta
     i = 0
@@ -582,18 +461,18 @@ def write_augmented(result: GapResult, nominal: pin.Model, path: str | Path) -> 
     doc = augmented_model(result, nominal)
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     Path(path).write_text("# written by sit2stand gap: the nominal model plus the effects it named\n"
-                          + yaml.safe_dump(_plain(doc), sort_keys=False))
+                          + yaml.safe_dump(plain_data(doc), sort_keys=False))
     return doc
 
 
-def _plain(x):
+def plain_data(x):
     """``x`` with NumPy scalars and arrays as plain Python numbers and lists (for JSON)."""
     if isinstance(x, dict):
-        return {str(k): _plain(v) for k, v in x.items()}
+        return {str(k): plain_data(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_plain(v) for v in x]
+        return [plain_data(v) for v in x]
     if isinstance(x, np.ndarray):
-        return _plain(x.tolist())
+        return plain_data(x.tolist())
     if isinstance(x, (np.floating, float)):
         return float(x)
     if isinstance(x, (np.integer, int)) and not isinstance(x, bool):
@@ -601,29 +480,9 @@ def _plain(x):
     return x
 
 
-def summary(result: GapResult) -> dict:
-    """The result as plain data (``gap.json``)."""
-    return _plain({
-        "model": result.model_source, "bags": result.bags, "verdict": result.verdict,
-        "effects": result.effects, "gap_before": result.gap_before, "gap_after": result.gap_after,
-        "gap_shrink": result.shrink, "gap_after_first_order": result.gap_after_first_order,
-        "gap_shrink_first_order": result.shrink_first_order, "replay_gap_before": result.replay_gap_before,
-        "replay_gap_after": result.replay_gap_after, "refused": result.refused,
-        "unexplained": result.unexplained[:20], "ranked": result.table[:30],
-        "channels": {ch: {"floor": result.floors[:, c].tolist(), "rms_before": result.rms_before[:, c].tolist(),
-                          "rms_after": result.rms_after[:, c].tolist()} for c, ch in enumerate(result.channels)},
-        "replay": result.replay, "selection_steps": result.selection.steps, "n_rows": result.selection.n_rows,
-        "n_eff": result.selection.n_eff, "events": result.dataset.events, "notes": result.notes})
-
-
 def progress_printer(msg: str) -> None:
     """A progress callback printing to stderr."""
     print(msg, file=sys.stderr, flush=True)
 
 
-def write_json(result: GapResult, path: str | Path) -> None:
-    """Write :func:`summary` as JSON to ``path``."""
-    Path(path).write_text(json.dumps(summary(result), indent=1))
-
-
-__all__ = ["GapError", "RecordingError", "run", "write_augmented", "summary", "load_nominal", "describe"]
+__all__ = ["GapError", "RecordingError", "run", "write_augmented", "load_nominal", "describe"]
