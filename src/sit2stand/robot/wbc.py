@@ -102,10 +102,6 @@ def friction_rows(n_points: int, mu: float) -> np.ndarray:
     return np.kron(np.eye(n_points), block)
 
 
-def skew(r: np.ndarray) -> np.ndarray:
-    return np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
-
-
 class WholeBodyQP:
     """Task-space inverse dynamics (see the module docstring).
 
@@ -164,7 +160,7 @@ class WholeBodyQP:
             oMf = data.oMf[fid]
             for p in self.corner_local:
                 r = oMf.rotation @ p
-                rows_f.append(Jw[:3] - skew(r) @ Jw[3:])
+                rows_f.append(Jw[:3] - pin.skew(r) @ Jw[3:])
                 corners.append(oMf.translation + r)
         if self.seat is not None:
             Js = pin.getFrameJacobian(model, data, self.seat, pin.LOCAL_WORLD_ALIGNED)[:3]
