@@ -7,10 +7,12 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import pytest
 import yaml
 
+import sit2stand.nodes as nodes_pkg
 from sit2stand.launch import LaunchError, load_graph, parse_overrides
 
 CHILD = textwrap.dedent("""\
@@ -206,3 +208,13 @@ def test_real_time_refused_without_cap_sys_nice(tmp_path):
         pytest.skip(f"setpriv cannot drop capabilities here: {proc.stderr.strip()}")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     _check_sched(proc.stdout, False)
+
+
+def test_every_node_module_launches_as_a_sit2stand_node(tmp_path):
+    """Each nodes/ module with ``main = node_main(...)`` is a sit2stand node a graph runs as ``python -m``."""
+    folder = Path(nodes_pkg.__file__).parent
+    modules = {p.stem for p in folder.glob("*.py") if "\nmain = node_main(" in p.read_text()}
+    assert "foxglove" in modules
+    for exe in sorted(modules):
+        (node,) = load_graph(graph_file(tmp_path, [{"name": "n", "executable": exe}]), {}).nodes
+        assert node.command[1:3] == ["-m", f"sit2stand.nodes.{exe}"]

@@ -65,7 +65,8 @@ from .data import folder as data_folder
 from .data import names as data_names
 from .errors import Sit2StandError
 
-OUR_NODES = {"replayer", "recorder", "human_com", "driver", "identification", "retargeter", "mocap_bridge"}
+OUR_NODES = {"replayer", "recorder", "human_com", "driver", "identification", "retargeter", "mocap_bridge",
+             "foxglove"}
 SUBST = re.compile(r"\$\((var|env|dirname)(?:\s+([^)\s]+))?(?:\s+([^)]*))?\)")
 
 
