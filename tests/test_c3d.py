@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from conftest import real_file
-from sit2stand.io.topics import MARKERS_TOPIC, REFERENCE_COM_TOPIC, plate_topic
+from sit2stand.io.topics import MARKERS_TOPIC, REFERENCE_COM_TOPIC, SUBJECT_TOPIC, plate_topic
 from sit2stand.io.bag import BagReader
 from sit2stand.io.c3d import C3DError, read_c3d, write_trial_bag
 from sit2stand.io.forceplate import point_in_polygon
@@ -67,8 +67,12 @@ def test_sit_to_stand_bag_topics_and_rates(sts_bag):
         assert topics[MARKERS_TOPIC].count == 91
         assert topics[plate_topic("feet")].count == 1820
         assert topics[REFERENCE_COM_TOPIC].count == 91
-        assert set(topics) == {MARKERS_TOPIC, "/mocap/model_points", REFERENCE_COM_TOPIC, plate_topic("feet")}
+        assert set(topics) == {MARKERS_TOPIC, "/mocap/model_points", REFERENCE_COM_TOPIC, plate_topic("feet"),
+                               SUBJECT_TOPIC}
         assert "forward=" in bag.custom_data["lab_axes"]
+        ((_, subject),) = bag.read(SUBJECT_TOPIC)       # latched, as in synthesised bags
+        assert (subject.height_m, subject.mass_kg) == pytest.approx((1.03, 14.5))
+        assert [q.durability.name for q in bag.qos(SUBJECT_TOPIC)] == ["TRANSIENT_LOCAL"]
 
 
 @pytest.mark.parametrize("name, n_plates, point_rate, analog_rate", [

@@ -9,7 +9,9 @@ import pytest
 from conftest import real_file
 from sit2stand.cli import main
 from sit2stand.human.offline import read_trial
+from sit2stand.io.bag import BagReader
 from sit2stand.io.forceplate import center_of_pressure, shift_moment
+from sit2stand.io.topics import SUBJECT_TOPIC
 from sit2stand.io.trc import OPENSIM_AXES, TrcError, read_grf_mot, read_opensim_trial, read_trc
 
 G = 9.81
@@ -112,6 +114,9 @@ def test_import_trc_then_human_com_with_gait2392(tmp_path, capsys):
     trial = read_trial(bag)
     assert (trial.height_m, trial.mass_kg, len(trial.marker_names)) == (1.8, MASS_KG, 41)
     assert sorted(p.name for p in trial.plates) == ["plate0", "plate1"]
+    with BagReader(bag) as b:                          # the subject in the stream too, for a live human_com
+        ((_, subject),) = b.read(SUBJECT_TOPIC)
+    assert (subject.height_m, subject.mass_kg) == (1.8, MASS_KG)
     assert main(["human-com", str(bag), "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["marker_set"] == "gait2392" and summary["frames_fitted"] == 151

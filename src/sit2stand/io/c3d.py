@@ -26,11 +26,11 @@ import ezc3d
 import numpy as np
 
 from .topics import (COM_TYPE, MARKERS_TOPIC, MOCAP_TYPE, MODEL_POINTS_TOPIC, PLATE_TYPE, REFERENCE_COM_TOPIC,
-                     plate_topic)
+                     SUBJECT_TOPIC, SUBJECT_TYPE, plate_topic)
 from ..errors import Sit2StandError
-from .bag import BagWriter
+from .bag import BagWriter, reliable_qos
 from .forceplate import DEFAULT_COP_THRESHOLD_N, PlateSeries, wrench_in_lab
-from .messages import (center_of_mass, mocap_frame, plate_messages)
+from .messages import center_of_mass, mocap_frame, plate_messages, subject
 
 LENGTH_SCALE = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "dm": 0.1}
 NON_POSITION_GROUPS = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "REACTIONS", "SCALARS")
@@ -451,8 +451,14 @@ def write_trial_bag(trial: C3DTrial, out: str | Path) -> dict[str, int]:
     if trial.events:
         custom["events"] = "; ".join(f"{lab}@{t:.3f}s" for lab, _ctx, t in trial.events)
     with BagWriter(out, custom_data=custom) as bag:
-        bag.add_topic(MARKERS_TOPIC, MOCAP_TYPE)
         m = trial.markers
+        if trial.body_mass_kg and trial.height_m:
+            # the subject in the stream too (latched, as in synthesised bags): a conversion that drops custom_data
+            # (ROS 1) keeps it, and a live human_com node reads it when not given the subject's parameters
+            t0 = _to_ns(float(m.times_s[0]) if len(m.times_s) else 0.0)
+            bag.add_topic(SUBJECT_TOPIC, SUBJECT_TYPE, [reliable_qos(1, transient_local=True)])
+            bag.write(SUBJECT_TOPIC, t0, subject(t0, trial.height_m, trial.body_mass_kg, ""))
+        bag.add_topic(MARKERS_TOPIC, MOCAP_TYPE)
         for k, t in enumerate(m.times_s):
             bag.write(MARKERS_TOPIC, _to_ns(t), mocap_frame(_to_ns(t), m.names, m.positions_m[k], m.valid[k],
                                                            m.residuals_m[k]))
