@@ -15,9 +15,12 @@ Parameters:
                                  human's recording ends) keeps its time base.
     wait_for_subscribers (int, 0)  before playing, wait until every topic has this many subscribers ...
     wait_for (str[], [])         ... or, instead, until each listed "TOPIC:COUNT" has COUNT subscribers (a topic
-                                 the bag does not hold counts the graph's subscriptions: a downstream input) ...
+                                 the bag does not hold counts the graph's subscriptions: a downstream input;
+                                 "/clock:N" counts the nodes under use_sim_time that have our clock) ...
     wait_timeout_s (float, 10)   ... or this long (then play anyway, with a warning).
     delay_s (float, 0)           extra wait before the first message.
+    While it waits, /clock holds the bag's start time, so that a node under use_sim_time has the bag's time before the
+    first message reaches it (a recorder then logs nothing before the bag's start).
     skip_unknown_types (bool, false)  skip topics whose type has no Python class here, instead of failing.
 
 Services: ~/pause (std_srvs/SetBool: true pauses, false resumes).
@@ -54,6 +57,7 @@ os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(Path(__file__).with_
 
 ACK_BATCH = 200          # unpaced mode: wait for acknowledgements every this many messages
 ACK_TIMEOUT_S = 10.0
+CLOCK_SETTLE_S = 0.1    # /clock at the bag's start this long before the first message, at least
 
 
 class SharedDomain(NodeError):
@@ -172,16 +176,33 @@ class Replayer(Node):
         while not self._stop.is_set():
             # a played topic: our publisher's matched subscriptions; any other (e.g. a downstream node's input,
             # /human/com in the stand-up graph): the subscriptions the graph has on it
-            short = [t for t, n in wanted.items()
-                     if (self.pubs[t].get_subscription_count() if t in self.pubs else
-                         self.count_subscribers(ros_name(t))) < n]
+            short = [t for t, n in wanted.items() if self._subscribers(t) < n]
             if not short:
                 return
             if time.monotonic() > deadline:
                 self.get_logger().warning(f"playing without the awaited subscribers on {', '.join(short)} after "
                                           f"{self.wait_timeout_s:g} s")
                 return
-            time.sleep(0.02)
+            self._hold_clock_at_start(0.02)
+
+    def _subscribers(self, topic: str) -> int:
+        """Matched subscriptions of a played topic or /clock; the graph's subscriptions on any other topic."""
+        if topic in self.pubs:
+            return self.pubs[topic].get_subscription_count()
+        if topic == CLOCK_TOPIC and self.clock_pub is not None:
+            return self.clock_pub.get_subscription_count()
+        return self.count_subscribers(ros_name(topic))
+
+    def _hold_clock_at_start(self, duration_s: float) -> None:
+        """Publish the bag's start time on /clock for ``duration_s`` (every 20 ms; best effort, so repeated)."""
+        end = time.monotonic() + duration_s
+        while not self._stop.is_set():
+            if self.clock_pub is not None:
+                self._publish_clock(self.reader.start_ns)
+            left = end - time.monotonic()
+            if left <= 0:
+                return
+            time.sleep(min(0.02, left))
 
     def _wait_acked(self) -> None:
         for topic, pub in self.pubs.items():
@@ -192,8 +213,7 @@ class Replayer(Node):
     def _play(self) -> None:
         try:
             self._wait_for_subscribers()
-            if self.delay_s > 0:
-                time.sleep(self.delay_s)
+            self._hold_clock_at_start(max(self.delay_s, CLOCK_SETTLE_S))
             while not self._stop.is_set():
                 self.clock.restart(self.reader.start_ns)
                 since_ack = 0
