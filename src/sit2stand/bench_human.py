@@ -4,8 +4,10 @@ Per real recording in ``../shared/data/real/`` (read in place): the offline esti
 and without (the anthropometric table alone), and the capture software's own COM where the file has one (Vicon's
 ``CentreOfMass``). Each is scored by the residual of Newton's law for the whole body, F_plates - m (a_com + g z), RMS
 per axis [N] over the frames whose whole weight is on the plates (the same frames for every COM of a trial), a_com by
-a Savitzky-Golay second derivative (0.3 s, order 4). OpenSim's scaled Gait2392 COM is not computed here (the `opensim`
-wheel and the Gait2392 model files are not part of the environment). Printed as a table and written to JSON.
+a Savitzky-Golay second derivative (0.3 s, order 4). On subject01, also OpenSim's own COM: the generic Gait2392
+model scaled on ``subject01_static.trc`` and fitted by OpenSim's IK (:mod:`sit2stand.bench_opensim`; PyPI ``opensim``
+4.6 in a venv of its own, made on demand, and a checkout of opensim-models named by ``SIT2STAND_OPENSIM_MODELS``);
+without them the table says why. Printed as a table and written to JSON.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .bench_opensim import opensim_com
 from .human.com import estimate_com
 from .human.marker_sets import choose_marker_set
 from .human.offline import Trial, newton_residual, read_trial
@@ -35,12 +38,13 @@ class RealTrial:
     feet_plate: int | None = None
     height_m: float | None = None
     mass_kg: float | None = None
+    opensim_static: str | None = None       # a Gait2392 static trial: OpenSim's scaled COM is scored too
 
 
 TRIALS = [
     RealTrial("sts_child_vicon_01 (sit-to-stand, Vicon)", ("sts_child_vicon_01.c3d",), feet_plate=2),
     RealTrial("subject01_walk1 (walking, OpenSim Gait2392)", ("subject01_walk1.trc", "subject01_walk1_grf.mot"),
-              height_m=1.8, mass_kg=72.6),
+              height_m=1.8, mass_kg=72.6, opensim_static="subject01_static.trc"),
 ]
 
 
@@ -59,8 +63,8 @@ def _rms(residual: np.ndarray, frames: np.ndarray) -> list[float]:
     return np.sqrt(np.mean(residual[frames] ** 2, axis=0)).round(2).tolist()
 
 
-def score(bag: Path) -> dict:
-    """Newton residuals [N] (x, y, z RMS) of the COMs of one imported trial."""
+def score(bag: Path, real: RealTrial | None = None) -> dict:
+    """Newton residuals [N] (x, y, z RMS) of the COMs of one imported trial (``real``: how it was imported)."""
     trial: Trial = read_trial(bag)
     subject = Subject(trial.height_m, trial.mass_kg, trial.sex,
                       marker_set=choose_marker_set(trial.marker_names, None))
@@ -74,10 +78,16 @@ def score(bag: Path) -> dict:
     if trial.reference is not None:
         t, com, ok = trial.reference
         coms["the capture software's own"] = np.stack([np.interp(res.t_s, t[ok], com[ok, i]) for i in range(3)], 1)
+    extra = {}
+    if real is not None and real.opensim_static:
+        com, extra["opensim"] = opensim_com(REAL / real.opensim_static, REAL / real.files[0], mass, subject.height_m,
+                                            res.t_s)
+        if com is not None:
+            coms["OpenSim, scaled Gait2392"] = com
     residuals = {k: newton_residual(res.t_s, c, trial.plates, mass) for k, c in coms.items()}
     frames = res.supported & next(iter(residuals.values()))[1]
     return {"frames": int(frames.sum()), "mass_kg": round(float(mass), 2), "marker_set": subject.marker_set.name,
-            "newton_residual_rms_xyz_n": {k: _rms(r, frames) for k, (r, _) in residuals.items()}}
+            "newton_residual_rms_xyz_n": {k: _rms(r, frames) for k, (r, _) in residuals.items()}, **extra}
 
 
 def bench_human_real(trials: list[RealTrial] = TRIALS) -> dict:
@@ -89,7 +99,7 @@ def bench_human_real(trials: list[RealTrial] = TRIALS) -> dict:
                 out[trial.name] = {"skipped": f"not on this machine ({REAL})"}
                 continue
             print(f"  {trial.name} ...", flush=True)
-            out[trial.name] = score(_import(trial, Path(tmp) / f"trial{i}"))
+            out[trial.name] = score(_import(trial, Path(tmp) / f"trial{i}"), trial)
     return out
 
 
@@ -102,3 +112,9 @@ def print_table(results: dict) -> None:
             continue
         for label, (x, y, z) in r["newton_residual_rms_xyz_n"].items():
             print(f"  {name:<46} {label:<30} {r['frames']:>6}  {x:6.1f} / {y:6.1f} / {z:6.1f}")
+        opensim = r.get("opensim", {})
+        if "skipped" in opensim:
+            print(f"  {name:<46} {'OpenSim, scaled Gait2392':<30} skipped: {opensim['skipped']}")
+        elif opensim:
+            print(f"  {'':<46} (OpenSim IK: marker RMS {opensim['ik_marker_rms_mm']} mm, "
+                  f"{opensim['ik_ms_per_frame']} ms per frame)")
