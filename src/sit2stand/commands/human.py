@@ -78,10 +78,10 @@ def _human_calibrate(args: argparse.Namespace) -> int:
     from ..human.offline import calibrate_from_bag
 
     t0 = time.perf_counter()
-    cal = calibrate_from_bag(args.bag, args.out, args.frames, args.height, args.mass, args.sex)
-    print(f"calibrated a {cal.height_m:g} m {cal.sex} on the first {cal.frames} frames of {args.bag} in "
-          f"{time.perf_counter() - t0:.1f} s: marker RMS {cal.marker_rms_before_m * 1e3:.1f} -> "
-          f"{cal.marker_rms_after_m * 1e3:.1f} mm; wrote {args.out}")
+    cal, reason = calibrate_from_bag(args.bag, args.out, args.frames, args.height, args.mass, args.sex,
+                                     calibration_frame=args.calibration_frame, static=args.static)
+    print(f"calibrated a {cal.height_m:g} m {cal.sex} on {reason} in "
+          f"{time.perf_counter() - t0:.1f} s; wrote {args.out}")
     return 0
 
 
@@ -89,7 +89,8 @@ def _human_com(args: argparse.Namespace) -> int:
     from ..human.offline import run
 
     summary = run(args.bag, args.out, height_m=args.height, mass_kg=args.mass, sex=args.sex,
-                  calibrate=not args.no_calibration, scale=not args.no_scaling, marker_set=args.marker_set)
+                  calibrate=not args.no_calibration, scale=not args.no_scaling, marker_set=args.marker_set,
+                  calibration_frame=args.calibration_frame, static=args.static)
     keys = ["com_rms_vs_truth_scaled_mm", "com_rms_vs_truth_unscaled_mm", "cop_rms_unscaled_mm", "cop_rms_scaled_mm",
             "com_rms_vs_reference_mm", "standing_com_to_cop_mm", "standing_reference_com_to_cop_mm", "marker_rms_mm"]
     for key in keys:
@@ -137,6 +138,26 @@ def _add_lab_file_args(p, default_axes: str) -> None:
     p.add_argument("--up", help=f"file axis that is lab z (up), e.g. +Z; {default_axes}")
     p.add_argument("--cop-threshold", type=float, default=20.0, help="normal force [N] below which COP is invalid")
     p.add_argument("-v", "--verbose", action="store_true", help="print the bag summary afterwards")
+
+
+def calibration_frame(text: str) -> int | str:
+    """``--calibration-frame``: a frame number (0-based) or ``auto``."""
+    if text == "auto":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a frame number (0-based) or auto, not {text!r}") from None
+
+
+def add_calibration_args(p, default: str) -> None:
+    """Where the skeleton (or the robot's marker map) is calibrated: ``default`` says where without the options."""
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--calibration-frame", type=calibration_frame, metavar="N|auto",
+                       help=f"calibrate from frame N on (0-based), or on the quietest stretch that sees the most "
+                            f"markers (auto); default: {default}")
+    group.add_argument("--static", type=Path, metavar="FILE",
+                       help="calibrate the skeleton on a static trial recorded beforehand (bag, .c3d or .trc)")
 
 
 def add_import_c3d(sub) -> None:
@@ -187,15 +208,17 @@ def add_human_com(sub) -> None:
     p.add_argument("--no-scaling", action="store_true", help="keep de Leva's segment masses")
     p.add_argument("--marker-set", help="marker set: plug_in_gait, plug_in_gait_lower, gait2392 or a YAML file "
                    "(default: the packaged set that covers most of the bag's marker names)")
+    add_calibration_args(p, "every frame of the trial")
     p.set_defaults(func=_human_com)
 
 
 def add_human_calibrate(sub) -> None:
-    p = sub.add_parser("human-calibrate", help="calibrate the skeleton on a bag's first (seated, still) frames, "
-                       "for the human_com node's calibration_file")
+    p = sub.add_parser("human-calibrate", help="calibrate the skeleton on a bag's quietest frames (or chosen ones, "
+                       "or a static trial), for the human_com node's calibration_file")
     p.add_argument("bag", type=Path)
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--frames", type=int, default=50, help="frames to use (the stream's own calibration takes 50)")
+    add_calibration_args(p, "auto")
     p.add_argument("--height", type=float, help="stature [m] if the bag's metadata lacks it")
     p.add_argument("--mass", type=float, help="body mass [kg] if the bag's metadata lacks it")
     p.add_argument("--sex", choices=["male", "female"])

@@ -27,7 +27,7 @@ import pinocchio as pin
 from ..dynamics import G, model_cop, savgol_series, smooth_motion
 from ..io.forceplate import PlateSeries, center_of_pressure
 from .anthropometry import anthropometric_set
-from .calibration import calibrate_lengths, calibrate_markers
+from .calibration import StreamCalibration, calibrate_lengths, calibrate_markers
 from .marker_ik import MarkerIK, TooFewMarkers, bridge_skipped, check_marker_units, fit_sequence
 from .mass_scaling import (FactorAtBound, MassScaling, apply_scaling, assemble_rows, frame_rows, lengths_at_bounds,
                            prior_scaling, scaling_at_bounds, solve_mass_scaling)
@@ -93,17 +93,22 @@ class _Motion:
 
 
 def _fit_motion(marker_t_s, marker_names, positions, valid, subject: Subject, calibrate: bool, window: int,
-                progress) -> _Motion:
-    """Calibrate (optionally), fit every frame, bridge the frames that could not be fitted, smooth."""
+                progress, calibration: StreamCalibration | None = None) -> _Motion:
+    """Calibrate (optionally; on the whole trial, or use ``calibration``), fit every frame, bridge the frames that
+    could not be fitted, smooth."""
     dt = float(np.median(np.diff(marker_t_s)))
     first = int(np.argmax(np.sum(valid, axis=1)))          # the frame that sees the most markers
     check_marker_units(positions[first], valid[first], subject.height_m, "markers")
     rms_before = rms_after = float("nan")
-    if calibrate:
+    if calibration is not None:
+        subject, human = calibration.build(subject)
+        rms_before, rms_after = calibration.marker_rms_before_m, calibration.marker_rms_after_m
+    elif calibrate:
         subject, rms_before, _ = calibrate_lengths(subject, marker_names, positions, valid)
-    human = build_human(subject)
-    if calibrate:
+        human = build_human(subject)
         _, rms_after = calibrate_markers(human, marker_names, positions, valid)
+    else:
+        human = build_human(subject)
     fits = fit_sequence(MarkerIK(human, marker_names), positions, valid, progress)
     ok = np.array([f.ok for f in fits])
     if ok.sum() < window:
@@ -166,7 +171,8 @@ def _cop_rms(cop: np.ndarray, measured: np.ndarray, sel: np.ndarray) -> float:
 def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.ndarray, valid: np.ndarray,
                  plates: list[PlateSeries], subject: Subject, *, calibrate: bool = True, scale_masses: bool = True,
                  chair_on_plate: bool = True, window: int = 31, trust_plate_mass: bool = True,
-                 quasi_static_acc: float = 0.15, progress=None) -> ComResult:
+                 quasi_static_acc: float = 0.15, progress=None,
+                 calibration: StreamCalibration | None = None) -> ComResult:
     """Offline COM estimation of a whole trial (see the module docstring).
 
     Args:
@@ -176,8 +182,11 @@ def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.
         subject: stature, body mass and sex (the mass is replaced by the plates' weighing if they differ by more
             than :data:`PLATE_MASS_TOLERANCE` and ``trust_plate_mass``).
         chair_on_plate: the chair stands on a plate (see :class:`~sit2stand.human.support.SupportRule`).
+        calibration: a skeleton calibration made beforehand (on chosen frames or a static trial,
+            :func:`~sit2stand.human.offline.calibrate_subject`) instead of the one on the whole trial.
     """
-    motion = _fit_motion(marker_t_s, marker_names, positions, valid, subject, calibrate, window, progress)
+    motion = _fit_motion(marker_t_s, marker_names, positions, valid, subject, calibrate, window, progress,
+                         calibration)
     dt = float(np.median(np.diff(marker_t_s)))
     force, moment, covered = _plate_wrench(marker_t_s, plates, window)
     supported = _supported(force, covered, motion.fitted, subject.mass_kg * G, chair_on_plate, window)
@@ -204,7 +213,8 @@ def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.
     table = anthropometric_set(motion.subject.height_m, motion.subject.sex)
     if not table.is_adult:
         notes.append(table.describe())
-    at_bounds = (lengths_at_bounds(motion.subject.lengths) if calibrate else []) + scaling_at_bounds(scaling)
+    at_bounds = (lengths_at_bounds(motion.subject.lengths) if calibrate or calibration is not None else []) + \
+        scaling_at_bounds(scaling)
     notes += [f.note() for f in at_bounds]
     fits = motion.fits
     return ComResult(marker_t_s, com, vcom, acom, com_unscaled,

@@ -34,7 +34,10 @@ from ..io.topics import (COM_TYPE, FORCE_PLATE_PREFIX, GROUND_TRUTH_COM_TOPIC, H
                          SUBJECT_TOPIC)
 from ..dynamics import G, savgol_series
 from ..io.typestore import typestore
-from .calibration import calibrate_stream, static_frames
+from ..io.c3d import read_c3d
+from ..io.trc import read_trc
+from .calibration import StreamCalibration, calibrate_stream
+from .calibration_frames import FrameChoice, frames_at, quiet_frames
 from .com import ComResult, estimate_com
 from .export import write_exports
 from .marker_ik import MarkerUnitsError
@@ -254,9 +257,12 @@ def write_result_bag(result: ComResult, out: Path, joint_names: list[str]) -> No
 
 def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg: float | None = None,
         sex: str | None = None, calibrate: bool = True, scale: bool = True, quiet: bool = False,
-        marker_set: MarkerSet | str | None = None) -> dict:
+        marker_set: MarkerSet | str | None = None, calibration_frame: int | str | None = None,
+        static: str | Path | None = None) -> dict:
     """The whole offline job; returns the summary dict (also written to OUT/summary.json). ``marker_set``: a
-    packaged set's name, a file or a MarkerSet; None chooses from the bag's marker names."""
+    packaged set's name, a file or a MarkerSet; None chooses from the bag's marker names. The skeleton is calibrated
+    on every frame of the trial, unless ``calibration_frame`` (a frame, or ``"auto"``: :func:`choose_frames`) or a
+    ``static`` trial says where."""
     trial = read_trial(bag_path)
     height = height_m or trial.height_m
     mass = mass_kg or trial.mass_kg
@@ -277,10 +283,15 @@ def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg
               f"{'' if chair else ' (chair not on a plate: scaling uses frames after seat-off)'}", file=sys.stderr)
         print(f"  marker set {markers.name}: {len(markers.covered(trial.marker_names))} of the "
               f"{len(trial.marker_names)} markers", file=sys.stderr)
+    made = None
+    if calibrate and (calibration_frame is not None or static is not None):
+        made, reason = calibrate_subject(trial, subject, calibration_frame, static)
+        if not quiet:
+            print(f"  skeleton calibrated on {reason}", file=sys.stderr)
     try:
         result = estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,
                               subject, calibrate=calibrate, scale_masses=scale, chair_on_plate=chair,
-                              progress=progress, trust_plate_mass=mass_kg is None)
+                              progress=progress, trust_plate_mass=mass_kg is None, calibration=made)
     except MarkerUnitsError as err:          # the estimator checks the units; the bag is named here
         raise MarkerUnitsError(f"{bag_path}: {MARKERS_TOPIC}: {err}") from None
     summary = {"bag": str(bag_path), "subject": {"height_m": height, "mass_kg": mass, "sex": subject.sex},
@@ -301,21 +312,58 @@ def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg
     return summary
 
 
+def read_static(path: str | Path) -> Trial:
+    """A static trial's markers (``--static FILE``): a bag (folder or .mcap), a C3D or an OpenSim TRC file, in the
+    lab axes the import commands choose. Raises InputError naming the file when it is none of these."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix in (".c3d", ".trc"):
+        if suffix == ".c3d":
+            lab = read_c3d(path, markers_only=True)
+            m, height, mass = lab.markers, lab.height_m, lab.body_mass_kg
+        else:
+            m, height, mass = read_trc(path), None, None
+        return Trial(m.times_s, list(m.names), m.positions_m, m.valid, [], height, mass, "", None, None)
+    if path.is_dir() or suffix == ".mcap":
+        return read_trial(path)
+    raise InputError(f"--static {path}: not a bag, a .c3d nor a .trc file")
+
+
+def choose_frames(trial: Trial, calibration_frame: int | str | None, n: int) -> FrameChoice:
+    """The frames to calibrate on: ``n`` from a given frame, or (``"auto"``, None) the quietest stretch of ``n``
+    frames that sees the most markers (:func:`sit2stand.human.calibration_frames.quiet_frames`)."""
+    if calibration_frame is None or calibration_frame == "auto":
+        return quiet_frames(trial.marker_t_s, trial.positions, trial.valid, n)
+    return frames_at(int(calibration_frame), trial.positions, trial.valid, n)
+
+
+def calibrate_subject(trial: Trial, subject: Subject, calibration_frame: int | str | None = None,
+                      static: str | Path | None = None, n: int = 50) -> tuple[StreamCalibration, str]:
+    """The subject's skeleton calibrated on ``n`` frames of a ``static`` trial (its quietest, most complete
+    stretch), or of ``trial`` (:func:`choose_frames`); with the frames chosen, in words."""
+    source = read_static(static) if static is not None else trial
+    choice = choose_frames(source, None if static is not None else calibration_frame, n)
+    k = choice.frames
+    cal = calibrate_stream(subject, source.marker_names, source.positions[k], source.valid[k])
+    where = f"{static}: " if static is not None else ""
+    return cal, (f"{where}{choice.reason}; marker RMS {cal.marker_rms_before_m * 1e3:.1f} -> "
+                 f"{cal.marker_rms_after_m * 1e3:.1f} mm")
+
+
 def calibrate_from_bag(bag_path: str | Path, out_yaml: str | Path, frames: int = 50, height_m: float | None = None,
-                       mass_kg: float | None = None, sex: str | None = None, marker_set: MarkerSet | str | None = None):
-    """The streaming estimator's skeleton calibration from a bag's first ``frames`` usable (seated, still) marker
-    frames, as from a static trial recorded before the motion; written to ``out_yaml`` for the human_com node's
-    ``calibration_file``. Returns the :class:`sit2stand.human.com.StreamCalibration`."""
+                       mass_kg: float | None = None, sex: str | None = None, marker_set: MarkerSet | str | None = None,
+                       calibration_frame: int | str | None = None,
+                       static: str | Path | None = None) -> tuple[StreamCalibration, str]:
+    """The streaming estimator's skeleton calibration, for the human_com node's ``calibration_file``: on
+    ``frames`` frames of the bag (the quietest, most complete stretch, or from ``calibration_frame``) or of a
+    ``static`` trial. Written to ``out_yaml``; returns it and the frames used, in words."""
 
     trial = read_trial(bag_path)
     height, mass = height_m or trial.height_m, mass_kg or trial.mass_kg
     if height is None or mass is None:
         raise InputError(f"{bag_path}: no subject height_m/body_mass_kg in its metadata; give them")
     subject = Subject(height, mass, sex or trial.sex, marker_set=choose_marker_set(trial.marker_names, marker_set))
-    pos, valid = static_frames(trial.positions, trial.valid, frames)
-    if len(pos) < frames:
-        raise InputError(f"{bag_path}: only {len(pos)} frames with enough markers, {frames} asked")
-    cal = calibrate_stream(subject, trial.marker_names, pos, valid)
+    cal, reason = calibrate_subject(trial, subject, calibration_frame, static, frames)
     Path(out_yaml).parent.mkdir(parents=True, exist_ok=True)
     cal.save(out_yaml)
-    return cal
+    return cal, reason
