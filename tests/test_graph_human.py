@@ -6,7 +6,8 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import GRAPHS
+from conftest import GRAPHS, real_file
+from sit2stand.cli import main
 from sit2stand.io.topics import MARKERS_TOPIC, MOCAP_TYPE
 from sit2stand.human.demonstration_bag import write_demonstration_bag
 from sit2stand.human.synth import SynthConfig, synthesize
@@ -52,7 +53,7 @@ def test_too_few_markers_stop_the_node_with_a_clear_error(tmp_path, ros_env, run
             t = 10_000_000_000 + k * 10_000_000
             bag.write(MARKERS_TOPIC, t, M.mocap_frame(t, ["LASI", "RASI", "LPSI", "FOO", "BAR"], np.ones((5, 3)),
                                                         np.ones(5, bool)))
-    node = run_node("sit2stand.nodes.human_com")
+    node = run_node("sit2stand.nodes.human_com", "--ros-args", "-p", "height_m:=1.75", "-p", "mass_kg:=75.0")
     assert node.wait_for_output("waiting for", 20)
     play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={tmp_path / 'few'}",
                     "-p", "wait_for_subscribers:=1")
@@ -66,3 +67,22 @@ def test_a_bad_calibration_file_stops_the_node_naming_it(tmp_path, run_node):
     node = run_node("sit2stand.nodes.human_com", "--ros-args", "-p", f"calibration_file:={tmp_path / 'cal.yaml'}")
     assert node.wait(30) != 0, node.output
     assert "calibration_file" in node.output and "cal.yaml" in node.output
+
+
+def test_the_node_on_opensims_gait2392_markers_with_the_subject_from_the_bag(tmp_path, run_node):
+    """subject01 (OpenSim's Gait2392 set, 41 markers at 60 Hz, no chair) imported with import-trc: the node takes the
+    marker set as a parameter and the subject from /human/subject (no height_m/mass_kg given)."""
+    bag = tmp_path / "walk"
+    trc, mot = real_file("subject01_walk1.trc"), real_file("subject01_walk1_grf.mot")
+    assert main(["import-trc", str(trc), "--grf", str(mot), "--mass", "72.6", "--height", "1.8", "--out", str(bag)]) \
+        == 0
+    node = run_node("sit2stand.nodes.human_com", "--ros-args", "-p", "marker_set:=gait2392", "-p", "rate_hz:=60.0",
+                    "-p", "calibration_frames:=20", "-p", "chair_on_plate:=false", "-p", "viz_rate_hz:=0.0")
+    assert node.wait_for_output("waiting for", 20)
+    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={bag}", "-p", "wait_for_subscribers:=1")
+    assert play.wait(60) == 0, play.output
+    assert node.stop() == 0, node.output         # after a signal it finishes the frames already received
+    out = node.output
+    assert "subject from /human/subject: 1.8 m, 72.6 kg" in out
+    assert "marker set gait2392: 41 of the stream's 41 markers" in out
+    assert "[human_com] 151 frames, 0 skipped" in out, out

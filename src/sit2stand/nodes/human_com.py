@@ -19,7 +19,10 @@ Subscribes ``/mocap/markers`` (sit2stand_msgs/MocapFrame) and every ``/force_pla
 Every name is relative (:func:`sit2stand.io.topics.ros_name`): ``__ns`` moves them all. Stamps are the marker
 frame's (bag time when replayed: run it with ``use_sim_time`` under the replayer's /clock).
 
-Parameters: ``height_m``, ``mass_kg``, ``sex`` (the subject), ``rate_hz`` (marker rate, 100), ``window`` (31
+Parameters: ``height_m``, ``mass_kg``, ``sex`` (the subject; with no stature or mass given, the subject comes from
+``/human/subject``, latched, as a bag carries it, and marker frames wait for it), ``marker_set`` (a packaged set's
+name or a YAML file, as ``sit2stand human-com --marker-set``; empty: the packaged set that covers most of the stream's
+marker names), ``rate_hz`` (marker rate, 100), ``window`` (31
 frames), ``calibration_frames`` (50: length and marker calibration from the first frames, a pause of ~1 s, several
 under load, that the stream then runs behind), ``calibration_file`` (a calibration made beforehand from a static
 trial, ``sit2stand human-calibrate``: no pause), ``rescale_every`` (100),
@@ -31,6 +34,7 @@ The per-frame cost is logged on exit (p50/p99) and on ``~/stats`` (diagnostic_ms
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -41,6 +45,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, InertialParameters, MocapFrame
+from sit2stand_msgs.msg import Subject as SubjectMsg
 from std_msgs.msg import Header, String
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
@@ -49,15 +54,18 @@ from ..human.calibration import StreamCalibration
 from ..human.description import SkeletonFrames, human_urdf
 from ..human.com_stream import StreamingComEstimator
 from ..human.marker_ik import MarkerUnitsError, TooFewMarkers
+from ..human.marker_sets import MarkerSetError, choose_marker_set
 from ..human.skeleton import Subject
 from ..io.messages import mocap_arrays, plate_sample_from_cdr, reorder_markers, stamp_ns
 from ..io.tf_message import TfEncoder
 from ..io.topics import (FORCE_PLATE_PREFIX, HUMAN_COM_TOPIC, HUMAN_DESCRIPTION_TOPIC, HUMAN_JOINTS_TOPIC,
                          HUMAN_MARKERS_TOPIC, HUMAN_MEASURED_COP_TOPIC, HUMAN_MODEL_COP_TOPIC, HUMAN_PELVIS_POSE_TOPIC,
-                         HUMAN_ROOT_FRAME, HUMAN_SCALING_TOPIC, LAB_FRAME, MARKERS_TOPIC, TF_TOPIC, bag_name, ros_name)
+                         HUMAN_ROOT_FRAME, HUMAN_SCALING_TOPIC, LAB_FRAME, MARKERS_TOPIC, SUBJECT_TOPIC, TF_TOPIC,
+                         bag_name, ros_name)
 from .markers import human_markers
 from .runtime import LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, IdleDrain, NodeError, declare, node_main, steady_timer
 
+SUBJECT_WAIT_FRAMES = 500        # marker frames held for /human/subject (5 s at 100 Hz; a bag latches it first)
 PENDING_PLATE_SAMPLES = 4000      # per plate, between two marker frames (4 s at 1 kHz; the estimator keeps ~2 s)
 
 
@@ -71,9 +79,15 @@ class HumanComNode(Node):
 
     def __init__(self) -> None:
         super().__init__("human_com")
-        self.subject = Subject(declare(self, "height_m", 1.75, "stature [m]"),
-                               declare(self, "mass_kg", 75.0, "body mass [kg]"),
-                               declare(self, "sex", "male", "male | female"))
+        height, mass = declare(self, "height_m", 0.0, "stature [m] (0: from /human/subject)"), \
+            declare(self, "mass_kg", 0.0, "body mass [kg] (0: from /human/subject)")
+        self.sex = declare(self, "sex", "male", "male | female")
+        self.marker_set = declare(self, "marker_set", "", "marker set: a packaged set's name or a YAML file (empty: "
+                                  "the packaged set that covers most of the stream's marker names)")
+        self.subject = Subject(height, mass, self.sex) if height > 0 and mass > 0 else None
+        self._held: list[MocapFrame] = []       # marker frames that came before the subject
+        if self.subject is None:
+            self.create_subscription(SubjectMsg, ros_name(SUBJECT_TOPIC), self._on_subject, LATCHED_QOS)
         self.rate_hz = declare(self, "rate_hz", 100.0, "marker rate [Hz]")
         self.window = declare(self, "window", 31, "Savitzky-Golay window [frames]")
         self.calibration_frames = declare(self, "calibration_frames", 50, "frames used to calibrate the model")
@@ -86,7 +100,8 @@ class HumanComNode(Node):
         if cal_file:
             try:
                 self.calibration = StreamCalibration.load(cal_file)
-                self.calibration.build(self.subject)      # the subject it was made for
+                if self.subject is not None:
+                    self.calibration.build(self.subject)      # the subject it was made for
             except ValueError as err:
                 raise NodeError(f"calibration_file: {err}") from None
         deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
@@ -117,8 +132,8 @@ class HumanComNode(Node):
         steady_timer(self, 0.5, self._discover_plates)
         steady_timer(self, 2.0, self._report)
         self._discover_plates()
-        self.get_logger().info(f"human COM estimator for a {self.subject.height_m:g} m, {self.subject.mass_kg:g} kg "
-                               f"{self.subject.sex}; waiting for {MARKERS_TOPIC}")
+        who = f"a {height:g} m, {mass:g} kg {self.sex}" if self.subject else f"the subject of {SUBJECT_TOPIC}"
+        self.get_logger().info(f"human COM estimator for {who}; waiting for {MARKERS_TOPIC}")
 
     def _setup_viz(self, rate_hz: float) -> None:
         """/tf and /viz/human every ``viz_every`` marker frames; the description when the skeleton is (re)built."""
@@ -155,22 +170,58 @@ class HumanComNode(Node):
                 self.estimator.add_plate_samples(name, a[:, 0], a[:, 1:4], a[:, 4:7])
                 rows.clear()
 
+    def _on_subject(self, msg: SubjectMsg) -> None:
+        if self.subject is not None:
+            return
+        try:
+            self.subject = Subject(msg.height_m, msg.mass_kg, msg.sex or self.sex)
+        except ValueError as err:
+            self._fail(f"{SUBJECT_TOPIC}: {err}")
+            return
+        self.get_logger().info(f"subject from {SUBJECT_TOPIC}: {msg.height_m:g} m, {msg.mass_kg:g} kg "
+                               f"{self.subject.sex}")
+        held, self._held = self._held, []
+        for frame in held:
+            self._on_markers(frame)
+
+    def _fail(self, text: str) -> None:
+        self.get_logger().error(text)
+        self.exit_code, self.finished = 2, True
+
+    def _start(self, names: list[str]) -> bool:
+        """The estimator for the stream's marker names and the subject (False: the node stops, saying why)."""
+        try:
+            markers = choose_marker_set(names, self.marker_set or None)
+            self.subject = dataclasses.replace(self.subject, marker_set=markers)
+            self.estimator = StreamingComEstimator(
+                self.subject, names, rate_hz=self.rate_hz, window=self.window,
+                calibration_frames=self.calibration_frames, rescale_every=self.rescale_every,
+                chair_on_plate=self.chair_on_plate, calibration=self.calibration, defer_rescale=True)
+        except (TooFewMarkers, MarkerSetError) as err:
+            self._fail(f"{MARKERS_TOPIC}: {err}")
+            return False
+        except ValueError as err:         # a calibration_file made for another subject
+            self._fail(f"calibration_file: {err}")
+            return False
+        for name in self.expected_plates:
+            self.estimator.expect_plate(name)
+        self.names = names
+        self.get_logger().info(f"marker set {markers.name}: {len(markers.covered(names))} of the stream's "
+                               f"{len(names)} markers")
+        return True
+
     def _on_markers(self, msg: MocapFrame) -> None:
+        if self.finished:
+            return
+        if self.subject is None:
+            self._held.append(msg)
+            if len(self._held) > SUBJECT_WAIT_FRAMES:
+                self._fail(f"no {SUBJECT_TOPIC} after {SUBJECT_WAIT_FRAMES} marker frames and no height_m/mass_kg "
+                           f"parameters: give them")
+            return
         t0 = time.perf_counter()
-        names = list(msg.marker_names)
-        if self.estimator is None:
-            try:
-                self.estimator = StreamingComEstimator(
-                    self.subject, names, rate_hz=self.rate_hz, window=self.window,
-                    calibration_frames=self.calibration_frames, rescale_every=self.rescale_every,
-                    chair_on_plate=self.chair_on_plate, calibration=self.calibration, defer_rescale=True)
-                for name in self.expected_plates:
-                    self.estimator.expect_plate(name)
-            except TooFewMarkers as err:
-                self.get_logger().error(f"{MARKERS_TOPIC}: {err}")
-                self.exit_code, self.finished = 2, True
-                return
-            self.names = names
+        if self.estimator is None and not self._start(list(msg.marker_names)):
+            return
         pos, valid = reorder_markers(*mocap_arrays(msg), self.names)
         t_s = stamp_ns(msg.header) * 1e-9
         self._flush_plates()
