@@ -209,6 +209,10 @@ class BagWriter:
     def has_topic(self, topic: str) -> bool:
         return topic in self._connections
 
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Set a ``custom_data`` entry of ``metadata.yaml`` (written at :meth:`close`)."""
+        self._writer.set_custom_data(key, str(value))
+
     def write(self, topic: str, timestamp_ns: int, msg: Any) -> None:
         """Serialize a rosbags message object and queue it (the topic must have been added)."""
         conn = self._connection(topic)

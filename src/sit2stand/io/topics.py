@@ -77,6 +77,34 @@ GROUND_TRUTH_PARAMETERS_TOPIC = "/ground_truth/inertial_parameters"
 GROUND_TRUTH_ROBOT_COM_TOPIC = "/ground_truth/robot_com"
 
 
+# --- every topic above with its type; the latched ones (transient local) --------------------------------------------
+# The recorder subscribes to these before their publishers exist, so that a topic appearing mid-run is recorded from
+# its first message (subscribing once a publisher is seen missed its first 0.14-0.38 s).
+_POINT = "geometry_msgs/msg/PointStamped"
+_POSE = "geometry_msgs/msg/PoseStamped"
+_JOINTS = "sensor_msgs/msg/JointState"
+_PARAMETERS = "sit2stand_msgs/msg/InertialParameters"
+_STRING = "std_msgs/msg/String"
+TOPIC_TYPES: dict[str, str] = {
+    MARKERS_TOPIC: MOCAP_TYPE, MODEL_POINTS_TOPIC: MOCAP_TYPE, REFERENCE_COM_TOPIC: COM_TYPE,
+    FORCE_PLATE_PREFIX + "chair": PLATE_TYPE, FORCE_PLATE_PREFIX + "feet": PLATE_TYPE,
+    HUMAN_COM_TOPIC: COM_TYPE, HUMAN_MODEL_COP_TOPIC: _POINT, HUMAN_MEASURED_COP_TOPIC: _POINT,
+    HUMAN_JOINTS_TOPIC: _JOINTS, HUMAN_PELVIS_POSE_TOPIC: _POSE, HUMAN_SCALING_TOPIC: _PARAMETERS,
+    HUMAN_DESCRIPTION_TOPIC: _STRING, HUMAN_MARKERS_TOPIC: MARKER_ARRAY_TYPE, SUBJECT_TOPIC: SUBJECT_TYPE,
+    ROBOT_JOINT_STATES_TOPIC: _JOINTS, ROBOT_BASE_POSE_TOPIC: _POSE, ROBOT_COP_TOPIC: _POINT,
+    ROBOT_FT_LEFT_TOPIC: "geometry_msgs/msg/WrenchStamped", ROBOT_FT_RIGHT_TOPIC: "geometry_msgs/msg/WrenchStamped",
+    ROBOT_STATUS_TOPIC: "diagnostic_msgs/msg/DiagnosticStatus",
+    ROBOT_JOINT_COMMAND_TOPIC: "trajectory_msgs/msg/JointTrajectory", ROBOT_JOINT_STATE_COMMAND_TOPIC: _JOINTS,
+    TF_TOPIC: TF_TYPE, TF_STATIC_TOPIC: TF_TYPE, ROBOT_DESCRIPTION_TOPIC: _STRING,
+    ROBOT_PLANNED_COM_TOPIC: COM_TYPE, ROBOT_PLANNED_ZMP_TOPIC: _POINT,
+    ROBOT_COM_FEEDBACK_TOPIC: "geometry_msgs/msg/Vector3Stamped", ROBOT_RETARGET_IK_TOPIC: _JOINTS,
+    VIZ_MARKERS_TOPIC: MARKER_ARRAY_TYPE, ROBOT_INERTIAL_PARAMETERS_TOPIC: _PARAMETERS,
+    GROUND_TRUTH_COM_TOPIC: COM_TYPE, GROUND_TRUTH_JOINTS_TOPIC: _JOINTS,
+    GROUND_TRUTH_PARAMETERS_TOPIC: _PARAMETERS, GROUND_TRUTH_ROBOT_COM_TOPIC: COM_TYPE,
+}
+LATCHED_TOPICS = frozenset({HUMAN_SCALING_TOPIC, HUMAN_DESCRIPTION_TOPIC, SUBJECT_TOPIC, TF_STATIC_TOPIC,
+                            ROBOT_DESCRIPTION_TOPIC, ROBOT_INERTIAL_PARAMETERS_TOPIC})
+
 def ros_name(topic: str) -> str:
     """The name a node uses for ``topic``: relative (no leading ``/``), so it resolves in the node's namespace."""
     return topic.lstrip("/")

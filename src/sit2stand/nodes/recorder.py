@@ -7,7 +7,8 @@ Parameters:
                                  with neither, every topic is recorded.
     exclude (str)                regex of topics never recorded; default ``^/rosout$|^/parameter_events$``.
     include_clock (bool, false)  also record /clock.
-    discovery_period_s (0.5)     how often to look for new topics.
+    discovery_period_s (0.5)     how often to look for new topics (those of :data:`~sit2stand.io.topics.TOPIC_TYPES`
+                                 are subscribed to from the start).
     flush_period_s (0.5)         how often the open chunk is written out: a recorder killed with SIGKILL loses at
                                  most this much (rebuild the bag with ``sit2stand bag recover DIR``).
     use_sim_time (bool)          standard: log messages at /clock time instead of the wall clock (one time base
@@ -18,24 +19,56 @@ Topics are those of the recorder's namespace, written with their names relative 
 is ``/mocap/markers`` in the bag of a recorder under ``__ns:=/robot2``; :func:`sit2stand.io.topics.bag_name`), so a
 bag replays into any namespace; ``topics``, ``regex`` and ``exclude`` match those bag names.
 
-Subscriptions take the QoS of the topic's publishers (reliable only if all are, as rosbag2 does), and that QoS is
-stored in the bag. SIGINT or SIGTERM closes the bag cleanly (summary and metadata.yaml written).
+Every wanted topic of :data:`~sit2stand.io.topics.TOPIC_TYPES` is subscribed to at start-up, reliable (and transient
+local for the latched ones), so a topic whose publisher appears mid-run is recorded from its first message; a
+publisher whose QoS that subscription cannot match (best effort, or volatile on a latched topic) makes the recorder
+subscribe anew. Other topics are found by polling the graph. Subscriptions take the QoS of the topic's publishers
+(reliable only if all are, as rosbag2 does), and that QoS is stored in the bag. SIGINT or SIGTERM closes the bag
+cleanly (summary and metadata.yaml written).
+
+Losses are counted, never silent: each subscription keeps up to 100,000 samples not yet taken (recorder_fastdds.xml),
+and a sample a publisher dropped from its queue before the recorder had it (the DDS message-lost event) is counted
+per topic, logged, stored in the bag's ``custom_data`` as ``lost_messages``, and makes the node exit 1.
 """
 
 from __future__ import annotations
 
+import os
 import re
 import time
 from pathlib import Path
 
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ..io.topics import CLOCK_TOPIC, bag_name
+from ..io.topics import CLOCK_TOPIC, LATCHED_TOPICS, TOPIC_TYPES, bag_name, ros_name
 from ..io.bag import BagError, BagWriter
 from .runtime import (IdleDrain, NodeError, declare, message_class, node_main, qos_matching_publishers, qos_to_bag,
                       steady_timer)
 
+# the deep reader queues (read when rclpy creates its DDS participant; a profile the user names wins)
+os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(Path(__file__).with_name("recorder_fastdds.xml")))
+
 DEFAULT_EXCLUDE = r"^/rosout$|^/parameter_events$"
+
+
+def known_topic_qos(latched: bool) -> QoSProfile:
+    """The subscription QoS of a topic of :data:`TOPIC_TYPES` before its publishers are seen: what every sit2stand
+    publisher offers (reliable; transient local when latched), keep-all as a recorder should."""
+    return QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+
+def matches_publishers(qos: QoSProfile, infos) -> bool:
+    """Whether a subscription of ``qos`` connects to every publisher in ``infos`` (DDS request/offer rules)."""
+    for info in infos:
+        if qos.reliability == ReliabilityPolicy.RELIABLE and info.qos_profile.reliability != ReliabilityPolicy.RELIABLE:
+            return False
+        if qos.durability == DurabilityPolicy.TRANSIENT_LOCAL and \
+                info.qos_profile.durability != DurabilityPolicy.TRANSIENT_LOCAL:
+            return False
+    return True
 
 
 class Recorder(Node):
@@ -70,6 +103,8 @@ class Recorder(Node):
         self.sim_time = bool(self.get_parameter("use_sim_time").value)
         self._early: list[tuple[str, bytes]] = []     # received before the first /clock (use_sim_time)
         self.subs = {}
+        self.unconfirmed: dict[str, tuple[str, QoSProfile]] = {}   # subscribed before a publisher was seen
+        self.lost: dict[str, int] = {}
         self.skipped: set[str] = set()
         self.finished = False
         self.exit_code = 0
@@ -82,6 +117,7 @@ class Recorder(Node):
         what = ["all topics"] if self.record_all else ([", ".join(sorted(self.topics))] if self.topics else []) + \
             ([f"topics matching /{regex}/"] if regex else [])
         self.get_logger().info(f"recording to {self.output} ({' and '.join(what)})")
+        self._subscribe_known()
         self._discover()
 
     def _wanted(self, topic: str) -> bool:
@@ -91,30 +127,74 @@ class Recorder(Node):
             return False
         return self.record_all or topic in self.topics or bool(self.regex and self.regex.search(topic))
 
+    def _subscribe_known(self) -> None:
+        """Subscribe now to every wanted topic whose type is known, before its publisher exists."""
+        for topic, msgtype in TOPIC_TYPES.items():
+            if self._wanted(topic):
+                qos = known_topic_qos(topic in LATCHED_TOPICS)
+                self._subscribe(topic, ros_name(topic), message_class(msgtype), qos)
+                self.unconfirmed[topic] = (msgtype, qos)
+
     def _discover(self) -> None:
         for resolved, types in self.get_topic_names_and_types():
             topic = bag_name(self.get_namespace(), resolved)       # None: another namespace's
-            if topic is None or topic in self.subs or topic in self.skipped or not self._wanted(topic):
+            if topic is None or topic in self.skipped or not self._wanted(topic):
                 continue
-            if not self.get_publishers_info_by_topic(resolved):
+            if topic in self.subs and topic not in self.unconfirmed:
+                continue
+            infos = self.get_publishers_info_by_topic(resolved)
+            if not infos:
                 continue  # only subscribers so far: wait for a publisher to learn its QoS
             msgtype = types[0]
             if len(types) > 1:
                 self.get_logger().warning(f"{topic} has several types {types}; recording {msgtype}")
-            try:
-                cls = message_class(msgtype)
-                qos = qos_matching_publishers(self, resolved)
-                self.writer.add_topic(topic, msgtype, [qos_to_bag(qos)])
-            except (NodeError, BagError) as err:
-                self.get_logger().warning(f"not recording {topic}: {err}")
-                self.skipped.add(topic)
+            if topic in self.unconfirmed and not self._resubscribe(topic, resolved, msgtype, infos):
                 continue
-            self.subs[topic] = self.create_subscription(
-                cls, resolved, lambda data, t=topic: self._on_message(t, data), qos, raw=True)
-            self.get_logger().info(f"subscribed to {topic} ({msgtype}, "
-                                   f"{'reliable' if qos.reliability == 1 else 'best effort'})")
+            self._record(topic, resolved, msgtype)
+
+    def _resubscribe(self, topic: str, resolved: str, msgtype: str, infos) -> bool:
+        """A subscription made before its publishers were seen: True when it cannot serve them (then dropped, to
+        subscribe anew), False when it does (the topic is then declared in the bag with the publishers' QoS)."""
+        known_type, qos = self.unconfirmed.pop(topic)
+        if known_type == msgtype and matches_publishers(qos, infos):
+            self._add_to_bag(topic, msgtype, qos_matching_publishers(self, resolved))
+            self.get_logger().info(f"subscribed to {topic} ({msgtype}, reliable; since start-up)")
+            return False
+        self.get_logger().info(f"subscribing to {topic} anew: its publishers offer {msgtype}, "
+                               f"{'best effort' if qos.reliability == 1 else 'reliable'} or volatile")
+        self.destroy_subscription(self.subs.pop(topic))
+        return True
+
+    def _record(self, topic: str, resolved: str, msgtype: str) -> None:
+        """Subscribe to a discovered topic with its publishers' QoS and declare it in the bag."""
+        try:
+            cls = message_class(msgtype)
+            qos = qos_matching_publishers(self, resolved)
+            self._add_to_bag(topic, msgtype, qos)
+        except (NodeError, BagError) as err:
+            self.get_logger().warning(f"not recording {topic}: {err}")
+            self.skipped.add(topic)
+            return
+        self._subscribe(topic, resolved, cls, qos)
+        self.get_logger().info(f"subscribed to {topic} ({msgtype}, "
+                               f"{'reliable' if qos.reliability == 1 else 'best effort'})")
+
+    def _subscribe(self, topic: str, name: str, cls, qos: QoSProfile) -> None:
+        events = SubscriptionEventCallbacks(message_lost=lambda info, t=topic: self._on_lost(t, info))
+        self.subs[topic] = self.create_subscription(
+            cls, name, lambda data, t=topic: self._on_message(t, data), qos, raw=True, event_callbacks=events)
+
+    def _add_to_bag(self, topic: str, msgtype: str, qos: QoSProfile) -> None:
+        self.writer.add_topic(topic, msgtype, [qos_to_bag(qos)])
+
+    def _on_lost(self, topic: str, info) -> None:
+        self.lost[topic] = self.lost.get(topic, 0) + info.total_count_change
+        self.exit_code = 1
 
     def _on_message(self, topic: str, data: bytes) -> None:
+        if not self.writer.has_topic(topic):      # a known topic's first message, before its publisher was polled
+            msgtype, qos = self.unconfirmed[topic]
+            self._add_to_bag(topic, msgtype, qos)
         now_ns = self.get_clock().now().nanoseconds
         if self.sim_time and now_ns == 0:        # no /clock yet: a log time of 0 would be no time of the bag's
             self._early.append((topic, data))
@@ -124,9 +204,14 @@ class Recorder(Node):
         self._early.clear()
         self.writer.write_raw(topic, now_ns, data)
 
+    def _lost_text(self) -> str:
+        return ", ".join(f"{t}: {n}" for t, n in sorted(self.lost.items()))
+
     def _log_counts(self) -> None:
         counts = ", ".join(f"{t}: {n}" for t, n in sorted(self.writer.counts.items()))
         self.get_logger().info(f"recorded {sum(self.writer.counts.values())} messages ({counts})")
+        if self.lost:
+            self.get_logger().error(f"lost {sum(self.lost.values())} messages so far ({self._lost_text()})")
 
     def close(self) -> None:
         if self._closed:
@@ -138,9 +223,15 @@ class Recorder(Node):
             print(f"[recorder] no /clock came: {len(self._early)} messages logged at time 0", flush=True)
             for topic, data in self._early:
                 self.writer.write_raw(topic, 0, data)
+        if self.lost:
+            self.writer.set_custom_data("lost_messages", self._lost_text())
         self.writer.close()
         total = sum(self.writer.counts.values())
         print(f"[recorder] closed {self.output}: {total} messages on {len(self.writer.counts)} topics", flush=True)
+        if self.lost:
+            print(f"[recorder] error: lost {sum(self.lost.values())} messages ({self._lost_text()}): their publishers "
+                  f"dropped them before the recorder took them (it fell behind by more than their queue depth)",
+                  flush=True)
 
 
 main = node_main(Recorder)

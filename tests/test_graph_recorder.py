@@ -1,0 +1,99 @@
+"""Graph tests of the recorder node against real publisher processes: a topic that appears mid-run is recorded from
+its first message, and messages the recorder could not take in time are counted and reported, never lost silently.
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+
+from sit2stand.io.bag import BagReader
+
+pytestmark = pytest.mark.graph
+
+# A driver-like node that starts late and publishes once set up: /robot/cop at 1 kHz, x = the message's index.
+PUBLISHER = textwrap.dedent("""\
+    import sys, time
+    import rclpy
+    from geometry_msgs.msg import PointStamped
+    count, depth = int(sys.argv[1]), int(sys.argv[2])
+    rclpy.init()
+    node = rclpy.create_node("late_publisher")
+    pub = node.create_publisher(PointStamped, "robot/cop", depth)
+    # a real node loads its model before it publishes, by when the two processes have found each other (DDS
+    # discovery of a new process was seen to take 0.005-2.5 s)
+    deadline = time.monotonic() + 10
+    while "recorder" not in node.get_node_names() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    time.sleep(0.1)
+    print("publishing", flush=True)
+    for i in range(count):
+        msg = PointStamped()
+        msg.point.x = float(i)
+        pub.publish(msg)
+        time.sleep(0.001)
+    time.sleep(1.0)
+    print("done", flush=True)
+    """)
+
+
+@pytest.fixture
+def run_publisher(tmp_path, ros_env):
+    """Start the late publisher (count, depth) in its own process; killed at the end of the test."""
+    script = tmp_path / "late_publisher.py"
+    script.write_text(PUBLISHER)
+    procs = []
+
+    def start(count: int, depth: int = 1000) -> subprocess.Popen:
+        procs.append(subprocess.Popen([sys.executable, str(script), str(count), str(depth)],
+                                      env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True))
+        return procs[-1]
+
+    yield start
+    for proc in procs:
+        proc.kill()
+        proc.wait(10)
+
+
+def start_recorder(run_node, out):
+    rec = run_node("sit2stand.nodes.recorder", "--ros-args", "-p", f"output:={out}", "-p", "regex:=^/robot/")
+    assert rec.wait_for_output("recording to", 20), rec.output
+    return rec
+
+
+def recorded_x(out) -> list[float]:
+    with BagReader(out) as bag:
+        return [msg.point.x for _, msg in bag.read("/robot/cop")]
+
+
+def test_a_topic_that_appears_mid_run_is_recorded_from_its_first_message(run_node, run_publisher, tmp_path):
+    out = tmp_path / "rec"
+    rec = start_recorder(run_node, out)
+    time.sleep(0.5)         # the recorder runs before the publisher exists, as in a graph whose driver starts late
+    pub = run_publisher(300)
+    assert pub.wait(30) == 0, pub.stdout.read()
+    assert rec.stop() == 0, rec.output
+    assert recorded_x(out) == [float(i) for i in range(300)], rec.output
+
+
+def test_messages_the_recorder_missed_are_counted_and_fail_it(run_node, run_publisher, tmp_path):
+    out = tmp_path / "rec"
+    rec = start_recorder(run_node, out)
+    pub = run_publisher(2000, depth=50)
+    assert pub.stdout.readline().strip() == "publishing"
+    # a recorder starved of CPU for 1.5 s: more than the publisher's queue (50) and the shared-memory port (512)
+    rec.proc.send_signal(signal.SIGSTOP)
+    time.sleep(1.5)
+    rec.proc.send_signal(signal.SIGCONT)
+    assert pub.wait(30) == 0
+    assert rec.stop() == 1, rec.output
+    kept = len(recorded_x(out))
+    assert kept < 2000
+    assert f"lost {2000 - kept} messages (/robot/cop: {2000 - kept})" in rec.output
+    with BagReader(out) as bag:
+        assert bag.custom_data["lost_messages"] == f"/robot/cop: {2000 - kept}"
