@@ -22,6 +22,7 @@ CHILD = textwrap.dedent("""\
     open(os.path.join({tmp!r}, name + ".pid"), "w").write(str(os.getpid()))
     def on_int(*_):
         print(name, "got SIGINT", flush=True)
+        time.sleep(float(os.environ.get("STOP_S", "0")))     # a node that takes this long to close
         sys.exit(0)
     signal.signal(signal.SIGINT, on_int)
     if {ignore_int!r}:
@@ -76,7 +77,8 @@ def test_substitutions_and_parameters(tmp_path):
     ([{"name": "a", "executable": "recorder"}, {"name": "a", "executable": "replayer"}], {}, "duplicate node name"),
     ([{"name": "a", "executable": "recorder", "parameters": ["nope.yaml"]}], {}, "does not exist"),
     ([{"name": "a", "executable": "recorder"}], {"typo": "1"}, "unknown argument"),
-    ([{"name": "a", "executable": "recorder", "on_exit": "explode"}], {}, "on_exit"),
+    ([{"name": "a", "executable": "recorder", "on_exit": "explode"}], {}, "on_exit must be one of ignore, shutdown"),
+    ([{"name": "a", "executable": "recorder", "grace_s": "long"}], {}, "grace_s must be a positive number"),
     ([{"name": "a", "executable": "recorder", "scheduling": {"policy": "turbo"}}], {}, "scheduling.policy"),
     ([{"name": "a", "executable": "recorder", "scheduling": {"policy": "fifo"}}], {}, "scheduling.priority"),
     ([{"name": "a", "executable": "recorder", "scheduling": {"nice": 40}}], {}, "scheduling.nice"),
@@ -145,6 +147,35 @@ def test_shutdown_node_ends_the_graph(tmp_path):
     out, _ = proc.communicate(timeout=30)
     assert proc.returncode == 0, out
     assert "stopping the graph (short ended)" in out and "[long ] long got SIGINT" in out
+
+
+def test_a_crashed_recorder_fails_the_job_but_does_not_stop_the_graph(tmp_path):
+    script = child_script(tmp_path)
+    nodes = [{"name": "rec", "executable": str(script), "arguments": ["rec"], "on_exit": "continue"},
+             {"name": "robot", "executable": str(script), "arguments": ["robot"], "env": {"LIFETIME": "2"},
+              "on_exit": "shutdown"}]
+    proc = run_launch(tmp_path, nodes)
+    rec_pid, _ = wait_for_pids(tmp_path, ["rec", "robot"])
+    os.kill(rec_pid, signal.SIGKILL)
+    out, _ = proc.communicate(timeout=30)
+    assert "[robot] robot done" in out, "the robot must run on without its recorder"
+    assert "the graph goes on without rec (on_exit: continue)" in out
+    assert proc.returncode == 1 and "the job failed: rec exited with code -9" in out
+
+
+def test_recorders_stop_last_and_have_their_own_grace(tmp_path):
+    script = child_script(tmp_path)
+    nodes = [{"name": "rec", "executable": str(script), "arguments": ["rec"], "on_exit": "continue",
+              "env": {"STOP_S": "1.5"}, "grace_s": 5},
+             {"name": "robot", "executable": str(script), "arguments": ["robot"], "env": {"STOP_S": "0.5"}}]
+    proc = run_launch(tmp_path, nodes, "--grace", "1")
+    wait_for_pids(tmp_path, ["rec", "robot"])
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=30)
+    assert proc.returncode == 0, out
+    assert out.index("robot exited with code 0") < out.index("[rec  ] rec got SIGINT")
+    assert "SIGTERM" not in out
 
 
 def test_no_orphans_when_the_launcher_is_killed(tmp_path):

@@ -18,7 +18,11 @@ A graph file::
         scheduling: {policy: fifo, priority: 50}   # or {nice: 10}; default: the launcher's own (see below)
         delay_s: 0.0                 # start this long after the graph
         host: robot                  # a label: `sit2stand launch GRAPH --host robot` starts only these nodes
-        on_exit: ignore              # or "shutdown": when this node ends, stop the whole graph
+        on_exit: ignore              # "ignore": a clean exit leaves the graph running, a failure stops it;
+                                     # "shutdown": when this node ends, stop the whole graph; "continue": the graph
+                                     # runs on whatever its exit (the recorder's default: its crash must not stop
+                                     # the robot), a failure still fails the job
+        grace_s: 10.0                # SIGINT to SIGTERM at shutdown; default the launcher's --grace (recorder: 60)
       - name: replayer
         executable: replayer
         parameters: [{bag: $(var bag), wait_for_subscribers: 1}]
@@ -40,8 +44,14 @@ The graph itself is a file or a packaged graph's name (``standup``: ``sit2stand/
 Where that is not permitted the node still starts, under the default scheduler, and the launcher says so.
 
 Each node's output is printed line by line with a ``[name]`` prefix. SIGINT/SIGTERM to the launcher are forwarded
-as SIGINT to every node; nodes still alive after ``grace_s`` get SIGTERM, then SIGKILL. Every child gets
-PR_SET_PDEATHSIG, so even a launcher killed with SIGKILL leaves no orphan process.
+as SIGINT to every node; nodes still alive after their ``grace_s`` get SIGTERM, then SIGKILL. Recorders (``on_exit:
+continue``) are stopped last, once every other node has ended, so that they take all that was published and their
+shutdown is only their own drain and close. Every child gets PR_SET_PDEATHSIG, so even a launcher killed with SIGKILL
+leaves no orphan process.
+
+The launcher exits 0 only when the job succeeded: every node exited 0 (or on the SIGINT it was sent). A node that
+failed (a robot that fell: the driver exits 3; a recorder killed, or one that lost messages: exit 1) makes it exit 1,
+naming the nodes.
 """
 
 from __future__ import annotations
@@ -67,6 +77,10 @@ from .errors import Sit2StandError
 
 OUR_NODES = {"replayer", "recorder", "human_com", "driver", "identification", "retargeter", "mocap_bridge",
              "foxglove"}
+ON_EXIT = ("ignore", "shutdown", "continue")
+# The recorder's shutdown: its drain (up to 30 s while a backlog keeps arriving) and its close (the last chunk and the
+# bag's summary); an 11-minute recording took longer than 10 s and was sent SIGTERM
+RECORDER_GRACE_S = 60.0
 SUBST = re.compile(r"\$\((var|env|dirname)(?:\s+([^)\s]+))?(?:\s+([^)]*))?\)")
 
 
@@ -144,6 +158,8 @@ class NodeSpec:
     shutdown_on_exit: bool = False
     scheduling: Scheduling | None = None
     host: str = ""
+    continue_on_failure: bool = False   # on_exit: continue
+    grace_s: float | None = None        # None: the launcher's
 
 
 @dataclass
@@ -285,12 +301,17 @@ def _node_spec(spec: dict, name: str, where: str, graph_dir: Path, tmpdir: Path,
             raise LaunchError(f"{where} ({name}): parameters[{j}] must be a file name or a map")
     for src, dst in (spec.get("remappings") or {}).items():
         command += ["-r", f"{src}:={dst}"]
-    on_exit = spec.get("on_exit", "ignore")
-    if on_exit not in ("ignore", "shutdown"):
-        raise LaunchError(f"{where} ({name}): on_exit must be 'ignore' or 'shutdown', not {on_exit!r}")
+    recorder = exe == "recorder"
+    on_exit = spec.get("on_exit", "continue" if recorder else "ignore")
+    if on_exit not in ON_EXIT:
+        raise LaunchError(f"{where} ({name}): on_exit must be one of {', '.join(ON_EXIT)}, not {on_exit!r}")
+    grace = spec.get("grace_s", RECORDER_GRACE_S if recorder else None)
+    if grace is not None and (isinstance(grace, bool) or not isinstance(grace, (int, float)) or grace <= 0):
+        raise LaunchError(f"{where} ({name}): grace_s must be a positive number of seconds, not {grace!r}")
     env = {str(k): str(v) for k, v in (spec.get("env") or {}).items()}
     return NodeSpec(name, command, env, float(spec.get("delay_s", 0.0)), on_exit == "shutdown",
-                    parse_scheduling(spec.get("scheduling"), f"{where} ({name})"), str(spec.get("host", "")))
+                    parse_scheduling(spec.get("scheduling"), f"{where} ({name})"), str(spec.get("host", "")),
+                    on_exit == "continue", None if grace is None else float(grace))
 
 
 def _set_parent_death_signal() -> None:
@@ -365,7 +386,7 @@ class Launcher:
         self._stop.set()
 
     def run(self, timeout_s: float | None = None) -> int:
-        """Start the graph and supervise it; returns 0 when every node ended cleanly, else 1."""
+        """Start the graph and supervise it; returns 0 when the job succeeded (every node ended cleanly), else 1."""
         old = {s: signal.signal(s, self.request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
         t0 = time.monotonic()
         pending = sorted(self.graph.nodes, key=lambda n: n.delay_s)
@@ -375,16 +396,7 @@ class Launcher:
                 now = time.monotonic() - t0
                 while pending and pending[0].delay_s <= now:
                     self._start(pending.pop(0))
-                for spec in self.graph.nodes:
-                    proc = self.procs.get(spec.name)
-                    if proc is None or proc.returncode is not None or proc.poll() is None:
-                        continue
-                    self._emit("launch", f"{spec.name} exited with code {proc.returncode}")
-                    if proc.returncode != 0:
-                        failed.append(spec.name)
-                    if spec.shutdown_on_exit or proc.returncode != 0:
-                        self._emit("launch", f"stopping the graph ({spec.name} ended)")
-                        self._stop.set()
+                failed += self._check_exits()
                 if not pending and all(p.poll() is not None for p in self.procs.values()):
                     break
                 if timeout_s is not None and now > timeout_s:
@@ -399,32 +411,66 @@ class Launcher:
                 reader.join(timeout=2.0)
             if self.graph.tmpdir is not None:
                 shutil.rmtree(self.graph.tmpdir, ignore_errors=True)
+        if failed:
+            self._emit("launch", "the job failed: " + ", ".join(
+                f"{n} exited with code {self.procs[n].returncode}" for n in dict.fromkeys(failed)))
         return 1 if failed else 0
 
+    def _check_exits(self) -> list[str]:
+        """Report the nodes that ended since the last look, stop the graph where their ``on_exit`` says so; returns
+        the names of those that failed."""
+        failed = []
+        for spec in self.graph.nodes:
+            proc = self.procs.get(spec.name)
+            if proc is None or proc.returncode is not None or proc.poll() is None:
+                continue
+            self._emit("launch", f"{spec.name} exited with code {proc.returncode}")
+            if proc.returncode != 0:
+                failed.append(spec.name)
+            if spec.shutdown_on_exit or (proc.returncode != 0 and not spec.continue_on_failure):
+                self._emit("launch", f"stopping the graph ({spec.name} ended)")
+                self._stop.set()
+            elif proc.returncode != 0:
+                self._emit("launch", f"the graph goes on without {spec.name} (on_exit: continue); the job has failed")
+        return failed
+
     def _shutdown(self) -> list[str]:
-        """SIGINT everything alive, then SIGTERM, then SIGKILL; returns the names of nodes that exited badly."""
-        alive = {n: p for n, p in self.procs.items() if p.poll() is None}
+        """Stop every node still alive, recorders (``on_exit: continue``) once the others have ended; returns the
+        names of the nodes that failed."""
+        last = {s.name for s in self.graph.nodes if s.continue_on_failure}
+        bad = self._stop_nodes([n for n in self.procs if n not in last])
+        return bad + self._stop_nodes([n for n in self.procs if n in last])
+
+    def _stop_nodes(self, names: list[str]) -> list[str]:
+        """SIGINT these nodes, SIGTERM each one alive after its grace, SIGKILL 5 s later; returns the names of those
+        that failed (an exit code other than 0, or death by a signal other than the SIGINT they were sent)."""
+        t0 = time.monotonic()
+        alive = {n: self.procs[n] for n in names if self.procs[n].poll() is None}
+        grace = {s.name: self.grace_s if s.grace_s is None else s.grace_s for s in self.graph.nodes}
+        escalation = {n: [(grace[n], signal.SIGTERM), (grace[n] + 5.0, signal.SIGKILL)] for n in alive}
+        for proc in alive.values():
+            _send(proc, signal.SIGINT)
         bad = []
-        for sig, wait in ((signal.SIGINT, self.grace_s), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
-            if not alive:
-                break
-            for name, proc in alive.items():
-                if sig != signal.SIGINT:
-                    self._emit("launch", f"sending {signal.Signals(sig).name} to {name}")
-                try:
-                    proc.send_signal(sig)
-                except ProcessLookupError:
-                    pass
-            deadline = time.monotonic() + wait
-            while time.monotonic() < deadline and any(p.poll() is None for p in alive.values()):
-                time.sleep(0.05)
+        while alive:
             for name, proc in list(alive.items()):
                 if proc.poll() is not None:
                     self._emit("launch", f"{name} exited with code {proc.returncode}")
-                    if proc.returncode not in (0, -signal.SIGINT) or sig != signal.SIGINT:
+                    if proc.returncode not in (0, -signal.SIGINT):
                         bad.append(name)
                     del alive[name]
+                elif escalation[name] and time.monotonic() - t0 > escalation[name][0][0]:
+                    sig = escalation[name].pop(0)[1]
+                    self._emit("launch", f"sending {sig.name} to {name}")
+                    _send(proc, sig)
+            time.sleep(0.05)
         return bad
+
+
+def _send(proc: subprocess.Popen, sig: int) -> None:
+    try:
+        proc.send_signal(sig)
+    except ProcessLookupError:
+        pass
 
 
 def parse_overrides(items: list[str]) -> dict[str, str]:
