@@ -2,9 +2,13 @@
 
 import numpy as np
 import pytest
+import yaml
 
+from sit2stand.human.marker_sets import load_marker_set
 from sit2stand.human.offline import read_trial
-from sit2stand.retarget.calibration import MarkerMap, calibrate_markers, map_com
+from sit2stand.retarget.calibration import (MarkerMap, calibrate_markers, map_com, map_frame, marker_group,
+                                            marker_roles)
+from sit2stand.retarget.stream import RetargetConfig, Retargeter, robot_setup
 from sit2stand.robot.model import PlantConfig
 from sit2stand.robot.plant import Plant
 
@@ -61,3 +65,51 @@ def test_calibration_needs_the_pelvis():
     with pytest.raises(ValueError, match="need 3"):
         calibrate_markers(plant.ctrl, plant.pin_configuration(plant.q_seated), ["LASI", "C7"],
                           np.zeros((2, 3)), np.array([True, True]), 0.42, 0.38)
+
+
+def test_marker_roles_come_from_the_set_plug_in_gaits_as_its_names_said():
+    pig = marker_roles("plug_in_gait")
+    assert all(pig.group(n) == marker_group(n) for n in pig.groups)      # the name rules, now read off the set
+    assert (pig.pelvis, pig.knee, pig.ankle, pig.heel) == (("LASI", "RASI", "LPSI", "RPSI"), ("LKNE",), ("LANK",),
+                                                           ("LHEE",))
+    g = marker_roles("gait2392")
+    assert (g.pelvis, g.knee, g.ankle, g.heel) == (("R.ASIS", "L.ASIS", "V.Sacral"), ("L.Knee.Lat", "L.Knee.Med"),
+                                                   ("L.Ankle.Lat", "L.Ankle.Med"), ("L.Heel",))
+    assert (g.group("L.Acromium"), g.sides["L.Acromium"], g.group("Sternum"), g.sides["Sternum"]) == \
+        ("arm", "left", "trunk", None)
+
+
+def test_a_renamed_marker_set_retargets_as_plug_in_gait(tmp_path):
+    """Plug-in-Gait's markers renamed in a user's YAML: the same marker map, the same COM map knots."""
+    trial = read_trial("bags/natural")
+    pig = load_marker_set("plug_in_gait")
+    doc = yaml.safe_load(open(pig.source))
+    rename = {n: f"m_{n.lower()}" for n in pig.names}
+    doc["pelvis"] = {k: [rename[n] for n in v] for k, v in doc["pelvis"].items()}
+    doc["markers"] = {rename[n]: v for n, v in doc["markers"].items()}
+    (tmp_path / "renamed.yaml").write_text(yaml.safe_dump(doc))
+    robot = robot_setup()
+    k, com = 10, np.array([-0.25, 0.0, 0.75])
+    maps, knots = [], []
+    renamed = RetargetConfig(marker_set=str(tmp_path / "renamed.yaml"))
+    for names, cfg in ((trial.marker_names, RetargetConfig()), ([rename[n] for n in trial.marker_names], renamed)):
+        rt = Retargeter(robot, cfg)
+        maps.append(rt.calibrate(names, trial.positions[k], trial.valid[k], com))
+        knots.append((rt.knots_h, rt.scale))
+    assert {rename[m]: link for m, link in maps[0].links.items()} == maps[1].links
+    np.testing.assert_allclose(knots[0][0], knots[1][0])
+    with pytest.raises(ValueError, match=r"marker\(s\) m_lhee missing"):
+        valid = trial.valid[k] & (np.array(trial.marker_names) != "LHEE")
+        Retargeter(robot, renamed).calibrate([rename[n] for n in trial.marker_names], trial.positions[k], valid, com)
+
+
+def test_the_marker_map_frame_is_a_seated_one():
+    trial = read_trial("bags/natural")
+    t, pos, valid = trial.marker_t_s, trial.positions, trial.valid
+    auto = map_frame(t, pos, valid, seated_frames=60)
+    assert auto.first < 60 and "seated" in auto.reason
+    assert map_frame(t, pos, valid, seated_frames=0).first == 0            # starts mid-rise: the nearest to seated
+    assert map_frame(t, pos, valid, 60, given=12).first == 12
+    with pytest.raises(ValueError, match=r"--calibration-frame 200: the human is no longer seated there \(the rise "
+                                         r"starts at frame 60\)"):
+        map_frame(t, pos, valid, 60, given=200)

@@ -15,8 +15,11 @@ from .graph import ros_params
 
 def _retarget(args: argparse.Namespace) -> int:
     from ..retarget.offline import run
+    from ..retarget.stream import RetargetConfig
 
     summary = run(Path(args.bag), Path(args.out), params=args.params, plant=args.plant,
+                  config=RetargetConfig(marker_set=args.marker_set), calibration_frame=args.calibration_frame,
+                  static=args.static,
                   human_com_bag=args.human_com, margin_m=args.margin, time_scale=args.time_scale,
                   **({"max_time_scale": args.max_time_scale} if args.max_time_scale else {}),
                   simulate=args.simulate, com_feedback=not args.no_com_feedback, whole=args.whole,
@@ -127,6 +130,12 @@ def add_retarget(sub) -> None:
                         "experimental whole-body torque control (QP at 500 Hz)")
     p.add_argument("--seat-off-dwell", type=float, default=None,
                    help="the player's wait at the robot's seat-off [s] (default 1)")
+    p.add_argument("--marker-set", help="marker set: plug_in_gait, plug_in_gait_lower, gait2392 or a YAML file "
+                   "(default: the packaged set that covers most of the bag's marker names)")
+    p.add_argument("--calibration-frame", type=int, metavar="N", help="the seated frame the robot's marker map is "
+                   "made on (default: the one that sees the most markers in the quietest seated stretch)")
+    p.add_argument("--static", type=Path, metavar="FILE", help="calibrate the human skeleton on a static trial "
+                   "(bag, .c3d or .trc) when the human COM is estimated here")
     p.set_defaults(func=_retarget)
 
 

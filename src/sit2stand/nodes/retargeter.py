@@ -21,7 +21,8 @@ Parameters: ``plant``, ``controller_params`` (identified YAML; empty: CAD), ``ma
 one's cap), ``rate_hz``, ``com_wait_s``, ``wait_for_robot``, ``marker_map`` (YAML to write the calibration to),
 ``hold_s`` (exit this long after the plan ends; 0: never), ``input_timeout_s`` (marker frames waiting this long for
 a human COM end the node with an error), ``com_feedback`` and its gains ``com_feedback_kp``, ``_ki``, ``_kd``,
-``markers_every`` (5; 0: no markers).
+``markers_every`` (5; 0: no markers), ``marker_set`` (as the human_com node's: which markers are the pelvis, the
+left knee, ankle and heel, and each marker's body part; :func:`sit2stand.retarget.calibration.marker_roles`).
 """
 
 from __future__ import annotations
@@ -72,6 +73,8 @@ def _live_config(node: Node) -> LiveConfig:
         max_time_scale=declare(node, "max_time_scale", DEFAULT_MAX_TIME_SCALE, "cap of the adaptive time scale"),
         com_wait_s=declare(node, "com_wait_s", 0.03, "use the latest human COM if at most this old [s]"),
         com_feedback=declare(node, "com_feedback", True, "correct the commands for the measured robot COM"),
+        marker_set=declare(node, "marker_set", "", "marker set: a packaged set's name or a YAML file (empty: the "
+                           "packaged set that covers most of the stream's marker names)"),
         stabiliser=StabiliserConfig(
             kp=declare(node, "com_feedback_kp", gains.kp, "COM feedback: proportional gain [m/m]"),
             ki=declare(node, "com_feedback_ki", gains.ki, "COM feedback: integral gain [1/s]"),

@@ -3,6 +3,9 @@
 * :func:`calibrate_markers`: overlay one seated human frame onto the robot's seated posture (pelvis on pelvis,
   scaled by the ratio of thigh lengths) and fix each marker to the nearest robot link "bone" (the segment from a link's
   joint to its child's joint), keeping its offset in that link's frame. Saved to / loaded from YAML.
+* :func:`marker_roles`: what the calibration and the IK need of a marker set (:mod:`sit2stand.human.marker_sets`):
+  each marker's body part and side, the pelvis markers, the left knee, ankle and heel markers; from the set's data,
+  so that any set (Plug-in-Gait, Gait2392, a user's YAML) is retargeted alike.
 * :func:`map_com`: a human COM (lab frame) expressed relative to the human's left foot, scaled by the two bodies'
   leg lengths, placed relative to the robot's left sole: the robot's COM target.
 
@@ -17,9 +20,80 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import yaml
+
 from ..errors import InputError
+from ..human.calibration_frames import FrameChoice, quiet_frames, seen
+from ..human.marker_sets import MarkerSet, MarkerSpec, load_marker_set
 
 PELVIS_MARKERS = ("LASI", "RASI", "LPSI", "RPSI")
+SEGMENT_GROUPS = {"pelvis": "pelvis", "torso": "trunk", "head": "head", "upper_arm": "arm", "forearm": "arm",
+                  "hand": "arm", "thigh": "thigh", "shank": "shank", "foot": "foot", "toes": "foot"}
+"""The retargeter's body part of each skeleton segment (its marker weights and the robot links a marker may go to)."""
+SHOULDER_Y_MM = 120.0
+"""A torso marker this far [mm, at 1.75 m] to the side is on the shoulder: an arm marker for the robot, whose
+shoulder is a link of the arm (Plug-in-Gait's LSHO at 175 mm, Gait2392's acromia at 166; RBAK at 80 stays trunk)."""
+MAP_WINDOW = 10
+"""Seated frames [frames] over which the marker map's frame must be quiet."""
+SIDE_Y_MM = 20.0
+"""A marker of a segment without a side (pelvis, torso, head) this far [mm] to one side is on that side."""
+
+
+@dataclass(frozen=True)
+class MarkerRoles:
+    """What the retargeter needs of a marker set: per marker, its body part (head, trunk, pelvis, thigh, shank,
+    foot, arm) and side (left, right or None); the pelvis markers; the left knee, ankle and heel markers (their
+    mean where several are seen)."""
+
+    groups: dict[str, str]
+    sides: dict[str, str | None]
+    pelvis: tuple[str, ...]
+    knee: tuple[str, ...]
+    ankle: tuple[str, ...]
+    heel: tuple[str, ...]
+    name: str = ""
+
+    def group(self, marker: str) -> str:
+        """The marker's body part ("" for a marker the set lacks: it gets no weight)."""
+        return self.groups.get(marker, "")
+
+
+def _role(spec: MarkerSpec) -> tuple[str, str | None]:
+    base, _, suffix = spec.segment.rpartition("_") if spec.segment.endswith(("_l", "_r")) else (spec.segment, "", "")
+    group = SEGMENT_GROUPS[base]
+    y = spec.mm[1]
+    if group == "trunk" and abs(y) >= SHOULDER_Y_MM:
+        group = "arm"
+    side = {"l": "left", "r": "right"}.get(suffix) or (("left" if y > 0 else "right") if abs(y) >= SIDE_Y_MM else None)
+    return group, side
+
+
+def marker_roles(marker_set: MarkerSet | str | None = None) -> MarkerRoles:
+    """The roles of a marker set's markers (see :class:`MarkerRoles`). The knee and ankle markers are the left thigh's
+    and shank's at the segment's end (``of_length`` z = -1), the heel the left foot's rearmost; from the set's data,
+    so that the Plug-in-Gait rules (LKNE, LANK, LHEE) follow for any set."""
+    ms = load_marker_set(marker_set)
+    roles = {m.name: _role(m) for m in ms.markers}
+
+    def at_end(segment: str) -> tuple[str, ...]:
+        return tuple(m.name for m in ms.markers if m.segment == segment and m.of_length[2] == -1)
+
+    feet = [m for m in ms.markers if m.segment == "foot_l"]
+    heel = (min(feet, key=lambda m: (m.of_length[0], m.mm[0])).name,) if feet else ()
+    return MarkerRoles({n: g for n, (g, _) in roles.items()}, {n: s for n, (_, s) in roles.items()},
+                       ms.pelvis.markers, at_end("thigh_l"), at_end("shank_l"), heel, ms.name)
+
+
+def pelvis_centre(roles: MarkerRoles, names: list[str], positions_m: np.ndarray, valid: np.ndarray,
+                  rule: MarkerSet | None = None) -> tuple[np.ndarray, list[int]]:
+    """The mean of the pelvis markers seen in a frame, and their indices; InputError when they do not define the
+    pelvis (3 of them, or as the set's pelvis rule says)."""
+    pel = [i for i, n in enumerate(names) if n in roles.pelvis and valid[i] and np.all(np.isfinite(positions_m[i]))]
+    seen = [names[i] for i in pel]
+    ok = rule.pelvis.defined_by(seen) if rule is not None else len(pel) >= 3
+    if not ok:
+        raise InputError(f"calibration frame: {len(pel)} of {', '.join(roles.pelvis)} valid; need 3"
+                         + (f" ({rule.pelvis.describe()})" if rule is not None else ""))
+    return positions_m[pel].mean(axis=0), pel
 
 
 @dataclass
@@ -77,6 +151,52 @@ def _depth(model: pin.Model, j: int) -> int:
     return d
 
 
+def left_leg_points(roles: MarkerRoles, names: list[str], positions_m: np.ndarray, valid: np.ndarray,
+                    rule: MarkerSet | None = None) -> tuple[np.ndarray, list[int], np.ndarray, np.ndarray, np.ndarray]:
+    """The pelvis centre and its markers' indices, and the left knee, ankle and heel [m] of one frame (each the mean
+    of its markers seen); InputError naming what is missing."""
+    seen = {n: i for i, n in enumerate(names) if valid[i] and np.all(np.isfinite(positions_m[i]))}
+    points, missing = [], []
+    for markers in (roles.knee, roles.ankle, roles.heel):
+        here = [seen[m] for m in markers if m in seen]
+        if here:
+            points.append(positions_m[here].mean(axis=0))
+        else:
+            missing.append(" or ".join(markers) or f"(marker set {roles.name} has none)")
+    if missing:
+        raise InputError(f"calibration frame: marker(s) {', '.join(missing)} missing")
+    pelvis, pel = pelvis_centre(roles, names, positions_m, valid, rule)
+    return pelvis, pel, *points
+
+
+def map_frame(t_s: np.ndarray, positions_m: np.ndarray, valid: np.ndarray, seated_frames: int,
+              given: int | None = None, n: int = MAP_WINDOW) -> FrameChoice:
+    """The frame the marker map is made on: it overlays the human on the robot's seated posture, so a seated one.
+
+    ``seated_frames``: how many frames the trial starts seated (0: it starts after the rise began; frame 0, the
+    nearest to seated, then, and a lead-in joins the robot's seat to it). Automatically, the frame that sees the
+    most markers in the quietest stretch of ``n`` seated frames
+    (:func:`sit2stand.human.calibration_frames.quiet_frames`); ``given``: that frame, if it is seated.
+
+    Raises:
+        InputError: ``given`` is not a frame of the trial, or not a seated one.
+    """
+    if given is not None:
+        if not 0 <= given < len(t_s):
+            raise InputError(f"--calibration-frame {given}: the trial has frames 0-{len(t_s) - 1}")
+        if seated_frames and given >= seated_frames:
+            raise InputError(f"--calibration-frame {given}: the human is no longer seated there (the rise starts at "
+                             f"frame {seated_frames}); the marker map overlays a seated frame on the robot's seat")
+        return FrameChoice(np.array([given]), f"frame {given} given (--calibration-frame)")
+    if not seated_frames:
+        return FrameChoice(np.array([0]), "frame 0: the trial starts after the rise began (the nearest to seated)")
+    window = quiet_frames(t_s, positions_m, valid, min(n, seated_frames), stop=seated_frames, min_markers=1)
+    count = seen(positions_m[window.frames], valid[window.frames]).sum(axis=1)
+    k = int(window.frames[np.argmax(count)])
+    return FrameChoice(np.array([k]), f"frame {k}, seated: the most markers in the quietest seated stretch "
+                                      f"({window.reason})")
+
+
 def _point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     ab = b - a
     t = 0.0 if ab @ ab < 1e-12 else float(np.clip((p - a) @ ab / (ab @ ab), 0.0, 1.0))
@@ -101,11 +221,15 @@ def marker_group(name: str) -> str:
     return "arm"
 
 
-def talos_links(model: pin.Model, marker: str) -> tuple[str, ...]:
-    """The TALOS links (Pinocchio joint names) a Plug-in-Gait marker may be fixed to: those of its body part and
-    side. Nearest-link matching alone puts a seated human's hip markers on the robot's hanging arms."""
-    side = "left" if marker.startswith("L") else "right" if marker.startswith("R") else None
-    group = marker_group(marker)
+def talos_links(model: pin.Model, marker: str, roles: MarkerRoles | None = None) -> tuple[str, ...]:
+    """The TALOS links (Pinocchio joint names) a marker may be fixed to: those of its body part and side (``roles``:
+    of its marker set; None: Plug-in-Gait's names). Nearest-link matching alone puts a seated human's hip markers on
+    the robot's hanging arms."""
+    if roles is None:
+        side = "left" if marker.startswith("L") else "right" if marker.startswith("R") else None
+        group = marker_group(marker)
+    else:
+        side, group = roles.sides.get(marker), roles.group(marker) or "arm"
     names = list(model.names[1:])
     if group == "pelvis":
         return (names[0],)
@@ -121,20 +245,18 @@ def talos_links(model: pin.Model, marker: str) -> tuple[str, ...]:
 
 def calibrate_markers(model: pin.Model, q_robot: np.ndarray, names: list[str], positions_m: np.ndarray,
                       valid: np.ndarray, human_thigh_m: float, robot_thigh_m: float,
-                      allowed_links=talos_links) -> MarkerMap:
+                      allowed_links=talos_links, roles: MarkerRoles | None = None) -> MarkerMap:
     """Fix each valid human marker of one seated frame to the nearest robot link (see the module docstring)
-    among ``allowed_links(model, marker)`` (None: any link).
+    among ``allowed_links(model, marker, roles)`` (None: any link). ``roles``: the marker set's (None: Plug-in-Gait).
 
     Raises:
-        ValueError: fewer than 3 of the pelvis markers (LASI RASI LPSI RPSI) are valid in the frame.
+        ValueError: the pelvis markers seen in the frame do not define the pelvis (3 of LASI RASI LPSI RPSI).
     """
     data = model.createData()
     pin.forwardKinematics(model, data, q_robot)
-    pel = [i for i, n in enumerate(names) if n in PELVIS_MARKERS and valid[i]]
-    if len(pel) < 3:
-        raise InputError(f"calibration frame: {len(pel)} of {', '.join(PELVIS_MARKERS)} valid; need 3")
+    roles = roles or marker_roles()
+    human_pelvis, _ = pelvis_centre(roles, names, positions_m, valid)
     scale = robot_thigh_m / human_thigh_m
-    human_pelvis = positions_m[pel].mean(axis=0)
     robot_pelvis = data.oMi[1].translation
     bones = _bones(model, data)
     links, offsets = {}, {}
@@ -142,11 +264,11 @@ def calibrate_markers(model: pin.Model, q_robot: np.ndarray, names: list[str], p
         if not valid[i] or not np.all(np.isfinite(positions_m[i])):
             continue
         p = robot_pelvis + scale * (positions_m[i] - human_pelvis)
-        side = "left" if name.startswith("L") else "right" if name.startswith("R") else None
+        side = roles.sides.get(name)
         candidates = [b for b in bones if side is None or ("left" not in model.names[b[0]] and "right" not in
                                                           model.names[b[0]]) or side in model.names[b[0]]]
         if allowed_links is not None:
-            allowed = set(allowed_links(model, name))
+            allowed = set(allowed_links(model, name, roles))
             candidates = [b for b in candidates if model.names[b[0]] in allowed] or candidates
         # nearest bone; within 5 mm, the more distal link (a heel marker belongs to the foot, not the shank's end)
         j = min(candidates, key=lambda b: (round(_point_segment_distance(p, b[1], b[2]) / 0.005),

@@ -20,8 +20,9 @@ import numpy as np
 import pinocchio as pin
 
 from ..human.com import estimate_com
-from ..human.marker_ik import PELVIS_MARKERS
-from ..human.offline import Trial, read_trial
+from ..human.calibration import StreamCalibration
+from ..human.marker_sets import choose_marker_set
+from ..human.offline import Trial, calibrate_subject, read_trial
 from ..human.skeleton import Subject
 from ..io import messages as M
 from ..io.bag import BagReader, BagWriter
@@ -37,11 +38,14 @@ from .dynamic import DynamicsFilter
 from .phases import Phases, find_phases
 from .player import DEFAULT_MAX_TIME_SCALE, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig
+from .calibration import map_frame
 from .stream import RetargetConfig, Retargeter, retarget_sequence, robot_model, robot_setup
 
 
-def human_com_series(bag: Path, human_com_bag: Path | None, trial) -> np.ndarray:
-    """(N, 3) human COM at the marker frames: ``/human/com`` of a bag, or the offline estimator."""
+def human_com_series(bag: Path, human_com_bag: Path | None, trial, calibration: StreamCalibration | None = None,
+                     marker_set: str | None = None) -> np.ndarray:
+    """(N, 3) human COM at the marker frames: ``/human/com`` of a bag, or the offline estimator (with a skeleton
+    ``calibration`` made beforehand, if given)."""
     for source in (human_com_bag, bag):
         if source is None:
             continue
@@ -52,16 +56,26 @@ def human_com_series(bag: Path, human_com_bag: Path | None, trial) -> np.ndarray
                 c = np.array([[m.position.x, m.position.y, m.position.z] for _, m in msgs])
                 return np.stack([np.interp(trial.marker_t_s, t, c[:, i]) for i in range(3)], axis=1)
 
-    subject = Subject(trial.height_m or 1.75, trial.mass_kg or 75.0, trial.sex)
+    subject = Subject(trial.height_m or 1.75, trial.mass_kg or 75.0, trial.sex,
+                      marker_set=choose_marker_set(trial.marker_names, marker_set))
     return estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,
-                        subject).com_m
+                        subject, calibration=calibration).com_m
 
 
-def trial_phases(trial: Trial, com_h: np.ndarray, chair_fz_n: np.ndarray | None) -> Phases:
+def trial_phases(trial: Trial, com_h: np.ndarray, chair_fz_n: np.ndarray | None,
+                 marker_set: str | None = None) -> Phases:
     """The trial's phases from its pelvis markers, the human COM and the chair plate (if any)."""
-    pel = [trial.marker_names.index(n) for n in PELVIS_MARKERS if n in trial.marker_names]
+    pelvis = choose_marker_set(trial.marker_names, marker_set).pelvis.markers
+    pel = [trial.marker_names.index(n) for n in pelvis if n in trial.marker_names]
     pelvis_z = np.nanmean(np.where(trial.valid[:, pel], trial.positions[:, pel, 2], np.nan), axis=1)
     return find_phases(trial.marker_t_s, pelvis_z, com_h[:, 0], trial.height_m or 1.75, chair_fz_n)
+
+
+def _static_calibration(trial: Trial, static: Path, marker_set: str | None) -> StreamCalibration:
+    """The human skeleton calibrated on a static trial, for the offline human COM."""
+    subject = Subject(trial.height_m or 1.75, trial.mass_kg or 75.0, trial.sex,
+                      marker_set=choose_marker_set(trial.marker_names, marker_set))
+    return calibrate_subject(trial, subject, static=static)[0]
 
 
 def _cropped(trial: Trial, keep: np.ndarray) -> Trial:
@@ -75,7 +89,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         max_time_scale: float = DEFAULT_MAX_TIME_SCALE, simulate: bool = False, config: RetargetConfig | None = None,
         com_feedback: bool = True, stabiliser: StabiliserConfig | None = None, whole: bool = False,
         dynamic: bool = False, controller: str = "inverse_dynamics", seat_off_dwell_s: float = 1.0,
-        gains: WbcGains | None = None) -> dict:
+        gains: WbcGains | None = None, calibration_frame: int | None = None, static: Path | None = None) -> dict:
     """Retarget ``bag`` into ``out`` (see the module docstring); returns the summary. ``com_feedback``: the
     simulated robot's commands are corrected by :class:`~sit2stand.retarget.stabiliser.ComStabiliser` (gains
     ``stabiliser``, default :class:`~sit2stand.retarget.stabiliser.StabiliserConfig`), as the node does.
@@ -84,13 +98,17 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     (:mod:`sit2stand.retarget.phases`). ``dynamic``: the commands go through the dynamics filter
     (:mod:`sit2stand.retarget.dynamic`, QP gains ``gains``), which stretches time only where it cannot follow;
     ``seat_off_dwell_s``: the player's wait at the robot's seat-off. ``controller``: the simulated robot's
-    (``inverse_dynamics``: joint PD with that feed-forward; ``wbc``: whole-body torque control)."""
+    (``inverse_dynamics``: joint PD with that feed-forward; ``wbc``: whole-body torque control). The marker map is
+    made on a seated frame (:func:`~sit2stand.retarget.calibration.map_frame`; ``calibration_frame``: that one);
+    a ``static`` trial calibrates the human skeleton when the human COM is estimated here."""
     out.mkdir(parents=True, exist_ok=True)
     trial = read_trial(bag)
-    com_h = human_com_series(bag, human_com_bag, trial)
+    config = config or RetargetConfig()
+    skeleton = _static_calibration(trial, static, config.marker_set) if static is not None else None
+    com_h = human_com_series(bag, human_com_bag, trial, skeleton, config.marker_set)
     chair = next((p for p in trial.plates if p.name == "chair"), None)
     fz = None if chair is None else np.interp(trial.marker_t_s, chair.t_s, chair.force_n[:, 2])
-    phases = trial_phases(trial, com_h, fz)
+    phases = trial_phases(trial, com_h, fz, config.marker_set)
     if not whole:
         keep = phases.rise_and_stand(trial.marker_t_s)
         trial, com_h, fz = _cropped(trial, keep), com_h[keep], None if fz is None else fz[keep]
@@ -102,9 +120,13 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         sim.settle(2.0)     # at rest on the chair, as the driver starts; the calibration overlays this posture
         q_start = sim.pin_configuration(sim.data.qpos)
     robot = robot_setup(plant, params, q_start=q_start, prebuilt=robot_model(plant, params, links))
-    rt = Retargeter(robot, config or RetargetConfig())
+    rt = Retargeter(robot, config)
     dt = float(np.median(np.diff(trial.marker_t_s)))
-    rt.calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0]).save(out / "marker_map.yaml")
+    standing = np.flatnonzero(phases.labels != "seated")
+    seated = (int(standing[0]) if len(standing) else len(phases.labels)) if phases.starts_seated else 0
+    where = map_frame(trial.marker_t_s, trial.positions, trial.valid, seated, calibration_frame)
+    k = where.first
+    rt.calibrate(trial.marker_names, trial.positions[k], trial.valid[k], com_h[k]).save(out / "marker_map.yaml")
     dynamics = DynamicsFilter(robot.model, dt, robot.support_xy, gains=gains) if dynamic else None
     player = PlanPlayer(robot.model, dt, robot.support_xy, margin_m=margin_m, fixed_time_scale=time_scale,
                         max_time_scale=max_time_scale, seat_off_dwell_s=seat_off_dwell_s, dynamics=dynamics)
@@ -115,6 +137,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     on_feet = [c for c in cmds if c.on_feet]
     summary = {
         "bag": str(bag), "parameters": robot.parameters, "frames": len(frames),
+        "calibration_frame": k, "calibration_frame_reason": where.reason,
         "infeasible_frames": int((~feasible).sum()),
         "com_equality_max_error_mm_feasible": float(com_err[feasible].max() * 1e3) if feasible.any() else None,
         "ik_ms_p50": float(np.percentile(ik_ms, 50)), "ik_ms_p99": float(np.percentile(ik_ms, 99)),

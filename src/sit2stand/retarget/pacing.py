@@ -175,6 +175,7 @@ class LiveConfig:
     com_wait_s: float = 0.03
     com_feedback: bool = True
     stabiliser: StabiliserConfig = field(default_factory=StabiliserConfig)
+    marker_set: str = ""          # a packaged set's name or a YAML file; empty: chosen from the stream's names
 
 
 class LiveRetargeting:
@@ -210,7 +211,7 @@ class LiveRetargeting:
         Raises:
             InputError: the frame cannot be overlaid on the robot (a missing marker, not seated).
         """
-        self.retargeter = Retargeter(robot, RetargetConfig())
+        self.retargeter = Retargeter(robot, RetargetConfig(marker_set=self.cfg.marker_set or None))
         marker_map = self.retargeter.calibrate(frame.names, frame.positions_m, frame.valid, com_m)
         c = self.cfg
         self.player = PlanPlayer(robot.model, 1.0 / c.rate_hz, robot.support_xy, margin_m=c.margin_m,

@@ -39,12 +39,12 @@ from ..robot.identify import read_link_parameters
 from ..robot.model import (SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, UPPER_LIMB_PREFIXES, PlantConfig, add_seat_frame,
                            build_spec, controller_model)
 from ..robot.plant import seat_top_height, seated_configuration
-from .calibration import PELVIS_MARKERS, MarkerMap, calibrate_markers, marker_group
+from ..human.marker_sets import choose_marker_set
+from .calibration import MarkerMap, calibrate_markers, left_leg_points, marker_roles
 from .feasibility import support_polygon
 from .ik import ComIk, IkResult
 from .player import Command, PlanPlayer
 
-FOOT_MARKERS = ("LANK", "RANK", "LHEE", "RHEE", "LTOE", "RTOE")
 SEATED_COM_BEHIND_ANKLE_THIGHS = 0.6
 """Where a seated human's COM is along x: this many thigh lengths behind the ankle (0.60 on both shipped digital
 humans: the hips on the seat, the shanks near vertical). The COM map's seated knot when a recording starts after the
@@ -147,6 +147,7 @@ class RetargetConfig:
     #                                       the ankle, where the shipped rises end): a child's COM is 8 cm ahead of
     #                                       its ankles, 12.5 cm scaled to TALOS; at 8 cm the live robot fell 1 in 3
     velocity_limit_rad_s: float = 4.0
+    marker_set: str | None = None         # a packaged set's name or a YAML file; None: chosen from the names
     chair_off_force_n: float = 30.0       # human left the seat when the chair plate reads less
     pelvis_rise_m: float = 0.02           # ... or, without a chair plate, when the pelvis markers rose this much
     y_ramp_s: float = 0.5
@@ -201,26 +202,22 @@ class Retargeter:
                   marker_map: MarkerMap | None = None) -> MarkerMap:
         """Fix the markers to the robot (or use ``marker_map``) from one seated frame; note the human's references.
 
+        The marker set (``cfg.marker_set``, else chosen from ``names``) says which markers are the pelvis, the left
+        knee, ankle and heel, and each marker's body part (:func:`~sit2stand.retarget.calibration.marker_roles`).
+
         Raises:
             ValueError: a marker the calibration needs (pelvis, left knee, ankle, heel) is missing in the frame.
         """
-        idx = {n: i for i, n in enumerate(names)}
-        need = ("LKNE", "LANK", "LHEE")
-        missing = [m for m in need if m not in idx or not valid[idx[m]]]
-        if missing:
-            raise InputError(f"calibration frame: marker(s) {', '.join(missing)} missing")
-        pel = [idx[m] for m in PELVIS_MARKERS if m in idx and valid[idx[m]]]
-        if len(pel) < 3:
-            raise InputError(f"calibration frame: {len(pel)} of {', '.join(PELVIS_MARKERS)} valid; need 3")
-        pelvis = positions_m[pel].mean(axis=0)
-        knee, ankle, heel = (positions_m[idx[m]] for m in need)
+        markers = choose_marker_set(names, self.cfg.marker_set)
+        roles = marker_roles(markers)
+        pelvis, pel, knee, ankle, heel = left_leg_points(roles, names, positions_m, valid, markers)
         self.human_thigh = float(np.linalg.norm(knee - pelvis))
         self._pelvis_last = pelvis
         human_leg = float(np.linalg.norm(knee - pelvis) + np.linalg.norm(ankle - knee))
         self.scale = self.robot.leg_length_m / human_leg
         if marker_map is None:
             marker_map = calibrate_markers(self.robot.model, self.robot.q_seated, names, positions_m, valid,
-                                           human_leg, self.robot.leg_length_m)
+                                           human_leg, self.robot.leg_length_m, roles=roles)
         self.marker_map = marker_map
         self.marker_frames = marker_map.add_frames(self.model)
         self.data = self.model.createData()
@@ -240,7 +237,7 @@ class Retargeter:
         self.ik.eps_abs = self.cfg.qp_tolerance
         self.names = list(names)
         self.weights = np.array([0.0 if n not in self.marker_frames else
-                                 self.cfg.weights.get(marker_group(n), 0.0) for n in names])
+                                 self.cfg.weights.get(roles.group(n), 0.0) for n in names])
         self.human_pelvis0 = pelvis
         self.robot_pelvis0 = self.robot.q_seated[:3].copy()
         self.pelvis_markers = pel
