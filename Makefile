@@ -6,7 +6,7 @@ PY    := $(VENV)/bin/python
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export RCUTILS_COLORIZED_OUTPUT ?= 0
 
-.PHONY: setup demo test test-fast lint bench bench-gap bench-retarget bench-human bench-capture lock clean
+.PHONY: setup demo test test-fast lint bench bench-gap bench-retarget bench-human bench-capture bench-standup lock clean
 
 setup:            ## create .venv (pinned wheels, ROS 2 Jazzy), build msgs/, install src/ (idempotent)
 	@ros_ws/bootstrap.sh
@@ -37,6 +37,9 @@ bench-human: setup  ## the human COM on the real lab recordings of ../shared/dat
 
 bench-capture: setup  ## the mocap bridge 10 min at 200 Hz against serve-c3d: frames lost, memory growth, latency; merged into bench.json
 	@$(PY) -m sit2stand.bench_capture --out bench/results/bench.json
+
+bench-standup: setup  ## 30 digital humans (stature, mass, seat, natural/elderly/fast) retargeted and simulated: success, time scale, COM, torque; bench/results/standup/
+	@$(PY) -m sit2stand.bench_standup --out bench/results/standup $(BENCH_STANDUP_ARGS)
 
 lock:             ## re-pin constraints.txt from the current .venv (after changing requirements.txt)
 	@(echo "# Full pinned closure of ros_ws/requirements.txt (pip freeze on Python 3.11, Linux x86_64). Regenerate with: make lock"; \

@@ -1,0 +1,70 @@
+"""sit2stand.bench_standup: the population is drawn in range, reproducibly, and aggregated right (nothing simulated)."""
+
+import pytest
+
+from sit2stand import bench_standup as B
+from sit2stand.human.synth import SynthConfig
+
+
+@pytest.fixture(scope="module")
+def population():
+    return B.sample_population(300, seed=0)
+
+
+def test_bodies_seats_and_rises_are_in_the_issues_ranges(population):
+    for c in population:
+        assert 1.5 <= c.height_m <= 1.95
+        assert 50.0 <= c.mass_kg <= 110.0
+        assert 17.0 - 0.1 <= c.mass_kg / c.height_m**2 <= 38.0 + 0.1
+        assert abs(c.seat_height_m - 0.26 * c.height_m) <= 0.05 + 1e-3
+        lo, hi = B.RISE_S[c.style]
+        assert lo <= c.rise_s <= hi
+        assert c.sex in ("male", "female")
+
+
+def test_the_ranges_are_covered_not_just_respected(population):
+    heights = [c.height_m for c in population]
+    masses = [c.mass_kg for c in population]
+    assert min(heights) < 1.55 and max(heights) > 1.9
+    assert min(masses) < 55 and max(masses) > 105
+
+
+def test_styles_take_turns_and_fast_is_natural_rushed(population):
+    assert [c.style for c in population[:6]] == ["natural", "elderly", "fast"] * 2
+    fast = next(c for c in population if c.style == "fast")
+    cfg = fast.config()
+    assert isinstance(cfg, SynthConfig)
+    assert cfg.style == "natural" and cfg.duration_s == fast.rise_s <= 1.2
+
+
+def test_the_same_seed_draws_the_same_population_and_another_seed_another():
+    assert B.sample_population(30, seed=7) == B.sample_population(30, seed=7)
+    assert B.sample_population(30, seed=7) != B.sample_population(30, seed=8)
+
+
+def test_only_one_style_keeps_the_same_people():
+    mixed = B.sample_population(12, seed=3)
+    elderly = B.sample_population(12, seed=3, styles=("elderly",))
+    assert all(c.style == "elderly" for c in elderly)
+    assert [(c.height_m, c.mass_kg, c.seat_height_m, c.seed) for c in mixed] == \
+        [(c.height_m, c.mass_kg, c.seat_height_m, c.seed) for c in elderly]
+
+
+def test_bad_requests_name_the_culprit():
+    with pytest.raises(ValueError, match="at least 1 case, not 0"):
+        B.sample_population(0)
+    with pytest.raises(ValueError, match="not sprint"):
+        B.sample_population(3, styles=("sprint",))
+
+
+def test_aggregate_counts_success_and_the_share_at_human_speed():
+    def row(i, style, stood, scale, ratio):
+        return {"case": {"index": i, "style": style, "seed": i}, "stood_up": stood, "time_scale": scale,
+                "duration_ratio": ratio, "com_tracking_rms_m": 0.004, "wall_s": 10.0, "synth_seed": i}
+    rows = [row(0, "natural", True, 1.2, 1.3), row(1, "elderly", True, 4.0, 3.7), row(2, "fast", False, 1.0, 1.0)]
+    agg = B.aggregate(rows)
+    assert agg["success_rate"] == pytest.approx(2 / 3)
+    assert agg["share_stood_time_scale_le_1_5"] == pytest.approx(1 / 3)     # the fallen fast case does not count
+    assert agg["time_scale"]["max"] == 4.0 and agg["time_scale"]["median"] == 1.2
+    assert agg["by_style"] == {"natural": "1/1", "elderly": "1/1", "fast": "0/1"}
+    assert agg["torque_ratio_peak"]["median"] is None      # not measured: reported as such, not as 0
