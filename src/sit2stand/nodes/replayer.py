@@ -24,7 +24,9 @@ Parameters:
     skip_unknown_types (bool, false)  skip topics whose type has no Python class here, instead of failing.
 
 Services: ~/pause (std_srvs/SetBool: true pauses, false resumes).
-Topics out: every bag topic (raw CDR, recorded QoS), /clock, ~/progress (diagnostic_msgs/DiagnosticStatus, 2 Hz).
+Topics out: every bag topic (raw CDR, recorded QoS), /clock, ~/progress (diagnostic_msgs/DiagnosticStatus, 2 Hz);
+/human/subject (latched) from the bag's metadata (``height_m``, ``body_mass_kg``, ``sex``) when the bag holds no
+such topic, so that an estimator that takes the subject from the stream finds it for every bag.
 Every topic is played relative to the node's namespace: a bag's ``/mocap/markers`` is ``/robot2/mocap/markers``
 under ``__ns:=/robot2`` (:func:`sit2stand.io.topics.ros_name`), /clock included, and the check for another publisher
 of a played topic looks there.
@@ -44,12 +46,13 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rcl_interfaces.msg import SetParametersResult
 from rosgraph_msgs.msg import Clock
+from sit2stand_msgs.msg import Subject as SubjectMsg
 from std_srvs.srv import SetBool
 
-from ..io.topics import CLOCK_TOPIC, FORCE_PLATE_PREFIX, MARKERS_TOPIC, ros_name
+from ..io.topics import CLOCK_TOPIC, FORCE_PLATE_PREFIX, MARKERS_TOPIC, SUBJECT_TOPIC, ros_name
 from ..io.bag import BagError, BagReader
 from ..io.playback import ClockTicks, PlaybackClock, check_rate, parse_wait_for, played_fraction
-from .runtime import NodeError, declare, message_class, node_main, qos_from_bag
+from .runtime import LATCHED_QOS, NodeError, declare, message_class, node_main, qos_from_bag
 
 # Reliable writers heartbeat every 5 ms instead of Fast DDS's 3 s, so acknowledgements (and with them the unpaced
 # mode's flow control) come quickly. Set before rclpy.init; a user's own profile file takes precedence.
@@ -112,6 +115,7 @@ class Replayer(Node):
         if not self.pubs:
             raise NodeError(f"{self.bag_path}: nothing to play")
         self.total = sum(bag_topics[t].count for t in self.pubs)
+        self._latch_subject()
         self.clock_after_end = declare(self, "clock_after_end", False, "keep /clock going after the bag's end")
         self.clock_pub = self.create_publisher(
             Clock, ros_name(CLOCK_TOPIC), QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
@@ -161,6 +165,21 @@ class Replayer(Node):
                 self._wake.set()
         return SetParametersResult(successful=True)
 
+    def _latch_subject(self) -> None:
+        """/human/subject from the bag's metadata, latched, unless the bag plays the topic itself."""
+        custom = self.reader.custom_data
+        if SUBJECT_TOPIC in self.pubs or not {"height_m", "body_mass_kg"} <= set(custom):
+            return
+        try:
+            height, mass = float(custom["height_m"]), float(custom["body_mass_kg"])
+        except ValueError:
+            self.get_logger().warning(f"{self.bag_path}: metadata height_m/body_mass_kg are not numbers: no subject")
+            return
+        msg = SubjectMsg(height_m=height, mass_kg=mass, sex=custom.get("sex", "male"), age_years=float("nan"))
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(self.reader.start_ns), 1_000_000_000)
+        self.subject_pub = self.create_publisher(SubjectMsg, ros_name(SUBJECT_TOPIC), LATCHED_QOS)
+        self.subject_pub.publish(msg)
+
     # --- playback thread ---------------------------------------------------------------------------------------
     def _wait_for_subscribers(self) -> None:
         # a capture topic the bag does not hold (a trial without a chair plate) has nobody to wait for
@@ -204,11 +223,20 @@ class Replayer(Node):
                 return
             time.sleep(min(0.02, left))
 
-    def _wait_acked(self) -> None:
+    def _wait_acked(self, keep_clock: bool = False) -> None:
+        """Wait until the subscribers acknowledged all, ACK_TIMEOUT_S at most in all (a dead subscriber, e.g. a
+        killed recorder, never does); ``keep_clock``: /clock goes on meanwhile (a graph's time frozen for 10 s made
+        its simulated robot stand still, then fall). Waits in 2 ms slices: rclpy holds the GIL while it waits."""
+        deadline = time.monotonic() + ACK_TIMEOUT_S
         for topic, pub in self.pubs.items():
-            if pub.qos_profile.reliability == ReliabilityPolicy.RELIABLE and pub.get_subscription_count():
-                if not pub.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S)):
+            if pub.qos_profile.reliability != ReliabilityPolicy.RELIABLE or not pub.get_subscription_count():
+                continue
+            while not pub.wait_for_all_acked(Duration(seconds=0.002)):
+                if time.monotonic() > deadline:
                     self.get_logger().warning(f"{topic}: subscribers did not acknowledge within {ACK_TIMEOUT_S} s")
+                    break
+                if keep_clock:
+                    self._publish_clock(max(self.clock.bag_now_ns(), self.reader.end_ns))
 
     def _play(self) -> None:
         try:
@@ -242,12 +270,13 @@ class Replayer(Node):
                 self.loops_done += 1
                 if not self.loop:
                     break
-            self._wait_acked()
+            keep_clock = self.clock_after_end and self.at_end == "idle" and self.clock_pub is not None
+            self._wait_acked(keep_clock)
             self._report(force=True)
             elapsed = time.monotonic() - self._t_first if self._t_first is not None else 0.0
             self.get_logger().info(f"done: {self.sent} messages published in {elapsed:.3f} s "
                                    f"({self.sent / elapsed if elapsed > 0 else 0.0:.0f} msg/s)")
-            if self.clock_after_end and self.at_end == "idle" and self.clock_pub is not None:
+            if keep_clock:
                 self._keep_clock()
         except BagError as err:
             self.get_logger().error(str(err))
