@@ -9,10 +9,17 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
+import numpy as np
 import pytest
+import rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
 
 from sit2stand.io.bag import BagReader
+
+ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.graph
 
@@ -97,3 +104,41 @@ def test_messages_the_recorder_missed_are_counted_and_fail_it(run_node, run_publ
     assert f"lost {2000 - kept} messages (/robot/cop: {2000 - kept})" in rec.output
     with BagReader(out) as bag:
         assert bag.custom_data["lost_messages"] == f"/robot/cop: {2000 - kept}"
+
+
+def test_a_killed_recorder_does_not_hold_up_the_replayers_clock(run_node, tmp_path):
+    # a dead subscriber never acknowledges: the replayer waited 10 s for it at the bag's end with /clock frozen, and
+    # the simulated robot, on that clock, stood still and then fell
+    bag = ROOT / "bags" / "natural"
+    rec = run_node("sit2stand.nodes.recorder", "--ros-args", "-p", f"output:={tmp_path / 'rec'}",
+                   "-p", "regex:=^/(mocap|force_plate)/")
+    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={bag}", "-p", "rate:=2.0",
+                    "-p", "topics:=['/mocap/markers', '/force_plate/chair', '/force_plate/feet']",
+                    "-p", "wait_for_subscribers:=1", "-p", "at_end:=idle", "-p", "clock_after_end:=true")
+    assert play.wait_for_output("playing", 30), play.output
+    time.sleep(0.7)
+    rec.proc.send_signal(signal.SIGKILL)
+    clocks = []
+    spin_clock(clocks.append, seconds=4.0)         # the bag ends 1.5 s after the kill; /clock goes on at 1 kHz
+    stamps = [c.clock.sec + c.clock.nanosec * 1e-9 for c in clocks]
+    assert stamps and max(np.diff(stamps), default=1.0) < 0.5, play.output
+    assert stamps[-1] > 100.0 + 3.9 + 0.5
+    assert play.stop() == 0
+
+
+def spin_clock(callback, seconds: float) -> None:
+    """Take /clock in this process for ``seconds``."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = rclpy.create_node("clock_watch", context=context)
+        node.create_subscription(Clock, "/clock", callback, QoSProfile(depth=1000,
+                                 reliability=ReliabilityPolicy.BEST_EFFORT))
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
