@@ -8,7 +8,7 @@ import pytest
 
 from sit2stand.human.offline import read_trial
 from sit2stand.retarget.feasibility import plan_dynamics, plan_zmp, support_margin, zmp_at_scale
-from sit2stand.retarget.player import PlanPlayer
+from sit2stand.retarget.player import MAX_TIME_SCALE_RATE, PlanPlayer
 from sit2stand.retarget.stream import Retargeter, retarget_sequence, robot_setup
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -80,8 +80,24 @@ def test_every_frame_is_finite_within_limits_and_the_com_equality_holds_where_fe
     assert qs[-1, 2] > qs[0, 2] + 0.2
 
 
-def test_the_player_retimes_until_the_zmp_keeps_its_margin(retargeted, elderly):
-    robot, rt, frames, cmds, player = retargeted
+def _played(robot, frames, **options):
+    """The IK poses of ``frames`` through a fresh player: (commands, player)."""
+    player = PlanPlayer(robot.model, 0.01, robot.support_xy, margin_m=0.06, **options)
+    cmds = []
+    for f in frames:
+        player.push(f.q, not f.seated)
+        c = player.pull()
+        if c is not None:
+            cmds.append(c)
+    player.close()
+    while not player.done:
+        cmds.append(player.pull())
+    return cmds, player
+
+
+def test_the_uniform_player_retimes_until_the_zmp_keeps_its_margin(retargeted):
+    robot, rt, frames, _, _ = retargeted
+    cmds, player = _played(robot, frames, retiming="uniform", max_time_scale_rate=1.5)
     on_feet = [c for c in cmds if c.on_feet]
     assert on_feet and min(c.margin_m for c in on_feet) >= 0.06 - 1e-3
     assert player.time_scale > 1.0, "the human's timing is too fast for the robot: the plan must be slowed"
@@ -95,6 +111,24 @@ def test_the_player_retimes_until_the_zmp_keeps_its_margin(retargeted, elderly):
     assert support_margin(zmp[feet, :2], robot.support_xy).min() < 0.06
     for c in cmds:
         assert np.all(np.isfinite(c.q)) and np.all(np.isfinite(c.v)) and np.all(np.isfinite(c.a))
+
+
+def test_the_local_player_is_slower_only_where_a_frame_needs_it(retargeted):
+    """The default player: each command at least as slow as its own frame needs (ZMP margin, torques), the time
+    scale back at the human's 1.0 between and after, at a bounded rate, and the whole far shorter than the uniform
+    player's."""
+    robot, _, frames, cmds, player = retargeted
+    scales = np.array([c.time_scale for c in cmds])
+    assert np.abs(np.diff(scales)).max() <= MAX_TIME_SCALE_RATE * 0.01 + 1e-9
+    need = np.array([player.frame_scale(int(round(c.t_plan_s / 0.01))) for c in cmds])
+    assert np.all(scales >= need - MAX_TIME_SCALE_RATE * 0.01 - 1e-9), "a frame played faster than it can be"
+    assert scales.max() > 1.5 and scales[-1] == 1.0
+    assert np.mean(scales < 1.0 + 1e-9) > 0.3, "the human's timing wherever the robot can follow it"
+    on_feet = [c.margin_m for c in cmds if c.on_feet and player.frame_scale(int(round(c.t_plan_s / 0.01))) <
+               player.max_time_scale]
+    assert min(on_feet) >= 0.06 - 1e-3
+    uniform, _ = _played(robot, frames, retiming="uniform")
+    assert len(cmds) < 0.75 * len(uniform)
 
 
 def test_zmp_at_scale_equals_the_zmp_of_the_slowed_plan():

@@ -23,7 +23,7 @@ def _retarget(args: argparse.Namespace) -> int:
                   human_com_bag=args.human_com, margin_m=args.margin, time_scale=args.time_scale,
                   **({"max_time_scale": args.max_time_scale} if args.max_time_scale else {}),
                   simulate=args.simulate, com_feedback=not args.no_com_feedback, whole=args.whole,
-                  dynamic=args.dynamic, controller=args.controller,
+                  dynamic=args.dynamic, controller=args.controller, retiming=args.retiming,
                   **({"seat_off_dwell_s": args.seat_off_dwell} if args.seat_off_dwell is not None else {}))
     print(json.dumps(summary, indent=2))
     if args.simulate:
@@ -129,7 +129,9 @@ def add_retarget(sub) -> None:
                    help="the simulated robot's controller: joint PD + inverse-dynamics feed-forward (default), or "
                         "experimental whole-body torque control (QP at 500 Hz)")
     p.add_argument("--seat-off-dwell", type=float, default=None,
-                   help="the player's wait at the robot's seat-off [s] (default 1)")
+                   help="the player's wait at the robot's seat-off [s] (default 0.5)")
+    p.add_argument("--retiming", choices=("local", "uniform"), default="local",
+                   help="local: slower only where a frame needs it (default); uniform: one growing factor")
     p.add_argument("--marker-set", help="marker set: plug_in_gait, plug_in_gait_lower, gait2392 or a YAML file "
                    "(default: the packaged set that covers most of the bag's marker names)")
     p.add_argument("--calibration-frame", type=int, metavar="N", help="the seated frame the robot's marker map is "

@@ -3,6 +3,7 @@
 Each frame solves, by damped Gauss-Newton steps on the configuration q (Pinocchio, floating base),
 
     minimise    sum_k w_k || p_k(q) - t_k ||^2  +  mu || q (-) q_ref ||^2        (markers soft, posture prior)
+                + w_L || (L(q) - L_prev) / (m g) ||^2                             (angular momentum rate)
     subject to  c(q)[axes] = c_target[axes]                                      (COM: hard equality)
                 X_sole(q) = X_sole_target   for both feet                       (feet fixed: hard, 6-D each)
                 q_min <= q <= q_max,  |q_dot| dt <= v_max dt                      (joint and velocity limits)
@@ -12,6 +13,12 @@ with one dense QP (proxsuite) per step in the tangent step dq:
 Iterations are warm-started from the previous frame's solution. If the COM target cannot be met with the feet
 fixed and within limits, the COM is made a heavily weighted soft task instead, and the frame is flagged infeasible;
 the returned q always respects the joint limits and is finite.
+
+The angular momentum term: the centroidal angular momentum L = A_g(q) q_dot [kg m^2/s] of the frame's motion (from
+the previous frame) stays near the previous frame's. Its change dL/dt moves the ZMP by dL/dt / (m g) from where the
+COM alone puts it; frame-by-frame IK otherwise lets the trunk and arms trade angle against each other from one frame
+to the next, and measured on the shipped natural rise that swung dL_y/dt by +-180 N m around seat-off (the ZMP 12-15
+cm off). ``momentum_weight`` weighs it as a ZMP shift [m] against the markers' metres.
 
 Units SI; frames by Pinocchio frame id; positions in the world frame (REP-103).
 """
@@ -75,7 +82,8 @@ class ComIk:
     """
 
     def __init__(self, model: pin.Model, sole_frames: list[int], velocity_limit: float | np.ndarray = 5.0,
-                 dt: float = 0.01, posture_weight: float | np.ndarray = 1e-3, damping: float = 1e-6) -> None:
+                 dt: float = 0.01, posture_weight: float | np.ndarray = 1e-3, damping: float = 1e-6,
+                 momentum_weight: float = 0.0) -> None:
         self.model = model
         self.data = model.createData()
         self.soles = list(sole_frames)
@@ -91,6 +99,9 @@ class ComIk:
         self._qp: dict[tuple[int, int], object] = {}
         self.eps_abs = 1e-9
         self.points = PointJacobians(model)
+        self.momentum_weight = momentum_weight
+        self._weight_g = float(pin.computeTotalMass(model)) * 9.81
+        self._L_prev: np.ndarray | None = None      # the previous frame's angular momentum [kg m^2/s]
 
     def _solve_qp(self, H, g, A, b, lo, hi):
         """min 1/2 dq' H dq + g' dq s.t. A dq = b, lo <= dq <= hi (a warm QP per shape): dq, solved, dual residual."""
@@ -134,6 +145,9 @@ class ComIk:
             step = float(np.linalg.norm(dq))
             if step < tol:
                 break
+        if self.momentum_weight > 0:
+            self._L_prev = None if q_prev is None else \
+                pin.computeCentroidalMap(self.model, self.data, q)[3:] @ pin.difference(self.model, q_prev, q) / self.dt
         return self._result(q, frame, feasible, it, step, dua, t0)
 
     def _step(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, bool, float]:
@@ -175,6 +189,14 @@ class ComIk:
         post[:6] = 0.0
         H[np.diag_indices(nv)] += self.mu + self.damping
         g += self.mu * post
+        if self.momentum_weight > 0 and f.q_prev is not None and self._L_prev is not None:
+            # L(dq) = A (v0 + dq / dt), v0 the motion from the previous frame to q; its change as a ZMP shift [m]
+            A = pin.computeCentroidalMap(self.model, self.data, q)[3:] / self.dt
+            v0 = pin.difference(self.model, f.q_prev, q)
+            e = (A @ v0 - self._L_prev) / (self.dt * self._weight_g)
+            As = A / (self.dt * self._weight_g)
+            H += self.momentum_weight * As.T @ As
+            g += self.momentum_weight * As.T @ e
         return H, g
 
     def _hard_rows(self, q: np.ndarray, f: _Frame, H: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

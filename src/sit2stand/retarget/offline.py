@@ -36,7 +36,7 @@ from ..robot.plant import Plant
 from ..robot.wbc import WbcGains
 from .dynamic import DynamicsFilter
 from .phases import Phases, find_phases
-from .player import DEFAULT_MAX_TIME_SCALE, PlanPlayer
+from .player import DEFAULT_MAX_TIME_SCALE, SEAT_OFF_DWELL_S, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig
 from .calibration import map_frame
 from .stream import RetargetConfig, Retargeter, retarget_sequence, robot_model, robot_setup
@@ -88,12 +88,14 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         human_com_bag: Path | None = None, margin_m: float = 0.06, time_scale: float | None = None,
         max_time_scale: float = DEFAULT_MAX_TIME_SCALE, simulate: bool = False, config: RetargetConfig | None = None,
         com_feedback: bool = True, stabiliser: StabiliserConfig | None = None, whole: bool = False,
-        dynamic: bool = False, controller: str = "inverse_dynamics", seat_off_dwell_s: float = 1.0,
-        gains: WbcGains | None = None, calibration_frame: int | None = None, static: Path | None = None) -> dict:
+        dynamic: bool = False, controller: str = "inverse_dynamics", seat_off_dwell_s: float = SEAT_OFF_DWELL_S,
+        gains: WbcGains | None = None, calibration_frame: int | None = None, static: Path | None = None,
+        retiming: str = "local") -> dict:
     """Retarget ``bag`` into ``out`` (see the module docstring); returns the summary. ``com_feedback``: the
     simulated robot's commands are corrected by :class:`~sit2stand.retarget.stabiliser.ComStabiliser` (gains
     ``stabiliser``, default :class:`~sit2stand.retarget.stabiliser.StabiliserConfig`), as the node does.
-    ``time_scale``: play the plan this many times slower than the human (None: adapt, up to ``max_time_scale``).
+    ``time_scale``: play the plan this many times slower than the human (None: adapt, up to ``max_time_scale``,
+    ``retiming`` "local" (slower only where a frame needs it) or "uniform" (one growing factor)).
     ``whole``: play the whole recording; by default a trial that ends seated is played up to the human's sit-down
     (:mod:`sit2stand.retarget.phases`). ``dynamic``: the commands go through the dynamics filter
     (:mod:`sit2stand.retarget.dynamic`, QP gains ``gains``), which stretches time only where it cannot follow;
@@ -129,7 +131,8 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     rt.calibrate(trial.marker_names, trial.positions[k], trial.valid[k], com_h[k]).save(out / "marker_map.yaml")
     dynamics = DynamicsFilter(robot.model, dt, robot.support_xy, gains=gains) if dynamic else None
     player = PlanPlayer(robot.model, dt, robot.support_xy, margin_m=margin_m, fixed_time_scale=time_scale,
-                        max_time_scale=max_time_scale, seat_off_dwell_s=seat_off_dwell_s, dynamics=dynamics)
+                        max_time_scale=max_time_scale, seat_off_dwell_s=seat_off_dwell_s, dynamics=dynamics,
+                        retiming=retiming)
     frames, cmds = retarget_sequence(rt, player, trial.marker_t_s, trial.positions, trial.valid, com_h, fz)
     ik_ms = np.array([f.ik.seconds for f in frames]) * 1e3
     feasible = np.array([f.ik.feasible for f in frames])
@@ -141,7 +144,9 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         "infeasible_frames": int((~feasible).sum()),
         "com_equality_max_error_mm_feasible": float(com_err[feasible].max() * 1e3) if feasible.any() else None,
         "ik_ms_p50": float(np.percentile(ik_ms, 50)), "ik_ms_p99": float(np.percentile(ik_ms, 99)),
-        "time_scale": float(player.time_scale), "commands": len(cmds), "plan_duration_s": len(cmds) * dt,
+        # time_scale: the robot's duration over the human's (issue 15's measure); the peak local factor beside it
+        "time_scale": len(cmds) / max(1, len(frames)), "time_scale_peak": max(c.time_scale for c in cmds),
+        "retiming": "fixed" if time_scale else retiming, "commands": len(cmds), "plan_duration_s": len(cmds) * dt,
         "duration_ratio": len(cmds) / max(1, len(frames)), **_filter_summary(cmds),
         "min_zmp_margin_on_feet_m": float(min(c.margin_m for c in on_feet)) if on_feet else None,
         "human_seat_off_frame": next((i for i, f in enumerate(frames) if f.human_seat_off), None),

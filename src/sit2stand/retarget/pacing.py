@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..io.messages import reorder_markers
-from .player import DEFAULT_MAX_TIME_SCALE, Command, PlanPlayer
+from .player import DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S, Command, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig
 from .stream import RetargetConfig, Retargeter, RobotSetup
 
@@ -167,9 +167,10 @@ class LiveConfig:
 
     rate_hz: float = 100.0
     margin_m: float = 0.06
-    lookahead_s: float = 0.8
+    lookahead_s: float = LOOKAHEAD_S
     smooth_frames: int = 21
-    max_joint_speed: float = 0.6
+    max_joint_speed: float = DEFAULT_MAX_JOINT_SPEED
+    retiming: str = "local"
     fixed_time_scale: float | None = None
     max_time_scale: float = DEFAULT_MAX_TIME_SCALE
     com_wait_s: float = 0.03
@@ -217,7 +218,7 @@ class LiveRetargeting:
         self.player = PlanPlayer(robot.model, 1.0 / c.rate_hz, robot.support_xy, margin_m=c.margin_m,
                                  lookahead_s=c.lookahead_s, smooth_frames=c.smooth_frames,
                                  fixed_time_scale=c.fixed_time_scale, max_time_scale=c.max_time_scale,
-                                 max_joint_speed=c.max_joint_speed)
+                                 max_joint_speed=c.max_joint_speed, retiming=c.retiming)
         vx = float(self.coms.velocity_at(frame.t_s)[0])
         self.lead_in_frames = len(self.retargeter.lead_in(frame.t_s, 1.0 / c.rate_hz, frame.positions_m,
                                                           frame.valid, com_m, vx, on_frame=self._push))

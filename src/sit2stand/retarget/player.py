@@ -1,13 +1,16 @@
 """The plan player: the dynamic-feasibility stage between the per-frame IK and the robot's joint commands.
 
 It smooths the poses (Savitzky-Golay on the tangent coordinates, ``smooth_frames`` wide), computes each pose's ZMP
-from the centroidal dynamics, and plays the plan back ``time_scale`` times slower. ``time_scale`` is the smallest
-factor that keeps the ZMP ``margin_m`` inside the feet wherever the robot is off the chair, and the joint speeds
-under ``max_joint_speed``, over the poses known ``lookahead_s`` ahead of the playback point; it is capped at
-``max_time_scale``. At the robot's seat-off the player dwells ``seat_off_dwell_s``, so that the COM settles over the
-feet before the hips lift. ``time_scale`` only grows, at a bounded rate, so the command stays smooth. Each command
-carries positions, velocities and accelerations (time-warp included). Live, the commands lag the human by
-``lookahead_s`` plus half the smoothing window, plus the stretching.
+from the centroidal dynamics, and plays the plan back ``time_scale`` times slower, where ``time_scale`` is a local
+factor. Each frame has its own smallest factor (:meth:`PlanPlayer.frame_scale`): its ZMP ``margin_m`` inside the
+feet wherever the robot is off the chair, its joint speeds under ``max_joint_speed`` and its inverse-dynamics torques
+within the URDF's limits (played s x slower, velocities scale by 1/s and accelerations and velocity products by
+1/s^2). With ``retiming="local"`` (the default) the factor rises just in time for each frame that needs more than 1,
+at a bounded rate, and comes back down once it is played: the human's timing is kept wherever the robot can follow
+it. With ``retiming="uniform"`` it is one factor that only grows, up to ``max_time_scale`` (the first round's
+player). At the robot's seat-off the player can dwell ``seat_off_dwell_s``. Each command carries positions,
+velocities and accelerations (time-warp included). Live, the commands lag the human by ``lookahead_s`` plus half the
+smoothing window, plus the stretching.
 
 Units SI; world frame REP-103 (x forward, y left, z up).
 """
@@ -20,12 +23,30 @@ import numpy as np
 import pinocchio as pin
 from scipy.signal import savgol_coeffs   # at import: a live node's first frames must not pay for it
 
+from ..errors import InputError
+from ..robot.plant import contact_feedforward
 from .dynamic import DynamicsFilter, FilterReport
 from .feasibility import frame_time_scales, support_margin, zmp_at_scale
 
 DEFAULT_MAX_TIME_SCALE = 4.0
 """The slowest the plan is played by default (x the human's timing); a parameter of the player, the node and the
 ``sit2stand retarget`` command."""
+DEFAULT_MAX_JOINT_SPEED = 4.0
+"""The plan's joint speed limit [rad/s]: the IK's own (:class:`~sit2stand.retarget.stream.RetargetConfig`), so that
+by default the torques, not a speed, decide where time is stretched. The uniform player of the first round needed
+0.6 to stand the robot up."""
+SEAT_OFF_DWELL_S = 0.5
+"""The player's wait at the robot's seat-off [s]: the COM feedback settles the COM over the feet before the hips
+lift (measured: the real child trial under CAD's parameters, whose COM is 3 cm off the robot's, fell with none and
+stood with 0.5 s; the first round's uniform player waited 1 s)."""
+MAX_TIME_SCALE_RATE = 3.0
+"""How fast the time scale may change [1/s of robot time]: faster changes add a COM acceleration of the order of the
+COM speed times the rate, which moves the ZMP."""
+LOOKAHEAD_S = 1.0
+"""How far ahead of the playback point the player knows the plan [s]: enough for the local time scale to ramp from
+1 to ``DEFAULT_MAX_TIME_SCALE`` at ``MAX_TIME_SCALE_RATE`` before the frame that needs it; live, the commands lag
+the human by this much more."""
+RETIMING = ("local", "uniform")
 
 
 @dataclass
@@ -50,13 +71,17 @@ class PlanPlayer:
 
     ``push`` one pose per human frame (period ``dt``); ``pull`` once per output tick (same period) returns the next
     command, or None while the look-ahead fills. ``fixed_time_scale`` set: no adaptation (1.0: the human's
-    timing); ``max_time_scale`` caps the adaptation."""
+    timing); ``max_time_scale`` caps the adaptation. ``torque_limited``: the torques count in each frame's factor
+    (the model's URDF effort limits)."""
 
     def __init__(self, model: pin.Model, dt: float, polygon_xy: np.ndarray, *, margin_m: float = 0.06,
-                 lookahead_s: float = 0.8, smooth_frames: int = 21, max_time_scale: float = DEFAULT_MAX_TIME_SCALE,
-                 max_time_scale_rate: float = 1.5, fixed_time_scale: float | None = None,
-                 max_joint_speed: float = 0.6, seat_off_dwell_s: float = 1.0,
-                 dynamics: DynamicsFilter | None = None) -> None:
+                 lookahead_s: float = LOOKAHEAD_S, smooth_frames: int = 21,
+                 max_time_scale: float = DEFAULT_MAX_TIME_SCALE, max_time_scale_rate: float = MAX_TIME_SCALE_RATE,
+                 fixed_time_scale: float | None = None,
+                 max_joint_speed: float = DEFAULT_MAX_JOINT_SPEED, seat_off_dwell_s: float = SEAT_OFF_DWELL_S,
+                 dynamics: DynamicsFilter | None = None, retiming: str = "local", torque_limited: bool = True) -> None:
+        if retiming not in RETIMING:
+            raise InputError(f"retiming {retiming!r}: one of {', '.join(RETIMING)}")
         self.model, self.data = model, model.createData()
         self.dt = dt
         self.polygon = polygon_xy
@@ -85,6 +110,8 @@ class PlanPlayer:
         self._coef_cache: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._s_req: list[float] = []          # each frame's own smallest time scale
         self.dynamics = dynamics
+        self.local = retiming == "local"
+        self.torque_limits = model.effortLimit[6:].copy() if torque_limited else None
 
     # -- input -------------------------------------------------------------------------------------------------
     def push(self, q: np.ndarray, on_feet: bool) -> None:
@@ -134,13 +161,29 @@ class PlanPlayer:
     # -- output ------------------------------------------------------------------------------------------------
     def frame_scale(self, k: int) -> float:
         """Smallest time scale (grid of 0.02, at most ``max_scale``) keeping frame ``k``'s ZMP ``margin_m`` inside the
-        feet (none while the robot is on the chair) and its joint speeds under ``max_joint_speed`` [rad/s]."""
+        feet (none while the robot is on the chair), its joint speeds under ``max_joint_speed`` [rad/s] and, with
+        ``torque_limits_nm``, its inverse-dynamics torques within them."""
         speed = float(np.abs(self._v[k][6:]).max()) / self.max_speed if self.max_speed > 0 else 1.0
         s = 1.0
         if self._feet[k]:
             com, acc, dl = self._dyn[k]
             s = float(frame_time_scales(com, acc, dl, self.mass, self.polygon, self.margin_m, self.max_time_scale)[0])
-        return min(max(s, speed), self.max_time_scale)
+        return min(max(s, speed, self._torque_scale(k)), self.max_time_scale)
+
+    def _torque_scale(self, k: int) -> float:
+        """Smallest time scale keeping frame ``k``'s joint torques (contact-consistent inverse dynamics, the chair
+        taking load while seated) within ``torque_limits_nm``. Played s x slower, tau = tau_static + tau_motion / s^2;
+        a joint whose static torque alone is past its limit (one resting on its stop) cannot be helped by slowing
+        down and is left out."""
+        if self.torque_limits is None:
+            return 1.0
+        seated = not self._feet[k]
+        tau = contact_feedforward(self.model, self.data, self._q[k], self._v[k][6:], self._a[k][6:], True, seated)
+        static = contact_feedforward(self.model, self.data, self._q[k], self._v[k][6:], self._a[k][6:], False, seated)
+        motion = tau - static
+        room = self.torque_limits - np.sign(motion) * static
+        need = np.where(room > 0, np.abs(motion) / np.maximum(room, 1e-9), 0.0)
+        return float(np.sqrt(max(1.0, need.max())))
 
     def required_scale(self, frames: range) -> float:
         """Smallest time scale keeping the ZMP ``margin_m`` inside the feet on all of ``frames`` (known ones)."""
@@ -158,6 +201,13 @@ class PlanPlayer:
         self.started = True
         if self.fixed_time_scale is None and self.dynamics is not None:
             self.time_scale_goal = self.dynamics.stretch(self.max_time_scale)     # local: up and down
+        elif self.fixed_time_scale is None and self.local:
+            # local: just in time for each frame about to be played (its own scale less what the bounded rate of
+            # change can add before it is reached; plan time is a lower bound on the robot's), back down after
+            ahead = range(int(self.u), min(known, int(self.u) + self.lookahead + 1))
+            self.time_scale_goal = min(self.max_time_scale, max(
+                [1.0] + [self._s_req[k] - self.max_time_scale_rate * max(0.0, k - self.u) * self.dt
+                         for k in ahead if k < len(self._s_req)]))
         elif self.fixed_time_scale is None:
             ahead = range(int(self.u), min(known, int(self.u) + self.lookahead + 1))
             self.time_scale_goal = max(self.time_scale_goal, self.required_scale(ahead))
