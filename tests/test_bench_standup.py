@@ -68,3 +68,15 @@ def test_aggregate_counts_success_and_the_share_at_human_speed():
     assert agg["time_scale"]["max"] == 4.0 and agg["time_scale"]["median"] == 1.2
     assert agg["by_style"] == {"natural": "1/1", "elderly": "1/1", "fast": "0/1"}
     assert agg["torque_ratio_peak"]["median"] is None      # not measured: reported as such, not as 0
+
+
+def test_a_body_the_synthesiser_refuses_is_left_out_of_the_robots_rates():
+    rows = [{"case": {"index": 0, "style": "natural", "seed": 0}, "stood_up": True, "time_scale": 1.0,
+             "duration_ratio": 1.1, "wall_s": 9.0, "synth_seed": 0},
+            {"case": {"index": 1, "style": "fast", "seed": 1}, "stood_up": False, "stage": "synthesis",
+             "error": "ValueError: no demonstration", "wall_s": 1.0}]
+    agg = B.aggregate(rows)
+    assert (agg["cases"], agg["synthesised"], agg["not_synthesised"], agg["errors"]) == (2, 1, 1, 0)
+    assert agg["success_rate"] == 1.0 and agg["by_style"]["fast"] == "0/0"
+    assert "NOSYN" in B.case_line({**rows[1], "case": {**rows[1]["case"], "height_m": 1.6, "mass_kg": 54.0,
+                                                       "sex": "female", "seat_height_m": 0.39, "rise_s": 1.1}})

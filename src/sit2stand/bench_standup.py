@@ -199,7 +199,8 @@ def synthesise(case: Case, attempts: int = SYNTH_ATTEMPTS):
 
 
 def run_case(case: Case, out: Path, params: Path | None) -> dict:
-    """Synthesise, bag, retarget and simulate one case; its figures (an ``error`` where a stage raised)."""
+    """Synthesise, bag, retarget and simulate one case; its figures (an ``error`` where a stage raised, and
+    ``stage: synthesis`` where the synthesiser refused every seed: no robot run to judge)."""
     t0 = time.monotonic()
     row: dict = {"case": dataclasses.asdict(case), "stood_up": False}
     probe = _Probe()
@@ -214,6 +215,7 @@ def run_case(case: Case, out: Path, params: Path | None) -> dict:
         row.update(_figures(summary, demo.rise_end_s - demo.rise_start_s))
     except Exception as exc:  # noqa: BLE001 - a case that breaks is a result too: recorded, the population goes on
         row["error"] = f"{type(exc).__name__}: {exc}"
+        row["stage"] = "synthesis" if "synth_seed" not in row else "robot"
     row.update(probe.com_deviation(), **probe.torque(), wall_s=round(time.monotonic() - t0, 1))
     return row
 
@@ -239,15 +241,17 @@ def aggregate(rows: list[dict]) -> dict:
     def col(key, only=None):
         return [r[key] for r in rows if r.get(key) is not None and (only is None or only(r))]
     stood = [r for r in rows if r.get("stood_up")]
-    n = len(rows)
+    refused = sum(r.get("stage") == "synthesis" for r in rows)
+    n = len(rows) - refused                       # the cases with a demonstration: the robot's population
     fast_enough = [r for r in stood if r.get("time_scale") is not None and r["time_scale"] <= TARGET_TIME_SCALE]
     ratio_ok = [r for r in stood if r.get("duration_ratio") is not None and r["duration_ratio"] <= TARGET_TIME_SCALE]
     return {
-        "cases": n, "stood_up": len(stood), "success_rate": len(stood) / n if n else None,
-        "errors": sum("error" in r for r in rows),
+        "cases": len(rows), "not_synthesised": refused, "synthesised": n, "stood_up": len(stood),
+        "success_rate": len(stood) / n if n else None, "errors": sum(r.get("stage") == "robot" for r in rows),
         "bodies_redrawn": sum(r.get("synth_seed") not in (None, r["case"]["seed"]) for r in rows),
         "by_style": {s: f"{sum(r['stood_up'] for r in rows if r['case']['style'] == s)}/"
-                        f"{sum(r['case']['style'] == s for r in rows)}" for s in STYLES
+                        f"{sum(r['case']['style'] == s and r.get('stage') != 'synthesis' for r in rows)}"
+                     for s in STYLES
                      if any(r["case"]["style"] == s for r in rows)},
         "time_scale": _spread(col("time_scale")), "duration_ratio": _spread(col("duration_ratio")),
         "share_stood_time_scale_le_1_5": len(fast_enough) / n if n else None,
@@ -269,7 +273,8 @@ def _fmt(v, scale: float = 1.0, spec: str = ".2f") -> str:
 def case_line(r: dict) -> str:
     """One table row: the body, the outcome, the figures."""
     c = r["case"]
-    outcome = "ERROR" if "error" in r else ("stood" if r["stood_up"] else "FELL")
+    outcome = ("NOSYN" if r.get("stage") == "synthesis" else "ERROR") if "error" in r else \
+        ("stood" if r["stood_up"] else "FELL")
     redrawn = "*" if r.get("synth_seed") not in (None, c["seed"]) else " "
     return (f"{c['index']:>3} {c['style']:<7}{redrawn} {c['height_m']:5.2f} {c['mass_kg']:5.1f} {c['sex'][0]} "
             f"{c['seat_height_m']:5.3f} {c['rise_s']:4.2f} | {outcome:<5} {_fmt(r.get('time_scale')):>5} "
@@ -291,9 +296,10 @@ def summary_text(agg: dict) -> str:
         return f"median {_fmt(d['median'], scale, spec)}, p90 {_fmt(d['p90'], scale, spec)}, " \
                f"max {_fmt(d['max'], scale, spec)}"
     return "\n".join([
-        f"stood up {agg['stood_up']}/{agg['cases']} ({_fmt(agg['success_rate'], 100, '.0f')} %); by style "
-        + ", ".join(f"{k} {v}" for k, v in agg["by_style"].items()) + f"; errors {agg['errors']}; bodies "
-        f"redrawn (synthesiser refused the first seed) {agg['bodies_redrawn']}",
+        f"stood up {agg['stood_up']}/{agg['synthesised']} ({_fmt(agg['success_rate'], 100, '.0f')} %); by style "
+        + ", ".join(f"{k} {v}" for k, v in agg["by_style"].items()) + f"; robot-side errors {agg['errors']}",
+        f"of {agg['cases']} bodies drawn: {agg['not_synthesised']} refused by the synthesiser at every seed, "
+        f"{agg['bodies_redrawn']} redrawn (the first seed refused)",
         f"time_scale      {s(agg['time_scale'])}",
         f"duration_ratio  {s(agg['duration_ratio'])}",
         f"stood with time_scale <= 1.5: {_fmt(agg['share_stood_time_scale_le_1_5'], 100, '.0f')} %; with "
