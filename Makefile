@@ -5,8 +5,9 @@ PY    := $(VENV)/bin/python
 # Keep DDS traffic on this machine; tests pick their own ROS_DOMAIN_ID per test.
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export RCUTILS_COLORIZED_OUTPUT ?= 0
+SOAK_MIN ?= 2
 
-.PHONY: setup demo test test-fast lint bench bench-gap bench-retarget bench-human bench-capture bench-standup lock clean
+.PHONY: setup demo test test-fast lint bench bench-gap bench-retarget bench-human bench-capture bench-standup bench-faults lock clean
 
 setup:            ## create .venv (pinned wheels, ROS 2 Jazzy), build msgs/, install src/ (idempotent)
 	@ros_ws/bootstrap.sh
@@ -40,6 +41,9 @@ bench-capture: setup  ## the mocap bridge 10 min at 200 Hz against serve-c3d: fr
 
 bench-standup: setup  ## 30 digital humans (stature, mass, seat, natural/elderly/fast) retargeted and simulated: success, time scale, COM, torque; bench/results/standup/
 	@$(PY) -m sit2stand.bench_standup --out bench/results/standup $(BENCH_STANDUP_ARGS)
+
+bench-faults: setup  ## fault campaign (corrupt/cut files, NaN/missing/mm markers, bad identification, killed recorder, second graph) + a SOAK_MIN-minute soak (default 2; the issue's: SOAK_MIN=30); bench/results/faults.json
+	@$(PY) -m sit2stand.bench_faults --soak-min $(SOAK_MIN) --out bench/results/faults.json
 
 lock:             ## re-pin constraints.txt from the current .venv (after changing requirements.txt)
 	@(echo "# Full pinned closure of ros_ws/requirements.txt (pip freeze on Python 3.11, Linux x86_64). Regenerate with: make lock"; \
