@@ -99,7 +99,7 @@ def test_the_uniform_player_retimes_until_the_zmp_keeps_its_margin(retargeted):
     robot, rt, frames, _, _ = retargeted
     cmds, player = _played(robot, frames, retiming="uniform", max_time_scale_rate=1.5)
     on_feet = [c for c in cmds if c.on_feet]
-    assert on_feet and min(c.margin_m for c in on_feet) >= 0.06 - 1e-3
+    assert on_feet and min(c.margin_at_scale_m for c in on_feet) >= 0.06 - 1e-3
     assert player.time_scale > 1.0, "the human's timing is too fast for the robot: the plan must be slowed"
     scales = np.array([c.time_scale for c in cmds])
     assert np.all(np.diff(scales) >= -1e-12) and np.all(np.diff(scales) <= 1.5 * 0.01 + 1e-9)
@@ -124,9 +124,11 @@ def test_the_local_player_is_slower_only_where_a_frame_needs_it(retargeted):
     assert np.all(scales >= need - MAX_TIME_SCALE_RATE * 0.01 - 1e-9), "a frame played faster than it can be"
     assert scales.max() > 1.5 and scales[-1] == 1.0
     assert np.mean(scales < 1.0 + 1e-9) > 0.3, "the human's timing wherever the robot can follow it"
-    on_feet = [c.margin_m for c in cmds if c.on_feet and player.frame_scale(int(round(c.t_plan_s / 0.01))) <
-               player.max_time_scale]
-    assert min(on_feet) >= 0.06 - 1e-3
+    on_feet = [c for c in cmds if c.on_feet]
+    assert min(c.margin_at_scale_m for c in on_feet if player.frame_scale(int(round(c.t_plan_s / 0.01))) <
+               player.max_time_scale) >= 0.06 - 1e-3
+    # the commands' own ZMP (the warp's changes of speed included) leaves the feet only briefly
+    assert np.mean([c.margin_m < 0 for c in on_feet]) < 0.05
     uniform, _ = _played(robot, frames, retiming="uniform")
     assert len(cmds) < 0.75 * len(uniform)
 

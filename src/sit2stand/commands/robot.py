@@ -112,7 +112,7 @@ def add_retarget(sub) -> None:
     p.add_argument("--params", default=None, help="identified COM parameters YAML (default: CAD)")
     p.add_argument("--plant", default=None, help="plant YAML (seated posture; default: the nominal plant)")
     p.add_argument("--human-com", default=None, help="bag with /human/com (default: the bag's, else estimated)")
-    p.add_argument("--margin", type=float, default=0.06, help="ZMP margin inside the feet [m]")
+    p.add_argument("--margin", type=float, default=0.04, help="ZMP margin inside the feet [m] (default 0.04)")
     p.add_argument("--time-scale", type=float, default=None, help="fixed time scale (default: adaptive)")
     p.add_argument("--max-time-scale", type=float,
                    help="the adaptive time scale's cap: at most this many times slower than the human "

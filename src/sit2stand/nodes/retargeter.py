@@ -19,10 +19,11 @@ the calibration overlays the first human frame on; then, with ``com_feedback``, 
 Parameters: ``plant``, ``controller_params`` (identified YAML; empty: CAD), ``margin_m``, ``lookahead_s``,
 ``smooth_frames``, ``max_joint_speed``, ``retiming`` (local | uniform), ``time_scale`` (0: adaptive; else fixed),
 ``max_time_scale`` (the adaptive one's cap), ``rate_hz``, ``com_wait_s``, ``wait_for_robot``, ``marker_map`` (YAML
-to write the calibration to), ``hold_s`` (exit this long after the plan ends; 0: never), ``input_timeout_s`` (marker frames waiting this long for
-a human COM end the node with an error), ``com_feedback`` and its gains ``com_feedback_kp``, ``_ki``, ``_kd``,
-``markers_every`` (5; 0: no markers), ``marker_set`` (as the human_com node's: which markers are the pelvis, the
-left knee, ankle and heel, and each marker's body part; :func:`sit2stand.retarget.calibration.marker_roles`).
+to write the calibration to), ``hold_s`` (exit this long after the plan ends; 0: never), ``input_timeout_s`` (marker
+frames waiting this long for a human COM end the node with an error), ``com_feedback`` and its gains
+``com_feedback_kp``, ``_ki``, ``_kd``, ``markers_every`` (5; 0: no markers), ``marker_set`` (as the human_com
+node's: which markers are the pelvis, the left knee, ankle and heel, and each marker's body part;
+:func:`sit2stand.retarget.calibration.marker_roles`).
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBO
                          ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC, ROBOT_RETARGET_IK_TOPIC, VIZ_MARKERS_TOPIC,
                          WORLD_FRAME, ros_name)
 from ..retarget.pacing import LiveConfig, LiveRetargeting, MarkerFrame, summary_line
-from ..retarget.player import DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S, Command
+from ..retarget.player import DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S, Command
 from ..retarget.stabiliser import StabiliserConfig
 from ..retarget.stream import robot_model, robot_setup
 from .markers import plan_markers
@@ -65,7 +66,7 @@ def _live_config(node: Node) -> LiveConfig:
     scale = declare(node, "time_scale", 0.0, "0: adaptive retiming; else a fixed time scale")
     return LiveConfig(
         rate_hz=declare(node, "rate_hz", 100.0, "marker rate [Hz]"),
-        margin_m=declare(node, "margin_m", 0.06, "ZMP margin inside the feet [m]"),
+        margin_m=declare(node, "margin_m", DEFAULT_MARGIN_M, "ZMP margin inside the feet [m]"),
         lookahead_s=declare(node, "lookahead_s", LOOKAHEAD_S, "look-ahead of the retiming [s]"),
         smooth_frames=declare(node, "smooth_frames", 21, "Savitzky-Golay window of the plan [frames]"),
         max_joint_speed=declare(node, "max_joint_speed", DEFAULT_MAX_JOINT_SPEED,

@@ -36,7 +36,7 @@ from ..robot.plant import Plant
 from ..robot.wbc import WbcGains
 from .dynamic import DynamicsFilter
 from .phases import Phases, find_phases
-from .player import DEFAULT_MAX_TIME_SCALE, SEAT_OFF_DWELL_S, PlanPlayer
+from .player import DEFAULT_MARGIN_M, DEFAULT_MAX_TIME_SCALE, SEAT_OFF_DWELL_S, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig
 from .calibration import map_frame
 from .stream import RetargetConfig, Retargeter, retarget_sequence, robot_model, robot_setup
@@ -85,7 +85,7 @@ def _cropped(trial: Trial, keep: np.ndarray) -> Trial:
 
 
 def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None = None,
-        human_com_bag: Path | None = None, margin_m: float = 0.06, time_scale: float | None = None,
+        human_com_bag: Path | None = None, margin_m: float = DEFAULT_MARGIN_M, time_scale: float | None = None,
         max_time_scale: float = DEFAULT_MAX_TIME_SCALE, simulate: bool = False, config: RetargetConfig | None = None,
         com_feedback: bool = True, stabiliser: StabiliserConfig | None = None, whole: bool = False,
         dynamic: bool = False, controller: str = "inverse_dynamics", seat_off_dwell_s: float = SEAT_OFF_DWELL_S,
@@ -133,7 +133,14 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     player = PlanPlayer(robot.model, dt, robot.support_xy, margin_m=margin_m, fixed_time_scale=time_scale,
                         max_time_scale=max_time_scale, seat_off_dwell_s=seat_off_dwell_s, dynamics=dynamics,
                         retiming=retiming)
-    frames, cmds = retarget_sequence(rt, player, trial.marker_t_s, trial.positions, trial.valid, com_h, fz)
+    frames, cmds = retarget_sequence(rt, player, trial.marker_t_s, trial.positions, trial.valid, com_h, fz,
+                                     pull=sim is None)
+    simulated = {}
+    if sim is not None:      # the commands pulled as the robot moves: a robot that trails its plan slows it
+        com_feedback = com_feedback and controller != "wbc"      # the torque controller has its own COM task
+        stab = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, stabiliser) if com_feedback else None
+        cmds, simulated = _simulate(sim, player, dt, out, stabiliser=stab, controller=controller)
+        simulated = {"com_feedback": bool(com_feedback), "controller": controller, **simulated}
     ik_ms = np.array([f.ik.seconds for f in frames]) * 1e3
     feasible = np.array([f.ik.feasible for f in frames])
     com_err = np.array([f.ik.com_error_m for f in frames])
@@ -148,7 +155,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         "time_scale": len(cmds) / max(1, len(frames)), "time_scale_peak": max(c.time_scale for c in cmds),
         "retiming": "fixed" if time_scale else retiming, "commands": len(cmds), "plan_duration_s": len(cmds) * dt,
         "duration_ratio": len(cmds) / max(1, len(frames)), **_filter_summary(cmds),
-        "min_zmp_margin_on_feet_m": float(min(c.margin_m for c in on_feet)) if on_feet else None,
+        **_zmp_summary(on_feet), **_com_deviation(frames, cmds),
         "human_seat_off_frame": next((i for i, f in enumerate(frames) if f.human_seat_off), None),
         "robot_seat_off_frame": next((i for i, f in enumerate(frames) if not f.seated), None),
         "lead_in_frames": int(sum(f.t_s < trial.marker_t_s[0] for f in frames)),
@@ -156,16 +163,33 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
                    "standing_s": phases.standing_s, "sit_down_s": phases.sit_down_s,
                    "played": "whole trial" if whole or phases.sit_down_s is None else "rise and stand"},
     }
+    summary.update(simulated)
     _write_bag(out / "retarget", cmds, robot.joint_names, float(trial.marker_t_s[0]), dt)
-    if sim is not None:
-        com_feedback = com_feedback and controller != "wbc"      # the torque controller has its own COM task
-        stab = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, stabiliser) if com_feedback else None
-        summary["com_feedback"] = bool(com_feedback)
-        summary["controller"] = controller
-        summary.update(_simulate(sim, cmds, dt, out, stabiliser=stab, controller=controller))
     _figure(trial, com_h, frames, cmds, dt, out / "retarget.png", summary)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
+
+
+def _com_deviation(frames, cmds) -> dict:
+    """The played plan's forward COM against the COM map's target (the human's mapped COM) at the human time each
+    command plays [m]: RMS and largest (x only: after seat-off y is the feet's middle, not the human's)."""
+    if not cmds:
+        return {}
+    t = np.array([f.t_s for f in frames])
+    target_x = np.array([f.com_target[0] for f in frames])
+    dev = np.array([c.com[0] for c in cmds]) - np.interp([t[0] + c.t_plan_s for c in cmds], t, target_x)
+    return {"com_deviation_rms_m": float(np.sqrt(np.mean(dev**2))), "com_deviation_max_m": float(np.abs(dev).max())}
+
+
+def _zmp_summary(on_feet: list) -> dict:
+    """The planned ZMP off the chair: the retiming's criterion (each frame at its time scale) and the commands' own
+    ZMP, whose accelerations include the time warp's changes of speed."""
+    if not on_feet:
+        return {"min_zmp_margin_on_feet_m": None}
+    own = np.array([c.margin_m for c in on_feet])
+    return {"min_zmp_margin_on_feet_m": float(min(c.margin_at_scale_m for c in on_feet)),
+            "zmp_margin_with_warp_p5_m": float(np.percentile(own, 5)),
+            "zmp_outside_feet_share": float(np.mean(own < 0))}
 
 
 def _filter_summary(cmds) -> dict:
@@ -201,25 +225,33 @@ def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float)
                     ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, WORLD_FRAME), point=M.point(*c.zmp)))
 
 
-def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0,
-              stabiliser: ComStabiliser | None = None, controller: str = "inverse_dynamics") -> dict:
-    """Drive the plant with the commands (PD + inverse-dynamics feed-forward), then hold the last one. Writes
-    ``simulation.npy``: t, true COM (3), planned COM (3), COP (3), pelvis z, pelvis x, planned pelvis x, largest joint
-    tracking error [rad] and its joint index, chair force [N], COM of the measured state with the controller's model
-    (3), COM feedback offset (x, y) [m]. ``stabiliser``: a :class:`~sit2stand.retarget.stabiliser.ComStabiliser`
-    correcting each command for the plant's measured state (None: the commands as planned)."""
+def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3.0,
+              stabiliser: ComStabiliser | None = None, controller: str = "inverse_dynamics") -> tuple[list, dict]:
+    """Drive the plant with the player's commands (PD + inverse-dynamics feed-forward), pulled one per frame period
+    with the robot's lag behind the plan (the COM feedback's error), then hold the last one. Returns (commands,
+    figures). Writes ``simulation.npy``: t, true COM (3), planned COM (3), COP (3), pelvis z, pelvis x, planned
+    pelvis x, largest joint tracking error [rad] and its joint index, chair force [N], COM of the measured state
+    with the controller's model (3), COM feedback offset (x, y) [m]. ``stabiliser``: a
+    :class:`~sit2stand.retarget.stabiliser.ComStabiliser` correcting each command for the plant's measured state
+    (None: the commands as planned)."""
     steps = max(1, int(round(dt / plant.cfg.timestep_s)))
-    rows = []
-    offset = np.zeros(2)
-    for k in range(len(cmds) + int(hold_s / dt)):
-        c = cmds[min(k, len(cmds) - 1)]
-        if k < len(cmds):         # then the last one is held (as the driver does when the retargeter stops)
+    rows, cmds, torque = [], [], []
+    offset, lag = np.zeros(2), 0.0
+    held = 0
+    while held < int(hold_s / dt):
+        if not player.done:
+            c = player.pull(lag_m=lag)
+            cmds.append(c)
             q = c.q
             if stabiliser is not None:
                 fix = stabiliser.correct(c.q, c.com, plant.pin_configuration(plant.data.qpos), c.on_feet, dt)
-                q, offset = fix.q, fix.offset_m
+                q, offset, lag = fix.q, fix.offset_m, float(np.linalg.norm(fix.error_m))
             plant.command(q[7:], c.v[6:], c.a[6:], feedforward=controller)
+        else:           # the last command held, as the driver does when the retargeter stops
+            held += 1
         plant.step(steps)
+        demand = np.abs(plant.data.actuator_force[plant.pd_ids] + plant.data.actuator_force[plant.ff_ids])
+        torque.append(demand / plant.effort)
         s = plant.sensors()
         err = plant.data.qpos[plant.qadr] - plant.q_ref
         rows.append([plant.t_s, *plant.true_com(), *c.com,
@@ -227,16 +259,27 @@ def _simulate(plant, cmds, dt: float, out: Path, hold_s: float = 3.0,
                      float(np.abs(err).max()), float(np.argmax(np.abs(err))), plant.chair_force_n(),
                      *pin.centerOfMass(plant.ctrl, plant.ctrl_data, plant.pin_configuration(plant.data.qpos)), *offset])
         if plant.fallen:
+            while not player.done:      # the rest of the plan, for its bag and figures
+                cmds.append(player.pull())
             break
     arr = np.array(rows)
     np.save(out / "simulation.npy", arr)
     stand_z = float(cmds[-1].q[2])
     stood = (not plant.fallen) and arr[-1, 10] > stand_z - 0.08 and arr[-1, 10] > arr[0, 10] + 0.2
     err = arr[:, 1:4] - arr[:, 4:7]
-    return {"stood_up": bool(stood), "fall": plant.status_text if plant.fallen else None,
-            "pelvis_final_m": float(arr[-1, 10]), "pelvis_planned_final_m": stand_z,
-            "com_tracking_rms_m": float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))),
-            "com_feedback_max_offset_m": float(np.abs(arr[:, 19:21]).max()), **_qp_times(plant)}
+    return cmds, {"stood_up": bool(stood), "fall": plant.status_text if plant.fallen else None,
+                  "pelvis_final_m": float(arr[-1, 10]), "pelvis_planned_final_m": stand_z,
+                  "com_tracking_rms_m": float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))),
+                  "com_feedback_max_offset_m": float(np.abs(arr[:, 19:21]).max()), **_torques(plant, np.array(torque)),
+                  **_qp_times(plant)}
+
+
+def _torques(plant, demand: np.ndarray) -> dict:
+    """The joint torques the controller asked for (servo + feed-forward) over the URDF limits, once per command:
+    the peak, its joint, and the share of commands with some joint clamped at its limit."""
+    k = np.unravel_index(np.argmax(demand), demand.shape)
+    return {"torque_demand_peak_ratio": float(demand[k]), "torque_demand_peak_joint": plant.joint_names[k[1]],
+            "torque_saturated_share": float(np.mean((demand >= 0.999).any(axis=1)))}
 
 
 def _qp_times(plant) -> dict:

@@ -17,6 +17,7 @@ Times: stamps [s] of the capture clock; wall times [s] from ``time.monotonic`` /
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections import deque
 from collections.abc import Callable
@@ -25,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..io.messages import reorder_markers
-from .player import DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S, Command, PlanPlayer
+from .player import DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S, Command, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig
 from .stream import RetargetConfig, Retargeter, RobotSetup
 
@@ -166,7 +167,7 @@ class LiveConfig:
     """The live retargeting's settings (the node's parameters)."""
 
     rate_hz: float = 100.0
-    margin_m: float = 0.06
+    margin_m: float = DEFAULT_MARGIN_M
     lookahead_s: float = LOOKAHEAD_S
     smooth_frames: int = 21
     max_joint_speed: float = DEFAULT_MAX_JOINT_SPEED
@@ -204,6 +205,7 @@ class LiveRetargeting:
         self.names: list[str] = []
         self.infeasible = self.skipped = self.processed = self.state_stale = self.lead_in_frames = 0
         self.feedback_max_m = 0.0
+        self.lag_m = 0.0              # the robot's COM behind the plan's at the last command [m]
         self.last_frame_s = 0.0       # time.monotonic of the last frame processed
 
     def start(self, robot: RobotSetup, frame: MarkerFrame, com_m: np.ndarray):
@@ -267,7 +269,7 @@ class LiveRetargeting:
 
     def pull_and_send(self) -> float | None:
         """Send the plan's next command (corrected by the COM feedback), if it has one; returns when it went."""
-        cmd = self.player.pull()
+        cmd = self.player.pull(lag_m=self.lag_m)     # a robot that trails its plan slows it (the player)
         if cmd is None:
             return None
         offset = None
@@ -275,9 +277,9 @@ class LiveRetargeting:
             q_measured = self.measured_q()
             self.state_stale += q_measured is None and cmd.on_feet
             fix = self.stabiliser.correct(cmd.q, cmd.com, q_measured, cmd.on_feet, 1.0 / self.cfg.rate_hz)
-            cmd = Command(cmd.t_plan_s, fix.q, cmd.v, cmd.a, cmd.time_scale, cmd.com, cmd.zmp, cmd.margin_m,
-                          cmd.on_feet)
+            cmd = dataclasses.replace(cmd, q=fix.q)
             offset = fix.offset_m
+            self.lag_m = float(np.linalg.norm(fix.error_m)) if q_measured is not None else 0.0
             self.feedback_max_m = max(self.feedback_max_m, float(np.abs(offset).max()))
         return self.send(cmd, offset)
 

@@ -23,6 +23,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.signal import savgol_coeffs   # at import: a live node's first frames must not pay for it
 
+from ..dynamics import model_cop
 from ..errors import InputError
 from ..robot.plant import contact_feedforward
 from .dynamic import DynamicsFilter, FilterReport
@@ -35,17 +36,28 @@ DEFAULT_MAX_JOINT_SPEED = 4.0
 """The plan's joint speed limit [rad/s]: the IK's own (:class:`~sit2stand.retarget.stream.RetargetConfig`), so that
 by default the torques, not a speed, decide where time is stretched. The uniform player of the first round needed
 0.6 to stand the robot up."""
-SEAT_OFF_DWELL_S = 0.5
-"""The player's wait at the robot's seat-off [s]: the COM feedback settles the COM over the feet before the hips
-lift (measured: the real child trial under CAD's parameters, whose COM is 3 cm off the robot's, fell with none and
-stood with 0.5 s; the first round's uniform player waited 1 s)."""
-MAX_TIME_SCALE_RATE = 3.0
-"""How fast the time scale may change [1/s of robot time]: faster changes add a COM acceleration of the order of the
-COM speed times the rate, which moves the ZMP."""
-LOOKAHEAD_S = 1.0
+SEAT_OFF_DWELL_S = 0.0
+"""The player's fixed wait at the robot's seat-off [s]; none by default: the lag of the robot behind the plan slows
+the plan instead (``pull(lag_m=...)``). The first round's uniform player waited 1 s."""
+LAG_DEADBAND_M = 0.01
+LAG_GAIN_PER_M = 100.0
+"""Off the chair, a robot whose COM trails the plan's by more than ``LAG_DEADBAND_M`` slows the plan to at least
+1 + ``LAG_GAIN_PER_M`` x the excess (2x at 2 cm): the plan waits for the robot. Measured: the real child trial
+under CAD's parameters (its true COM 2.5 cm behind the model's) fell at the human's timing after seat-off, the COM
+feedback at its bound; a fixed 0.5 s wait at seat-off made it stand."""
+MAX_TIME_SCALE_RATE = 20.0
+"""How fast the time scale may change [1/s of robot time]. A change adds v_plan * d(1/s)/dt to the accelerations,
+which the commands carry and their ZMP includes; ramps are what local retiming costs (measured on the shipped
+rises with a 4 cm margin: duration ratio natural 1.66 / elderly 1.37 at 3/s, 1.25 / 1.13 at 10/s, 1.19 / 1.09 at
+20/s, all standing)."""
+LOOKAHEAD_S = 0.5
 """How far ahead of the playback point the player knows the plan [s]: enough for the local time scale to ramp from
-1 to ``DEFAULT_MAX_TIME_SCALE`` at ``MAX_TIME_SCALE_RATE`` before the frame that needs it; live, the commands lag
-the human by this much more."""
+1 to ``DEFAULT_MAX_TIME_SCALE`` at ``MAX_TIME_SCALE_RATE`` before the frame that needs it (0.15 s); live, the
+commands lag the human by this much more."""
+DEFAULT_MARGIN_M = 0.04
+"""The ZMP's margin inside the feet [m]: what joint PD with an inverse-dynamics feed-forward was measured to need
+(../shared/notes/robot-talos.md); the uniform player used 6 cm."""
+TORQUE_ROOM_MIN = 0.1
 RETIMING = ("local", "uniform")
 
 
@@ -59,9 +71,11 @@ class Command:
     a: np.ndarray                # (nv,)
     time_scale: float
     com: np.ndarray              # planned COM [m]
-    zmp: np.ndarray              # planned ZMP [m] on the floor at this time scale
-    margin_m: float              # ZMP distance inside the feet (negative: outside); inf while seated
+    zmp: np.ndarray              # the command's ZMP [m] on the floor (its accelerations, time warp included)
+    margin_m: float              # its distance inside the feet (negative: outside); inf while seated
     on_feet: bool
+    margin_at_scale_m: float = np.inf   # the frame's ZMP margin played uniformly at this time scale: the retiming's
+    #                                     criterion (the warp's change of speed left out)
     com_kinematic: np.ndarray | None = None   # the kinematic plan's COM [m], when a dynamics filter changed it
     filter: FilterReport | None = None        # what the dynamics filter did
 
@@ -74,7 +88,7 @@ class PlanPlayer:
     timing); ``max_time_scale`` caps the adaptation. ``torque_limited``: the torques count in each frame's factor
     (the model's URDF effort limits)."""
 
-    def __init__(self, model: pin.Model, dt: float, polygon_xy: np.ndarray, *, margin_m: float = 0.06,
+    def __init__(self, model: pin.Model, dt: float, polygon_xy: np.ndarray, *, margin_m: float = DEFAULT_MARGIN_M,
                  lookahead_s: float = LOOKAHEAD_S, smooth_frames: int = 21,
                  max_time_scale: float = DEFAULT_MAX_TIME_SCALE, max_time_scale_rate: float = MAX_TIME_SCALE_RATE,
                  fixed_time_scale: float | None = None,
@@ -182,7 +196,7 @@ class PlanPlayer:
         static = contact_feedforward(self.model, self.data, self._q[k], self._v[k][6:], self._a[k][6:], False, seated)
         motion = tau - static
         room = self.torque_limits - np.sign(motion) * static
-        need = np.where(room > 0, np.abs(motion) / np.maximum(room, 1e-9), 0.0)
+        need = np.where(room > 0, np.abs(motion) / np.maximum(room, TORQUE_ROOM_MIN * self.torque_limits), 0.0)
         return float(np.sqrt(max(1.0, need.max())))
 
     def required_scale(self, frames: range) -> float:
@@ -194,7 +208,9 @@ class PlanPlayer:
         known = len(self._v)
         return self.finished or known >= self.lookahead + 2
 
-    def pull(self) -> Command | None:
+    def pull(self, lag_m: float = 0.0) -> Command | None:
+        """The next command; ``lag_m``: how far the robot's measured COM trails the plan's [m] (0: unknown), which
+        slows the local plan once the robot is off the chair (``LAG_DEADBAND_M``, ``LAG_GAIN_PER_M``)."""
         known = len(self._v)
         if known < 1 or (not self.started and not self.ready()):
             return None
@@ -205,9 +221,11 @@ class PlanPlayer:
             # local: just in time for each frame about to be played (its own scale less what the bounded rate of
             # change can add before it is reached; plan time is a lower bound on the robot's), back down after
             ahead = range(int(self.u), min(known, int(self.u) + self.lookahead + 1))
+            off_chair = self._feet[min(int(self.u), known - 1)]
+            wait = 1.0 + LAG_GAIN_PER_M * max(0.0, lag_m - LAG_DEADBAND_M) if off_chair else 1.0
             self.time_scale_goal = min(self.max_time_scale, max(
-                [1.0] + [self._s_req[k] - self.max_time_scale_rate * max(0.0, k - self.u) * self.dt
-                         for k in ahead if k < len(self._s_req)]))
+                [wait] + [self._s_req[k] - self.max_time_scale_rate * max(0.0, k - self.u) * self.dt
+                          for k in ahead if k < len(self._s_req)]))
         elif self.fixed_time_scale is None:
             ahead = range(int(self.u), min(known, int(self.u) + self.lookahead + 1))
             self.time_scale_goal = max(self.time_scale_goal, self.required_scale(ahead))
@@ -235,14 +253,17 @@ class PlanPlayer:
         u_ddot = 0.0 if hold else -s_dot / self.time_scale**2
         v = v_plan * u_dot
         a = a_plan * u_dot**2 + v_plan * u_ddot
-        com, acom, dl = self._dyn[k]
-        zmp = zmp_at_scale(com[None], acom[None], dl[None], self.mass, self.time_scale)[0] if not hold else \
-            np.array([com[0], com[1], 0.0])
+        # the command's own ZMP: its accelerations carry the time warp's change of speed too
+        com, _, _, zmp = model_cop(self.model, self.data, q, v, a)
         on_feet = self._feet[k]
         margin = float(support_margin(zmp[None, :2], self.polygon)[0]) if on_feet else np.inf
         if not hold:
             self.u += u_dot
-        cmd = Command(k * self.dt + frac * self.dt, q, v, a, self.time_scale, com, zmp, margin, on_feet)
+        criterion = np.inf
+        if on_feet:
+            zmp_s = zmp_at_scale(*(x[None] for x in self._dyn[k]), self.mass, self.time_scale)
+            criterion = float(support_margin(zmp_s[:, :2], self.polygon)[0])
+        cmd = Command(k * self.dt + frac * self.dt, q, v, a, self.time_scale, com, zmp, margin, on_feet, criterion)
         return cmd if self.dynamics is None else self._filtered(cmd, k)
 
     def seconds_to_seat_off(self, k: int) -> float | None:

@@ -364,12 +364,16 @@ class Retargeter:
 
 
 def retarget_sequence(retargeter: Retargeter, player: PlanPlayer, t_s: np.ndarray, positions_m: np.ndarray,
-                      valid: np.ndarray, human_com_m: np.ndarray, chair_force_n: np.ndarray | None = None
-                      ) -> tuple[list[RetargetFrame], list[Command]]:
+                      valid: np.ndarray, human_com_m: np.ndarray, chair_force_n: np.ndarray | None = None,
+                      pull: bool = True) -> tuple[list[RetargetFrame], list[Command]]:
     """A whole recorded demonstration through a calibrated ``retargeter`` and a ``player``, as the node streams it:
     one pull per frame, then the rest of the (retimed) plan; a recording that starts after the human left the seat
-    is led in first (:meth:`Retargeter.lead_in`). Returns (frames, commands), lead-in frames included."""
+    is led in first (:meth:`Retargeter.lead_in`). Returns (frames, commands), lead-in frames included. ``pull``
+    False: the poses only (the player closed, its commands left for a caller that pulls them with the robot's lag,
+    as :func:`sit2stand.retarget.offline.run` does when it simulates)."""
     frames, cmds = [], []
+    if not pull:
+        player = _PushOnly(player)
     vx0 = float(np.gradient(human_com_m[:, 0], t_s)[0]) if len(t_s) > 1 else 0.0
     for f in retargeter.lead_in(float(t_s[0]), float(np.median(np.diff(t_s))), positions_m[0], valid[0],
                                 human_com_m[0], vx0):
@@ -387,6 +391,17 @@ def retarget_sequence(retargeter: Retargeter, player: PlanPlayer, t_s: np.ndarra
         if c is not None:
             cmds.append(c)
     player.close()
-    while not player.done:
+    while pull and not player.done:
         cmds.append(player.pull())
     return frames, cmds
+
+
+class _PushOnly:
+    """A player whose pulls give nothing (the commands are pulled later)."""
+
+    def __init__(self, player: PlanPlayer) -> None:
+        self.push, self.close = player.push, player.close
+
+    @staticmethod
+    def pull() -> None:
+        return None
