@@ -67,7 +67,7 @@ def test_aggregate_counts_success_and_the_share_at_human_speed():
     assert agg["share_stood_time_scale_le_1_5"] == pytest.approx(1 / 3)     # the fallen fast case does not count
     assert agg["time_scale"]["max"] == 4.0 and agg["time_scale"]["median"] == 1.2
     assert agg["by_style"] == {"natural": "1/1", "elderly": "1/1", "fast": "0/1"}
-    assert agg["torque_ratio_peak"]["median"] is None      # not measured: reported as such, not as 0
+    assert agg["torque_demand_peak_ratio"]["median"] is None      # not measured: reported as such, not as 0
 
 
 def test_a_body_the_synthesiser_refuses_is_left_out_of_the_robots_rates():

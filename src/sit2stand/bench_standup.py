@@ -16,10 +16,9 @@ default plant with the identified parameters, its other options at their default
 --params P --simulate`` does). Per case: stood up, ``time_scale`` and ``duration_ratio`` (robot / human duration)
 from the summary, COM tracking RMS (robot's true COM against the plan), the plan's forward COM deviation from the
 mapped human COM (the retargeter's COM target, compared at the human time each command plays), the peak joint
-torque the controller asks for (PD + feed-forward) over the URDF effort limit, the share of physics steps with
-some joint clamped at its limit (from the plan's first command to the end of the hold), and wall time.
-The last three come from wrapping :func:`~sit2stand.retarget.stream.retarget_sequence` and the plant's ``step`` for
-the run; where either is gone the figure is reported as not available.
+torque the controller asks for (PD + feed-forward) over the URDF effort limit, the share of commands with some
+joint clamped at its limit, the share of off-chair commands whose own ZMP leaves the feet, all from ``run``'s
+summary, and wall time.
 
 Writes ``DIR/bench_standup.json`` (cases and aggregate) and each case's retarget folder under ``DIR/cases/``.
 """
@@ -27,7 +26,6 @@ Writes ``DIR/bench_standup.json`` (cases and aggregate) and each case's retarget
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import json
 import math
@@ -110,82 +108,6 @@ def sample_population(n: int, seed: int = 0, styles: tuple[str, ...] = STYLES) -
     return cases
 
 
-class _Probe:
-    """What :func:`sit2stand.retarget.offline.run` keeps to itself: its frames and commands, and the plant's peak
-    joint torque over its effort limit, sampled at every physics step."""
-
-    def __init__(self) -> None:
-        self.frames = self.cmds = None
-        self._reset_torque()
-
-    def _reset_torque(self) -> None:
-        self.torque_ratio: float | None = None      # peak |PD + feed-forward| / effort, before the joint's clamp
-        self.torque_joint: str | None = None
-        self.steps = self.saturated_steps = 0       # physics steps; those with some joint clamped at its limit
-
-    def torque(self) -> dict:
-        """The peak torque demand over the limit, its joint, and the share of steps with a joint saturated."""
-        share = self.saturated_steps / self.steps if self.steps else None
-        return {"torque_ratio_peak": self.torque_ratio, "torque_peak_joint": self.torque_joint,
-                "torque_saturated_share": share}
-
-    @contextlib.contextmanager
-    def attached(self):
-        """Wrap ``offline.retarget_sequence`` and ``offline.Plant`` for the duration of one run."""
-        saved = {k: getattr(offline, k) for k in ("retarget_sequence", "Plant") if hasattr(offline, k)}
-        if "retarget_sequence" in saved:
-            offline.retarget_sequence = self._sequence(saved["retarget_sequence"])
-        if "Plant" in saved:
-            offline.Plant = self._plant_class(saved["Plant"])
-        try:
-            yield self
-        finally:
-            for k, v in saved.items():
-                setattr(offline, k, v)
-
-    def _sequence(self, inner):
-        def sequence(*args, **kwargs):
-            self._reset_torque()          # the plant's settling on the chair, before the plan, is not counted
-            self.frames, self.cmds = inner(*args, **kwargs)
-            return self.frames, self.cmds
-        return sequence
-
-    def _plant_class(self, base):
-        probe = self
-
-        class WatchedPlant(base):
-            def step(self, n: int = 1) -> None:
-                for _ in range(n):
-                    super().step(1)
-                    probe._watch(self)
-        return WatchedPlant
-
-    def _watch(self, plant) -> None:
-        """One physics step's torques: the servo's and the motor's sum, which the joint clamps at the effort."""
-        d = plant.data
-        demand = np.abs(d.actuator_force[plant.pd_ids] + d.actuator_force[plant.ff_ids]) / plant.effort
-        k = int(np.argmax(demand))
-        if self.torque_ratio is None or demand[k] > self.torque_ratio:
-            self.torque_ratio, self.torque_joint = float(demand[k]), plant.joint_names[k]
-        self.steps += 1
-        self.saturated_steps += bool(np.any(np.abs(d.qfrc_actuator[plant.vadr]) >= 0.999 * plant.effort))
-
-    def com_deviation(self) -> dict:
-        """The plan's forward COM against the mapped human COM (the retargeter's target) at the human time each
-        command plays [m]: RMS and max (the target's x only: y is the feet's middle after seat-off, not the
-        human's); the per-frame IK's own max; None where the frames were not seen."""
-        if not self.frames or not self.cmds:
-            return {"com_dev_plan_rms_m": None, "com_dev_plan_max_m": None, "com_dev_ik_max_m": None}
-        t = np.array([f.t_s for f in self.frames])
-        t = t - t[0]                  # a command's t_plan_s counts from the first frame pushed to the player
-        target_x = np.array([f.com_target[0] for f in self.frames])
-        t_plan = np.array([c.t_plan_s for c in self.cmds])
-        dev = np.array([c.com[0] for c in self.cmds]) - np.interp(t_plan, t, target_x)
-        ik = np.array([f.com[0] for f in self.frames]) - target_x
-        return {"com_dev_plan_rms_m": float(np.sqrt(np.mean(dev**2))), "com_dev_plan_max_m": float(np.abs(dev).max()),
-                "com_dev_ik_max_m": float(np.abs(ik).max())}
-
-
 def synthesise(case: Case, attempts: int = SYNTH_ATTEMPTS):
     """The case's demonstration and the seed that made it. The synthesiser refuses some random segment proportions
     (``ValueError``, e.g. chair and feet plates overlapping: with ``vary_subject`` off every stature, seat and style
@@ -203,27 +125,27 @@ def run_case(case: Case, out: Path, params: Path | None) -> dict:
     ``stage: synthesis`` where the synthesiser refused every seed: no robot run to judge)."""
     t0 = time.monotonic()
     row: dict = {"case": dataclasses.asdict(case), "stood_up": False}
-    probe = _Probe()
     shutil.rmtree(out / case.name, ignore_errors=True)     # the retarget bag inside is never overwritten
     try:
         with tempfile.TemporaryDirectory(prefix="sit2stand-bench-") as tmp:
             demo, row["synth_seed"] = synthesise(case)
             write_demonstration_bag(demo, Path(tmp) / case.name)
-            with probe.attached():
-                summary = offline.run(Path(tmp) / case.name, out / case.name, params=params,
-                                      plant=plant_path("default"), simulate=True)
+            summary = offline.run(Path(tmp) / case.name, out / case.name, params=params,
+                                  plant=plant_path("default"), simulate=True)
         row.update(_figures(summary, demo.rise_end_s - demo.rise_start_s))
     except Exception as exc:  # noqa: BLE001 - a case that breaks is a result too: recorded, the population goes on
         row["error"] = f"{type(exc).__name__}: {exc}"
         row["stage"] = "synthesis" if "synth_seed" not in row else "robot"
-    row.update(probe.com_deviation(), **probe.torque(), wall_s=round(time.monotonic() - t0, 1))
+    row["wall_s"] = round(time.monotonic() - t0, 1)
     return row
 
 
 def _figures(summary: dict, human_rise_s: float) -> dict:
     """The summary's figures this benchmark reports."""
-    keys = ("stood_up", "fall", "time_scale", "duration_ratio", "plan_duration_s", "com_tracking_rms_m",
-            "infeasible_frames", "frames", "min_zmp_margin_on_feet_m", "parameters")
+    keys = ("stood_up", "fall", "time_scale", "time_scale_peak", "duration_ratio", "plan_duration_s",
+            "com_tracking_rms_m", "com_deviation_rms_m", "com_deviation_max_m", "torque_demand_peak_ratio",
+            "torque_demand_peak_joint", "torque_saturated_share", "infeasible_frames", "frames",
+            "min_zmp_margin_on_feet_m", "zmp_outside_feet_share", "parameters")
     return {"human_rise_s": round(human_rise_s, 3), **{k: summary.get(k) for k in keys}}
 
 
@@ -257,9 +179,9 @@ def aggregate(rows: list[dict]) -> dict:
         "share_stood_time_scale_le_1_5": len(fast_enough) / n if n else None,
         "share_stood_duration_ratio_le_1_5": len(ratio_ok) / n if n else None,
         "com_tracking_rms_m": _spread(col("com_tracking_rms_m", lambda r: r.get("stood_up"))),
-        "com_dev_plan_rms_m": _spread(col("com_dev_plan_rms_m")),
-        "com_dev_plan_max_m": _spread(col("com_dev_plan_max_m")),
-        "torque_ratio_peak": _spread(col("torque_ratio_peak")),
+        "com_deviation_rms_m": _spread(col("com_deviation_rms_m")),
+        "com_deviation_max_m": _spread(col("com_deviation_max_m")),
+        "torque_demand_peak_ratio": _spread(col("torque_demand_peak_ratio")),
         "torque_saturated_cases": sum((r.get("torque_saturated_share") or 0) > 0 for r in rows),
         "torque_saturated_share": _spread(col("torque_saturated_share")),
         "wall_s": {**_spread(col("wall_s")), "total": float(sum(col("wall_s")))},
@@ -278,16 +200,16 @@ def case_line(r: dict) -> str:
     redrawn = "*" if r.get("synth_seed") not in (None, c["seed"]) else " "
     return (f"{c['index']:>3} {c['style']:<7}{redrawn} {c['height_m']:5.2f} {c['mass_kg']:5.1f} {c['sex'][0]} "
             f"{c['seat_height_m']:5.3f} {c['rise_s']:4.2f} | {outcome:<5} {_fmt(r.get('time_scale')):>5} "
-            f"{_fmt(r.get('duration_ratio')):>5} {_fmt(r.get('com_dev_plan_rms_m'), 100, '.1f'):>5} "
-            f"{_fmt(r.get('com_dev_plan_max_m'), 100, '.1f'):>5} {_fmt(r.get('com_tracking_rms_m'), 100, '.2f'):>5} "
-            f"{_fmt(r.get('torque_ratio_peak')):>5} {_fmt(r.get('torque_saturated_share'), 100, '.0f'):>5} "
+            f"{_fmt(r.get('duration_ratio')):>5} {_fmt(r.get('com_deviation_rms_m'), 100, '.1f'):>5} "
+            f"{_fmt(r.get('com_deviation_max_m'), 100, '.1f'):>5} {_fmt(r.get('com_tracking_rms_m'), 100, '.2f'):>5} "
+            f"{_fmt(r.get('torque_demand_peak_ratio')):>5} {_fmt(r.get('torque_saturated_share'), 100, '.0f'):>5} "
             f"{r['wall_s']:6.1f}"
             + (f"  {r['error'][:80]}" if "error" in r else ""))
 
 
 TABLE_HEAD = ("  # style    H [m] m[kg] s seat  rise | out   scale ratio dvRMS dvMax trkRMS tauPk  sat%  wall_s\n"
               "                                      | COM in cm (dv: plan vs mapped human, forward); tauPk: demand"
-              " / limit; sat%: steps clamped")
+              " / limit; sat%: commands clamped")
 
 
 def summary_text(agg: dict) -> str:
@@ -305,9 +227,9 @@ def summary_text(agg: dict) -> str:
         f"stood with time_scale <= 1.5: {_fmt(agg['share_stood_time_scale_le_1_5'], 100, '.0f')} %; with "
         f"duration_ratio <= 1.5: {_fmt(agg['share_stood_duration_ratio_le_1_5'], 100, '.0f')} % (target 90 %)",
         f"COM tracking RMS (stood) [cm]  {s(agg['com_tracking_rms_m'], 100)}",
-        f"COM plan vs mapped human, RMS [cm]  {s(agg['com_dev_plan_rms_m'], 100)}",
-        f"peak torque demand / limit  {s(agg['torque_ratio_peak'])}; a joint clamped at its limit in "
-        f"{agg['torque_saturated_cases']} cases; share of steps clamped "
+        f"COM plan vs mapped human, RMS [cm]  {s(agg['com_deviation_rms_m'], 100)}",
+        f"peak torque demand / limit  {s(agg['torque_demand_peak_ratio'])}; a joint clamped at its limit in "
+        f"{agg['torque_saturated_cases']} cases; share of commands clamped "
         f"{s(agg['torque_saturated_share'], 100, '.0f')} %",
         f"wall per case [s]  {s(agg['wall_s'], 1, '.0f')}; total {agg['wall_s']['total']:.0f} s"])
 
