@@ -303,7 +303,8 @@ class LiveRetargeting:
             "recent robot state")
         return {"frames": str(self.processed), "infeasible_frames": str(self.infeasible),
                 "skipped_frames": str(self.skipped),
-                "time_scale": f"{self.player.time_scale:.2f}" if self.player else "nan",
+                # the robot's duration over the human's, as sit2stand retarget's summary has it
+                "time_scale": f"{self.player.duration_ratio:.2f}" if self.player else "nan",
                 **self.latency.figures(), "com_feedback": feedback}
 
 

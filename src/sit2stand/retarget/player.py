@@ -126,6 +126,7 @@ class PlanPlayer:
         self.dynamics = dynamics
         self.local = retiming == "local"
         self.torque_limits = model.effortLimit[6:].copy() if torque_limited else None
+        self.pulled = 0               # commands played
 
     # -- input -------------------------------------------------------------------------------------------------
     def push(self, q: np.ndarray, on_feet: bool) -> None:
@@ -259,6 +260,7 @@ class PlanPlayer:
         margin = float(support_margin(zmp[None, :2], self.polygon)[0]) if on_feet else np.inf
         if not hold:
             self.u += u_dot
+        self.pulled += 1
         criterion = np.inf
         if on_feet:
             zmp_s = zmp_at_scale(*(x[None] for x in self._dyn[k]), self.mass, self.time_scale)
@@ -282,6 +284,12 @@ class PlanPlayer:
         zmp = np.array([cop[0], cop[1], 0.0]) if np.all(np.isfinite(cop[:2])) else np.array([com[0], com[1], 0.0])
         return Command(cmd.t_plan_s, q, v, a, cmd.time_scale, com, zmp, dyn.margin(cop, cmd.on_feet), cmd.on_feet,
                        com_kinematic=cmd.com, filter=report)
+
+    @property
+    def duration_ratio(self) -> float:
+        """Commands played per pose pushed so far: the robot's duration over the human's (``time_scale`` in
+        ``sit2stand retarget``'s summary)."""
+        return self.pulled / max(1, len(self._raw_q))
 
     @property
     def done(self) -> bool:
