@@ -21,7 +21,7 @@ import os
 import subprocess
 import sys
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import matplotlib
@@ -31,11 +31,11 @@ import numpy as np
 import pinocchio as pin
 
 from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_COM_FEEDBACK_TOPIC,
-                         ROBOT_COP_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_PLANNED_COM_TOPIC)
+                         ROBOT_COP_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC)
 from ..io.bag import BagReader
 from ..io.messages import stamp_ns
 from ..robot.identify import read_link_parameters
-from ..robot.model import PlantConfig, controller_model
+from ..robot.model import SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, PlantConfig, controller_model
 from ..robot.plant import Plant
 
 
@@ -57,6 +57,9 @@ class RunAnalysis:
     human_seat_off_s: float | None
     seat_off_s: float | None
     summary: dict
+    plan_zmp_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    plan_zmp: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))    # the plan's ZMP (the commands' own) [m]
+    support_x: tuple[float, float] = (np.nan, np.nan)   # the feet's heel and toe lines along x [m]
 
 
 @dataclass
@@ -66,6 +69,7 @@ class _RunMessages:
     joint_states: list
     base_pose: list
     planned_com: list
+    planned_zmp: list
     cop: list
     human_com: list
     chair: list
@@ -116,8 +120,20 @@ def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | N
                "duration_s": float(t[-1]),
                "com_feedback_max_shift_m": float(max(shift)) if shift else None,
                "cad_vs_identified_com_rms_m": float(np.sqrt(np.mean(np.sum((com - com_cad)[:, [0, 2]] ** 2, axis=1))))}
+    zmp_t = _stamps(msgs.planned_zmp) - t0 if msgs.planned_zmp else np.zeros(0)
+    zmp = _xyz(msgs.planned_zmp, "point").reshape(-1, 3)
     return RunAnalysis(name, t, q, com, com_cad, plan_t, plan_com, _stamps(msgs.cop) - t0, _xyz(msgs.cop, "point"),
-                       human_t, human_com, human_seat_off, seat_off, summary)
+                       human_t, human_com, human_seat_off, seat_off, summary, zmp_t, zmp, _support_x(ident, q[0]))
+
+
+def _support_x(model: pin.Model, q: np.ndarray) -> tuple[float, float]:
+    """The feet's heel and toe lines along x [m] (the support polygon's extent) at configuration ``q``."""
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    xs = [data.oMf[model.getFrameId(f"sole_{side}")].act(np.array([SOLE_CENTRE_X_M + sx * SOLE_HALF_SIZE_M[0],
+                                                                      0.0, 0.0]))[0]
+          for side in SIDES for sx in (-1, 1)]
+    return float(min(xs)), float(max(xs))
 
 
 def _read_run(run: Path, every: int) -> _RunMessages:
@@ -129,7 +145,9 @@ def _read_run(run: Path, every: int) -> _RunMessages:
                 raise ValueError(f"{run}: no {needed} topic: not a stand-up run")
         return _RunMessages(
             bag.read(ROBOT_JOINT_STATES_TOPIC)[::every], bag.read(ROBOT_BASE_POSE_TOPIC),
-            bag.read(ROBOT_PLANNED_COM_TOPIC), bag.read(ROBOT_COP_TOPIC),
+            bag.read(ROBOT_PLANNED_COM_TOPIC),
+            bag.read(ROBOT_PLANNED_ZMP_TOPIC) if ROBOT_PLANNED_ZMP_TOPIC in topics else [],
+            bag.read(ROBOT_COP_TOPIC),
             bag.read(HUMAN_COM_TOPIC) if HUMAN_COM_TOPIC in topics else [],
             bag.read(CHAIR_PLATE_TOPIC) if CHAIR_PLATE_TOPIC in topics else [],
             [np.hypot(m.vector.x, m.vector.y) for _, m in bag.read(ROBOT_COM_FEEDBACK_TOPIC)]
@@ -199,6 +217,11 @@ def figure_6(a: RunAnalysis, png: Path) -> None:
     ax[1].plot(a.t, a.com[:, 0], label="measured robot COM (identified parameters)")
     ok = np.isfinite(a.cop[:, 0])
     ax[1].plot(a.cop_t[ok], a.cop[ok, 0], lw=0.6, alpha=0.6, label="robot COP (ankle F/T)")
+    if len(a.plan_zmp_t):
+        ax[1].plot(a.plan_zmp_t, a.plan_zmp[:, 0], lw=0.6, alpha=0.7, label="planned ZMP")
+    for x, edge in zip(a.support_x, ("heel", "toe")):
+        if np.isfinite(x):
+            ax[1].axhline(x, color="grey", lw=0.8, ls="--", label=f"support polygon: {edge}")
     if a.seat_off_s is not None:
         ax[1].axvline(a.seat_off_s, color="k", ls=":", lw=1, label="robot seat-off (pelvis +2 cm)")
     ax[1].set_ylim(-0.3, 0.2)
