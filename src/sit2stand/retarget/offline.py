@@ -166,6 +166,8 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     summary.update(simulated)
     _write_bag(out / "retarget", cmds, robot.joint_names, float(trial.marker_t_s[0]), dt)
     _figure(trial, com_h, frames, cmds, dt, out / "retarget.png", summary)
+    if simulated:
+        _timing_figure(trial, com_h, frames, cmds, np.load(out / "simulation.npy"), out / "timing.png", summary)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
 
@@ -288,6 +290,32 @@ def _qp_times(plant) -> dict:
         return {}
     ms = np.array(plant.wbc.qp_times_s) * 1e3
     return {"controller_qp_ms_p50": float(np.percentile(ms, 50)), "controller_qp_ms_p99": float(np.percentile(ms, 99))}
+
+
+def _timing_figure(trial, com_h, frames, cmds, sim: np.ndarray, png: Path, summary: dict) -> None:
+    """The forward COM at the human's timing: the human's (lab), the COM map's target, the plan's and the simulated
+    robot's (world), each command at the human time it plays; and the local time scale. The simulation pulls one
+    command per row, so row i is the robot when command i was sent."""
+    matplotlib.use("Agg")
+    t0 = trial.marker_t_s[0]
+    t_frames = np.array([f.t_s for f in frames]) - t0
+    t_cmd = t_frames[0] + np.array([c.t_plan_s for c in cmds])
+    n = min(len(cmds), len(sim))
+    fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    ax[0].plot(trial.marker_t_s - t0, com_h[:, 0], color="0.6", label="human COM (lab)")
+    ax[0].plot(t_frames, [f.com_target[0] for f in frames], label="human COM mapped onto the robot (target)")
+    ax[0].plot(t_cmd, [c.com[0] for c in cmds], "--", label="plan COM")
+    ax[0].plot(t_cmd[:n], sim[:n, 1], label="robot COM (simulated)")
+    ax[0].set_ylabel("forward [m]")
+    ax[0].legend(fontsize=8)
+    ax[0].set_title(f"{Path(summary['bag']).name}: at the human's timing; the robot took {summary['time_scale']:.2f}x "
+                    f"the human's duration")
+    ax[1].plot(t_cmd, [c.time_scale for c in cmds])
+    ax[1].set_ylabel("local time scale")
+    ax[1].set_xlabel("human time [s]")
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
 
 
 def _figure(trial, com_h, frames, cmds, dt: float, png: Path, summary: dict) -> None:
