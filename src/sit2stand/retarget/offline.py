@@ -247,7 +247,7 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
             q = c.q
             if stabiliser is not None:
                 fix = stabiliser.correct(c.q, c.com, plant.pin_configuration(plant.data.qpos), c.on_feet, dt)
-                q, offset, lag = fix.q, fix.offset_m, float(np.linalg.norm(fix.error_m))
+                q, offset, lag = fix.q, fix.offset_m, fix.lag_m
             plant.command(q[7:], c.v[6:], c.a[6:], feedforward=controller)
         else:           # the last command held, as the driver does when the retargeter stops
             held += 1

@@ -279,7 +279,7 @@ class LiveRetargeting:
             fix = self.stabiliser.correct(cmd.q, cmd.com, q_measured, cmd.on_feet, 1.0 / self.cfg.rate_hz)
             cmd = dataclasses.replace(cmd, q=fix.q)
             offset = fix.offset_m
-            self.lag_m = float(np.linalg.norm(fix.error_m)) if q_measured is not None else 0.0
+            self.lag_m = fix.lag_m if q_measured is not None else 0.0
             self.feedback_max_m = max(self.feedback_max_m, float(np.abs(offset).max()))
         return self.send(cmd, offset)
 

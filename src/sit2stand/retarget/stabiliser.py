@@ -57,6 +57,12 @@ class Correction:
     error_m: np.ndarray             # planned - measured COM (x, y) [m]
     active: bool                    # the command was shifted
 
+    @property
+    def lag_m(self) -> float:
+        """How far the measured COM trails the planned one forward [m] (0 when it is ahead): a sit-to-stand moves
+        the COM forward, and only a robot behind its plan is helped by the plan waiting."""
+        return max(0.0, float(self.error_m[0]))
+
 
 class ComStabiliser:
     """COM feedback (see the module docstring).
