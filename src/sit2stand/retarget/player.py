@@ -233,6 +233,11 @@ class PlanPlayer:
             ahead = range(int(self.u), min(known, int(self.u) + self.lookahead + 1))
             off_chair = self._feet[min(int(self.u), known - 1)]
             wait = 1.0 + LAG_GAIN_PER_M * max(0.0, lag_m - LAG_DEADBAND_M) if off_chair else 1.0
+            # live, poses can arrive late (an estimator catching up): with less than the look-ahead known, slow
+            # down in proportion, as a streaming player's buffer does, rather than run dry and hold
+            buffered = known - 1 - self.u
+            if not self.finished and buffered < self.lookahead:
+                wait = max(wait, min(self.max_time_scale, self.lookahead / max(buffered, 1.0)))
             self.time_scale_goal = min(self.max_time_scale, max(
                 [wait] + [self._s_req[k] - self.max_time_scale_rate * max(0.0, k - self.u) * self.dt
                           for k in ahead if k < len(self._s_req)]))
