@@ -93,7 +93,8 @@ def _recover(bag: Path) -> tuple[str, str]:
     rc, out = _cli("bag", "recover", bag)
     if "Traceback" in out or rc not in (0, 1):
         return _judge(rc, out)
-    return "recovered", _last_error(out) if rc else out.strip().splitlines()[-1][:160]
+    said = [ln.strip() for ln in out.splitlines() if re.match(r"\s*(recovered|skipped)", ln)]
+    return "recovered", "; ".join(said)[:200] or _last_error(out)
 
 
 def case_corrupt_chunk(work: Path) -> list[tuple[str, str, str]]:
