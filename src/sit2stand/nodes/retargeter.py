@@ -17,9 +17,9 @@ the calibration overlays the first human frame on; then, with ``com_feedback``, 
   ``~/status`` (diagnostic_msgs/DiagnosticStatus: infeasible frames, time scale, latency p50/p99).
 
 Parameters: ``plant``, ``controller_params`` (identified YAML; empty: CAD), ``margin_m``, ``lookahead_s``,
-``smooth_frames``, ``max_joint_speed``, ``retiming`` (local | uniform), ``time_scale`` (0: adaptive; else fixed),
-``max_time_scale`` (the adaptive one's cap), ``rate_hz``, ``com_wait_s``, ``wait_for_robot``, ``marker_map`` (YAML
-to write the calibration to), ``hold_s`` (exit this long after the plan ends; 0: never), ``input_timeout_s`` (marker
+``smooth_frames``, ``max_joint_speed``, ``retiming`` (local | uniform), ``seat_off_dwell_s``, ``time_scale`` (0:
+adaptive; else fixed), ``max_time_scale`` (the adaptive one's cap), ``rate_hz``, ``com_wait_s``, ``wait_for_robot``,
+``marker_map`` (YAML to write the calibration to), ``hold_s`` (exit this long after the plan ends; 0: never), ``input_timeout_s`` (marker
 frames waiting this long for a human COM end the node with an error), ``com_feedback`` and its gains
 ``com_feedback_kp``, ``_ki``, ``_kd``, ``markers_every`` (5; 0: no markers), ``marker_set`` (as the human_com
 node's: which markers are the pelvis, the left knee, ankle and heel, and each marker's body part;
@@ -49,7 +49,8 @@ from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBO
                          ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC, ROBOT_RETARGET_IK_TOPIC, VIZ_MARKERS_TOPIC,
                          WORLD_FRAME, ros_name)
 from ..retarget.pacing import LiveConfig, LiveRetargeting, MarkerFrame, summary_line
-from ..retarget.player import DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S, Command
+from ..retarget.player import (DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S,
+                               SEAT_OFF_DWELL_S, Command)
 from ..retarget.stabiliser import StabiliserConfig
 from ..retarget.stream import robot_model, robot_setup
 from .markers import plan_markers
@@ -72,6 +73,7 @@ def _live_config(node: Node) -> LiveConfig:
         max_joint_speed=declare(node, "max_joint_speed", DEFAULT_MAX_JOINT_SPEED,
                                 "joint speed limit of the retimed plan [rad/s]"),
         retiming=declare(node, "retiming", "local", "local: slower only where a frame needs it; uniform: one factor"),
+        seat_off_dwell_s=declare(node, "seat_off_dwell_s", SEAT_OFF_DWELL_S, "wait at the robot's seat-off [s]"),
         fixed_time_scale=scale if scale > 0 else None,
         max_time_scale=declare(node, "max_time_scale", DEFAULT_MAX_TIME_SCALE, "cap of the adaptive time scale"),
         com_wait_s=declare(node, "com_wait_s", 0.03, "use the latest human COM if at most this old [s]"),

@@ -26,7 +26,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..io.messages import reorder_markers
-from .player import DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S, Command, PlanPlayer
+from .player import (DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S, SEAT_OFF_DWELL_S,
+                     Command, PlanPlayer)
 from .stabiliser import ComStabiliser, StabiliserConfig
 from .stream import RetargetConfig, Retargeter, RobotSetup
 
@@ -172,6 +173,7 @@ class LiveConfig:
     smooth_frames: int = 21
     max_joint_speed: float = DEFAULT_MAX_JOINT_SPEED
     retiming: str = "local"
+    seat_off_dwell_s: float = SEAT_OFF_DWELL_S
     fixed_time_scale: float | None = None
     max_time_scale: float = DEFAULT_MAX_TIME_SCALE
     com_wait_s: float = 0.03
@@ -220,7 +222,8 @@ class LiveRetargeting:
         self.player = PlanPlayer(robot.model, 1.0 / c.rate_hz, robot.support_xy, margin_m=c.margin_m,
                                  lookahead_s=c.lookahead_s, smooth_frames=c.smooth_frames,
                                  fixed_time_scale=c.fixed_time_scale, max_time_scale=c.max_time_scale,
-                                 max_joint_speed=c.max_joint_speed, retiming=c.retiming)
+                                 max_joint_speed=c.max_joint_speed, retiming=c.retiming,
+                                 seat_off_dwell_s=c.seat_off_dwell_s)
         vx = float(self.coms.velocity_at(frame.t_s)[0])
         self.lead_in_frames = len(self.retargeter.lead_in(frame.t_s, 1.0 / c.rate_hz, frame.positions_m,
                                                           frame.valid, com_m, vx, on_frame=self._push))
