@@ -20,9 +20,9 @@ Parameters: ``plant``, ``controller_params`` (identified YAML; empty: CAD), ``ma
 ``smooth_frames``, ``max_joint_speed``, ``retiming`` (local | uniform), ``seat_off_dwell_s``, ``time_scale`` (0:
 adaptive; else fixed), ``max_time_scale`` (the adaptive one's cap), ``rate_hz``, ``com_wait_s``, ``wait_for_robot``,
 ``marker_map`` (YAML to write the calibration to), ``hold_s`` (exit this long after the plan ends; 0: never),
-``input_timeout_s`` (marker frames waiting this long for a human COM end the node with an error), ``com_feedback``
-and its gains ``com_feedback_kp``, ``_ki``, ``_kd``, ``markers_every`` (5; 0: no markers), ``marker_set`` (as the human_com
-node's: which markers are the pelvis, the left knee, ankle and heel, and each marker's body part;
+``input_timeout_s`` (marker frames waiting this long for a human COM end the node with an error), ``com_feedback`` and
+its gains ``com_feedback_kp``, ``_ki``, ``_kd``, ``markers_every`` (5; 0: no markers), ``marker_set`` (as the
+human_com node's: which markers are the pelvis, the left knee, ankle and heel, and each marker's body part;
 :func:`sit2stand.retarget.calibration.marker_roles`).
 """
 
