@@ -28,7 +28,9 @@ cleanly (summary and metadata.yaml written).
 
 Losses are counted, never silent: each subscription keeps up to 100,000 samples not yet taken (recorder_fastdds.xml),
 and a sample a publisher dropped from its queue before the recorder had it (the DDS message-lost event) is counted
-per topic, logged, stored in the bag's ``custom_data`` as ``lost_messages``, and makes the node exit 1.
+per topic, logged, stored in the bag's ``custom_data`` as ``lost_messages``, and makes the node exit 1. A latched
+state topic (depth 1: the subject, the scaling, the descriptions) keeps only its newest sample by design: a sample a
+newer one replaced is stored as ``superseded_latched_messages`` and is not an error.
 """
 
 from __future__ import annotations
@@ -105,6 +107,7 @@ class Recorder(Node):
         self.subs = {}
         self.unconfirmed: dict[str, tuple[str, QoSProfile]] = {}   # subscribed before a publisher was seen
         self.lost: dict[str, int] = {}
+        self.superseded: dict[str, int] = {}      # latched states replaced before the recorder took them
         self.skipped: set[str] = set()
         self.finished = False
         self.exit_code = 0
@@ -188,6 +191,9 @@ class Recorder(Node):
         self.writer.add_topic(topic, msgtype, [qos_to_bag(qos)])
 
     def _on_lost(self, topic: str, info) -> None:
+        if topic in LATCHED_TOPICS:     # a state kept at depth 1: a newer one replaced it, by design; noted only
+            self.superseded[topic] = self.superseded.get(topic, 0) + info.total_count_change
+            return
         self.lost[topic] = self.lost.get(topic, 0) + info.total_count_change
         self.exit_code = 1
 
@@ -225,6 +231,9 @@ class Recorder(Node):
                 self.writer.write_raw(topic, 0, data)
         if self.lost:
             self.writer.set_custom_data("lost_messages", self._lost_text())
+        if self.superseded:
+            self.writer.set_custom_data("superseded_latched_messages",
+                                        ", ".join(f"{t}: {n}" for t, n in sorted(self.superseded.items())))
         self.writer.close()
         total = sum(self.writer.counts.values())
         print(f"[recorder] closed {self.output}: {total} messages on {len(self.writer.counts)} topics", flush=True)
