@@ -16,7 +16,7 @@ demo: setup       ## the main job on the shipped demonstration (writes runs/demo
 	@$(PY) -m sit2stand.demo --out runs/demo
 
 test: setup lint  ## lint, then the whole test suite: unit tests and graph tests with real node processes
-	@$(PY) -m pytest -q tests
+	@$(PY) -m pytest -q --durations=12 tests
 
 lint: setup       ## ruff (ruff.toml): zero findings
 	@$(VENV)/bin/ruff check
