@@ -26,7 +26,7 @@ from scipy.signal import savgol_coeffs   # at import: a live node's first frames
 from ..dynamics import model_cop
 from ..errors import InputError
 from ..robot.model import UPPER_LIMB_PREFIXES
-from ..robot.plant import contact_feedforward
+from ..robot.plant import contact_joint_torques
 from .dynamic import DynamicsFilter, FilterReport
 from .feasibility import frame_time_scales, support_margin, zmp_at_scale
 
@@ -185,8 +185,8 @@ class PlanPlayer:
     # -- output ------------------------------------------------------------------------------------------------
     def frame_scale(self, k: int) -> float:
         """Smallest time scale (grid of 0.02, at most ``max_scale``) keeping frame ``k``'s ZMP ``margin_m`` inside the
-        feet (none while the robot is on the chair), its joint speeds under ``max_joint_speed`` [rad/s] and, with
-        ``torque_limits_nm``, its inverse-dynamics torques within them."""
+        feet (none while the robot is on the chair), its joint speeds under ``max_joint_speed`` [rad/s] and, when
+        ``torque_limited``, its inverse-dynamics torques within the URDF effort limits."""
         speed = float(np.abs(self._v[k][6:]).max()) / self.max_speed if self.max_speed > 0 else 1.0
         s = 1.0
         if self._feet[k]:
@@ -196,15 +196,17 @@ class PlanPlayer:
 
     def _torque_scale(self, k: int) -> float:
         """Smallest time scale keeping frame ``k``'s joint torques (contact-consistent inverse dynamics, the chair
-        taking load while seated) within ``torque_limits_nm``. Played s x slower, tau = tau_static + tau_motion / s^2;
+        taking load while seated) within the URDF effort limits. Played s x slower, tau = tau_static + tau_motion / s^2;
         a joint whose static torque alone is past its limit (one resting on its stop) cannot be helped by slowing
         down and is left out."""
         if self.torque_limits is None:
             return 1.0
-        seated = not self._feet[k]
-        tau = contact_feedforward(self.model, self.data, self._q[k], self._v[k][6:], self._a[k][6:], True, seated)
-        static = contact_feedforward(self.model, self.data, self._q[k], self._v[k][6:], self._a[k][6:], False, seated)
-        motion = tau - static
+        q, v, a = self._q[k], np.zeros(self.model.nv), np.zeros(self.model.nv)
+        v[6:], a[6:] = self._v[k][6:], self._a[k][6:]
+        gravity = pin.computeGeneralizedGravity(self.model, self.data, q).copy()
+        full = pin.rnea(self.model, self.data, q, v, a)
+        static, motion = contact_joint_torques(self.model, self.data, q, np.stack([gravity, full - gravity]),
+                                               not self._feet[k])
         room = self.torque_limits - np.sign(motion) * static
         need = np.where(room > 0, np.abs(motion) / np.maximum(room, self._room_floor), 0.0)
         return float(np.sqrt(max(1.0, need.max())))

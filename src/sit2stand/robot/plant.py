@@ -396,12 +396,19 @@ def contact_feedforward(model, data, q: np.ndarray, qd_ref: np.ndarray, qdd_ref:
     a = np.zeros(model.nv)
     if dynamic:
         v[6:], a[6:] = qd_ref, qdd_ref
-    tau = pin.rnea(model, data, q, v, a)
+    return contact_joint_torques(model, data, q, pin.rnea(model, data, q, v, a)[None], seated)[0]
+
+
+def contact_joint_torques(model, data, q: np.ndarray, taus: np.ndarray, seated: bool) -> np.ndarray:
+    """Joint torques (K, nv - 6) [N m] for generalised forces ``taus`` (K, nv) at ``q`` once the soles (and the
+    seat frame when ``seated``) take the base's wrench in the least-squares sense; linear in ``taus``, so one set of
+    contact Jacobians serves several."""
     frames = [model.getFrameId(f"sole_{s}") for s in SIDES]
     pin.computeJointJacobians(model, data, q)
     pin.updateFramePlacements(model, data)
     J = np.vstack([pin.getFrameJacobian(model, data, f, pin.LOCAL_WORLD_ALIGNED) for f in frames])
     if seated:   # the seat pushes up under the buttocks (a frame on the pelvis at the seat surface)
         J = np.vstack([J, pin.getFrameJacobian(model, data, model.getFrameId("seat"), pin.LOCAL_WORLD_ALIGNED)[:3]])
-    lam = np.linalg.lstsq(J[:, :6].T, tau[:6], rcond=None)[0]
-    return tau[6:] - J[:, 6:].T @ lam
+    taus = np.atleast_2d(taus)
+    lam = np.linalg.lstsq(J[:, :6].T, taus[:, :6].T, rcond=None)[0]
+    return taus[:, 6:] - (J[:, 6:].T @ lam).T
