@@ -9,7 +9,8 @@ from sit2stand.retarget.dynamic import DynamicsFilter
 from sit2stand.retarget.feasibility import support_margin, support_polygon
 from sit2stand.robot.model import PlantConfig, add_seat_frame, controller_model
 from sit2stand.robot.plant import Plant
-from sit2stand.robot.wbc import Reference, WbcGains, WholeBodyQP, feet_anchored_reference, sole_corners_local
+from sit2stand.robot.model import sole_corners_local
+from sit2stand.robot.wbc import Reference, WbcGains, WholeBodyQP, feet_anchored_reference
 
 
 @pytest.fixture(scope="module")

@@ -35,7 +35,7 @@ from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, ROBOT_BASE_POSE_TOP
 from ..io.bag import BagReader
 from ..io.messages import stamp_ns
 from ..robot.identify import read_link_parameters
-from ..robot.model import SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, PlantConfig, controller_model
+from ..robot.model import PlantConfig, controller_model, sole_corners_world
 from ..robot.plant import Plant
 
 
@@ -130,10 +130,8 @@ def _support_x(model: pin.Model, q: np.ndarray) -> tuple[float, float]:
     """The feet's heel and toe lines along x [m] (the support polygon's extent) at configuration ``q``."""
     data = model.createData()
     pin.framesForwardKinematics(model, data, q)
-    xs = [data.oMf[model.getFrameId(f"sole_{side}")].act(np.array([SOLE_CENTRE_X_M + sx * SOLE_HALF_SIZE_M[0],
-                                                                      0.0, 0.0]))[0]
-          for side in SIDES for sx in (-1, 1)]
-    return float(min(xs)), float(max(xs))
+    x = sole_corners_world(model, data)[:, 0]
+    return float(x.min()), float(x.max())
 
 
 def _read_run(run: Path, every: int) -> _RunMessages:

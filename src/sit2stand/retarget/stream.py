@@ -36,8 +36,8 @@ import pinocchio as pin
 
 from ..errors import InputError
 from ..robot.identify import read_link_parameters
-from ..robot.model import (SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, UPPER_LIMB_PREFIXES, PlantConfig, add_seat_frame,
-                           build_spec, controller_model)
+from ..robot.model import (SIDES, UPPER_LIMB_PREFIXES, PlantConfig, add_seat_frame, build_spec, controller_model,
+                           sole_corners_world)
 from ..robot.plant import seat_top_height, seated_configuration
 from ..human.marker_sets import choose_marker_set
 from .calibration import MarkerMap, calibrate_markers, left_leg_points, marker_roles
@@ -117,13 +117,7 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
     pin.framesForwardKinematics(model, data, q)
     soles = [model.getFrameId(f"sole_{s}") for s in SIDES]
     targets = [data.oMf[f].copy() for f in soles]
-    corners = []
-    for X in targets:
-        for sx in (-1, 1):
-            for sy in (-1, 1):
-                corners.append(X.act(np.array([SOLE_CENTRE_X_M + sx * SOLE_HALF_SIZE_M[0], sy * SOLE_HALF_SIZE_M[1],
-                                               0.0]))[:2])
-    corners = np.array(corners)
+    corners = sole_corners_world(model, data)[:, :2]
     hip, knee, ankle = (data.oMi[model.getJointId(f"leg_left_{i}_joint")].translation for i in (3, 4, 6))
     ankle_floor = targets[0].translation.copy()
     return RobotSetup(model, list(model.names[2:]), q, soles, targets, support_polygon(corners),
@@ -372,36 +366,22 @@ def retarget_sequence(retargeter: Retargeter, player: PlanPlayer, t_s: np.ndarra
     False: the poses only (the player closed, its commands left for a caller that pulls them with the robot's lag,
     as :func:`sit2stand.retarget.offline.run` does when it simulates)."""
     frames, cmds = [], []
-    if not pull:
-        player = _PushOnly(player)
+
+    def play(f: RetargetFrame) -> None:
+        frames.append(f)
+        player.push(f.q, not f.seated)
+        c = player.pull() if pull else None
+        if c is not None:
+            cmds.append(c)
+
     vx0 = float(np.gradient(human_com_m[:, 0], t_s)[0]) if len(t_s) > 1 else 0.0
     for f in retargeter.lead_in(float(t_s[0]), float(np.median(np.diff(t_s))), positions_m[0], valid[0],
                                 human_com_m[0], vx0):
-        frames.append(f)
-        player.push(f.q, not f.seated)
-        c = player.pull()
-        if c is not None:
-            cmds.append(c)
+        play(f)
     for k, t in enumerate(t_s):
         fz = None if chair_force_n is None else float(chair_force_n[k])
-        f = retargeter.step(float(t), positions_m[k], valid[k], human_com_m[k], fz)
-        frames.append(f)
-        player.push(f.q, not f.seated)
-        c = player.pull()
-        if c is not None:
-            cmds.append(c)
+        play(retargeter.step(float(t), positions_m[k], valid[k], human_com_m[k], fz))
     player.close()
     while pull and not player.done:
         cmds.append(player.pull())
     return frames, cmds
-
-
-class _PushOnly:
-    """A player whose pulls give nothing (the commands are pulled later)."""
-
-    def __init__(self, player: PlanPlayer) -> None:
-        self.push, self.close = player.push, player.close
-
-    @staticmethod
-    def pull() -> None:
-        return None

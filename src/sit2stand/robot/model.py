@@ -47,6 +47,19 @@ class PlantConfigError(Sit2StandError, ValueError):
     """A plant file that cannot be used; the message names the file and the field."""
 
 
+def sole_corners_local(margin_m: float = 0.0) -> np.ndarray:
+    """(4, 3) corners of a sole in its frame [m], ``margin_m`` inside its edges."""
+    hx, hy = SOLE_HALF_SIZE_M[0] - margin_m, SOLE_HALF_SIZE_M[1] - margin_m
+    return np.array([[SOLE_CENTRE_X_M + sx * hx, sy * hy, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
+
+
+def sole_corners_world(model: pin.Model, data: pin.Data) -> np.ndarray:
+    """(8, 3) corners of both soles in the world [m] (left's four, then right's), from ``data``'s frame placements
+    (after ``pin.framesForwardKinematics``)."""
+    local = sole_corners_local()
+    return np.vstack([[data.oMf[model.getFrameId(f"sole_{side}")].act(c) for c in local] for side in SIDES])
+
+
 def talos_dir() -> Path:
     """The installed ``talos_data`` folder of example-robot-data."""
     for base in map(Path, sys.path):

@@ -31,7 +31,7 @@ import numpy as np
 import pinocchio as pin
 import proxsuite
 
-from .model import SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M
+from .model import SIDES, sole_corners_local
 
 INF = 1e20           # proxsuite's "no bound"
 FORCE_UNIT_N = 100.0
@@ -87,12 +87,6 @@ class WbcResult:
     com: np.ndarray                # (3,) COM of the state [m]
     solved: bool
     qp_s: float                    # wall time of matrix building + solve [s]
-
-
-def sole_corners_local(margin_m: float) -> np.ndarray:
-    """(4, 3) corners of a sole in its frame [m], ``margin_m`` inside its edges."""
-    hx, hy = SOLE_HALF_SIZE_M[0] - margin_m, SOLE_HALF_SIZE_M[1] - margin_m
-    return np.array([[SOLE_CENTRE_X_M + sx * hx, sy * hy, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
 
 
 def friction_rows(n_points: int, mu: float) -> np.ndarray:
