@@ -63,8 +63,16 @@ def test_the_timer_catches_up_when_frames_are_late():
     assert not pacer.late(1.0), "nothing sent yet: nothing overdue"
     pacer.sent(1.0)
     assert not pacer.late(1.012) and pacer.late(1.016)
-    pacer.sent_late()
-    assert pacer.next_due_s == pytest.approx(1.02)
+    pacer.sent(1.016)
+    assert pacer.next_due_s == pytest.approx(1.021)
+
+
+def test_a_jump_of_the_robots_clock_sends_one_command_not_a_burst():
+    pacer = CommandPacer(rate_hz=100.0)
+    pacer.sent(1.0)
+    assert pacer.late(4.0), "the clock jumped 3 s ahead (a replay catching up)"
+    pacer.sent(4.0)
+    assert not pacer.late(4.009) and pacer.late(4.011), "one command, then one per period from now on"
 
 
 def test_latency_log_separates_waiting_for_the_com_from_the_retargeters_own_share():

@@ -271,6 +271,8 @@ class Replayer(Node):
                 if not self.loop:
                     break
             keep_clock = self.clock_after_end and self.at_end == "idle" and self.clock_pub is not None
+            if keep_clock:      # on from the last message's time: a replay behind its schedule must not jump ahead
+                self.clock.restart(self.reader.end_ns)
             self._wait_acked(keep_clock)
             self._report(force=True)
             elapsed = time.monotonic() - self._t_first if self._t_first is not None else 0.0

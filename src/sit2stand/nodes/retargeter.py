@@ -100,7 +100,8 @@ class RetargeterNode(Node):
         self.map_out = declare(self, "marker_map", "", "write the marker calibration YAML here")
         self.hold_s = declare(self, "hold_s", 3.0, "after the plan ends, exit after this long [s] (0: never)")
         self.input_timeout_s = declare(self, "input_timeout_s", 20.0, "marker frames may wait this long for a COM")
-        self.live = LiveRetargeting(_live_config(self), self._publish, self._measured_q)
+        self.live = LiveRetargeting(_live_config(self), self._publish, self._measured_q,
+                                    lambda: self.get_clock().now().nanoseconds * 1e-9)
         try:        # the robot model now (~0.6 s idle, more under load), not when the first frames are queued
             self.robot_model = robot_model(self.plant_file, self.params_file or None)
         except (ValueError, OSError) as err:

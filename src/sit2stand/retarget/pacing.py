@@ -6,13 +6,16 @@ chair-plate forces and the robot's measured state in as they arrive, and publish
 * **COM by stamp** (:class:`HumanComTrack`): a frame uses the estimator's estimate for its own stamp; between two
   estimates (the frame's own was invalid) their interpolation; after the newest one, that one moved on by its
   velocity if it is at most ``com_wait_s`` old; otherwise the frame waits.
-* **Pacing** (:class:`CommandPacer`): one command per period of wall time, sent as soon as a frame brings it, so a
-  burst of queued frames (after the COM estimator's calibration pause, say) does not play the plan faster; when
-  frames are late, the timer keeps the commands at the mocap rate.
+* **Pacing** (:class:`CommandPacer`): one command per period of the robot's clock (the ROS clock: wall time on a
+  robot, ``/clock`` under ``use_sim_time``, which a simulated robot follows), sent as soon as a frame brings it, so
+  a burst of queued frames (after the COM estimator's calibration pause, say) does not play the plan faster; when
+  frames are late, the timer keeps the commands at the mocap rate. Paced on wall time, a replay whose ``/clock``
+  fell behind (a loaded machine) played the plan 1.7x faster to the simulated robot than the player said.
 * **Latency** (:class:`LatencyLog`): marker received -> its command sent; the same from when the frame's human COM
   was also there (the retargeter's own share); and over the frames whose COM kept in step with the markers.
 
-Times: stamps [s] of the capture clock; wall times [s] from ``time.monotonic`` / ``time.perf_counter``.
+Times: stamps [s] of the capture clock; the robot's clock [s] (``robot_clock``); wall times [s] from
+``time.monotonic`` / ``time.perf_counter`` (latencies, time-outs).
 """
 
 from __future__ import annotations
@@ -33,6 +36,9 @@ from .stream import RetargetConfig, Retargeter, RobotSetup
 
 STAMP_TOLERANCE_S = 1e-6
 """Two stamps this close are the same frame's."""
+MAX_CATCH_UP_PERIODS = 5.0
+"""A command that comes late (the retargeter or the clock held up) moves the plan on by the robot's time since the
+last one, up to this many periods: after a longer stall the plan waits instead of jumping ahead."""
 
 
 class HumanComTrack:
@@ -97,7 +103,7 @@ class ChairForceTrack:
 
 
 class CommandPacer:
-    """One command per period ``1 / rate_hz`` of wall time (see the module docstring)."""
+    """One command per period ``1 / rate_hz`` of the robot's clock (see the module docstring)."""
 
     def __init__(self, rate_hz: float) -> None:
         self.period_s = 1.0 / rate_hz
@@ -115,9 +121,6 @@ class CommandPacer:
         """The timer at ``now_s``: frames are late and a command is overdue."""
         return self.next_due_s is not None and now_s > self.next_due_s + 0.5 * self.period_s
 
-    def sent_late(self) -> None:
-        """The timer sent an overdue command."""
-        self.next_due_s += self.period_s
 
 
 def percentile_text(values_s: list[float], q: float) -> str:
@@ -190,12 +193,14 @@ class LiveRetargeting:
         send: publishes a command (the feedback's offset [m] or None) and returns when it went
             (``time.perf_counter``).
         measured_q: the robot's measured configuration in the model's order, or None when not recent.
+        robot_clock: the robot's time now [s], which paces the commands (the node's ROS clock).
     """
 
     def __init__(self, cfg: LiveConfig, send: Callable[[Command, np.ndarray | None], float],
-                 measured_q: Callable[[], np.ndarray | None]) -> None:
+                 measured_q: Callable[[], np.ndarray | None],
+                 robot_clock: Callable[[], float] = time.monotonic) -> None:
         self.cfg = cfg
-        self.send, self.measured_q = send, measured_q
+        self.send, self.measured_q, self.robot_clock = send, measured_q, robot_clock
         self.frames: deque[MarkerFrame] = deque()
         self.coms = HumanComTrack(cfg.com_wait_s)
         self.chair = ChairForceTrack()
@@ -208,6 +213,7 @@ class LiveRetargeting:
         self.infeasible = self.skipped = self.processed = self.state_stale = self.lead_in_frames = 0
         self.feedback_max_m = 0.0
         self.lag_m = 0.0              # the robot's COM behind the plan's at the last command [m]
+        self._last_command_s: float | None = None     # the robot's clock at the last command [s]
         self.last_frame_s = 0.0       # time.monotonic of the last frame processed
 
     def start(self, robot: RobotSetup, frame: MarkerFrame, com_m: np.ndarray):
@@ -260,9 +266,9 @@ class LiveRetargeting:
         self.latency.ik.append(result.ik.seconds)
         self.infeasible += not result.ik.feasible
         self.player.push(result.q, not result.seated)
-        now = time.monotonic()
+        now = self.robot_clock()
         if self.pacer.due(now):
-            sent = self.pull_and_send()
+            sent = self.pull_and_send(now)
             if sent is not None:
                 self.pacer.sent(now)
                 self.latency.command(frame.received_s, ready, sent)
@@ -270,11 +276,16 @@ class LiveRetargeting:
         self.last_frame_s = time.monotonic()
         return result.q
 
-    def pull_and_send(self) -> float | None:
-        """Send the plan's next command (corrected by the COM feedback), if it has one; returns when it went."""
-        cmd = self.player.pull(lag_m=self.lag_m)     # a robot that trails its plan slows it (the player)
+    def pull_and_send(self, robot_now_s: float) -> float | None:
+        """Send the plan's next command (corrected by the COM feedback), if it has one, for the robot's time
+        ``robot_now_s``; returns when it went (wall time)."""
+        periods = 1.0 if self._last_command_s is None else float(np.clip(
+            (robot_now_s - self._last_command_s) / self.pacer.period_s, 0.0, MAX_CATCH_UP_PERIODS))
+        # a robot that trails its plan slows it (the player)
+        cmd = self.player.pull(lag_m=self.lag_m, periods=periods)
         if cmd is None:
             return None
+        self._last_command_s = robot_now_s
         offset = None
         if self.stabiliser is not None:
             q_measured = self.measured_q()
@@ -287,12 +298,14 @@ class LiveRetargeting:
         return self.send(cmd, offset)
 
     def tick(self, now_s: float) -> bool:
-        """The timer: keep commands at the mocap rate when frames are late; after the markers stop, close the plan
-        and play the rest. Returns True once the whole plan has been played."""
+        """The timer (``now_s``: wall time, ``time.monotonic``): keep commands at the mocap rate when frames are
+        late; after the markers stop, close the plan and play the rest. Returns True once the whole plan has been
+        played."""
         if self.player is None:
             return False
-        if self.pacer.late(now_s) and not self.player.done and self.pull_and_send() is not None:
-            self.pacer.sent_late()
+        robot_now = self.robot_clock()
+        if self.pacer.late(robot_now) and not self.player.done and self.pull_and_send(robot_now) is not None:
+            self.pacer.sent(robot_now)      # after a jump of the clock: from now on, no burst to catch up
         if self.frames or now_s - self.last_frame_s < 3.0 * self.pacer.period_s:
             return False
         if not self.player.finished:

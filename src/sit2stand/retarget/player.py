@@ -135,7 +135,7 @@ class PlanPlayer:
             if model.names[j].startswith(UPPER_LIMB_PREFIXES):
                 upper[model.joints[j].idx_v - 6] = True
         self._room_floor = np.where(upper, TORQUE_ROOM_MIN * model.effortLimit[6:], 1e-9)
-        self.pulled = 0               # commands played
+        self.pulled = 0.0             # periods played
 
     # -- input -------------------------------------------------------------------------------------------------
     def push(self, q: np.ndarray, on_feet: bool) -> None:
@@ -220,9 +220,11 @@ class PlanPlayer:
         known = len(self._v)
         return self.finished or known >= self.lookahead + 2
 
-    def pull(self, lag_m: float = 0.0) -> Command | None:
+    def pull(self, lag_m: float = 0.0, periods: float = 1.0) -> Command | None:
         """The next command; ``lag_m``: how far the robot's measured COM trails the plan's [m] (0: unknown), which
-        slows the local plan once the robot is off the chair (``LAG_DEADBAND_M``, ``LAG_GAIN_PER_M``)."""
+        slows the local plan once the robot is off the chair (``LAG_DEADBAND_M``, ``LAG_GAIN_PER_M``);
+        ``periods``: the robot's time since the last command, in periods ``dt`` (live, a command can come late: the
+        plan is where the robot's clock says, not one frame on)."""
         known = len(self._v)
         if known < 1 or (not self.started and not self.ready()):
             return None
@@ -247,9 +249,9 @@ class PlanPlayer:
             ahead = range(int(self.u), min(known, int(self.u) + self.lookahead + 1))
             self.time_scale_goal = max(self.time_scale_goal, self.required_scale(ahead))
         s_prev = self.time_scale
-        rate = self.max_time_scale_rate * self.dt
+        rate = self.max_time_scale_rate * self.dt * periods
         self.time_scale = float(np.clip(self.time_scale_goal, self.time_scale - rate, self.time_scale + rate))
-        s_dot = (self.time_scale - s_prev) / self.dt
+        s_dot = (self.time_scale - s_prev) / (self.dt * max(periods, 1e-9))
         k = int(np.floor(self.u))
         if k >= known - 1:          # starved (live input late) or at the end: hold the last pose
             k, frac = known - 1, 0.0
@@ -259,7 +261,7 @@ class PlanPlayer:
             # at the robot's seat-off: wait, so that the COM settles over the feet before the hips lift
             frac, hold = 0.0, True
             self.u = float(k)
-            self._dwelt += 1
+            self._dwelt += periods
         else:
             frac = self.u - k
             hold = False
@@ -275,8 +277,8 @@ class PlanPlayer:
         on_feet = self._feet[k]
         margin = float(support_margin(zmp[None, :2], self.polygon)[0]) if on_feet else np.inf
         if not hold:
-            self.u += u_dot
-        self.pulled += 1
+            self.u += u_dot * periods
+        self.pulled += periods
         criterion = np.inf
         if on_feet:
             zmp_s = zmp_at_scale(*(x[None] for x in self._dyn[k]), self.mass, self.time_scale)
@@ -303,7 +305,7 @@ class PlanPlayer:
 
     @property
     def duration_ratio(self) -> float:
-        """Commands played per pose pushed so far: the robot's duration over the human's (``time_scale`` in
+        """Periods played per pose pushed so far: the robot's duration over the human's (``time_scale`` in
         ``sit2stand retarget``'s summary)."""
         return self.pulled / max(1, len(self._raw_q))
 
