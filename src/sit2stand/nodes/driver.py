@@ -2,9 +2,14 @@
 
 Subscribes:
 * ``/robot/joint_command`` (trajectory_msgs/JointTrajectory, what the retargeter sends): the first point's
-  positions, velocities and accelerations, applied at once; with accelerations the feed-forward is inverse dynamics
-  along the plan (joints not named keep their last reference);
+  positions, velocities and accelerations; with accelerations the feed-forward is inverse dynamics along the plan
+  (joints not named keep their last reference);
 * ``/robot/joint_state_command`` (sensor_msgs/JointState): positions and optional velocities by joint name.
+
+A command is applied when the simulation reaches its header stamp (at once when the stamp is 0 or already past):
+a simulation held up by a loaded machine catches up with each command at its own time, not with the newest one
+over the whole gap (which lurched the robot forward). A stamp more than ``MAX_COMMAND_LEAD_S`` ahead of the
+driver's own clock (clocks of two machines apart) is applied at once, with a warning.
 
 Publishes: ``/robot/joint_states`` (position, velocity, measured torque as effort) at ``state_rate_hz`` (500) of
 simulated time, ``/robot/ft/left`` and ``/robot/ft/right`` (geometry_msgs/WrenchStamped: ground reaction in world
@@ -34,6 +39,7 @@ tilted past ``fall_tilt_rad``) is published on the status and the robot goes lim
 from __future__ import annotations
 
 import time
+from collections import deque
 
 import numpy as np
 from builtin_interfaces.msg import Time as BuiltinTime
@@ -48,6 +54,7 @@ from std_srvs.srv import Trigger
 from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 
+from ..io.messages import stamp_ns
 from ..io.tf_message import TfEncoder
 from ..io.topics import (BASE_FRAME, CLOCK_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_DESCRIPTION_TOPIC,
                          ROBOT_JOINT_COMMAND_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_JOINT_STATE_COMMAND_TOPIC,
@@ -63,6 +70,8 @@ from .runtime import LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, NodeError, declare, nod
 DEFAULT_PLANT = plant_path("default")
 SIM_EPOCH_S = 100.0      # simulated time starts here when the driver is the time source (0 reads as "unset")
 FELL_EXIT_CODE = 3
+MAX_COMMAND_LEAD_S = 0.5
+MAX_STEP_PER_TICK_S = 0.02
 """The driver's exit status after the robot fell (a graph with it then exits 1)."""
 
 
@@ -98,7 +107,7 @@ class Driver(Node):
         self.ft_pubs = {s: self.create_publisher(WrenchStamped, ros_name(ft_topic(s)), PUBLISH_DEPTH) for s in SIDES}
         self.cop_pub = self.create_publisher(PointStamped, ros_name(ROBOT_COP_TOPIC), PUBLISH_DEPTH)
         self.base_pub = self.create_publisher(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC), PUBLISH_DEPTH)
-        self.status_pub = self.create_publisher(DiagnosticStatus, ros_name(ROBOT_STATUS_TOPIC), 10)
+        self.status_pub = self.create_publisher(DiagnosticStatus, ros_name(ROBOT_STATUS_TOPIC), PUBLISH_DEPTH)
         self.clock_pub = self.create_publisher(Clock, ros_name(CLOCK_TOPIC), fast) if self.publish_clock else None
         self._setup_frames(cfg.robot)
         self.create_subscription(JointTrajectory, ros_name(ROBOT_JOINT_COMMAND_TOPIC), self._on_trajectory, 10)
@@ -106,6 +115,8 @@ class Driver(Node):
         self.create_service(Trigger, "~/reset", self._on_reset)
         self._wall0 = time.monotonic()
         self._sim0 = self.plant.t_s
+        self._ros0_ns = self.get_clock().now().nanoseconds    # wall-clock mode: the ROS time of _sim0
+        self._pending: deque[tuple[int, tuple]] = deque()     # (stamp [ns], command) not yet due
         self.sim_time = bool(self.get_parameter("use_sim_time").value)
         self._clock0_ns: int | None = None   # under use_sim_time: the /clock time the simulation started at _sim0
         self.steps_done = 0
@@ -174,20 +185,38 @@ class Driver(Node):
             self.get_logger().error(f"/robot/joint_state_command: {len(msg.name)} names but {len(msg.position)} "
                                     "positions")
             return
-        self._apply(msg.name, list(msg.position), list(msg.velocity) or None)
+        self._schedule(stamp_ns(msg.header), (msg.name, list(msg.position), list(msg.velocity) or None))
 
     def _on_trajectory(self, msg: JointTrajectory) -> None:
         if not msg.points:
             return
         p = msg.points[0]
-        self._apply(msg.joint_names, list(p.positions), list(p.velocities) or None, list(p.accelerations) or None,
-                    ff="inverse_dynamics" if len(p.accelerations) else None)
+        self._schedule(stamp_ns(msg.header), (msg.joint_names, list(p.positions), list(p.velocities) or None,
+                                              list(p.accelerations) or None,
+                                              "inverse_dynamics" if len(p.accelerations) else None))
+
+    def _schedule(self, stamp: int, command: tuple) -> None:
+        """Apply ``command`` (the arguments of :meth:`_apply`) when the simulation reaches ``stamp`` [ns]."""
+        now_ns = self.get_clock().now().nanoseconds
+        if self._sim_ros_ns() is not None and stamp > now_ns + MAX_COMMAND_LEAD_S * 1e9:
+            self.get_logger().warning(f"a command stamped {(stamp - now_ns) * 1e-9:.2f} s ahead of this machine's "
+                                      "clock (clocks not synchronised?): applied at once", throttle_duration_sec=5.0)
+            stamp = 0
+        self._pending.append((stamp, command))
+        self._apply_due()
+
+    def _apply_due(self) -> None:
+        """Apply the pending commands whose stamps the simulation has reached (in the order they came)."""
+        sim_ns = self._sim_ros_ns()
+        while self._pending and (sim_ns is None or self._pending[0][0] <= sim_ns):
+            self._apply(*self._pending.popleft()[1])
 
     def _on_reset(self, _req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
         self.plant.reset()
         self.plant.feedforward = self.ff_mode
         self.plant.settle(self.settle_s)
-        self._wall0, self._sim0 = time.monotonic(), self.plant.t_s
+        self._pending.clear()
+        self._wall0, self._sim0, self._ros0_ns = time.monotonic(), self.plant.t_s, self.get_clock().now().nanoseconds
         if self._clock0_ns is not None:       # under use_sim_time: from the clock's time now
             self._clock0_ns = self.get_clock().now().nanoseconds
         self._fall_reported = False
@@ -211,7 +240,12 @@ class Driver(Node):
         else:
             target = plant.t_s + 0.25      # as fast as it can: 250 ms of simulation per tick
         chunk = max(1, int(round(self.state_period / plant.cfg.timestep_s)))
+        # behind (a held-up tick): catch up a slice at a time, so that the commands sent meanwhile are taken in
+        # between and applied at their stamps; the next tick comes at once
+        if self.sim_time or self.rtf > 0:
+            target = min(target, plant.t_s + MAX_STEP_PER_TICK_S)
         while plant.t_s + 0.5 * plant.cfg.timestep_s < target:
+            self._apply_due()
             plant.step(chunk)
             self.steps_done += chunk
             self._publish_state()
@@ -228,14 +262,24 @@ class Driver(Node):
     def _stamp(self, msg_header) -> None:
         msg_header.stamp = self._sample_stamp       # one stamp for every message of a state sample
 
-    def _now_stamp(self):
-        if self._clock0_ns is not None:      # the /clock time this state simulates
-            sec, nsec = divmod(self._clock0_ns + int(round((self.plant.t_s - self._sim0) * 1e9)), 1_000_000_000)
-            return BuiltinTime(sec=sec, nanosec=nsec)
+    def _sim_ros_ns(self) -> int | None:
+        """The ROS time [ns] of the simulated state now: the /clock time it simulates, the published simulated
+        time, or in wall-clock mode the time it stands for; None when running as fast as it can."""
+        elapsed_s = self.plant.t_s - self._sim0
+        if self._clock0_ns is not None:
+            return self._clock0_ns + int(round(elapsed_s * 1e9))
         if self.publish_clock:
-            sec, nsec = divmod(int(round((SIM_EPOCH_S + self.plant.t_s) * 1e9)), 1_000_000_000)
-            return BuiltinTime(sec=sec, nanosec=nsec)
-        return self.get_clock().now().to_msg()
+            return int(round((SIM_EPOCH_S + self.plant.t_s) * 1e9))
+        if self.sim_time or self.rtf <= 0:     # waiting for /clock, or not paced
+            return None
+        return self._ros0_ns + int(round(elapsed_s / self.rtf * 1e9))
+
+    def _now_stamp(self):
+        ns = self._sim_ros_ns()
+        if ns is None:
+            return self.get_clock().now().to_msg()
+        sec, nsec = divmod(ns, 1_000_000_000)
+        return BuiltinTime(sec=sec, nanosec=nsec)
 
     def _publish_state(self) -> None:
         s = self.plant.sensors()

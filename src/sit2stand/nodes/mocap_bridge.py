@@ -43,7 +43,7 @@ from ..io.c3d import LabAxes
 from ..io.messages import force_plate_sample, mocap_frame
 from ..io.topics import MARKERS_TOPIC, MOCAP_TYPE, PLATE_TYPE, plate_topic
 from ..io.typestore import typestore
-from .runtime import NodeError, declare, node_main, qos_from_bag
+from .runtime import PLATE_PUBLISH_DEPTH, NodeError, declare, node_main, qos_from_bag
 
 
 class MocapBridge(Node):
@@ -75,11 +75,11 @@ class MocapBridge(Node):
         except ValueError as err:
             raise NodeError(f"parameters 'forward'/'up': {err}") from None
         self.port = port or (22223 if self.protocol == "qtm" else 1510)
-        self.qos = qos_from_bag(None)
+        self.qos, self.plate_qos = qos_from_bag(None), qos_from_bag(None, PLATE_PUBLISH_DEPTH)
         self.marker_pub = self.create_publisher(MocapFrame, MARKERS_TOPIC, self.qos)
         # the chair's and feet's topics exist from the start, as a replayer's do: a subscriber matched before the
         # first frame gets every sample (a reliable, volatile topic gives a late subscriber nothing it missed)
-        self.plate_pubs = {name: self.create_publisher(ForcePlateSample, plate_topic(name), self.qos)
+        self.plate_pubs = {name: self.create_publisher(ForcePlateSample, plate_topic(name), self.plate_qos)
                            for name, index in (("chair", self.chair), ("feet", self.feet)) if index >= 0}
         self.status_pub = self.create_publisher(DiagnosticStatus, "~/status", 10)
         self.clock, self.drops = ClockMap(), DropCounter()
@@ -131,7 +131,7 @@ class MocapBridge(Node):
                                              self.threshold_n)
             for name in names.values():
                 if name not in self.plate_pubs:
-                    self.plate_pubs[name] = self.create_publisher(ForcePlateSample, plate_topic(name), self.qos)
+                    self.plate_pubs[name] = self.create_publisher(ForcePlateSample, plate_topic(name), self.plate_qos)
             self._info = info
         return self._converter
 

@@ -52,7 +52,7 @@ from std_srvs.srv import SetBool
 from ..io.topics import CLOCK_TOPIC, FORCE_PLATE_PREFIX, MARKERS_TOPIC, SUBJECT_TOPIC, ros_name
 from ..io.bag import BagError, BagReader
 from ..io.playback import ClockTicks, PlaybackClock, check_rate, parse_wait_for, played_fraction
-from .runtime import LATCHED_QOS, NodeError, declare, message_class, node_main, qos_from_bag
+from .runtime import LATCHED_QOS, NodeError, declare, message_class, node_main, publish_depth, qos_from_bag
 
 # Reliable writers heartbeat every 5 ms instead of Fast DDS's 3 s, so acknowledgements (and with them the unpaced
 # mode's flow control) come quickly. Set before rclpy.init; a user's own profile file takes precedence.
@@ -111,7 +111,8 @@ class Replayer(Node):
                     self.get_logger().warning(f"skipping {topic}: {err}")
                     continue
                 raise NodeError(f"{self.bag_path}: topic {topic}: {err}") from None
-            self.pubs[topic] = self.create_publisher(cls, ros_name(topic), qos_from_bag(self.reader.qos(topic)))
+            qos = qos_from_bag(self.reader.qos(topic), publish_depth(bag_topics[topic].rate_hz))
+            self.pubs[topic] = self.create_publisher(cls, ros_name(topic), qos)
         if not self.pubs:
             raise NodeError(f"{self.bag_path}: nothing to play")
         self.total = sum(bag_topics[t].count for t in self.pubs)

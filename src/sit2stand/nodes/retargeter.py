@@ -232,11 +232,14 @@ class RetargeterNode(Node):
                                np.asarray(js.position, float)])
 
     def _measured_q(self) -> np.ndarray | None:
-        """The robot's measured configuration in the model's order; None if older than ROBOT_STATE_MAX_AGE_S."""
+        """The robot's measured configuration in the model's order; None if received, or stamped, longer than
+        ROBOT_STATE_MAX_AGE_S ago."""
         if self.robot_js is None or self.robot_base is None or \
                 time.monotonic() - min(self.robot_rx) > ROBOT_STATE_MAX_AGE_S:
             return None
         js = deserialize_message(self.robot_js, JointState)
+        if self.get_clock().now().nanoseconds - stamp_ns(js.header) > ROBOT_STATE_MAX_AGE_S * 1e9:
+            return None          # received now, but a simulation held up sent it late: not the robot's state now
         if self._js_order is None or self._js_order[0] != list(js.name):
             if not set(self.joint_names) <= set(js.name):
                 return None

@@ -8,6 +8,7 @@ console script (``replayer --ros-args -p bag:=...``), as ``python -m sit2stand.n
 from __future__ import annotations
 
 import importlib
+import math
 import os
 import signal
 import sys
@@ -108,7 +109,20 @@ def qos_to_bag(profile: QoSProfile):
 # writer drops its oldest samples the recorder has not yet acknowledged beyond this depth (seen at 50 and 100:
 # 7-13 samples missing from a bag)
 PUBLISH_DEPTH = 1000
-TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)            # tf2_ros's /tf publisher
+READER_STALL_S = 5.0
+"""A recorded topic's publisher keeps at least this long of its samples [s] for a reader held up by a loaded
+machine: a live stand-up on 2 cores lost 133 force-plate samples (1 kHz, depth 1000) and 7 /tf messages (50 Hz,
+depth 100, as tf2_ros's) to a recorder held up for 1-2 s."""
+
+
+def publish_depth(rate_hz: float) -> int:
+    """History depth of a recorded topic's publisher at ``rate_hz``: ``READER_STALL_S`` of samples, at least
+    ``PUBLISH_DEPTH``."""
+    return max(PUBLISH_DEPTH, math.ceil(rate_hz * READER_STALL_S))
+
+
+PLATE_PUBLISH_DEPTH = publish_depth(1000.0)
+TF_QOS = QoSProfile(depth=publish_depth(50.0), reliability=ReliabilityPolicy.RELIABLE)     # /tf at 50 Hz
 # /tf_static, descriptions, the subject, parameters: the latest message reaches subscribers that come later
 LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
