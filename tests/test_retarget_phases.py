@@ -63,10 +63,10 @@ def test_no_rise_is_named():
         find_phases(t, np.full(100, 0.55), np.zeros(100), 1.75)
 
 
-def test_retarget_plays_rise_and_stand_of_a_trial_that_ends_seated(tmp_path):
-    """The natural rise followed by its mirror image (the human sits back down): by default the plan stops before
-    the sit-down and the simulated robot stands up."""
-    bag = tmp_path / "up_and_down"
+@pytest.fixture(scope="module")
+def up_and_down(tmp_path_factory) -> Path:
+    """The natural rise followed by its mirror image: the human sits back down (chair plate included)."""
+    bag = tmp_path_factory.mktemp("trial") / "up_and_down"
     mirrored = ("/mocap/", "/force_plate/", "/ground_truth/com")
     with BagReader(ROOT / "bags" / "natural") as src, BagWriter(bag, custom_data=src.custom_data) as out:
         for topic, info in src.topics().items():
@@ -79,7 +79,23 @@ def test_retarget_plays_rise_and_stand_of_a_trial_that_ends_seated(tmp_path):
                 t_ns = back - msg.timestamp_ns
                 obj = dataclasses.replace(obj, header=M.header(t_ns, obj.header.frame_id))
                 out.write(msg.topic, t_ns, obj)
-    assert sit2stand(["retarget", str(bag), "--simulate", "--out", str(tmp_path / "rt")]) == 0
+    return bag
+
+
+def test_retarget_plays_rise_and_stand_of_a_trial_that_ends_seated(tmp_path, up_and_down):
+    """By default the plan stops before the sit-down and the simulated robot stands up."""
+    assert sit2stand(["retarget", str(up_and_down), "--simulate", "--out", str(tmp_path / "rt")]) == 0
     summary = json.loads((tmp_path / "rt" / "summary.json").read_text())
     assert summary["phases"]["played"] == "rise and stand" and summary["phases"]["sit_down_s"] is not None
-    assert summary["stood_up"]
+    assert summary["stood_up"] and summary["sat_down"] is None
+
+
+def test_retarget_whole_stands_up_and_sits_back_down_at_the_humans_timing(tmp_path, up_and_down):
+    """--whole: the plan is seated again from the human's touch-down (the chair takes the load: no ZMP criterion
+    that would hold a COM behind the heels at the cap), and the robot sits back down on the chair."""
+    assert sit2stand(["retarget", str(up_and_down), "--whole", "--simulate", "--out", str(tmp_path / "rt")]) == 0
+    summary = json.loads((tmp_path / "rt" / "summary.json").read_text())
+    assert summary["phases"]["played"] == "whole trial"
+    assert summary["stood_up"] and summary["sat_down"] and summary["fall"] is None
+    assert summary["time_scale"] < 1.5, "the sit-down is not stretched (it was at the cap of 4 to the end)"
+    assert abs(summary["pelvis_final_m"] - summary["pelvis_planned_final_m"]) < 0.05

@@ -27,8 +27,15 @@ def _retarget(args: argparse.Namespace) -> int:
                   **({"seat_off_dwell_s": args.seat_off_dwell} if args.seat_off_dwell is not None else {}))
     print(json.dumps(summary, indent=2))
     if args.simulate:
-        print("stood up" if summary["stood_up"] else f"did not stand up: {summary['fall'] or 'pelvis too low'}")
-        return 0 if summary["stood_up"] else 1
+        ok = summary["stood_up"] and summary.get("sat_down") is not False
+        if not summary["stood_up"]:
+            print(f"did not stand up: {summary['fall'] or 'pelvis too low'}")
+        elif summary.get("sat_down") is None:
+            print("stood up")
+        else:
+            print("stood up and sat back down" if ok else f"stood up, did not sit back down: "
+                  f"{summary['fall'] or 'pelvis not on the seat'}")
+        return 0 if ok else 1
     return 0
 
 

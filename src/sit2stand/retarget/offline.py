@@ -266,14 +266,26 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
             break
     arr = np.array(rows)
     np.save(out / "simulation.npy", arr)
-    stand_z = float(cmds[-1].q[2])
-    stood = (not plant.fallen) and arr[-1, 10] > stand_z - 0.08 and arr[-1, 10] > arr[0, 10] + 0.2
+    stood, sat_down = _verdict(plant.fallen, arr[:, 10], np.array([c.q[2] for c in cmds]),
+                               not cmds[-1].on_feet and any(c.on_feet for c in cmds))
     err = arr[:, 1:4] - arr[:, 4:7]
-    return cmds, {"stood_up": bool(stood), "fall": plant.status_text if plant.fallen else None,
-                  "pelvis_final_m": float(arr[-1, 10]), "pelvis_planned_final_m": stand_z,
+    return cmds, {"stood_up": stood, "sat_down": sat_down, "fall": plant.status_text if plant.fallen else None,
+                  "pelvis_final_m": float(arr[-1, 10]), "pelvis_planned_final_m": float(cmds[-1].q[2]),
                   "com_tracking_rms_m": float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))),
                   "com_feedback_max_offset_m": float(np.abs(arr[:, 19:21]).max()), **_torques(plant, np.array(torque)),
                   **_qp_times(plant)}
+
+
+def _verdict(fallen: bool, pelvis_z: np.ndarray, planned_z: np.ndarray, ends_seated: bool) -> tuple[bool, bool | None]:
+    """(stood up, sat back down) from the simulated and planned pelvis heights [m]: stood up when, not fallen, the
+    pelvis came within 8 cm of the plan's standing height and 20 cm above its start (at the end, or for a plan that
+    ends seated, at its highest); sat back down (None unless the plan ends seated) when it ended within 5 cm of the
+    plan's last height."""
+    up = float(pelvis_z.max() if ends_seated else pelvis_z[-1])
+    stand_z = float(planned_z.max() if ends_seated else planned_z[-1])
+    stood = not fallen and up > stand_z - 0.08 and up > pelvis_z[0] + 0.2
+    sat = (not fallen and abs(float(pelvis_z[-1] - planned_z[-1])) < 0.05) if ends_seated else None
+    return bool(stood), sat
 
 
 def _torques(plant, demand: np.ndarray) -> dict:

@@ -12,7 +12,9 @@ plan, and the paper's figures.
   ``osmesa``; Fig. 4/5).
 
 Stood up: not fallen (the pelvis never below the plant's fall height), the pelvis 20 cm or more above where it sat,
-and above ``stand_fraction`` of the highest it reached for the whole last ``hold_s`` seconds. Units SI.
+and above ``stand_fraction`` of the highest it reached for ``hold_s`` seconds on end (the last ones, unless it sat
+back down). Sat back down (a demonstration that ends seated): stood up, then the pelvis back within 5 cm of where it
+sat. Units SI.
 """
 
 from __future__ import annotations
@@ -111,9 +113,10 @@ def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | N
     z = q[:, 2]
     rise = np.flatnonzero(z > z[0] + 0.02)
     seat_off = float(t[rise[0]]) if len(rise) else None
-    fallen, stood = _stood_up(cfg, t, z, hold_s, stand_fraction)
+    fallen, stood, sat_down = _stood_up(cfg, t, z, hold_s, stand_fraction)
     shift = msgs.com_feedback_shift_m
-    summary = {"stood_up": bool(stood), "fallen": fallen, "pelvis_start_m": float(z[0]), "pelvis_final_m": float(z[-1]),
+    summary = {"stood_up": bool(stood), "sat_down": sat_down, "fallen": fallen, "pelvis_start_m": float(z[0]),
+               "pelvis_final_m": float(z[-1]),
                "robot_seat_off_s": seat_off, "human_seat_off_s": human_seat_off,
                "com_tracking_rms_m": _tracking_rms(t, com, plan_t, plan_com),
                "planned_final_com_z_m": float(plan_com[-1, 2]) if len(plan_com) else None,
@@ -182,12 +185,20 @@ def _human_seat_off(chair: list) -> float | None:
 
 
 def _stood_up(cfg: PlantConfig, t: np.ndarray, z: np.ndarray, hold_s: float,
-              stand_fraction: float) -> tuple[bool, bool]:
-    """(fallen, stood up) from the pelvis height z [m] over time t [s] (see the module docstring)."""
-    last = t > t[-1] - hold_s
+              stand_fraction: float) -> tuple[bool, bool, bool]:
+    """(fallen, stood up, sat back down) from the pelvis height z [m] over time t [s] (see the module
+    docstring)."""
     fallen = bool(np.any(z < cfg.fall_pelvis_height_m))
-    stood = (not fallen) and bool(np.all(z[last] > stand_fraction * max(z.max(), 1e-9))) and z[-1] > z[0] + 0.2
-    return fallen, stood
+    up = z > stand_fraction * max(z.max(), 1e-9)
+    back = z[-1] < z[0] + 0.05
+    if back:          # the longest stretch standing, anywhere
+        starts = np.flatnonzero(np.diff(np.r_[0, up.astype(int)]) == 1)
+        ends = np.flatnonzero(np.diff(np.r_[up.astype(int), 0]) == -1)
+        held = max((t[e] - t[b] for b, e in zip(starts, ends)), default=0.0) >= hold_s
+    else:
+        held = bool(np.all(up[t > t[-1] - hold_s]))
+    stood = not fallen and held and z.max() > z[0] + 0.2
+    return fallen, stood, bool(stood and back)
 
 
 def _tracking_rms(t: np.ndarray, com: np.ndarray, plan_t: np.ndarray, plan_com: np.ndarray) -> float:
@@ -224,8 +235,9 @@ def figure_6(a: RunAnalysis, png: Path) -> None:
         ax[1].axvline(a.seat_off_s, color="k", ls=":", lw=1, label="robot seat-off (pelvis +2 cm)")
     ax[1].set_ylim(-0.3, 0.2)
     s = a.summary
-    ax[1].set_title(f"the robot (retimed): {'stood up' if s['stood_up'] else 'did not stand up'}, COM tracking RMS "
-                    f"{s['com_tracking_rms_m'] * 100:.1f} cm")
+    verdict = ("stood up" if s["stood_up"] else "did not stand up") + \
+        (" and sat back down" if s.get("sat_down") else "")
+    ax[1].set_title(f"the robot (retimed): {verdict}, COM tracking RMS {s['com_tracking_rms_m'] * 100:.1f} cm")
     ax[1].set_ylabel("forward [m]")
     ax[1].set_xlabel("time since the robot's first state [s]")
     ax[1].legend(fontsize=8)

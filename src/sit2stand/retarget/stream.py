@@ -183,6 +183,8 @@ class Retargeter:
         self.calibrated = False
         self.seated = True
         self.human_seat_off = False
+        self.sat_down = False           # the human sat back down after standing: the plan is on the seat again
+        self._pelvis_rise_peak_m = 0.0
         self._chair_loaded = False
         self._t_off: float | None = None
         self._y_off = 0.0
@@ -316,6 +318,8 @@ class Retargeter:
         pel = [i for i in self.pelvis_markers if ok[i]]
         pelvis_now = positions_m[pel].mean(axis=0) if pel else self._pelvis_last
         self._pelvis_last = pelvis_now
+        if not self.seated and not self.sat_down:
+            self.sat_down = self._human_touched_down(pelvis_now, chair_force_n)
         if self.seated and self.human_seat_off and target[0] >= robot.ankle_left[0] + self.knots_r[1] - 1e-3:
             self.seated = False
             self._t_off = t_s
@@ -353,8 +357,23 @@ class Retargeter:
                             base_weight=weight, base_pitch_min=self.pitch_seated if self.seated else None)
         self.q = res.q
         pin.centerOfMass(self.model, self.data, self.q)
-        return RetargetFrame(t_s, res.q, target, axes, self.data.com[0].copy(), self.seated, self.human_seat_off, res,
-                             markers)
+        return RetargetFrame(t_s, res.q, target, axes, self.data.com[0].copy(), self.seated or self.sat_down,
+                             self.human_seat_off, res, markers)
+
+    def _human_touched_down(self, pelvis_m: np.ndarray, chair_force_n: float | None) -> bool:
+        """After the rise, has the human sat back down? The chair plate loaded again (over twice the seat-off
+        threshold), or without one, the pelvis markers back within ``pelvis_rise_m`` of their seated height after
+        rising over five times that. From then on the plan's frames are seated again (the chair takes the load: no
+        ZMP criterion, the seat in the torque criterion); the IK keeps following the markers and the COM map,
+        which bring the hips back onto the seat."""
+        cfg = self.cfg
+        rise = float(pelvis_m[2] - self.human_pelvis0[2])
+        self._pelvis_rise_peak_m = max(self._pelvis_rise_peak_m, rise)
+        if self._pelvis_rise_peak_m < 5 * cfg.pelvis_rise_m:
+            return False
+        if chair_force_n is not None and np.isfinite(chair_force_n):
+            return chair_force_n > 2 * cfg.chair_off_force_n
+        return rise < cfg.pelvis_rise_m
 
 
 def retarget_sequence(retargeter: Retargeter, player: PlanPlayer, t_s: np.ndarray, positions_m: np.ndarray,
