@@ -126,7 +126,7 @@ def add_retarget(sub) -> None:
                         "(default: retarget.player.DEFAULT_MAX_TIME_SCALE, 4)")
     p.add_argument("--simulate", action="store_true", help="execute the commands on the MuJoCo plant")
     p.add_argument("--whole", action="store_true", help="play the whole recording; by default a trial that ends "
-                   "seated is played up to the human's sit-down (the robot does not sit back down yet)")
+                   "seated is played up to the human's sit-down; with --whole the robot sits back down")
     p.add_argument("--no-com-feedback", action="store_true",
                    help="simulate the commands as planned, without the COM feedback the node applies")
     p.add_argument("--dynamic", action="store_true",
