@@ -83,11 +83,11 @@ def up_and_down(tmp_path_factory) -> Path:
 
 
 def test_retarget_plays_rise_and_stand_of_a_trial_that_ends_seated(tmp_path, up_and_down):
-    """By default the plan stops before the sit-down and the simulated robot stands up."""
-    assert sit2stand(["retarget", str(up_and_down), "--simulate", "--out", str(tmp_path / "rt")]) == 0
+    """By default the plan stops before the sit-down: it ends standing (the simulated stand-up: the test below)."""
+    assert sit2stand(["retarget", str(up_and_down), "--out", str(tmp_path / "rt")]) == 0
     summary = json.loads((tmp_path / "rt" / "summary.json").read_text())
     assert summary["phases"]["played"] == "rise and stand" and summary["phases"]["sit_down_s"] is not None
-    assert summary["stood_up"] and summary["sat_down"] is None
+    assert summary["frames"] < 2 * 391 - 100, "the sit-down frames are left out"
 
 
 def test_retarget_whole_stands_up_and_sits_back_down_at_the_humans_timing(tmp_path, up_and_down):
