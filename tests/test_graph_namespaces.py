@@ -6,6 +6,7 @@ standing is not asserted: on 2 cores two real-time stand-ups starve each other, 
 
 import os
 import random
+import re
 import subprocess
 import sys
 import time
@@ -14,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import GRAPHS
+from conftest import GRAPHS, NodeProcess
 from sit2stand.io.bag import BagReader
 
 pytestmark = pytest.mark.graph
@@ -59,3 +60,27 @@ def test_two_stand_up_graphs_run_side_by_side_on_one_domain(tmp_path):
             np.testing.assert_array_equal(a, b)         # its own demonstration, not the other graph's
             z = [m.pose.position.z for _, m in rec.read("/robot/base_pose")]
             assert z[0] < 0.65 and len(z) > 1000, f"{bag}: its robot seated at the start, simulated throughout"
+
+
+def test_a_second_graph_with_the_same_node_names_stops_and_names_the_first(tmp_path, ros_env):
+    """Same graph, same namespace, same domain: the second run's node stops with an error naming the first run's
+    (sit2stand.nodes.runtime.GraphGuard); the first goes on, warned, and its bag carries its run id."""
+    graph = tmp_path / "solo.yaml"
+    graph.write_text("name: solo\narguments: {out: ''}\nnodes:\n  - name: recorder\n    executable: recorder\n"
+                     "    parameters:\n      - {output: $(var out)}\n")
+    first = NodeProcess(["sit2stand.cli", "launch", str(graph), f"out:={tmp_path / 'a'}"], ros_env,
+                        tmp_path / "first.log")
+    try:
+        assert first.wait_for_output("recording to", 60), first.output
+        second = subprocess.run([sys.executable, "-m", "sit2stand.cli", "launch", str(graph),
+                                 f"out:={tmp_path / 'b'}", "--timeout", "60"], env=ros_env, capture_output=True,
+                                text=True, timeout=90)
+        run_id = re.search(r"run (\w+): graph solo", first.output).group(1)
+        assert second.returncode == 1, second.stdout[-3000:]
+        assert f"another graph's /recorder (run {run_id}" in second.stdout, second.stdout[-3000:]
+        assert first.wait_for_output("a second /recorder", 20), first.output
+        assert first.stop() == 0, first.output
+    finally:
+        first.kill()
+    with BagReader(tmp_path / "a") as bag:
+        assert bag.custom_data["run_id"] == run_id

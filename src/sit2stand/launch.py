@@ -66,6 +66,7 @@ import sys
 import tempfile
 import threading
 import time
+import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -74,6 +75,7 @@ from .data import DataFileNotFound, graph_path
 from .data import folder as data_folder
 from .data import names as data_names
 from .errors import Sit2StandError
+from .io.topics import RUN_ID_ENV
 
 OUR_NODES = {"replayer", "recorder", "human_com", "driver", "identification", "retargeter", "mocap_bridge",
              "foxglove"}
@@ -346,6 +348,9 @@ class Launcher:
         self._print_lock = threading.Lock()
         self._readers: list[threading.Thread] = []
         self.width = max(len(n.name) for n in graph.nodes)
+        # one id for this run of the graph, given to every node: a node of another run with the same name (a second
+        # graph on the domain) stops itself (sit2stand.nodes.runtime.GraphGuard); the recorder stores it in the bag
+        self.run_id = os.environ.get(RUN_ID_ENV) or uuid.uuid4().hex[:8]
 
     def _emit(self, name: str, line: str) -> None:
         with self._print_lock:
@@ -363,6 +368,7 @@ class Launcher:
         env = dict(os.environ)
         env.update({"PYTHONUNBUFFERED": "1", "RCUTILS_COLORIZED_OUTPUT": "0", "RCUTILS_LOGGING_BUFFERED_STREAM": "0"})
         env.update(spec.env)
+        env[RUN_ID_ENV] = self.run_id
         proc = subprocess.Popen(spec.command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL,
                                 env=env, start_new_session=True,
@@ -389,6 +395,7 @@ class Launcher:
         """Start the graph and supervise it; returns 0 when the job succeeded (every node ended cleanly), else 1."""
         old = {s: signal.signal(s, self.request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
         t0 = time.monotonic()
+        self._emit("launch", f"run {self.run_id}: graph {self.graph.name}")
         pending = sorted(self.graph.nodes, key=lambda n: n.delay_s)
         failed: list[str] = []
         try:

@@ -31,6 +31,8 @@ MODEL_POINTS_TOPIC = "/mocap/model_points"           # MocapFrame: the capture s
 REFERENCE_COM_TOPIC = "/mocap/reference_com"         # CenterOfMass: the capture software's own COM
 FORCE_PLATE_PREFIX = "/force_plate/"                 # + plate name: ForcePlateSample, lab axes
 CLOCK_TOPIC = "/clock"                               # rosgraph_msgs/Clock
+GRAPH_TOPIC = "/sit2stand/graph"                     # std_msgs/String (transient local, JSON): each node's run id
+RUN_ID_ENV = "SIT2STAND_RUN_ID"                      # the launcher's run id, given to every node of a graph
 
 # --- human COM estimator ------------------------------------------------------------------------------------------
 HUMAN_COM_TOPIC = "/human/com"                       # CenterOfMass, lab frame

@@ -44,7 +44,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ..io.topics import CLOCK_TOPIC, LATCHED_TOPICS, TOPIC_TYPES, bag_name, ros_name
+from ..io.topics import CLOCK_TOPIC, GRAPH_TOPIC, LATCHED_TOPICS, RUN_ID_ENV, TOPIC_TYPES, bag_name, ros_name
 from ..io.bag import BagError, BagWriter
 from .runtime import (IdleDrain, NodeError, declare, message_class, node_main, qos_matching_publishers, qos_to_bag,
                       steady_timer)
@@ -98,7 +98,8 @@ class Recorder(Node):
             raise NodeError(f"parameter regex/exclude is not a regular expression: {err}") from None
         self.record_all = not self.topics and self.regex is None
         try:
-            self.writer = BagWriter(Path(out), custom_data={"recorded_by": "sit2stand recorder"})
+            self.writer = BagWriter(Path(out), custom_data={"recorded_by": "sit2stand recorder",
+                                                            "run_id": os.environ.get(RUN_ID_ENV, "")})
         except BagError as err:
             raise NodeError(str(err)) from None
         self.output = Path(out)
@@ -124,7 +125,7 @@ class Recorder(Node):
         self._discover()
 
     def _wanted(self, topic: str) -> bool:
-        if topic == CLOCK_TOPIC and not self.include_clock:
+        if topic == CLOCK_TOPIC and not self.include_clock or topic == GRAPH_TOPIC:   # the graphs' own bookkeeping
             return False
         if self.exclude is not None and self.exclude.search(topic) and topic not in self.topics:
             return False

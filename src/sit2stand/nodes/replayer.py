@@ -49,7 +49,7 @@ from rosgraph_msgs.msg import Clock
 from sit2stand_msgs.msg import Subject as SubjectMsg
 from std_srvs.srv import SetBool
 
-from ..io.topics import CLOCK_TOPIC, FORCE_PLATE_PREFIX, MARKERS_TOPIC, SUBJECT_TOPIC, ros_name
+from ..io.topics import CLOCK_TOPIC, FORCE_PLATE_PREFIX, GRAPH_TOPIC, MARKERS_TOPIC, SUBJECT_TOPIC, ros_name
 from ..io.bag import BagError, BagReader
 from ..io.playback import ClockTicks, PlaybackClock, check_rate, parse_wait_for, played_fraction
 from .runtime import LATCHED_QOS, NodeError, declare, message_class, node_main, publish_depth, qos_from_bag
@@ -97,7 +97,7 @@ class Replayer(Node):
             raise NodeError(str(err)) from None
 
         bag_topics = self.reader.topics()
-        wanted = self.topics_param or sorted(bag_topics)
+        wanted = self.topics_param or sorted(set(bag_topics) - {GRAPH_TOPIC})    # another run's bookkeeping
         missing = [t for t in wanted if t not in bag_topics]
         if missing:
             raise NodeError(f"{self.bag_path}: no topic {', '.join(missing)} (it has {', '.join(sorted(bag_topics))})")

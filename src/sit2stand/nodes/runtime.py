@@ -8,6 +8,7 @@ console script (``replayer --ros-args -p bag:=...``), as ``python -m sit2stand.n
 from __future__ import annotations
 
 import importlib
+import json
 import math
 import os
 import signal
@@ -25,9 +26,11 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from std_msgs.msg import String
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 
 from ..errors import Sit2StandError
+from ..io.topics import GRAPH_TOPIC, RUN_ID_ENV
 
 
 class NodeError(Sit2StandError, RuntimeError):
@@ -125,6 +128,9 @@ PLATE_PUBLISH_DEPTH = publish_depth(1000.0)
 TF_QOS = QoSProfile(depth=publish_depth(50.0), reliability=ReliabilityPolicy.RELIABLE)     # /tf at 50 Hz
 # /tf_static, descriptions, the subject, parameters: the latest message reaches subscribers that come later
 LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# a latched topic that many nodes publish once each: a late subscriber gets every node's message
+LATCHED_ALL_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def qos_from_bag(profiles, depth: int = PUBLISH_DEPTH) -> QoSProfile:
@@ -197,6 +203,43 @@ def _make_executor(kind: str):
 CLOCK_IN_NAMESPACE = ["--ros-args", "-r", "/clock:=clock"]
 
 
+class GraphGuard:
+    """One graph per name: a node announces its run (the launcher's ``SIT2STAND_RUN_ID``, else its own process) on
+    ``GRAPH_TOPIC`` (latched) and listens there. Another run's node with this node's fully qualified name means a
+    second graph on the domain: the one that started later stops with an error naming the other (the earlier one
+    logs a warning and goes on), before two graphs mix their data. Nodes in other namespaces never clash."""
+
+    def __init__(self, node: Node) -> None:
+        self.node, self.name = node, node.get_fully_qualified_name()
+        self.run = os.environ.get(RUN_ID_ENV) or f"pid{os.getpid()}"
+        self.started_ns = time.time_ns()
+        self.conflict: str | None = None
+        self._warned: set[str] = set()
+        pub = node.create_publisher(String, GRAPH_TOPIC, LATCHED_ALL_QOS)
+        pub.publish(String(data=json.dumps({"run": self.run, "node": self.name, "started_ns": self.started_ns,
+                                            "pid": os.getpid()})))
+        node.create_subscription(String, GRAPH_TOPIC, self._on_announce, LATCHED_ALL_QOS)
+
+    def _on_announce(self, msg) -> None:
+        try:
+            other = json.loads(msg.data)
+        except ValueError:
+            return
+        if other.get("node") != self.name or other.get("run") == self.run:
+            return
+        earlier = (other.get("started_ns", 0), other.get("pid", 0)) < (self.started_ns, os.getpid())
+        domain = os.environ.get("ROS_DOMAIN_ID", "0")
+        if earlier:
+            self.conflict = (f"another graph's {self.name} (run {other.get('run')}, pid {other.get('pid')}) is "
+                             f"running on ROS_DOMAIN_ID {domain}: this one (run {self.run}) stops before the two mix "
+                             "their data; run it on another ROS_DOMAIN_ID, or in a namespace (sit2stand launch "
+                             "--namespace NAME)")
+        elif other.get("run") not in self._warned:
+            self._warned.add(other.get("run"))
+            self.node.get_logger().warning(f"a second {self.name} (run {other.get('run')}) appeared on ROS_DOMAIN_ID "
+                                           f"{domain}; it was told to stop")
+
+
 def node_main(factory: Callable[[], Node]) -> Callable[[list[str] | None], int]:
     """Make a console-script ``main`` that runs one node until it finishes, SIGINT or SIGTERM.
 
@@ -223,10 +266,13 @@ def node_main(factory: Callable[[], Node]) -> Callable[[list[str] | None], int]:
         code = 0
         try:
             node = factory()
+            guard = GraphGuard(node)
             executor = _make_executor(getattr(node, "executor_kind", "single_threaded"))
             executor.add_node(node)
-            while rclpy.ok() and not getattr(node, "finished", False) and not signals["count"]:
+            while rclpy.ok() and not getattr(node, "finished", False) and not signals["count"] and not guard.conflict:
                 executor.spin_once(timeout_sec=0.1)
+            if guard.conflict:
+                raise NodeError(guard.conflict)
             drain = getattr(node, "drain", None)
             if signals["count"] and drain is not None:
                 deadline = time.monotonic() + float(getattr(node, "drain_timeout_s", 5.0))
