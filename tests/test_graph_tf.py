@@ -32,7 +32,7 @@ EXPECTED_FRAME = {
     "/mocap/markers": LAB_FRAME, "/force_plate/chair": LAB_FRAME, "/force_plate/feet": LAB_FRAME,
     "/human/com": LAB_FRAME, "/human/joint_states": HUMAN_ROOT_FRAME, "/human/model_cop": LAB_FRAME,
     "/human/pelvis_pose": LAB_FRAME, "/viz/human": LAB_FRAME,
-    "/human/measured_cop": LAB_FRAME, "/ground_truth/com": LAB_FRAME,
+    "/human/measured_cop": LAB_FRAME, "/ground_truth/com": LAB_FRAME, "/ground_truth/joint_states": LAB_FRAME,
     "/robot/base_pose": WORLD_FRAME, "/robot/cop": WORLD_FRAME, "/robot/planned_com": WORLD_FRAME,
     "/robot/planned_zmp": WORLD_FRAME, "/robot/com_feedback": WORLD_FRAME, "/robot/retarget/ik": WORLD_FRAME,
     "/robot/ft/left": sole_world_aligned_frame("left"), "/robot/ft/right": sole_world_aligned_frame("right"),
@@ -41,9 +41,6 @@ EXPECTED_FRAME = {
 # Stamped, but with no single frame: per-link parameters (masses, COMs in each link's own frame, scale factors), the
 # subject (stature, mass)
 NO_SINGLE_FRAME = {"/human/scaling", "/ground_truth/inertial_parameters", "/human/subject"}
-# Replayed as recorded in the shipped demonstration bags, which an older synthesiser wrote with 'pelvis' for a pelvis
-# pose in lab (today's writes lab); a regenerated bag flips the strict xfail below
-STALE_IN_SHIPPED_BAGS = {"/ground_truth/joint_states": LAB_FRAME}
 
 
 @pytest.fixture(scope="module")
@@ -195,18 +192,8 @@ def test_every_stamped_topic_says_a_known_frame(bag):
         ids = {m.header.frame_id for _, msg in read(topic) for m in getattr(msg, "markers", [msg])}
         if topic in NO_SINGLE_FRAME:
             continue
-        if topic in STALE_IN_SHIPPED_BAGS:
-            continue
         assert topic in EXPECTED_FRAME, f"{topic}: stamped, frame {ids}, but not in EXPECTED_FRAME"
         assert ids == {EXPECTED_FRAME[topic]}, f"{topic} says {ids}, its numbers are in {EXPECTED_FRAME[topic]}"
-
-
-@pytest.mark.xfail(strict=True, reason="bags/elderly was written by an older synthesiser ('pelvis'); "
-                                       "regenerate it with sit2stand synth-human to fix")
-def test_the_replayed_ground_truth_pelvis_pose_says_lab(bag):
-    read, _ = bag
-    for topic, frame in STALE_IN_SHIPPED_BAGS.items():
-        assert {m.header.frame_id for _, m in read(topic)} == {frame}
 
 
 def _nearest(stamps: list[int], s: int) -> int:
