@@ -58,6 +58,9 @@ from .runtime import (PUBLISH_DEPTH, IdleDrain, NodeError, declare, node_main, q
                       scheduling_text, steady_timer)
 
 ROBOT_STATE_MAX_AGE_S = 0.1
+ROBOT_STATE_MAX_DELAY_S = 0.5
+"""A robot state received within ``ROBOT_STATE_MAX_AGE_S`` (the robot is alive) and stamped within this of now is
+used by the COM feedback, compared with the plan of its own stamp; one from a simulation lagging more is not."""
 """An older robot state is not used by the COM feedback (the last shift is kept instead)."""
 
 
@@ -231,21 +234,22 @@ class RetargeterNode(Node):
                                [b.orientation.x, b.orientation.y, b.orientation.z, b.orientation.w],
                                np.asarray(js.position, float)])
 
-    def _measured_q(self) -> np.ndarray | None:
-        """The robot's measured configuration in the model's order; None if received, or stamped, longer than
-        ROBOT_STATE_MAX_AGE_S ago."""
+    def _measured_q(self) -> tuple[np.ndarray, float] | None:
+        """The robot's measured configuration in the model's order and its stamp [s]; None if received longer than
+        ROBOT_STATE_MAX_AGE_S ago or stamped longer than ROBOT_STATE_MAX_DELAY_S ago."""
         if self.robot_js is None or self.robot_base is None or \
                 time.monotonic() - min(self.robot_rx) > ROBOT_STATE_MAX_AGE_S:
             return None
         js = deserialize_message(self.robot_js, JointState)
-        if self.get_clock().now().nanoseconds - stamp_ns(js.header) > ROBOT_STATE_MAX_AGE_S * 1e9:
-            return None          # received now, but a simulation held up sent it late: not the robot's state now
+        stamp = stamp_ns(js.header)
+        if self.get_clock().now().nanoseconds - stamp > ROBOT_STATE_MAX_DELAY_S * 1e9:
+            return None          # received now, but a simulation held up sent it long ago
         if self._js_order is None or self._js_order[0] != list(js.name):
             if not set(self.joint_names) <= set(js.name):
                 return None
             self._js_order = (list(js.name), np.array([list(js.name).index(n) for n in self.joint_names]) + 7)
         q = self._robot_q(js)
-        return np.concatenate([q[:7], q[self._js_order[1]]])
+        return np.concatenate([q[:7], q[self._js_order[1]]]), stamp * 1e-9
 
     def _tick(self) -> None:
         """Input time-out, the pacing timer, and the end of the plan."""

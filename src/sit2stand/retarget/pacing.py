@@ -37,6 +37,8 @@ from .stream import RetargetConfig, Retargeter, RobotSetup
 STAMP_TOLERANCE_S = 1e-6
 """Two stamps this close are the same frame's."""
 MAX_CATCH_UP_PERIODS = 5.0
+PLANNED_COM_KEPT = 200
+"""Planned COMs kept by the robot time of their command (2 s at 100 Hz), to compare a late robot state with."""
 """A command that comes late (the retargeter or the clock held up) moves the plan on by the robot's time since the
 last one, up to this many periods: after a longer stall the plan waits instead of jumping ahead."""
 
@@ -192,12 +194,13 @@ class LiveRetargeting:
         cfg: the settings.
         send: publishes a command (the feedback's offset [m] or None) and returns when it went
             (``time.perf_counter``).
-        measured_q: the robot's measured configuration in the model's order, or None when not recent.
+        measured_q: the robot's measured configuration in the model's order and the robot time [s] it was measured
+            at (its stamp), or None when there is no recent one.
         robot_clock: the robot's time now [s], which paces the commands (the node's ROS clock).
     """
 
     def __init__(self, cfg: LiveConfig, send: Callable[[Command, np.ndarray | None], float],
-                 measured_q: Callable[[], np.ndarray | None],
+                 measured_q: Callable[[], tuple[np.ndarray, float] | None],
                  robot_clock: Callable[[], float] = time.monotonic) -> None:
         self.cfg = cfg
         self.send, self.measured_q, self.robot_clock = send, measured_q, robot_clock
@@ -214,6 +217,7 @@ class LiveRetargeting:
         self.feedback_max_m = 0.0
         self.lag_m = 0.0              # the robot's COM behind the plan's at the last command [m]
         self._last_command_s: float | None = None     # the robot's clock at the last command [s]
+        self._planned_com: deque[tuple[float, np.ndarray]] = deque(maxlen=PLANNED_COM_KEPT)   # (robot time, COM)
         self.last_frame_s = 0.0       # time.monotonic of the last frame processed
 
     def start(self, robot: RobotSetup, frame: MarkerFrame, com_m: np.ndarray):
@@ -286,16 +290,28 @@ class LiveRetargeting:
         if cmd is None:
             return None
         self._last_command_s = robot_now_s
+        self._planned_com.append((robot_now_s, cmd.com))
         offset = None
         if self.stabiliser is not None:
-            q_measured = self.measured_q()
+            measured = self.measured_q()
+            q_measured, plan_com = None, cmd.com
+            if measured is not None:
+                q_measured, plan_com = measured[0], self._planned_com_at(measured[1], cmd.com)
             self.state_stale += q_measured is None and cmd.on_feet
-            fix = self.stabiliser.correct(cmd.q, cmd.com, q_measured, cmd.on_feet, 1.0 / self.cfg.rate_hz)
+            fix = self.stabiliser.correct(cmd.q, plan_com, q_measured, cmd.on_feet, 1.0 / self.cfg.rate_hz)
             cmd = dataclasses.replace(cmd, q=fix.q)
             offset = fix.offset_m
             self.lag_m = fix.lag_m if q_measured is not None else 0.0
             self.feedback_max_m = max(self.feedback_max_m, float(np.abs(offset).max()))
         return self.send(cmd, offset)
+
+    def _planned_com_at(self, t_s: float, default: np.ndarray) -> np.ndarray:
+        """The planned COM of the last command sent at or before robot time ``t_s``: what a state measured then
+        is compared with (a robot state can arrive late; against the newest plan it would read as a lag)."""
+        for sent_s, com in reversed(self._planned_com):
+            if sent_s <= t_s + 1e-9:
+                return com
+        return default
 
     def tick(self, now_s: float) -> bool:
         """The timer (``now_s``: wall time, ``time.monotonic``): keep commands at the mocap rate when frames are
