@@ -40,10 +40,10 @@ def test_the_robot_stands_up_live_from_the_shipped_elderly_demonstration(tmp_pat
         marker_t = np.array([stamp_ns(m.header) for _, m in bag.read("/mocap/markers")]) * 1e-9
         cmd_t = np.array([stamp_ns(m.header) for _, m in cmds]) * 1e-9
         ratio = np.ptp(cmd_t) / np.ptp(marker_t)     # both on the replayer's clock
-        # the robot's duration over the human's: at least the human's (retimed where the robot needs it), and the
+        # the robot's duration over the human's: longer than the human's (the graph's uniform player), and the
         # retargeter's own figure
         reported = float(re.search(r"\[retargeter\] .* time scale ([\d.]+)", result.stdout).group(1))
-        assert 1.0 < ratio < 2.0 and abs(ratio - reported) < 0.15, (ratio, reported)
+        assert ratio > 1.0 and abs(ratio - reported) < 0.15 * reported, (ratio, reported)
         pos = np.array([list(m.points[0].positions) + list(m.points[0].velocities) + list(m.points[0].accelerations)
                         for _, m in cmds])
         assert np.all(np.isfinite(pos))

@@ -144,9 +144,7 @@ def parse_scheduling(raw, where: str) -> Scheduling | None:
         return Scheduling("other", 0, nice)
     if not 1 <= priority <= 99:
         raise LaunchError(f"{where}: scheduling.priority must be in 1..99 for policy {policy}, not {priority}")
-    if nice:
-        raise LaunchError(f"{where}: scheduling.nice applies to policy other only")
-    return Scheduling(policy, priority, 0)
+    return Scheduling(policy, priority, 0)       # nice applies to policy other only: a graph gives both, one switch
 
 
 @dataclass

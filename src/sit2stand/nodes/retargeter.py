@@ -58,7 +58,7 @@ from .runtime import (PUBLISH_DEPTH, IdleDrain, NodeError, declare, node_main, q
                       scheduling_text, steady_timer)
 
 ROBOT_STATE_MAX_AGE_S = 0.1
-ROBOT_STATE_MAX_DELAY_S = 0.5
+ROBOT_STATE_MAX_DELAY_S = 1.0
 """A robot state received within ``ROBOT_STATE_MAX_AGE_S`` (the robot is alive) and stamped within this of now is
 used by the COM feedback, compared with the plan of its own stamp; one from a simulation lagging more is not."""
 """An older robot state is not used by the COM feedback (the last shift is kept instead)."""
