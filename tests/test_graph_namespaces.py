@@ -64,7 +64,7 @@ def test_two_stand_up_graphs_run_side_by_side_on_one_domain(tmp_path):
 
 def test_a_second_graph_with_the_same_node_names_stops_and_names_the_first(tmp_path, ros_env):
     """Same graph, same namespace, same domain: the second run's node stops with an error naming the first run's
-    (sit2stand.nodes.runtime.GraphGuard); the first goes on, warned, and its bag carries its run id."""
+    (sit2stand.nodes.runtime.GraphGuard); the first goes on, and its bag carries its run id."""
     graph = tmp_path / "solo.yaml"
     graph.write_text("name: solo\narguments: {out: ''}\nnodes:\n  - name: recorder\n    executable: recorder\n"
                      "    parameters:\n      - {output: $(var out)}\n")
@@ -78,7 +78,7 @@ def test_a_second_graph_with_the_same_node_names_stops_and_names_the_first(tmp_p
         run_id = re.search(r"run (\w+): graph solo", first.output).group(1)
         assert second.returncode == 1, second.stdout[-3000:]
         assert f"another graph's /recorder (run {run_id}" in second.stdout, second.stdout[-3000:]
-        assert first.wait_for_output("a second /recorder", 20), first.output
+        # the first may warn of the second ("a second /recorder"), if it matched it before it stopped: not asserted
         assert first.stop() == 0, first.output
     finally:
         first.kill()
