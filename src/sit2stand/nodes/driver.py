@@ -8,8 +8,9 @@ Subscribes:
 
 A command is applied when the simulation reaches its header stamp (at once when the stamp is 0 or already past):
 a simulation held up by a loaded machine catches up with each command at its own time, not with the newest one
-over the whole gap (which lurched the robot forward). A stamp more than ``MAX_COMMAND_LEAD_S`` ahead of the
-driver's own clock (clocks of two machines apart) is applied at once, with a warning.
+over the whole gap (which lurched the robot forward). A stamp more than ``MAX_COMMAND_LEAD_S`` ahead of the graph's
+clock (the simulated time with ``publish_clock``, else the driver's ROS clock; e.g. two machines' clocks apart, or a
+wall-time stamp to a simulated-time driver) is applied at once, with a warning.
 
 Publishes: ``/robot/joint_states`` (position, velocity, measured torque as effort) at ``state_rate_hz`` (500) of
 simulated time, ``/robot/ft/left`` and ``/robot/ft/right`` (geometry_msgs/WrenchStamped: ground reaction in world
@@ -197,10 +198,13 @@ class Driver(Node):
 
     def _schedule(self, stamp: int, command: tuple) -> None:
         """Apply ``command`` (the arguments of :meth:`_apply`) when the simulation reaches ``stamp`` [ns]."""
-        now_ns = self.get_clock().now().nanoseconds
-        if self._sim_ros_ns() is not None and stamp > now_ns + MAX_COMMAND_LEAD_S * 1e9:
-            self.get_logger().warning(f"a command stamped {(stamp - now_ns) * 1e-9:.2f} s ahead of this machine's "
-                                      "clock (clocks not synchronised?): applied at once", throttle_duration_sec=5.0)
+        sim_ns = self._sim_ros_ns()
+        # the graph's clock now: the simulated time where the driver publishes it, else this node's clock
+        now_ns = sim_ns if self.publish_clock else self.get_clock().now().nanoseconds
+        if sim_ns is not None and stamp > now_ns + MAX_COMMAND_LEAD_S * 1e9:
+            self.get_logger().warning(f"a command stamped {(stamp - now_ns) * 1e-9:.2f} s ahead of the graph's clock "
+                                      "(clocks not synchronised, or not on the simulated time?): applied at once",
+                                      throttle_duration_sec=5.0)
             stamp = 0
         self._pending.append((stamp, command))
         self._apply_due()

@@ -36,6 +36,7 @@ from ..robot.plant import Plant
 from ..robot.wbc import WbcGains
 from .dynamic import DynamicsFilter
 from .phases import Phases, find_phases
+from .report import SAT_DOWN_TOLERANCE_M, STOOD_RISE_M
 from .player import DEFAULT_MARGIN_M, DEFAULT_MAX_TIME_SCALE, SEAT_OFF_DWELL_S, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig
 from .calibration import map_frame
@@ -283,8 +284,8 @@ def _verdict(fallen: bool, pelvis_z: np.ndarray, planned_z: np.ndarray, ends_sea
     plan's last height."""
     up = float(pelvis_z.max() if ends_seated else pelvis_z[-1])
     stand_z = float(planned_z.max() if ends_seated else planned_z[-1])
-    stood = not fallen and up > stand_z - 0.08 and up > pelvis_z[0] + 0.2
-    sat = (not fallen and abs(float(pelvis_z[-1] - planned_z[-1])) < 0.05) if ends_seated else None
+    stood = not fallen and up > stand_z - 0.08 and up > pelvis_z[0] + STOOD_RISE_M
+    sat = (not fallen and abs(float(pelvis_z[-1] - planned_z[-1])) < SAT_DOWN_TOLERANCE_M) if ends_seated else None
     return bool(stood), sat
 
 

@@ -40,6 +40,11 @@ from ..robot.identify import read_link_parameters
 from ..robot.model import PlantConfig, controller_model, sole_corners_world
 from ..robot.plant import Plant
 
+STOOD_RISE_M = 0.2
+"""A robot that stood up: its pelvis at least this far above where it sat [m]."""
+SAT_DOWN_TOLERANCE_M = 0.05
+"""A robot that sat back down: its pelvis within this of the seated height [m]."""
+
 
 @dataclass
 class RunAnalysis:
@@ -190,14 +195,14 @@ def _stood_up(cfg: PlantConfig, t: np.ndarray, z: np.ndarray, hold_s: float,
     docstring)."""
     fallen = bool(np.any(z < cfg.fall_pelvis_height_m))
     up = z > stand_fraction * max(z.max(), 1e-9)
-    back = z[-1] < z[0] + 0.05
+    back = z[-1] < z[0] + SAT_DOWN_TOLERANCE_M
     if back:          # the longest stretch standing, anywhere
         starts = np.flatnonzero(np.diff(np.r_[0, up.astype(int)]) == 1)
         ends = np.flatnonzero(np.diff(np.r_[up.astype(int), 0]) == -1)
         held = max((t[e] - t[b] for b, e in zip(starts, ends)), default=0.0) >= hold_s
     else:
         held = bool(np.all(up[t > t[-1] - hold_s]))
-    stood = not fallen and held and z.max() > z[0] + 0.2
+    stood = not fallen and held and z.max() > z[0] + STOOD_RISE_M
     return fallen, stood, bool(stood and back)
 
 
