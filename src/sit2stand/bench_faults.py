@@ -304,6 +304,18 @@ def _window(samples: list[tuple[float, float]], first: bool, span_s: float = 60.
     return [s for s in samples if (s[0] <= edge if first else s[0] >= edge)]
 
 
+def _each_minute(samples: list[tuple[float, float]]) -> list[float]:
+    """The last value of each minute of a list of (wall time, value): a leak climbs steadily, a high-water mark
+    (allocator pools, DDS queues after a burst) steps up and stays."""
+    if not samples:
+        return []
+    t0 = samples[0][0]
+    last: dict[int, float] = {}
+    for t, v in samples:
+        last[int((t - t0) // 60.0)] = v
+    return [round(last[k], 1) for k in sorted(last)]
+
+
 def _rate(samples: list[tuple[float, float]]) -> float:
     return (samples[-1][1] - samples[0][1]) / max(samples[-1][0] - samples[0][0], 1e-9) if len(samples) > 1 else 0.0
 
@@ -385,6 +397,7 @@ def soak(minutes: float, work: Path) -> dict[str, object]:
         start, end = np.mean([v for _, v in first]), np.mean([v for _, v in last])
         figures[f"{name}_rss_mb_first_min"], figures[f"{name}_rss_mb_last_min"] = round(start, 1), round(end, 1)
         figures[f"{name}_rss_growth_pct"] = round(100.0 * (end - start) / start, 2)
+        figures[f"{name}_rss_mb_each_min"] = _each_minute(samples)
     figures["driver_real_time_factor_first_min"] = round(_rate(_window(status, True)), 3)
     figures["driver_real_time_factor_last_min"] = round(_rate(_window(status, False)), 3)
     figures["launcher_end"] = [ln for ln in text.splitlines() if re.match(r"\[(launch|recorder)", ln)][-8:]
