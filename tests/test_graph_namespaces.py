@@ -1,8 +1,9 @@
 """Two stand-up graphs side by side on one ROS domain: one in the root namespace (bags/natural), one in /robot2
 (bags/elderly, `sit2stand launch --namespace robot2`). Relative topic names and the namespaced /clock keep them
 apart: each replayer finds no other publisher of its topics (it would stop with exit 2), each graph runs to its end
-with its own robot, each bag holds its own demonstration under the usual (namespace-free) names. (Both robots
-standing is not asserted: on 2 cores two real-time stand-ups starve each other, measured: one fell.)"""
+with its own robot, each bag holds its own demonstration under the usual (namespace-free) names, and both robots
+stand up. On 2 cores the two graphs starve each other; each replayer's lockstep slows its graph's clock to what its
+robot simulates (before it, one robot fell)."""
 
 import os
 import random
@@ -17,6 +18,7 @@ import pytest
 
 from conftest import GRAPHS, NodeProcess
 from sit2stand.io.bag import BagReader
+from sit2stand.retarget.report import analyse
 
 pytestmark = pytest.mark.graph
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,12 +42,11 @@ def test_two_stand_up_graphs_run_side_by_side_on_one_domain(tmp_path):
     procs = {bag: _launch(bag, out, env, ns) for bag, (out, ns) in runs.items()}
     logs = {bag: p.communicate(timeout=400)[0] for bag, p in procs.items()}
     for bag, p in procs.items():
-        # two real-time stand-ups on 2 cores starve each other's control loops ("on-feet commands without a recent
-        # robot state") and recorders (samples their publishers dropped, counted, recorder exit 1): a fall (driver
-        # exit 3) or counted losses are that, not a mix-up; anything else fails
-        fell = "FALLEN" in logs[bag] and "driver exited with code 3" in logs[bag]
+        # the recorders of two graphs on 2 cores may fall behind their publishers' queues: counted losses are that,
+        # not a mix-up; a fall (driver exit 3) or anything else fails
         lost = "[recorder] error: lost" in logs[bag] and "recorder exited with code 1" in logs[bag]
-        assert p.returncode == 0 or fell or lost, f"{bag}:\n" + logs[bag][-4000:]
+        assert p.returncode == 0 or lost and "driver exited with code 0" in logs[bag], f"{bag}:\n" + logs[bag][-4000:]
+        assert analyse(runs[bag][0], bag, None).summary["stood_up"], logs[bag][-3000:]
         assert "would mix their data" not in logs[bag] and "exited with code 2" not in logs[bag], logs[bag][-3000:]
     assert "using force plate /robot2/force_plate/chair" in logs["elderly"], logs["elderly"][-3000:]
     for bag, (out, _) in runs.items():

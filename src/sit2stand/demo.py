@@ -47,7 +47,6 @@ from .human.offline import run as human_com_offline
 from .io import messages as M
 from .io.bag import BagReader
 from .io.topics import GROUND_TRUTH_COM_TOPIC, HUMAN_COM_TOPIC
-from .retarget.player import DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, SEAT_OFF_DWELL_S
 from .retarget.report import RunAnalysis, analyse, figure_6, figure_7, render_strip
 from .robot.figures import com_path_figure, posture_figure
 from .robot.identify import identify, read_postures, write_yaml
@@ -89,12 +88,6 @@ def live(bag: Path, out: Path, rate: float) -> dict:
             "cost_p99_ms": float(cost.group(2)) if cost else None}
 
 
-# the player at the human's timing (the retargeter node's own defaults), which the stand-up graph leaves to a run
-# whose estimator is calibrated beforehand and whose robot loop is in real time, as here
-HUMAN_TIMING = ["retiming:=local", f"margin:={DEFAULT_MARGIN_M}", f"max_joint_speed:={DEFAULT_MAX_JOINT_SPEED}",
-                f"seat_off_dwell:={SEAT_OFF_DWELL_S}"]
-
-
 def standup(bag: Path, out: Path, params: Path) -> dict:
     """Run the stand-up graph on ``bag`` with the identified ``params``; analyse and plot the run."""
     with BagReader(bag) as b:
@@ -109,8 +102,7 @@ def standup(bag: Path, out: Path, params: Path) -> dict:
     cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(graph_path("standup")),
            f"bag:={bag.resolve()}", f"out:={(out / 'standup').resolve()}", f"params:={params.resolve()}",
            f"plant:={plant}", f"height:={height}", f"mass:={mass}", f"calibration:={calibration}",
-           "estimator_policy:=fifo", "driver_policy:=fifo", f"marker_map:={(out / 'marker_map.yaml').resolve()}",
-           *HUMAN_TIMING]
+           "estimator_policy:=fifo", "driver_policy:=fifo", f"marker_map:={(out / 'marker_map.yaml').resolve()}"]
     t0 = time.monotonic()
     cmd[4:4] = ["--timeout", "300"]           # a graph that hangs is stopped, its bag and log kept
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=360)

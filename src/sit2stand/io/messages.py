@@ -35,6 +35,14 @@ def stamp_ns(msg_header: Any) -> int:
     return int(msg_header.stamp.sec) * 1_000_000_000 + int(msg_header.stamp.nanosec)
 
 
+def cdr_header_stamp_ns(data: bytes | memoryview) -> int:
+    """ns of the header stamp of a serialized (CDR, little or big endian) message whose first field is a
+    std_msgs/Header: read from the raw bytes, without deserializing."""
+    fmt = "<iI" if bytes(data[1:2]) == b"\x01" else ">iI"      # the encapsulation's byte order
+    sec, nanosec = struct.unpack_from(fmt, data, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
 def point(x: float, y: float, z: float) -> Any:
     return typestore().types["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=float(z))
 

@@ -72,6 +72,19 @@ class PlaybackClock:
         wall = self._paused_at if self._paused_at is not None else self._now()
         return self._bag_origin_ns + int((wall - self._wall_origin) * self.rate * 1e9)
 
+    def hold_at(self, ceiling_ns: int | None) -> bool:
+        """Keep bag time from passing ``ceiling_ns`` (None: no limit): while it would, the wall origin slides, so
+        that time stands at the ceiling and goes on from there, without a jump, once the ceiling rises. Never
+        before the last played message (time shown on /clock does not go back). True when held. No effect while
+        paused or unpaced."""
+        if ceiling_ns is None or self.rate == 0.0 or self._paused_at is not None:
+            return False
+        over_ns = self.bag_now_ns() - max(int(ceiling_ns), self._last_bag_ns)
+        if over_ns <= 0:
+            return False
+        self._wall_origin += over_ns * 1e-9 / self.rate
+        return True
+
     def due_in_s(self, bag_t_ns: int) -> float:
         """Seconds until the message stamped ``bag_t_ns`` is due (<= 0: due now; inf while paused)."""
         if self._paused_at is not None:
@@ -84,6 +97,86 @@ class PlaybackClock:
     def played(self, bag_t_ns: int) -> None:
         """Note that the message at ``bag_t_ns`` has been published."""
         self._last_bag_ns = int(bag_t_ns)
+
+
+ENDED_SILENCE_S = 0.2
+"""Wall time [s] after which a followed stream that ended with the bag stops holding the clock (see Lockstep)."""
+FIRST_MESSAGE_TIMEOUT_S = 60.0
+"""Longest wait [s, wall] for a followed topic's first message (a node that never starts publishing)."""
+
+
+class Lockstep:
+    """The replay's clock held to what the graph has done (the simulator-owns-the-clock rule of Gazebo's lockstep):
+    /clock may lead the newest header stamp of each followed topic (the simulated robot's states, the retargeter's
+    commands, the estimator's output) by at most ``lead_ns``, so a node that falls behind on a loaded machine slows
+    the whole graph's time instead of falling behind it.
+
+    Before a followed topic's first message, while a node offers it (``announced``), the replay may run ``first_ns``
+    past the bag's start and then waits (a node that needs the first frames to start, e.g. the estimator's
+    calibration, gets them, and the rest waits for it), at most :data:`FIRST_MESSAGE_TIMEOUT_S`. A topic stops
+    holding the clock when it has held it for ``timeout_s`` of wall time without a newer message (a dead or stalled
+    node; silence while another topic holds the clock is no stall; it holds again from its next message), or, once
+    the clock has passed the bag's end, when its stamps stay within the bag for :data:`ENDED_SILENCE_S` (a stream
+    derived from the bag's own, which ends with it; the robot's go on).
+    """
+
+    def __init__(self, topics: list[str], lead_ns: int, timeout_s: float, bag_span_ns: tuple[int, int],
+                 first_ns: int) -> None:
+        self.lead_ns = int(lead_ns)
+        self.timeout_s = float(timeout_s)
+        self.bag_start_ns, self.bag_end_ns = (int(t) for t in bag_span_ns)
+        self.first_ns = int(first_ns)
+        self._newest: dict[str, tuple[int, float]] = {t: (-1, 0.0) for t in topics}   # stamp [ns], wall [s]
+        self._awaited_since: dict[str, float] = {}       # waiting for the first message since [s, wall]
+        self._holding_since: dict[str, float] = {}       # holding the clock, with no newer message, since [s, wall]
+        self.released: set[str] = set()                   # silent past the timeout (until their next message)
+
+    @property
+    def topics(self) -> list[str]:
+        return list(self._newest)
+
+    def note(self, topic: str, stamp_ns: int, wall_s: float) -> None:
+        """A message of a followed topic with header stamp ``stamp_ns`` arrived at ``wall_s``."""
+        if stamp_ns >= self._newest[topic][0]:
+            self._newest[topic] = (int(stamp_ns), wall_s)
+        self.released.discard(topic)
+        self._holding_since.pop(topic, None)
+
+    def holding(self, clock_ns: int, wall_s: float, announced: frozenset[str] = frozenset()) -> dict[str, int]:
+        """The followed topics that bound the clock now, with the bag time [ns] each allows; ``announced``: the
+        followed topics that some node offers (has a publisher for)."""
+        out = {}
+        for topic, (stamp_ns, seen_s) in self._newest.items():
+            if stamp_ns < 0:
+                if topic in announced and self._awaiting(topic, wall_s):
+                    out[topic] = self.bag_start_ns + self.first_ns
+                continue
+            if topic in self.released:
+                continue
+            if clock_ns > self.bag_end_ns and stamp_ns <= self.bag_end_ns and wall_s - seen_s > ENDED_SILENCE_S:
+                continue
+            ceiling = stamp_ns + self.lead_ns
+            if clock_ns >= ceiling and wall_s - self._holding_since.setdefault(topic, wall_s) > self.timeout_s:
+                self.released.add(topic)
+                continue
+            if clock_ns < ceiling:
+                self._holding_since.pop(topic, None)
+            out[topic] = ceiling
+        return out
+
+    def _awaiting(self, topic: str, wall_s: float) -> bool:
+        if self.first_ns < 0:
+            return False
+        since = self._awaited_since.setdefault(topic, wall_s)
+        if wall_s - since > FIRST_MESSAGE_TIMEOUT_S:
+            self.released.add(topic)
+            return False
+        return True
+
+    def ceiling_ns(self, clock_ns: int, wall_s: float, announced: frozenset[str] = frozenset()) -> int | None:
+        """The latest bag time /clock may show now (None: unbounded)."""
+        bounds = self.holding(clock_ns, wall_s, announced)
+        return min(bounds.values()) if bounds else None
 
 
 def parse_wait_for(entries: list[str]) -> dict[str, int]:

@@ -19,6 +19,16 @@ Parameters:
                                  "/clock:N" counts the nodes under use_sim_time that have our clock) ...
     wait_timeout_s (float, 10)   ... or this long (then play anyway, with a warning).
     delay_s (float, 0)           extra wait before the first message.
+    lockstep (str[], [])         topics (each with a std_msgs/Header first) whose newest stamp /clock may lead by at
+                                 most lockstep_lead_s: the graph's time then waits for a node that falls behind (the
+                                 simulated robot, the estimator) instead of running away from it; see
+                                 :class:`sit2stand.io.playback.Lockstep` for when a topic is followed.
+    lockstep_lead_s (float, 0.05)
+    lockstep_timeout_s (float, 10) wall seconds a followed topic may hold the clock without a newer message (a node
+                                 stalled longer, e.g. dead, is then not waited for; on 2 cores the estimator's mass
+                                 re-solve stalls it for 3-4 s).
+    lockstep_first_s (float, -1)  bag seconds played before a followed topic's first message is waited for, while
+                                 some node offers it (e.g. what the estimator needs to calibrate); < 0: not waited for.
     While it waits, /clock holds the bag's start time, so that a node under use_sim_time has the bag's time before the
     first message reaches it (a recorder then logs nothing before the bag's start).
     skip_unknown_types (bool, false)  skip topics whose type has no Python class here, instead of failing.
@@ -49,9 +59,11 @@ from rosgraph_msgs.msg import Clock
 from sit2stand_msgs.msg import Subject as SubjectMsg
 from std_srvs.srv import SetBool
 
-from ..io.topics import CLOCK_TOPIC, FORCE_PLATE_PREFIX, GRAPH_TOPIC, MARKERS_TOPIC, SUBJECT_TOPIC, ros_name
+from ..io.topics import (CLOCK_TOPIC, FORCE_PLATE_PREFIX, GRAPH_TOPIC, MARKERS_TOPIC, SUBJECT_TOPIC, TOPIC_TYPES,
+                         ros_name)
 from ..io.bag import BagError, BagReader
-from ..io.playback import ClockTicks, PlaybackClock, check_rate, parse_wait_for, played_fraction
+from ..io.messages import cdr_header_stamp_ns
+from ..io.playback import ClockTicks, Lockstep, PlaybackClock, check_rate, parse_wait_for, played_fraction
 from .runtime import LATCHED_QOS, NodeError, declare, message_class, node_main, publish_depth, qos_from_bag
 
 # Reliable writers heartbeat every 5 ms instead of Fast DDS's 3 s, so acknowledgements (and with them the unpaced
@@ -126,6 +138,10 @@ class Replayer(Node):
         self.add_on_set_parameters_callback(self._on_parameters)
 
         self.clock = PlaybackClock(self.reader.start_ns, rate)
+        self.lockstep = self._follow(declare(self, "lockstep", [], "topics whose newest stamp /clock may lead"),
+                                     declare(self, "lockstep_lead_s", 0.05, "how far /clock may lead them [s]"),
+                                     declare(self, "lockstep_timeout_s", 10.0, "stall that releases a topic [s]"),
+                                     declare(self, "lockstep_first_s", -1.0, "bag time before first messages [s]"))
         if start_paused:
             self.clock.pause()
         self.sent = 0
@@ -143,6 +159,52 @@ class Replayer(Node):
             f"{' (paused)' if start_paused else ''}")
         self._thread = threading.Thread(target=self._play, name="playback", daemon=True)
         self._thread.start()
+
+    def _follow(self, topics: list[str], lead_s: float, timeout_s: float, first_s: float) -> Lockstep | None:
+        """Subscribe to the lockstep topics (raw: only their header stamps are read)."""
+        if not topics:
+            return None
+        unknown = [t for t in topics if t not in TOPIC_TYPES]
+        if unknown:
+            raise NodeError(f"parameter lockstep: no known type for {', '.join(unknown)} (one of "
+                            f"{', '.join(sorted(TOPIC_TYPES))})")
+        lockstep = Lockstep(topics, int(lead_s * 1e9), timeout_s, (self.reader.start_ns, self.reader.end_ns),
+                            int(first_s * 1e9) if first_s >= 0 else -1)
+        self._held_by: set[str] = set()
+        self._released: set[str] = set()
+        self._announced: tuple[float, frozenset[str]] = (0.0, frozenset())
+        for topic in topics:
+            self.create_subscription(message_class(TOPIC_TYPES[topic]), ros_name(topic),
+                                     lambda data, t=topic: self._on_followed(t, data), publish_depth(500.0), raw=True)
+        self.get_logger().info(f"lockstep: /clock leads {', '.join(topics)} by at most {lead_s * 1e3:g} ms")
+        return lockstep
+
+    def _on_followed(self, topic: str, data: bytes) -> None:
+        self.lockstep.note(topic, cdr_header_stamp_ns(data), time.monotonic())
+        self._wake.set()
+
+    def _bag_now_ns(self) -> int:
+        """The bag time to play and show on /clock now, held back by the lockstep topics."""
+        if self.lockstep is not None:
+            now = time.monotonic()
+            bounds = self.lockstep.holding(self.clock.bag_now_ns(), now, self._offered(now))
+            if self.clock.hold_at(min(bounds.values()) if bounds else None):
+                self._note_holders(min(bounds, key=bounds.get))
+            for topic in self.lockstep.released - self._released:
+                self.get_logger().warning(f"lockstep: nothing on {topic} for a while: /clock goes on without it")
+            self._released = set(self.lockstep.released)
+        return self.clock.bag_now_ns()
+
+    def _offered(self, now: float) -> frozenset[str]:
+        """The lockstep topics some node publishes (asked of the ROS graph at most every 0.2 s)."""
+        if now - self._announced[0] > 0.2:
+            self._announced = (now, frozenset(t for t in self.lockstep.topics if self.count_publishers(ros_name(t))))
+        return self._announced[1]
+
+    def _note_holders(self, topic: str) -> None:
+        if topic not in self._held_by:       # logged once per topic: how often is in ~/progress
+            self._held_by.add(topic)
+            self.get_logger().info(f"lockstep: /clock waits for {topic}")
 
     # --- controls --------------------------------------------------------------------------------------------
     def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
@@ -237,7 +299,7 @@ class Replayer(Node):
                     self.get_logger().warning(f"{topic}: subscribers did not acknowledge within {ACK_TIMEOUT_S} s")
                     break
                 if keep_clock:
-                    self._publish_clock(max(self.clock.bag_now_ns(), self.reader.end_ns))
+                    self._publish_clock(max(self._bag_now_ns(), self.reader.end_ns))
 
     def _play(self) -> None:
         try:
@@ -248,6 +310,7 @@ class Replayer(Node):
                 since_ack = 0
                 for msg in self.reader.messages(list(self.pubs)):
                     while not self._stop.is_set():
+                        self._bag_now_ns()
                         wait = self.clock.due_in_s(msg.timestamp_ns)
                         if wait <= 0:
                             break
@@ -304,7 +367,7 @@ class Replayer(Node):
         """After the bag: /clock at ``clock_rate_hz`` of play time from the last message on, until stopped."""
         period_s = self.clock_ticks.period_ns * 1e-9
         while not self._stop.wait(period_s / max(self.clock.rate, 1.0)):
-            self._publish_clock(max(self.clock.bag_now_ns(), self.reader.end_ns))
+            self._publish_clock(max(self._bag_now_ns(), self.reader.end_ns))
 
     def _check_alone(self) -> None:
         """Raise :class:`SharedDomain` if another node publishes a topic this replayer plays (in its namespace:

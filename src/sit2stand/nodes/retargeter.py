@@ -19,7 +19,8 @@ the calibration overlays the first human frame on; then, with ``com_feedback``, 
 Parameters: ``plant``, ``controller_params`` (identified YAML; empty: CAD), ``margin_m``, ``lookahead_s``,
 ``smooth_frames``, ``max_joint_speed``, ``retiming`` (local | uniform), ``seat_off_dwell_s``, ``time_scale`` (0:
 adaptive; else fixed), ``max_time_scale`` (the adaptive one's cap), ``rate_hz``, ``com_wait_s``, ``wait_for_robot``,
-``marker_map`` (YAML to write the calibration to), ``hold_s`` (exit this long after the plan ends; 0: never),
+``marker_map`` (YAML to write the calibration to), ``hold_s`` (hold the last pose this long after the plan ends,
+in ROS time, then exit; 0: never),
 ``input_timeout_s`` (marker frames waiting this long for a human COM end the node with an error), ``com_feedback`` and
 its gains ``com_feedback_kp``, ``_ki``, ``_kd``, ``markers_every`` (5; 0: no markers), ``marker_set`` (as the
 human_com node's: which markers are the pelvis, the left knee, ankle and heel, and each marker's body part;
@@ -101,7 +102,8 @@ class RetargeterNode(Node):
         self.params_file = declare(self, "controller_params", "", "identified parameters YAML (empty: CAD)")
         self.wait_for_robot = declare(self, "wait_for_robot", True, "start from the robot's measured posture")
         self.map_out = declare(self, "marker_map", "", "write the marker calibration YAML here")
-        self.hold_s = declare(self, "hold_s", 3.0, "after the plan ends, exit after this long [s] (0: never)")
+        self.hold_s = declare(self, "hold_s", 3.0, "after the plan ends, hold its last pose this long [s] of ROS "
+                                                   "time, then exit (0: never)")
         self.input_timeout_s = declare(self, "input_timeout_s", 20.0, "marker frames may wait this long for a COM")
         self.live = LiveRetargeting(_live_config(self), self._publish, self._measured_q,
                                     lambda: self.get_clock().now().nanoseconds * 1e-9)
@@ -264,9 +266,10 @@ class RetargeterNode(Node):
             return
         if frames and self._first_wait is None:
             self._first_wait = now
-        if self.live.tick(now):
-            self._done_at = self._done_at or now
-            self.finished = self.hold_s > 0 and now - self._done_at > self.hold_s
+        if self.live.tick():
+            robot_now = self.get_clock().now().nanoseconds * 1e-9     # the hold is the robot's time standing
+            self._done_at = self._done_at or robot_now
+            self.finished = self.hold_s > 0 and robot_now - self._done_at > self.hold_s
 
     # -- outputs -----------------------------------------------------------------------------------------------
     def _publish(self, cmd: Command, offset_m: np.ndarray | None) -> float:

@@ -219,6 +219,8 @@ class LiveRetargeting:
         self._last_command_s: float | None = None     # the robot's clock at the last command [s]
         self._planned_com: deque[tuple[float, np.ndarray]] = deque(maxlen=PLANNED_COM_KEPT)   # (robot time, COM)
         self.last_frame_s = 0.0       # time.monotonic of the last frame processed
+        self._last_frame_robot_s: float | None = None      # the robot's clock then [s]
+        self._last_sent: tuple[Command, np.ndarray | None] | None = None
 
     def start(self, robot: RobotSetup, frame: MarkerFrame, com_m: np.ndarray):
         """Calibrate on ``frame`` (the human seated) over the robot's start posture; returns the marker map.
@@ -278,6 +280,7 @@ class LiveRetargeting:
                 self.latency.command(frame.received_s, ready, sent)
         self.processed += 1
         self.last_frame_s = time.monotonic()
+        self._last_frame_robot_s = self.robot_clock()
         return result.q
 
     def pull_and_send(self, robot_now_s: float) -> float | None:
@@ -303,6 +306,7 @@ class LiveRetargeting:
             offset = fix.offset_m
             self.lag_m = fix.lag_m if q_measured is not None else 0.0
             self.feedback_max_m = max(self.feedback_max_m, float(np.abs(offset).max()))
+        self._last_sent = (cmd, offset)
         return self.send(cmd, offset)
 
     def _planned_com_at(self, t_s: float, default: np.ndarray) -> np.ndarray:
@@ -313,16 +317,22 @@ class LiveRetargeting:
                 return com
         return default
 
-    def tick(self, now_s: float) -> bool:
-        """The timer (``now_s``: wall time, ``time.monotonic``): keep commands at the mocap rate when frames are
-        late; after the markers stop, close the plan and play the rest. Returns True once the whole plan has been
-        played."""
+    def tick(self) -> bool:
+        """The timer: keep commands at the mocap rate when frames are late; after the markers stop (three periods
+        of the robot's clock without one: on a graph held in lockstep, wall time says nothing), close the plan and
+        play the rest; once played, hold its last pose (re-sent at the same rate, as a controller streams).
+        Returns True once the whole plan has been played."""
         if self.player is None:
             return False
         robot_now = self.robot_clock()
-        if self.pacer.late(robot_now) and not self.player.done and self.pull_and_send(robot_now) is not None:
-            self.pacer.sent(robot_now)      # after a jump of the clock: from now on, no burst to catch up
-        if self.frames or now_s - self.last_frame_s < 3.0 * self.pacer.period_s:
+        if self.pacer.late(robot_now):
+            if not self.player.done and self.pull_and_send(robot_now) is not None:
+                self.pacer.sent(robot_now)      # after a jump of the clock: from now on, no burst to catch up
+            elif self.player.done and self._last_sent is not None:
+                self.send(*self._last_sent)
+                self.pacer.sent(robot_now)
+        stopped_s = robot_now - (self._last_frame_robot_s if self._last_frame_robot_s is not None else robot_now)
+        if self.frames or stopped_s < 3.0 * self.pacer.period_s:
             return False
         if not self.player.finished:
             self.player.close()
