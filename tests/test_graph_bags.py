@@ -89,7 +89,7 @@ def test_two_plates_at_five_times_real_time(ros_env, tmp_path):
         # one time base: logged at the replayer's /clock, the copy spans the original's 9 s, not the 1.8 s it took
         assert orig.duration_s == pytest.approx(9.0, abs=0.05)
         assert rec.duration_s == pytest.approx(orig.duration_s, abs=0.05)
-        assert abs(rec.start_ns - orig.start_ns) < 20_000_000
+        assert abs(rec.start_ns - orig.start_ns) <= 50_000_000, "within the bag's first frames (50 Hz markers)"
     assert time.monotonic() - t0 < 60
 
 

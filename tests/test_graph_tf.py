@@ -38,6 +38,8 @@ EXPECTED_FRAME = {
     "/robot/ft/left": sole_world_aligned_frame("left"), "/robot/ft/right": sole_world_aligned_frame("right"),
     "/robot/joint_states": BASE_FRAME, "/robot/joint_command": BASE_FRAME, "/viz/markers": WORLD_FRAME,
 }
+# /tf samples of a stand-up at least (50 Hz: the robot's 6 s, seated, rising and standing, at the human's timing)
+MIN_SAMPLES = 300
 # Stamped, but with no single frame: per-link parameters (masses, COMs in each link's own frame, scale factors), the
 # subject (stature, mass)
 NO_SINGLE_FRAME = {"/human/scaling", "/ground_truth/inertial_parameters", "/human/subject"}
@@ -134,7 +136,7 @@ def test_the_robot_stands_up_and_the_bag_holds_tf_and_the_description(run, bag):
     z = np.array([m.pose.position.z for _, m in read("/robot/base_pose")])
     assert z[0] < 0.65 and z[-1] > 0.85, f"pelvis from {z[0]:.2f} m to {z[-1]:.2f} m: did not stand up"
     robot_tf = _robot_tf(read)
-    assert topics["/tf"].msgtype == "tf2_msgs/msg/TFMessage" and len(robot_tf) > 500
+    assert topics["/tf"].msgtype == "tf2_msgs/msg/TFMessage" and len(robot_tf) > MIN_SAMPLES
     assert topics["/tf_static"].count == 1 and topics["/robot_description"].count == 1
     for latched in ("/tf_static", "/robot_description"):
         assert [q.durability.name for q in reader.qos(latched)] == ["TRANSIENT_LOCAL"], latched
@@ -177,7 +179,7 @@ def test_the_sole_tf_is_where_pinocchio_puts_it_for_the_recorded_state(frames):
                 X = _in(edges, frame)
                 worst_m = max(worst_m, np.linalg.norm(X.translation - ref.translation))
                 worst_rad = max(worst_rad, np.linalg.norm(pin.log3(ref.rotation.T @ X.rotation)))
-    assert len(frames) > 500
+    assert len(frames) > MIN_SAMPLES
     assert worst_m < 1e-3 and worst_rad < 1e-6, f"sole off by {worst_m * 1e3:.3g} mm, {worst_rad:.2g} rad"
 
 
@@ -242,7 +244,7 @@ def test_the_feet_wrenches_are_in_the_world_aligned_sole_frames(bag, frames):
             assert c.z == 0.0
             compared += 1
     outside = np.array(outside)
-    assert len(outside) > 500 and compared > 500
+    assert len(outside) > MIN_SAMPLES and compared > MIN_SAMPLES
     assert outside.max() < 0.02 and np.mean(outside > 0.005) < 0.01, f"feet COPs up to {outside.max():.3f} m off"
 
 
@@ -378,15 +380,18 @@ def test_the_human_skeleton_is_in_tf_under_lab_with_its_description(bag):
 
 
 def test_one_time_base_header_stamps_within_the_log_times(bag):
-    """Every header stamp of every topic lies within the bag's log-time span. Stamps and log times are read off one
+    """Every header stamp of every topic lies within the bag's log-time span (its end plus 50 ms). Stamps and log
+    times are read off one
     clock (the replayer's /clock), so their difference is a latency: the sources (replayed capture, the robot's
     state) are logged within a frame (10 ms) of their stamps whenever the recorder keeps up (10th percentile; on 2
     cores the calibrating estimator and the real-time retargeter starve it for seconds at times), and no stamp is
     more than half a second after its log time (each process sees /clock with its own delay); before, robot stamps
     were wall time, 56 years after the bag's."""
     read, reader = bag
-    span = (reader.start_ns, reader.end_ns)
     frame_ns = 10_000_000
+    # each process takes /clock with its own delay: the robot's last state, stamped at the /clock it simulated, may
+    # reach the recorder before that /clock does (the replayer's lockstep lets /clock lead the robot by 50 ms)
+    span = (reader.start_ns, reader.end_ns + 5 * frame_ns)
     for topic in sorted(reader.topics()):
         lags = []
         for log_ns, msg in read(topic):
@@ -401,6 +406,9 @@ def test_one_time_base_header_stamps_within_the_log_times(bag):
         if topic.startswith(("/mocap/", "/force_plate/", "/robot/joint_states", "/robot/base_pose", "/robot/ft/")):
             p10 = np.percentile(lags, 10)
             assert abs(p10) < frame_ns, f"{topic}: logged {p10 * 1e-6:.1f} ms after its stamps (10th percentile)"
+        if topic == "/robot/joint_states":    # the replayer's lockstep keeps the robot with the clock (749 ms before)
+            p50 = np.percentile(lags, 50)
+            assert p50 < 6 * frame_ns, f"{topic}: logged {p50 * 1e-6:.1f} ms after its stamps (median)"
 
 
 def _headers(msg):

@@ -306,7 +306,8 @@ class LiveRetargeting:
             offset = fix.offset_m
             self.lag_m = fix.lag_m if q_measured is not None else 0.0
             self.feedback_max_m = max(self.feedback_max_m, float(np.abs(offset).max()))
-        self._last_sent = (cmd, offset)
+        # held after the plan: the same pose, at rest
+        self._last_sent = (dataclasses.replace(cmd, v=np.zeros_like(cmd.v), a=np.zeros_like(cmd.a)), offset)
         return self.send(cmd, offset)
 
     def _planned_com_at(self, t_s: float, default: np.ndarray) -> np.ndarray:
