@@ -39,9 +39,13 @@ def test_the_robot_stands_up_live_from_the_shipped_elderly_demonstration(tmp_pat
         cmds = bag.read("/robot/joint_command")
         marker_t = np.array([stamp_ns(m.header) for _, m in bag.read("/mocap/markers")]) * 1e-9
         cmd_t = np.array([stamp_ns(m.header) for _, m in cmds]) * 1e-9
-        ratio = np.ptp(cmd_t) / np.ptp(marker_t)     # both on the replayer's clock
-        # the robot's duration over the human's: longer than the human's (the graph's uniform player), and the
-        # retargeter's own figure
+        # the plan's commands: after it, the retargeter re-sends the last pose (at rest) while it holds
+        last = np.array(cmds[-1][1].points[0].positions)
+        held = next(i for i in range(len(cmds), 0, -1)
+                    if not np.array_equal(np.array(cmds[i - 1][1].points[0].positions), last))
+        ratio = np.ptp(cmd_t[:held + 1]) / np.ptp(marker_t)     # both on the replayer's clock
+        assert np.ptp(cmd_t[held:]) > 2.5, "held for hold_s (3 s) of the robot's time"
+        # the robot's duration over the human's: longer than the human's, and the retargeter's own figure
         reported = float(re.search(r"\[retargeter\] .* time scale ([\d.]+)", result.stdout).group(1))
         assert ratio > 1.0 and abs(ratio - reported) < 0.15 * reported, (ratio, reported)
         pos = np.array([list(m.points[0].positions) + list(m.points[0].velocities) + list(m.points[0].accelerations)
