@@ -97,3 +97,24 @@ def test_frames_before_the_com_stream_began_are_dropped_and_counted():
     assert frame.t_s == 1.00 and live.skipped == 2
     assert com == pytest.approx([0.0, 0.0, 0.8])
     assert "2 without a human COM" in summary_line(live.figures())
+
+
+class _PlayedPlan:
+    """A plan player whose plan has been played to its end."""
+    done = finished = True
+
+
+def test_after_the_plan_the_last_pose_is_re_sent_once_per_period_of_the_robots_clock():
+    robot_now, sent = [10.0], []
+    live = LiveRetargeting(LiveConfig(), send=lambda cmd, offset: sent.append(cmd) or 0.0, measured_q=lambda: None,
+                           robot_clock=lambda: robot_now[0])
+    live.player = _PlayedPlan()
+    live._last_sent = ("last pose, at rest", None)
+    live._last_frame_robot_s = 10.0          # the last marker frame
+    live.pacer.sent(10.0)
+    for _ in range(3):                       # a graph held in lockstep: wall time passes, the robot's clock does not
+        assert not live.tick() and not sent, "markers and commands both wait with the robot's clock"
+    robot_now[0] = 10.016
+    assert not live.tick() and sent == ["last pose, at rest"], "the pose is held; markers not yet taken as stopped"
+    robot_now[0] = 10.032
+    assert live.tick() is True and len(sent) == 2, "three periods of the robot's clock without markers: done"

@@ -34,7 +34,8 @@ Parameters:
     skip_unknown_types (bool, false)  skip topics whose type has no Python class here, instead of failing.
 
 Services: ~/pause (std_srvs/SetBool: true pauses, false resumes).
-Topics out: every bag topic (raw CDR, recorded QoS), /clock, ~/progress (diagnostic_msgs/DiagnosticStatus, 2 Hz);
+Topics out: every bag topic (raw CDR, recorded QoS), /clock, ~/progress (diagnostic_msgs/DiagnosticStatus, 2 Hz:
+fraction, bag time, messages, rate, the lockstep topic holding /clock now);
 /human/subject (latched) from the bag's metadata (``height_m``, ``body_mass_kg``, ``sex``) when the bag holds no
 such topic, so that an estimator that takes the subject from the stream finds it for every bag.
 Every topic is played relative to the node's namespace: a bag's ``/mocap/markers`` is ``/robot2/mocap/markers``
@@ -171,6 +172,7 @@ class Replayer(Node):
         lockstep = Lockstep(topics, int(lead_s * 1e9), timeout_s, (self.reader.start_ns, self.reader.end_ns),
                             int(first_s * 1e9) if first_s >= 0 else -1)
         self._held_by: set[str] = set()
+        self._holder = ""                               # the topic holding /clock now ("": none)
         self._released: set[str] = set()
         self._announced: tuple[float, frozenset[str]] = (0.0, frozenset())
         for topic in topics:
@@ -188,8 +190,9 @@ class Replayer(Node):
         if self.lockstep is not None:
             now = time.monotonic()
             bounds = self.lockstep.holding(self.clock.bag_now_ns(), now, self._offered(now))
+            self._holder = ""
             if self.clock.hold_at(min(bounds.values()) if bounds else None):
-                self._note_holders(min(bounds, key=bounds.get))
+                self._note_holder(min(bounds, key=bounds.get))
             for topic in self.lockstep.released - self._released:
                 self.get_logger().warning(f"lockstep: nothing on {topic} for a while: /clock goes on without it")
             self._released = set(self.lockstep.released)
@@ -201,8 +204,9 @@ class Replayer(Node):
             self._announced = (now, frozenset(t for t in self.lockstep.topics if self.count_publishers(ros_name(t))))
         return self._announced[1]
 
-    def _note_holders(self, topic: str) -> None:
-        if topic not in self._held_by:       # logged once per topic: how often is in ~/progress
+    def _note_holder(self, topic: str) -> None:
+        self._holder = topic
+        if topic not in self._held_by:       # logged once per topic; ~/progress says which holds it now
             self._held_by.add(topic)
             self.get_logger().info(f"lockstep: /clock waits for {topic}")
 
@@ -396,7 +400,8 @@ class Replayer(Node):
         status.values = [KeyValue(key=k, value=v) for k, v in (
             ("fraction", f"{frac:.4f}"), ("bag_time_s", f"{bag_t:.3f}"),
             ("duration_s", f"{self.reader.duration_s:.3f}"), ("messages_sent", str(self.sent)),
-            ("loops_done", str(self.loops_done)), ("rate", f"{self.clock.rate:g}"))]
+            ("loops_done", str(self.loops_done)), ("rate", f"{self.clock.rate:g}"),
+            ("lockstep_waits_for", getattr(self, "_holder", "")))]
         self.progress_pub.publish(status)
         if force or now - self._last_log >= 2.0:
             self._last_log = now
