@@ -26,7 +26,6 @@ import random
 import re
 import shutil
 import signal
-import struct
 import subprocess
 import sys
 import tempfile
@@ -40,6 +39,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from .io.bag import BagError, BagReader, BagWriter
+from .io.messages import cdr_header_stamp_ns
 from .robot.identify import (IdentificationError, check_postures, check_result, controller_model, identify_full,
                              read_postures, write_yaml)
 from .robot.model import PlantConfig
@@ -371,10 +371,10 @@ def _recorder_figures(bag_dir: Path) -> dict[str, object]:
     """Lag of the recorder (log time minus header stamp) in the first and last minute, gaps in the joint states."""
     with BagReader(bag_dir) as bag:
         lost = bag.custom_data.get("lost_messages", "none")
-        msgs = [(m.timestamp_ns, struct.unpack_from("<iI", m.data, 4)) for m in bag.messages(["/robot/joint_states"])]
+        msgs = [(m.timestamp_ns, cdr_header_stamp_ns(m.data)) for m in bag.messages(["/robot/joint_states"])]
         total = bag.message_count
     log = np.array([t for t, _ in msgs], np.int64)
-    stamp = np.array([s * 1_000_000_000 + ns for _, (s, ns) in msgs], np.int64)
+    stamp = np.array([s for _, s in msgs], np.int64)
     lag_ms = (log - stamp) * 1e-6
     minute = np.searchsorted(stamp, [stamp[0] + 60e9, stamp[-1] - 60e9])
     period = np.median(np.diff(stamp))
