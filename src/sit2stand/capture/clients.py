@@ -16,6 +16,7 @@ import asyncio
 import logging
 import socket
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -205,35 +206,129 @@ class QtmStream:
 
 
 class NatNetStream:
-    """OptiTrack NatNet through ``natnet`` (markers only: its labelled markers, named from Motive's marker-set
-    descriptions; NatNet's force plates carry raw channels without plate geometry and are not published)."""
+    """OptiTrack NatNet through ``natnet`` (markers only: the marker sets' markers, named from Motive's marker-set
+    descriptions; NatNet's force plates carry raw channels without plate geometry and are not published).
+
+    A thread connects (NAT_CONNECT, then the marker-set descriptions), hands each frame to ``on_frame`` from
+    ``natnet``'s receiving thread, and connects again (:class:`~.convert.ReconnectPolicy`) when no frame has come
+    for ``silence_s``; every failure goes to ``on_status`` naming protocol, host and port. Frames that come before
+    the descriptions are dropped (their markers have no names yet). Labels are the marker names, prefixed with
+    ``set:`` when more than one marker set is described; Motive's ``all`` set, which repeats the other sets'
+    markers, is skipped when there are others. A new description makes a new :class:`StreamInfo` (the bridge then
+    builds a new converter). ``local_ip`` None: the local address that routes to ``host``."""
 
     def __init__(self, host: str, port: int, on_frame: Callable[[DataFrame, StreamInfo], None],
-                 on_status: Callable[[str, bool], None], local_ip: str = "127.0.0.1", multicast: bool = False) -> None:
-        self.where = f"NatNet at {host}:{port}"
+                 on_status: Callable[[str, bool], None], local_ip: str | None = None, multicast: bool = False,
+                 timeout_s: float = 3.0, silence_s: float = 2.0, policy: ReconnectPolicy | None = None) -> None:
+        self.host, self.port, self.multicast = host, port, multicast
+        self.where = f"NatNet ({'multicast' if multicast else 'unicast'}) at {host}:{port}"
         self.on_frame, self.on_status = on_frame, on_status
+        self.local_ip = local_ip
+        self.timeout_s, self.silence_s = timeout_s, silence_s
+        self.policy = policy or ReconnectPolicy()
         self.info = StreamInfo([], [], float("nan"))
-        self.client = NatNetClient(server_ip_address=host, local_ip_address=local_ip, command_port=port,
-                                   data_port=port + 1, use_multicast=multicast)
-        self.client.on_data_description_received_event.handlers.append(self._on_descriptions)
-        self.client.on_data_frame_received_event.handlers.append(self._on_frame)
+        self.connections = 0
+        self.client: NatNetClient | None = None
+        self._sets: list[tuple[str, int]] = []           # (marker set name, marker count) in the labels' order
+        self._described = threading.Event()
+        self._last_frame_s = 0.0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="natnet-client", daemon=True)
+
+    def _local_ip(self) -> str:
+        if self.local_ip:
+            return self.local_ip
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.connect((self.host, self.port))       # no datagram is sent: the kernel picks the route
+            return probe.getsockname()[0]
 
     def _on_descriptions(self, desc) -> None:
-        self.info.labels = [f"{ms.name}:{m}" if len(desc.marker_sets) > 1 else m
-                            for ms in desc.marker_sets for m in ms.marker_names]
+        sets = [ms for ms in desc.marker_sets if ms.name.lower() != "all"] or list(desc.marker_sets)
+        labels = [f"{ms.name}:{m}" if len(sets) > 1 else m for ms in sets for m in ms.marker_names]
+        self._sets = [(ms.name, len(ms.marker_names)) for ms in sets]
+        if labels != self.info.labels:
+            self.info = StreamInfo(labels, [], float("nan"))
+        self._described.set()
 
     def _on_frame(self, frame) -> None:
-        pos = np.array([p for ms in frame.marker_sets for p in ms.marker_pos_list], float).reshape(-1, 3) * 1e3
-        self.on_frame(DataFrame(int(frame.suffix.timestamp * 1e6), frame.prefix.frame_number, pos), self.info)
+        self._last_frame_s = time.monotonic()
+        if not self._described.is_set():
+            return
+        by_name = {ms.model_name: ms.marker_pos_list for ms in frame.marker_sets}
+        parts = []
+        for name, count in self._sets:
+            pos = np.array(by_name.get(name, ()), float).reshape(-1, 3)
+            parts.append(pos if len(pos) == count else np.full((count, 3), np.nan))
+        mm = np.vstack(parts) * 1e3 if parts else np.zeros((0, 3))
+        self.on_frame(DataFrame(int(round(frame.suffix.timestamp * 1e6)), frame.prefix.frame_number, mm), self.info)
 
     def start(self) -> None:
-        try:
-            self.client.connect(timeout=3.0)
-        except Exception as err:  # noqa: BLE001 - natnet raises its own and socket errors
-            raise CaptureError(f"cannot connect to {self.where}: {err}") from None
-        self.client.request_modeldef()
-        self.client.run_async()
-        self.on_status(f"connected to {self.where}", True)
+        self._thread.start()
 
     def stop(self) -> None:
-        self.client.shutdown()
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        self._close()
+
+    def _close(self) -> None:
+        client, self.client = self.client, None
+        if client is not None:
+            try:
+                client.shutdown()
+            except OSError:
+                pass
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self._session()
+            except CaptureError as err:
+                self.on_status(str(err), False)
+            except Exception as err:  # noqa: BLE001 - the loop must survive
+                self.on_status(f"{self.where}: {type(err).__name__}: {err}", False)
+            finally:
+                self._close()
+            self._stop.wait(self.policy.next_delay_s())
+
+    def _connect(self) -> NatNetClient:
+        try:
+            client = NatNetClient(server_ip_address=self.host, local_ip_address=self._local_ip(),
+                                  command_port=self.port, data_port=self.port + 1, use_multicast=self.multicast)
+            client.on_data_description_received_event.handlers.append(self._on_descriptions)
+            client.on_data_frame_received_event.handlers.append(self._on_frame)
+            self.client = client
+            client.connect(timeout=self.timeout_s)
+        except TimeoutError:
+            raise CaptureError(f"cannot connect to {self.where}: no server info in reply to NAT_CONNECT within "
+                               f"{self.timeout_s:g} s (is Motive streaming, unicast, with command port "
+                               f"{self.port}?)") from None
+        except OSError as err:
+            raise CaptureError(f"cannot connect to {self.where}: {err}") from None
+        return client
+
+    def _session(self) -> None:
+        self._described.clear()
+        client = self._connect()
+        server = client.server_info
+        client.run_async()
+        deadline = time.monotonic() + self.timeout_s
+        while not self._stop.is_set() and not self._described.is_set():
+            if time.monotonic() > deadline:
+                raise CaptureError(f"{self.where}: no NAT_MODELDEF in reply to NAT_REQUEST_MODELDEF within "
+                                   f"{self.timeout_s:g} s: the markers cannot be named")
+            client.request_modeldef()                     # UDP: asked again until answered
+            self._described.wait(0.5)
+        if self._stop.is_set():
+            return
+        if not self.info.labels:
+            raise CaptureError(f"{self.where}: the server describes no marker set: define the subject's marker "
+                               "set (asset) in Motive")
+        self.connections += 1
+        self._last_frame_s = time.monotonic()
+        self.on_status(f"connected to {self.where}: {server.application_name} {server.server_version}, NatNet "
+                       f"{client.protocol_version.truncate(2)}; {len(self.info.labels)} markers in "
+                       f"{len(self._sets)} marker set(s)", True)
+        self.policy.succeeded()
+        while not self._stop.wait(0.05):
+            if time.monotonic() - self._last_frame_s > self.silence_s:
+                raise CaptureError(f"{self.where}: no frame for {self.silence_s:g} s; reconnecting")

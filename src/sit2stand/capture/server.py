@@ -1,4 +1,4 @@
-"""A capture-system stand-in: serves a :class:`~.recording.CaptureRecording` over the QTM real-time protocol.
+"""A capture-system stand-in: serves a :class:`~.recording.CaptureRecording` over QTM's real-time protocol or NatNet.
 
 ``sit2stand serve-c3d FILE --protocol qtm --port P [--rate R] [--loop]``. Speaks protocol 1.8-1.25 on the
 little-endian port as QTM does (see :mod:`.qtm_protocol`): the welcome string, ``Version``, ``QTMVersion``,
@@ -14,15 +14,31 @@ packet and the event RT From File Stopped.
 
 Threads, not asyncio: the frame clock sleeps to 1 ms before a frame's time and spins the rest, so frames leave
 within ~0.1 ms of their capture time (an asyncio timer was 1 ms late at p50).
+
+``sit2stand serve-c3d FILE --protocol natnet --port P [--rate R] [--loop]`` (:class:`NatNetServer`) stands in for
+OptiTrack Motive streaming NatNet 4.1 in unicast (see :mod:`.natnet_protocol`): one UDP socket on the command port
+answers NAT_CONNECT (server info), NAT_REQUEST_MODELDEF (one marker set named after the file, with its labels),
+NAT_REQUEST_FRAMEOFDATA (the current frame), ``FrameRate`` requests, keep-alives and NAT_DISCONNECT; anything else
+is answered NAT_UNRECOGNIZED_REQUEST. Frames go, from the same socket, to the address each NAT_CONNECT came from:
+``natnet``'s unicast client binds its data socket to a port nobody is told and reads frames on its command socket,
+which keeps the server's path open with keep-alives. A client silent for :data:`CLIENT_TIMEOUT_S` is dropped. The
+clock starts at the first NAT_REQUEST_MODELDEF (a client that connects and asks for the names gets frame 1), or
+:data:`NATNET_START_S` after the first NAT_CONNECT. Markers only: force plates are not served over NatNet (Motive's
+plates stream raw channels without geometry, which the bridge does not publish). Positions are metres in Motive's
+default y-up axes (``--up-axis Y``; ``Z``: the recording's own axes).
 """
 
 from __future__ import annotations
 
 import socket
+import struct
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from pathlib import Path
 
+from . import natnet_protocol as nn
 from .qtm_protocol import (OLDEST_VERSION, PROTOCOL_VERSION, WELCOME, Component, Event, PacketType, ProtocolError,
                            StreamRequest, data_packet, event_packet, packet, parameters_xml, parse_stream_frames,
                            parse_version, split_packets, string_packet, text_of)
@@ -98,7 +114,56 @@ class _Client(threading.Thread):
             self.send(reply)
 
 
-class QtmServer:
+class _FrameClock:
+    """The measurement's clock, shared by both servers: waits for :attr:`started`, then sends frame ``k`` when its
+    capture time ``origin + k / (rate x speed)`` comes (:meth:`_send_frame`), once or looping, then :meth:`_end`."""
+
+    recording: CaptureRecording
+    speed: float
+    loop: bool
+    stopped: threading.Event
+    started: threading.Event
+    origin_ns: int
+    frames_sent: int
+    log: Callable[..., None]
+
+    # --- the frame clock -------------------------------------------------------------------------------------
+    def _wait_until(self, t_ns: int) -> None:
+        while not self.stopped.is_set():
+            left = (t_ns - time.time_ns()) * 1e-9
+            if left <= 0:
+                return
+            if left > SPIN_S:
+                time.sleep(left - SPIN_S)
+
+    def _play(self) -> None:
+        self.started.wait()
+        rec = self.recording
+        period_ns = 1e9 / (rec.rate_hz * self.speed)
+        self.origin_ns = time.time_ns()
+        self.log(f"streaming {rec.source}: {rec.n_frames} frames at {rec.rate_hz * self.speed:g} Hz; capture clock "
+                 f"origin {self.origin_ns} ns (CLOCK_REALTIME) at timestamp 0", flush=True)
+        pass_index = 0
+        while not self.stopped.is_set():
+            for k in range(rec.n_frames):
+                number = pass_index * rec.n_frames + k
+                self._wait_until(self.origin_ns + int(round(number * period_ns)))
+                if self.stopped.is_set():
+                    return
+                self._send_frame(k, pass_index)
+            pass_index += 1
+            if not self.loop:
+                break
+        self._end()
+
+    def _send_frame(self, k: int, pass_index: int) -> None:
+        raise NotImplementedError
+
+    def _end(self) -> None:
+        raise NotImplementedError
+
+
+class QtmServer(_FrameClock):
     """Serves one recording to any number of clients (see the module docstring)."""
 
     def __init__(self, recording: CaptureRecording, host: str = "127.0.0.1", port: int = 22223,
@@ -179,15 +244,7 @@ class QtmServer:
             if client in self.clients:
                 self.clients.remove(client)
 
-    # --- the frame clock -------------------------------------------------------------------------------------
-    def _wait_until(self, t_ns: int) -> None:
-        while not self.stopped.is_set():
-            left = (t_ns - time.time_ns()) * 1e-9
-            if left <= 0:
-                return
-            if left > SPIN_S:
-                time.sleep(left - SPIN_S)
-
+    # --- the frame clock (_FrameClock) -------------------------------------------------------------------------
     def _send_frame(self, k: int, pass_index: int) -> None:
         frame = self.recording.frame(k, pass_index, self.speed)
         with self._lock:
@@ -206,26 +263,6 @@ class QtmServer:
             else:
                 s.client.send(data)
         self.frames_sent += 1
-
-    def _play(self) -> None:
-        self.started.wait()
-        rec = self.recording
-        period_ns = 1e9 / (rec.rate_hz * self.speed)
-        self.origin_ns = time.time_ns()
-        self.log(f"streaming {rec.source}: {rec.n_frames} frames at {rec.rate_hz * self.speed:g} Hz; capture clock "
-                 f"origin {self.origin_ns} ns (CLOCK_REALTIME) at timestamp 0", flush=True)
-        pass_index = 0
-        while not self.stopped.is_set():
-            for k in range(rec.n_frames):
-                number = pass_index * rec.n_frames + k
-                self._wait_until(self.origin_ns + int(round(number* period_ns)))
-                if self.stopped.is_set():
-                    return
-                self._send_frame(k, pass_index)
-            pass_index += 1
-            if not self.loop:
-                break
-        self._end()
 
     def _end(self) -> None:
         with self._lock:
@@ -271,3 +308,134 @@ class QtmServer:
             c.close()
         self.listener.close()
         self.udp.close()
+
+
+CLIENT_TIMEOUT_S = 10.0
+NATNET_START_S = 1.0
+
+
+class NatNetServer(_FrameClock):
+    """Serves one recording's markers over NatNet, unicast, to any number of clients (see the module docstring)."""
+
+    def __init__(self, recording: CaptureRecording, host: str = "127.0.0.1", port: int = 1510,
+                 speed: float = 1.0, loop: bool = False, up_axis: str = "Y", log=print) -> None:
+        if speed <= 0:
+            raise ProtocolError(f"--rate must be positive, not {speed}")
+        if up_axis.upper() not in ("Y", "Z"):
+            raise ProtocolError(f"--up-axis must be Y (Motive's default) or Z, not {up_axis!r}")
+        self.recording, self.speed, self.loop, self.log = recording, float(speed), loop, log
+        self.axes = nn.Y_UP if up_axis.upper() == "Y" else nn.Z_UP
+        self.set_name = Path(recording.source).stem or "markers"
+        self.stopped = threading.Event()
+        self.started = threading.Event()
+        self.clients: dict[tuple[str, int], float] = {}      # address -> when last heard (monotonic)
+        self.frames_sent = 0
+        self.origin_ns = 0
+        self.current = 0
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind((host, port))
+        self.port = self.sock.getsockname()[1]
+        self._lock = threading.Lock()
+        self._start_timer: threading.Timer | None = None
+
+    # --- requests --------------------------------------------------------------------------------------------
+    def reply(self, data: bytes, address: tuple[str, int]) -> bytes | None:
+        """The reply to one datagram from ``address`` (None: none, as for a keep-alive)."""
+        try:
+            kind, text = nn.parse_request(data)
+        except Exception:  # noqa: BLE001 - a malformed datagram is dropped, as a server must
+            return None
+        now = time.monotonic()
+        with self._lock:
+            if address in self.clients:
+                self.clients[address] = now
+        if kind == nn.Message.CONNECT:
+            with self._lock:
+                new = address not in self.clients
+                self.clients[address] = now
+            if new:
+                self.log(f"NatNet client {address[0]}:{address[1]} connected", flush=True)
+            if self._start_timer is None and not self.started.is_set():
+                self._start_timer = threading.Timer(NATNET_START_S, self.started.set)
+                self._start_timer.daemon = True
+                self._start_timer.start()
+            return nn.server_info(data_port=self.port)
+        if kind == nn.Message.REQUEST_MODELDEF:
+            self.started.set()
+            return nn.model_definitions([(self.set_name, self.recording.labels)])
+        if kind == nn.Message.REQUEST_FRAMEOFDATA:
+            return nn.frame_of_data(self._frame(min(self.current, self.recording.n_frames - 1), 0))
+        if kind == nn.Message.KEEPALIVE:
+            return None
+        if kind == nn.Message.DISCONNECT:
+            with self._lock:
+                self.clients.pop(address, None)
+            return None
+        if kind == nn.Message.REQUEST and text.lower() == "framerate":
+            return nn.message(nn.Message.RESPONSE, struct.pack("<f", self.recording.rate_hz * self.speed))
+        return nn.message(nn.Message.UNRECOGNIZED_REQUEST)
+
+    # --- the frame clock (_FrameClock) -------------------------------------------------------------------------
+    def _frame(self, k: int, pass_index: int) -> nn.NatNetFrame:
+        frame = self.recording.frame(k, pass_index, self.speed)
+        t_ns = self.origin_ns + frame.timestamp_us * 1000
+        return nn.capture_frame(frame, self.recording.labels, self.set_name, self.axes,
+                                stamps=(t_ns, t_ns, time.time_ns()))
+
+    def _send_frame(self, k: int, pass_index: int) -> None:
+        self.current = k
+        now = time.monotonic()
+        with self._lock:
+            for address in [a for a, t in self.clients.items() if now - t > CLIENT_TIMEOUT_S]:
+                del self.clients[address]
+                self.log(f"NatNet client {address[0]}:{address[1]} dropped: silent for {CLIENT_TIMEOUT_S:g} s",
+                         flush=True)
+            targets = list(self.clients)
+        if targets:
+            data = nn.frame_of_data(self._frame(k, pass_index))
+            for address in targets:
+                try:
+                    self.sock.sendto(data, address)
+                except OSError:
+                    pass
+        self.frames_sent += 1
+
+    def _end(self) -> None:
+        self.log(f"end of {self.recording.source}: {self.frames_sent} frames sent", flush=True)
+
+    # --- running ---------------------------------------------------------------------------------------------
+    def serve(self, exit_at_end: bool = True) -> int:
+        """Answer requests and play the recording; returns when it has been played (``exit_at_end``), on
+        :meth:`stop`, or never with ``loop``."""
+        player = threading.Thread(target=self._play, name="frame-clock", daemon=True)
+        player.start()
+        self.sock.settimeout(0.2)
+        try:
+            while not self.stopped.is_set():
+                if exit_at_end and not player.is_alive():
+                    break
+                try:
+                    data, address = self.sock.recvfrom(65536)
+                except TimeoutError:
+                    continue
+                except OSError:           # stop() closed the socket, or an ICMP error of an earlier send
+                    if self.stopped.is_set():
+                        break
+                    continue
+                answer = self.reply(data, address)
+                if answer:
+                    try:
+                        self.sock.sendto(answer, address)
+                    except OSError:
+                        pass
+        finally:
+            self.stop()
+        return 0
+
+    def stop(self) -> None:
+        """Stop playing and close the socket."""
+        self.stopped.set()
+        self.started.set()
+        if self._start_timer is not None:
+            self._start_timer.cancel()
+        self.sock.close()
