@@ -34,10 +34,13 @@ def test_the_robot_stands_up_offline_from_a_real_trial_that_starts_after_seat_of
 
 
 @pytest.mark.graph
-def test_the_robot_stands_up_live_from_a_real_trial_without_a_chair_plate(child_bag, tmp_path, ros_env):
-    out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(GRAPHS / "standup.yaml"), f"bag:={child_bag}",
-           f"out:={out}", "height:=1.03", "mass:=14.5"]
+def test_the_robot_stands_up_live_from_a_real_trial_imported_and_launched_with_default_settings(tmp_path, ros_env):
+    """`import-c3d FILE --out B` without flags (the loaded plate keeps its own name, so neither a chair nor a feet
+    plate; the subject's stature and mass come from the file), then the stand-up graph with the bag and an output."""
+    bag, out = tmp_path / "bag", tmp_path / "run"
+    assert sit2stand(["import-c3d", str(real_file(CHILD)), "--out", str(bag)]) == 0
+    cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(GRAPHS / "standup.yaml"), f"bag:={bag}",
+           f"out:={out}"]
     result = subprocess.run(cmd, env=ros_env, capture_output=True, text=True, timeout=240)
     log = result.stdout[-4000:] + result.stderr[-2000:]
     assert result.returncode == 0, log

@@ -109,7 +109,7 @@ class MocapBridge(Node):
 
     def _make_stream(self):
         if self.protocol == "natnet":
-            return NatNetStream(self.host, self.port, self._on_frame, self._on_status)
+            return NatNetStream(self.host, self.port, self._on_frame, self._on_status, policy=self.policy)
         return QtmStream(self.host, self.port, self._on_frame, self._on_status, transport=self.transport,
                          udp_port=self.udp_port, version=self.version, policy=self.policy)
 
