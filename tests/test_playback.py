@@ -144,3 +144,15 @@ def test_lockstep_lets_a_stream_that_ended_with_the_bag_go_and_keeps_the_robot()
     later = 20.0 + ENDED_SILENCE_S + 0.05
     step.note("/robot/joint_states", 4200 * MS, wall_s=later)
     assert step.holding(4220 * MS, wall_s=later) == {"/robot/joint_states": 4250 * MS}
+
+
+def test_a_replay_that_ends_its_graph_waits_until_the_followed_streams_reach_its_end():
+    step = Lockstep(["/human/com"], lead_ns=50 * MS, timeout_s=3.0, bag_span_ns=SPAN, first_ns=-1)
+    assert step.caught_up(wall_s=1.0), "nothing published: nothing to wait for"
+    step.note("/human/com", 3800 * MS, wall_s=1.0)
+    assert not step.caught_up(wall_s=1.5), "the estimator is 200 ms behind the bag's end"
+    step.note("/human/com", 3990 * MS, wall_s=1.6)
+    assert step.caught_up(wall_s=1.6)
+    stalled = Lockstep(["/human/com"], lead_ns=50 * MS, timeout_s=3.0, bag_span_ns=SPAN, first_ns=-1)
+    stalled.note("/human/com", 1000 * MS, wall_s=1.0)
+    assert not stalled.caught_up(wall_s=3.9) and stalled.caught_up(wall_s=4.1), "a dead node is not waited for"

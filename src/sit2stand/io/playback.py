@@ -173,6 +173,17 @@ class Lockstep:
             return False
         return True
 
+    def caught_up(self, wall_s: float) -> bool:
+        """Every followed topic that has published has reached the bag's end (within ``lead_ns``), or is let go
+        (released, or silent for ``timeout_s``): a replay that ends its graph waits for this, so that the last
+        frames it played are processed."""
+        for topic, (stamp_ns, seen_s) in self._newest.items():
+            if stamp_ns < 0 or topic in self.released or wall_s - seen_s > self.timeout_s:
+                continue
+            if stamp_ns < self.bag_end_ns - self.lead_ns:
+                return False
+        return True
+
     def ceiling_ns(self, clock_ns: int, wall_s: float, announced: frozenset[str] = frozenset()) -> int | None:
         """The latest bag time /clock may show now (None: unbounded)."""
         bounds = self.holding(clock_ns, wall_s, announced)

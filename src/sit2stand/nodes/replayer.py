@@ -338,6 +338,7 @@ class Replayer(Node):
                 self.loops_done += 1
                 if not self.loop:
                     break
+            self._wait_caught_up()
             keep_clock = self.clock_after_end and self.at_end == "idle" and self.clock_pub is not None
             if keep_clock:      # on from the last message's time: a replay behind its schedule must not jump ahead
                 self.clock.restart(self.reader.end_ns)
@@ -361,6 +362,14 @@ class Replayer(Node):
         finally:
             if self.at_end == "exit" or self.exit_code:
                 self.finished = True
+
+    def _wait_caught_up(self) -> None:
+        """In lockstep, after the last message: wait until the followed nodes have processed it (the graph may end
+        with the replay)."""
+        while self.lockstep is not None and not self._stop.is_set() and \
+                not self.lockstep.caught_up(time.monotonic()):
+            self._wake.wait(0.02)
+            self._wake.clear()
 
     def _publish_clock(self, bag_ns: int) -> None:
         clock = Clock()
