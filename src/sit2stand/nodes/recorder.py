@@ -51,7 +51,6 @@ from .runtime import (IdleDrain, NodeError, declare, message_class, node_main, q
 
 # the deep reader queues (read when rclpy creates its DDS participant; a profile the user names wins)
 os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(Path(__file__).with_name("recorder_fastdds.xml")))
-os.environ.setdefault("RMW_FASTRTPS_USE_QOS_FROM_XML", "1")     # its memory policy, not rmw_fastrtps's
 
 DEFAULT_EXCLUDE = r"^/rosout$|^/parameter_events$"
 
