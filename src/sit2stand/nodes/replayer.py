@@ -139,6 +139,7 @@ class Replayer(Node):
         self.add_on_set_parameters_callback(self._on_parameters)
 
         self.clock = PlaybackClock(self.reader.start_ns, rate)
+        self._holder = ""                               # the lockstep topic holding /clock now ("": none)
         self.lockstep = self._follow(declare(self, "lockstep", [], "topics whose newest stamp /clock may lead"),
                                      declare(self, "lockstep_lead_s", 0.05, "how far /clock may lead them [s]"),
                                      declare(self, "lockstep_timeout_s", 10.0, "stall that releases a topic [s]"),
@@ -172,7 +173,6 @@ class Replayer(Node):
         lockstep = Lockstep(topics, int(lead_s * 1e9), timeout_s, (self.reader.start_ns, self.reader.end_ns),
                             int(first_s * 1e9) if first_s >= 0 else -1)
         self._held_by: set[str] = set()
-        self._holder = ""                               # the topic holding /clock now ("": none)
         self._released: set[str] = set()
         self._announced: tuple[float, frozenset[str]] = (0.0, frozenset())
         for topic in topics:
@@ -410,7 +410,7 @@ class Replayer(Node):
             ("fraction", f"{frac:.4f}"), ("bag_time_s", f"{bag_t:.3f}"),
             ("duration_s", f"{self.reader.duration_s:.3f}"), ("messages_sent", str(self.sent)),
             ("loops_done", str(self.loops_done)), ("rate", f"{self.clock.rate:g}"),
-            ("lockstep_waits_for", getattr(self, "_holder", "")))]
+            ("lockstep_waits_for", self._holder))]
         self.progress_pub.publish(status)
         if force or now - self._last_log >= 2.0:
             self._last_log = now
