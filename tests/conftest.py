@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import os
 import random
 import signal
@@ -28,13 +29,20 @@ def real_file(name: str) -> Path:
     return path
 
 
+# ROS domains 1-100 handed out in turn from a random start: no two tests of a session share one, so a node killed by
+# an earlier test (its DDS shared-memory ports left behind) never meets a later test's nodes
+_DOMAINS = itertools.cycle(list(range(1, 101))[random.Random(os.getpid() * 7919 + time.time_ns()).randrange(100):] +
+                           list(range(1, 101)))
+
+
 @pytest.fixture
 def ros_env(monkeypatch) -> dict[str, str]:
-    """Environment for node processes: a ROS domain of this test's own, discovery on localhost only."""
-    domain = str(random.Random(os.getpid() * 7919 + time.time_ns()).randint(1, 100))
+    """Environment for node processes: a ROS domain of this test's own, discovery on localhost only; a node that
+    hangs dumps its Python stacks on SIGABRT (faulthandler)."""
+    domain = str(next(_DOMAINS))
     env = dict(os.environ)
     env.update({"ROS_DOMAIN_ID": domain, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-                "PYTHONUNBUFFERED": "1", "RCUTILS_COLORIZED_OUTPUT": "0"})
+                "PYTHONUNBUFFERED": "1", "PYTHONFAULTHANDLER": "1", "RCUTILS_COLORIZED_OUTPUT": "0"})
     monkeypatch.setenv("ROS_DOMAIN_ID", domain)
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     return env
@@ -75,6 +83,16 @@ class NodeProcess:
             time.sleep(0.05)
         return False
 
+    def stacks(self, timeout: float = 5.0) -> str:
+        """The output after SIGABRT, which makes a hung node print its Python stacks (PYTHONFAULTHANDLER)."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGABRT)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                pass
+        return self.output
+
     def kill(self) -> None:
         if self.proc.poll() is None:
             self.proc.kill()
@@ -84,7 +102,8 @@ class NodeProcess:
 
 @pytest.fixture
 def run_node(tmp_path, ros_env):
-    """Start ``python -m MODULE ARGS...`` processes; every one still alive at the end of the test is killed."""
+    """Start ``python -m MODULE ARGS...`` processes. Those still running when the test ends get SIGINT, as from a
+    user, so that they leave no DDS shared-memory ports behind, and SIGKILL 5 s later."""
     started: list[NodeProcess] = []
 
     def start(*args: str, log_name: str | None = None) -> NodeProcess:
@@ -94,8 +113,23 @@ def run_node(tmp_path, ros_env):
         return node
 
     yield start
+    end_processes([node.proc for node in started])
     for node in started:
         node.kill()
+
+
+def end_processes(procs: list[subprocess.Popen], grace_s: float = 5.0) -> None:
+    """SIGINT to every process still running, then SIGKILL to those still running ``grace_s`` later."""
+    running = [p for p in procs if p.poll() is None]
+    for proc in running:
+        proc.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + grace_s
+    for proc in running:
+        try:
+            proc.wait(max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(10)
 
 
 @pytest.fixture(scope="session")

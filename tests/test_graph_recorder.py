@@ -69,7 +69,7 @@ def run_publisher(tmp_path, ros_env):
 
 def start_recorder(run_node, out):
     rec = run_node("sit2stand.nodes.recorder", "--ros-args", "-p", f"output:={out}", "-p", "regex:=^/robot/")
-    assert rec.wait_for_output("recording to", 20), rec.output
+    assert rec.wait_for_output("recording to", 20), rec.stacks()
     return rec
 
 
@@ -122,7 +122,7 @@ def test_a_killed_recorder_does_not_hold_up_the_replayers_clock(run_node, tmp_pa
     spin_clock(clocks.append, seconds=4.0)         # the bag ends 1.5 s after the kill; /clock goes on at 1 kHz
     stamps = [c.clock.sec + c.clock.nanosec * 1e-9 for c in clocks]
     assert stamps and max(np.diff(stamps), default=1.0) < 0.5, play.output
-    assert stamps[-1] > 100.0 + 3.9 + 0.5
+    assert stamps[-1] > 100.0 + 3.9 + 0.5, play.stacks()
     assert play.stop() == 0
 
 
