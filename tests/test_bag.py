@@ -6,6 +6,7 @@ import math
 import os
 import signal
 import sys
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -389,3 +390,30 @@ def test_recovery_keeps_the_damaged_bags_subject_data(tmp_path):
     assert report.bad_chunks, "the corrupt chunk is named"
     with BagReader(tmp_path / "rebuilt") as bag:
         assert bag.custom_data["height_m"] == "1.75" and "recovered_from" in bag.custom_data
+
+
+def test_a_long_recording_holds_its_chunk_index_packed_and_writes_every_chunk_in_the_summary(tmp_path):
+    """A recorder flushes a chunk every 0.5 s, and the summary's chunk index stays in memory until the bag closes
+    (issue 16's soak: the recorder grew with it). Packed, 2,000 chunks of two topics cost under 0.15 kB each, and the
+    summary still lists every chunk, each pointing at its chunk (rosbags' own index: 0.22 kB)."""
+    string = typestore().types["std_msgs/msg/String"]
+    with BagWriter(tmp_path / "b") as bag:
+        for topic in ("/a", "/b"):
+            bag.add_topic(topic, "std_msgs/msg/String")
+            bag.write(topic, 500, string(data="first"))        # rosbags builds its serializer on first use
+        bag.flush()
+        tracemalloc.start()
+        before = tracemalloc.get_traced_memory()[0]
+        for i in range(2000):
+            bag.write("/a", 1_000 + 10 * i, string(data=f"a{i}"))
+            bag.write("/b", 1_005 + 10 * i, string(data=f"b{i}"))
+            bag.flush()
+        held = tracemalloc.get_traced_memory()[0] - before
+        tracemalloc.stop()
+    assert held / 2000 < 150, f"{held / 2000:.0f} bytes per chunk"
+    indexes = chunk_indexes(tmp_path / "b" / "b.mcap")
+    assert len(indexes) == 2001
+    assert [ix.message_start_time for ix in indexes] == [500] + [1_000 + 10 * i for i in range(2000)]
+    with BagReader(tmp_path / "b") as r:
+        assert r.message_count == 4002
+        assert [m.timestamp_ns for m in r.messages(["/b"])][-3:] == [1_005 + 10 * i for i in (1997, 1998, 1999)]
