@@ -7,7 +7,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export RCUTILS_COLORIZED_OUTPUT ?= 0
 SOAK_MIN ?= 2
 
-.PHONY: setup demo test test-fast lint bench bench-gap bench-retarget bench-human bench-capture bench-standup bench-faults lock clean
+.PHONY: setup demo test test-fast lint bench bench-gap bench-gap-human bench-retarget bench-human bench-capture bench-standup bench-faults lock clean
 
 setup:            ## create .venv (pinned wheels, ROS 2 Jazzy), build msgs/, install src/ (idempotent)
 	@ros_ws/bootstrap.sh
@@ -29,6 +29,9 @@ bench: setup      ## speed figures (printed and written to bench/results/bench.j
 
 bench-gap: setup  ## only the model-gap hit rates (10 hidden-effect plants per kind, 13 kinds), merged into bench.json
 	@$(PY) -m sit2stand.bench --only gap --out bench/results/bench.json
+
+bench-gap-human: setup  ## only the human-side model-gap hit rates (20 digital humans per case: a mass hidden on each of 9 segment groups, a scale error, nothing), merged into bench.json
+	@$(PY) -m sit2stand.bench --only gap_human --out bench/results/bench.json
 
 bench-retarget: setup  ## only the retargeting figures (IK per frame, latency in the live graphs), merged into bench.json
 	@$(PY) -m sit2stand.bench --only retarget --out bench/results/bench.json

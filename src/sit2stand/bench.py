@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 from rosbags.rosbag2 import Reader
 
+from .bench_gap_human import CASES as GAP_HUMAN_CASES, bench_gap_human, summary_table
 from .bench_human import bench_human_real, print_table
 from .data import graph_path, plant_path
 from .gap.hidden import KINDS, OUT_OF_LIBRARY, draw, run_case
@@ -387,6 +388,18 @@ def _gap_section(seeds: int, two: int | None = None, kinds: str | None = None) -
     return bench_gap(seeds, n_two=seeds // 2 if two is None else two, kinds=chosen)
 
 
+def _gap_human_section(n: int, cases: str | None = None, workers: int = 1, de_leva: bool = False) -> dict:
+    chosen = tuple(c for c in cases.split(",") if c) if cases else GAP_HUMAN_CASES
+    bad = set(chosen) - set(GAP_HUMAN_CASES)
+    if bad:
+        raise SystemExit(f"--gap-human-cases: unknown {sorted(bad)} (known: {', '.join(GAP_HUMAN_CASES)})")
+    print(f"model gap, human side: {n} digital humans per case ({len(chosen)} cases: {', '.join(chosen)})"
+          + (", bodies of de Leva's proportions" if de_leva else "") + " ...", flush=True)
+    out = bench_gap_human(n, chosen, workers, vary_subject=not de_leva)
+    print(summary_table(out))
+    return out
+
+
 def _write(results: dict, out: Path, sections: list[str]) -> None:
     """Print ``sections`` of ``results`` and write all of it to ``out``."""
     _print_sections(results, sections)
@@ -399,13 +412,21 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sit2stand-bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results/bench.json"))
     parser.add_argument("--messages", type=int, default=40_000)
-    parser.add_argument("--only", choices=["gap", "retarget", "human"],
+    parser.add_argument("--only", choices=["gap", "gap_human", "retarget", "human"],
                         help="run one section and merge it into the JSON file")
     # 10 seeds x 13 kinds, 10 clean, 5 with two effects: ~25 s a case with its two replays, ~30 min on 2 cores
     parser.add_argument("--gap-seeds", type=int, default=10, help="hidden-effect cases per effect kind")
     parser.add_argument("--gap-two", type=int, default=None, help="cases with two hidden effects (default: seeds / 2)")
     parser.add_argument("--gap-kinds", default=None, help="comma-separated kinds (default: all, in and outside "
                         "the library)")
+    # 20 humans x 11 cases (a mass on each of 9 segment groups, a scale error, nothing): ~5 s a human, ~20 min
+    parser.add_argument("--gap-human-n", type=int, default=20, help="digital humans per human-side case")
+    parser.add_argument("--gap-human-cases", default=None, help="comma-separated human-side cases (default: all: "
+                        + ", ".join(GAP_HUMAN_CASES) + ")")
+    parser.add_argument("--gap-human-workers", type=int, default=1, help="human-side runs in parallel (processes)")
+    parser.add_argument("--gap-human-de-leva", action="store_true", help="human side: bodies of de Leva's "
+                        "proportions exactly (no random segment factors), to tell the workflow's misses from the "
+                        "population's own mass differences")
     args = parser.parse_args(argv)
     root = Path(__file__).resolve().parents[2]
     env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "91"),
@@ -413,9 +434,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.only:
         results = json.loads(args.out.read_text()) if args.out.exists() else {}
         sections = {"gap": lambda: _gap_section(args.gap_seeds, args.gap_two, args.gap_kinds),
+                    "gap_human": lambda: _gap_human_section(args.gap_human_n, args.gap_human_cases,
+                                                            args.gap_human_workers, args.gap_human_de_leva),
                     "retarget": lambda: _retarget_section(root, env),
                     "human": _human_real_section}
         key = "human_real" if args.only == "human" else args.only
+        key += "_de_leva" if args.only == "gap_human" and args.gap_human_de_leva else ""    # beside, not over it
         results[key] = sections[args.only]()
         _write(results, args.out, [] if key == "human_real" else [key])     # human_real: printed as its table
         return 0

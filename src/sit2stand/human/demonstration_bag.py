@@ -43,13 +43,15 @@ def write_demonstration_bag(demo: Demonstration, out) -> dict[str, int]:
     """Write a :class:`Demonstration` as a bag: what a lab would record, plus the truth on /ground_truth/*.
 
     The bag's metadata carries what a lab knows (stature, body mass from a scale, sex, seat height, events); the
-    hidden extra masses appear only on the ground-truth topics, which estimators must not read.
+    hidden extra masses appear only on the ground-truth topics, which estimators must not read. The body mass is the
+    true one (extra masses included) times ``config.declared_mass_factor`` (1: a scale that weighs right).
     """
     cfg = demo.config
+    declared_kg = demo.human.total_mass * cfg.declared_mass_factor
     store = typestore().types
     custom = {
         "source": "sit2stand synth-human", "style": cfg.style, "seed": str(cfg.seed),
-        "height_m": f"{cfg.height_m:g}", "body_mass_kg": f"{demo.human.total_mass:.3f}", "sex": cfg.sex,
+        "height_m": f"{cfg.height_m:g}", "body_mass_kg": f"{declared_kg:.3f}", "sex": cfg.sex,
         "seat_height_m": f"{demo.seat_height_m:.3f}", "plates": "chair, feet",
         "events": (f"rise_start@{START_TIME_S + demo.rise_start_s:.3f}s;"
                    f" seat_off@{START_TIME_S + demo.seat_off_s:.3f}s;"
@@ -61,7 +63,7 @@ def write_demonstration_bag(demo: Demonstration, out) -> dict[str, int]:
         bag.add_topic(MARKERS_TOPIC, MOCAP_TYPE)
         # the subject in the stream too (latched): a conversion that drops custom_data (ROS 1) keeps it
         bag.add_topic(SUBJECT_TOPIC, SUBJECT_TYPE, [reliable_qos(1, transient_local=True)])
-        bag.write(SUBJECT_TOPIC, _to_ns(0.0), M.subject(_to_ns(0.0), cfg.height_m, demo.human.total_mass, cfg.sex))
+        bag.write(SUBJECT_TOPIC, _to_ns(0.0), M.subject(_to_ns(0.0), cfg.height_m, declared_kg, cfg.sex))
         for name in ("chair", "feet"):
             bag.add_topic(plate_topic(name), PLATE_TYPE)
         bag.add_topic(GROUND_TRUTH_COM_TOPIC, COM_TYPE)

@@ -50,6 +50,7 @@ class SynthConfig:
     duration_s: float | None = None        # rise duration; default from the style
     seed: int = 0
     extra: list[ExtraMass] = field(default_factory=list)
+    declared_mass_factor: float = 1.0       # the bag's body mass = the true one x this (a scale error; plates: truth)
     vary_subject: bool = True               # random segment length (sd 3 %) and mass (sd 8 %) factors
     sit_before_s: float = 0.8
     stand_after_s: float = 1.5
@@ -68,6 +69,8 @@ class SynthConfig:
             raise ValueError(f"rise duration {self.duration_s:g} s is outside 0.8..8 s")
         if self.seat_height_m is not None and not 0.18 * self.height_m <= self.seat_height_m <= 0.36 * self.height_m:
             raise ValueError(f"seat height {self.seat_height_m:g} m is outside 18-36 % of the stature")
+        if not 0.5 <= self.declared_mass_factor <= 1.5:
+            raise ValueError(f"declared mass factor {self.declared_mass_factor:g} is outside 0.5..1.5")
 
 
 @dataclass
