@@ -10,7 +10,7 @@ with the next seeds, :func:`sit2stand.bench_standup.synthesise`; one it refuses 
 body of the same style, :func:`spare_body`). Each is synthesised, written as a bag and run through
 :func:`sit2stand.gap.human.human_gap` on the bag alone. The synthesiser's bodies differ from the model's de Leva
 proportions by design (segment masses sd 8 %, ``vary_subject``): each row lists the largest of those differences
-(``body_deviation``, kg, the hidden mass left out) beside what was named, to tell a false alarm from a real one.
+(``body_deviation``, kg, beyond the hidden effect) beside what was named, to tell a false alarm from a real one.
 
 * A hidden mass: drawn per human uniformly in the group's range (:data:`GROUPS`: a plausible load there), at an offset
   from the segment's COM uniform in +-``offset`` per axis, on a side drawn at random for the sided groups. The bag's
@@ -132,13 +132,14 @@ def spare_body(case: GapCase, k: int) -> GapCase:
                                                                        "rise_s", "seed")})
 
 
-def body_deviation(demo, declared_kg: float, top: int = 3) -> list[str]:
-    """The largest differences [kg] between the true segment masses (the hidden extra left out) and the model's
-    (de Leva at the declared body mass, as the workflow builds it): ``segment +-kg``, largest first."""
-    nominal = build_human(Subject(demo.config.height_m, declared_kg, demo.config.sex)).segment_mass
+def body_deviation(demo, top: int = 3) -> list[str]:
+    """What the model lacks beyond the hidden effect: the largest differences [kg] between the body's own segment
+    masses (the hidden extra left out) and de Leva's at its true mass without the extra (the model the workflow
+    builds, once the hidden effect's candidate is applied): ``segment +-kg``, largest first."""
     true = dict(demo.human.segment_mass)
     for e in demo.config.extra:
         true[e.segment] -= e.mass_kg
+    nominal = build_human(Subject(demo.config.height_m, sum(true.values()), demo.config.sex)).segment_mass
     dev = sorted(((true[s] - nominal[s], s) for s in SEGMENTS), key=lambda d: -abs(d[0]))
     return [f"{s} {d:+.2f}" for d, s in dev[:top]]
 
@@ -218,7 +219,7 @@ def run_one(case: GapCase) -> dict:
         with tempfile.TemporaryDirectory(prefix="sit2stand-gap-human-") as tmp:
             write_demonstration_bag(demo, Path(tmp) / "bag")
             r = human_gap(Path(tmp) / "bag")
-        row["body_deviation"] = body_deviation(demo, demo.human.total_mass * demo.config.declared_mass_factor)
+        row["body_deviation"] = body_deviation(demo)
         row["named"] = [_named(e) for e in r.effects]
         row["effects"] = [_effect_row(e) for e in r.effects]
         row["verdict"] = r.verdict
