@@ -64,9 +64,14 @@ class NodeProcess:
             self._log.flush()
 
     def stop(self, sig: int = signal.SIGINT, timeout: float = 20.0) -> int:
+        """Send ``sig`` and wait for the exit code; a process still running ``timeout`` later fails the test with its
+        Python stacks."""
         if self.proc.poll() is None:
             self.proc.send_signal(sig)
-        return self.wait(timeout)
+        try:
+            return self.wait(timeout)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"still running {timeout:g} s after signal {sig}:\n{self.stacks()[-6000:]}")
 
     @property
     def output(self) -> str:
