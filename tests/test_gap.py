@@ -15,11 +15,12 @@ import yaml
 
 from sit2stand.bench_gap_human import CASES as HUMAN_CASES
 from sit2stand.bench_gap_human import GROUPS, bench_gap_human, draw_cases, gap_human_rates, score_run
+from sit2stand.gap.bounds import Limits
 from sit2stand.gap.excite import excite
 from sit2stand.gap.hidden import Hidden, draw, plant_with, run_case, score
-from sit2stand.gap.human import human_gap
+from sit2stand.gap.human import LIGHTER_SHARE, human_gap, segment_reach_m, segment_refusal
 from sit2stand.gap.select import Candidate, select
-from sit2stand.human.skeleton import ExtraMass
+from sit2stand.human.skeleton import ExtraMass, Subject, build_human
 from sit2stand.human.demonstration_bag import write_demonstration_bag
 from sit2stand.human.offline import read_trial
 from sit2stand.human.synth import SynthConfig, synthesize
@@ -259,3 +260,20 @@ def test_human_gap_benchmark_runs_on_a_tiny_configuration():
     assert scale["hidden"]["kind"] == "mass_scale" and none["hidden"] is None
     assert scale["hit"], scale          # a 5-12 % scale error is named within 20 % (measured: within 1 %)
     assert 0.0 <= out["none_no_alarm_rate"] <= 1.0 and out["scale_wall_s"] > 0
+
+
+def test_a_mass_on_a_body_segment_stays_within_its_reach_and_no_lighter_than_a_share_of_it():
+    """The human side's bounds: a mass 40 cm below the neck is not on the head; a head 7 kg lighter than a 5 kg table
+    head is not a body's own variation; a 1 kg load 5 cm from the head's joint, or a slightly light segment, is."""
+    human = build_human(Subject(1.75, 75.0, "male"))
+    model = human.model
+    head = human.segment_joint["head"]
+    reach = segment_reach_m(model, head)
+    assert 0.1 < reach < 0.45, reach
+    assert segment_reach_m(model, human.segment_joint["thigh_l"]) > reach    # a thigh is longer than a head
+    limits = Limits(link_mass_kg=float(model.inertias[head].mass))
+    assert segment_refusal(np.array([1.0, 0.0, 0.0, 0.05]), limits, reach) is None
+    assert "from its segment" in segment_refusal(np.array([2.0, 0.0, 0.0, -0.8]), limits, reach)
+    assert "negative mass" in segment_refusal(np.array([-7.0, 0.0, 0.0, -0.7]), limits, reach)
+    light = -0.5 * LIGHTER_SHARE * limits.link_mass_kg
+    assert segment_refusal(np.array([light, 0.0, 0.0, 0.05 * light]), limits, reach) is None

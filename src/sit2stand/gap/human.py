@@ -88,13 +88,17 @@ def human_gap(bag: str | Path, progress=None) -> HumanGap:
         return X
 
     def bounded(seg: str):
-        """The extra mass's bounds on ``seg`` (gap.bounds; a lighter segment: at most its own mass)."""
-        limits = Limits(link_mass_kg=float(model.inertias[human.segment_joint[seg]].mass))
-        return lambda theta: refusal("extra_mass", seg, theta, limits)
+        """The extra mass's bounds on ``seg``: the robot's (gap.bounds), and on a body, within the segment's reach
+        and no lighter than ``LIGHTER_SHARE`` of the segment (see :func:`segment_refusal`)."""
+        j = human.segment_joint[seg]
+        limits = Limits(link_mass_kg=float(model.inertias[j].mass))
+        reach = segment_reach_m(model, j)
+        return lambda theta: refusal("extra_mass", seg, theta, limits) or segment_refusal(theta, limits, reach)
 
     cands = [Candidate("extra_mass", seg, MASS_PARAMS, stack(within_scale_mass(seg)), plausible=bounded(seg))
              for seg in SEGMENTS]
     cands.append(Candidate("mass_scale", "whole body", ["scale - 1"], stack(own)))
+    rms_b = np.sqrt(np.mean(e ** 2, axis=0))
     if progress:
         progress(f"  {len(keep)} supported frames, {len(cands)} candidates: selecting")
     sel = select(y, cands, series_id=sid, noise_rss=float(len(y)))
@@ -103,13 +107,47 @@ def human_gap(bag: str | Path, progress=None) -> HumanGap:
         X = within_scale_mass(s.candidate.location) if s.candidate.kind == "extra_mass" else own
         after -= np.tensordot(X, s.theta, axes=(2, 0))
     effects = effect_summary(sel)
-    rms_b = np.sqrt(np.mean(e ** 2, axis=0))
     rms_a = np.sqrt(np.mean(after ** 2, axis=0))
     if effects:
-        verdict = "; ".join(f"extra mass on {d['location']}: {d['mass_kg']:.2f} +- {d['mass_ci95_kg']:.2f} kg"
-                            if d["kind"] == "extra_mass" else f"whole-body mass scale {d['value']:.3f}"
-                            for d in effects)
+        verdict = "; ".join(_named(d) for d in effects)
     else:
         verdict = "no significant discrepancy" if (rms_b / floors).max() < SIGNIFICANT_Z else \
             "disagreement found, but no candidate effect explains it"
     return HumanGap(str(bag), list(SEGMENTS), floors, rms_b, rms_a, sel, effects, verdict)
+
+
+def _named(d: dict) -> str:
+    """One named effect in words, with the segments the data cannot tell it from."""
+    if d["kind"] != "extra_mass":
+        return f"whole-body mass scale {d['value']:.3f}"
+    alts = [a.split("@", 1)[-1] for a in d.get("alternatives", []) if a.startswith("extra_mass@")]
+    where = d["location"] + (f" (or {', '.join(alts)}: the plates cannot tell them apart)" if alts else "")
+    return f"extra mass on {where}: {d['mass_kg']:.2f} +- {d['mass_ci95_kg']:.2f} kg"
+
+
+LIGHTER_SHARE = 0.3
+"""A segment lighter than the table by more than this share of its mass is not a body's own variation, nor a load:
+such a negative mass (seen: -2 to -7 kg on a 5 kg head, placed in the chest) stands in for something else, and is
+refused (the residual it would take is reported as unexplained)."""
+REACH_FACTOR = 1.5
+"""An extra mass sits within this many segment lengths of its segment's joint (the robot's bound, 0.6 m, let a head
+mass sit in the chest)."""
+
+
+def segment_reach_m(model: pin.Model, joint: int) -> float:
+    """How far from joint ``joint`` a mass on its segment can sit [m]: ``REACH_FACTOR`` x the segment's length (to
+    its farthest child joint; a segment without one: twice its COM's distance)."""
+    children = [c for c in range(joint + 1, model.njoints) if model.parents[c] == joint]
+    length = max((float(np.linalg.norm(model.jointPlacements[c].translation)) for c in children),
+                 default=2.0 * float(np.linalg.norm(model.inertias[joint].lever)))
+    return REACH_FACTOR * length
+
+
+def segment_refusal(theta: np.ndarray, limits: Limits, reach_m: float) -> str | None:
+    """Why an extra mass ``theta`` (m, m c) is not a load on a body's segment; None when it can be."""
+    m = float(theta[0])
+    if m < -LIGHTER_SHARE * limits.link_mass_kg:
+        return f"negative mass {m:.3g} kg beyond {LIGHTER_SHARE:.0%} of the segment's {limits.link_mass_kg:.3g} kg"
+    if abs(m) > 1e-9 and (d := float(np.linalg.norm(np.asarray(theta[1:4]) / m))) > reach_m:
+        return f"mass {d:.2f} m from its segment's joint (beyond {reach_m:.2f} m)"
+    return None
