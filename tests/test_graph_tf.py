@@ -381,34 +381,40 @@ def test_the_human_skeleton_is_in_tf_under_lab_with_its_description(bag):
 
 def test_one_time_base_header_stamps_within_the_log_times(bag):
     """Every header stamp of every topic lies within the bag's log-time span (its end plus 50 ms). Stamps and log
-    times are read off one
-    clock (the replayer's /clock), so their difference is a latency: the sources (replayed capture, the robot's
-    state) are logged within a frame (10 ms) of their stamps whenever the recorder keeps up (10th percentile; on 2
-    cores the calibrating estimator and the real-time retargeter starve it for seconds at times), and no stamp is
-    more than half a second after its log time (each process sees /clock with its own delay); before, robot stamps
-    were wall time, 56 years after the bag's."""
+    times are read off one clock (the replayer's /clock), so their difference is a latency: the sources (replayed
+    capture, the robot's state) are logged within a frame (10 ms) of their stamps whenever the recorder keeps up
+    (10th percentile; on 2 cores the calibrating estimator and the real-time retargeter starve it at times), the
+    robot's states and commands within a frame at the median and three at p99, and no stamp is more than half a
+    second after its log time (each process sees /clock with its own delay); before, robot stamps were wall time,
+    56 years after the bag's."""
     read, reader = bag
     frame_ns = 10_000_000
     # each process takes /clock with its own delay: the robot's last state, stamped at the /clock it simulated, may
-    # reach the recorder before that /clock does (the replayer's lockstep lets /clock lead the robot by 50 ms)
+    # reach the recorder before that /clock does (the replayer's lockstep lets /clock lead the robot by 10 ms)
     span = (reader.start_ns, reader.end_ns + 5 * frame_ns)
     for topic in sorted(reader.topics()):
-        lags = []
+        lags, stamps = [], []
         for log_ns, msg in read(topic):
             for h in _headers(msg):
                 s = _ns(h)
                 assert span[0] <= s <= span[1], f"{topic}: stamp {s * 1e-9:.3f} s outside the log times " \
                     f"{span[0] * 1e-9:.3f}..{span[1] * 1e-9:.3f} s"
                 lags.append(log_ns - s)
+                stamps.append(s)
         if not lags:
             continue
         assert min(lags) > -50 * frame_ns, f"{topic}: a stamp {-min(lags) * 1e-6:.1f} ms after its log time"
         if topic.startswith(("/mocap/", "/force_plate/", "/robot/joint_states", "/robot/base_pose", "/robot/ft/")):
             p10 = np.percentile(lags, 10)
             assert abs(p10) < frame_ns, f"{topic}: logged {p10 * 1e-6:.1f} ms after its stamps (10th percentile)"
-        if topic == "/robot/joint_states":    # the replayer's lockstep keeps the robot with the clock (749 ms before)
-            p50 = np.percentile(lags, 50)
-            assert p50 < 6 * frame_ns, f"{topic}: logged {p50 * 1e-6:.1f} ms after its stamps (median)"
+        if topic in ("/robot/joint_states", "/robot/joint_command"):
+            # the replayer's lockstep keeps the robot with the clock within a frame (749 ms before it; 65 ms at p99
+            # with a 50 ms lead; measured here at 10 ms: p50 0.2 ms, p99 10-15 ms). It follows a topic from the first
+            # message it gets: the states of the bag's first 0.5 s, before that, were seen 130 ms late
+            steady = np.asarray(lags)[np.asarray(stamps) > reader.start_ns + 500_000_000]
+            p50, p99 = np.percentile(steady, [50, 99])
+            assert p50 < frame_ns and p99 < 3 * frame_ns, \
+                f"{topic}: logged {p50 * 1e-6:.1f} ms (median), {p99 * 1e-6:.1f} ms (p99) after its stamps"
 
 
 def _headers(msg):
