@@ -72,7 +72,7 @@ def test_the_bridge_names_what_failed_and_survives_the_server_going_away_and_com
     path, port = real_file("sts_child_vicon_01.c3d"), free_port()
     bridge = run_node(*bridge_args(port, "-p", "chair_plate:=-1", "-p", "feet_plate:=2"))
     assert bridge.wait_for_output(f"cannot connect to QTM RT protocol 1.25 at 127.0.0.1:{port}: [Errno 111]", 30), \
-        bridge.output
+        bridge.stacks()
     first = run_node("sit2stand.cli", "serve-c3d", str(path), "--port", str(port), "--host", LOCAL, "--loop",
                      log_name="serve1")
     assert bridge.wait_for_output("connected to QTM", 20), bridge.output
