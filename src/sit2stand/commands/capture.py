@@ -6,6 +6,7 @@ Each handler imports its stage when it runs (see :mod:`sit2stand.cli`).
 from __future__ import annotations
 
 import argparse
+import signal
 from pathlib import Path
 
 DEFAULT_PORTS = {"qtm": 22223, "natnet": 1510}
@@ -26,11 +27,23 @@ def _serve_c3d(args: argparse.Namespace) -> int:
         what = f"QTM RT protocol on {args.host}:{server.port}"
     print(f"serve-c3d: {recording.source}: {len(recording.labels)} markers, {len(recording.plates)} plates, "
           f"{recording.n_frames} frames at {recording.rate_hz:g} Hz; {what}", flush=True)
+    _stop_on_signals()
     try:
         return server.serve(exit_at_end=not args.stay)
     except KeyboardInterrupt:
         server.stop()
         return 0
+
+
+def _stop_on_signals() -> None:
+    """SIGINT and SIGTERM stop the server. Python leaves SIGINT ignored when the process starts with it ignored (a
+    background job of a non-interactive shell, `nohup`, and everything they start): the server then ran on after
+    SIGINT."""
+    def stop(signum, frame):
+        raise KeyboardInterrupt
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, stop)
 
 
 def add_serve_c3d(sub) -> None:
