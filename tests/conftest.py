@@ -29,10 +29,10 @@ def real_file(name: str) -> Path:
     return path
 
 
-# ROS domains 1-100 handed out in turn from a random start: no two tests of a session share one, so a node killed by
-# an earlier test (its DDS shared-memory ports left behind) never meets a later test's nodes
-_DOMAINS = itertools.cycle(list(range(1, 101))[random.Random(os.getpid() * 7919 + time.time_ns()).randrange(100):] +
-                           list(range(1, 101)))
+# ROS domains 1-100 handed out in turn from a random start: no two of 100 consecutive tests share one, so the nodes
+# of a test never meet the DDS state (shared-memory ports) that a node killed by a recent test left behind
+_DOMAINS = itertools.islice(itertools.cycle(range(1, 101)),
+                            random.Random(os.getpid() * 7919 + time.time_ns()).randrange(100), None)
 
 
 @pytest.fixture

@@ -30,7 +30,7 @@ from .select import Candidate, Selection, select
 from .dataset import fast_part_floor
 from .bounds import Limits, refusal
 from .candidates import MASS_PARAMS
-from .workflow import SIGNIFICANT_Z, effect_summary
+from .workflow import NO_DISCREPANCY, SIGNIFICANT_Z, UNEXPLAINED, effect_summary
 
 
 @dataclass
@@ -111,8 +111,7 @@ def human_gap(bag: str | Path, progress=None) -> HumanGap:
     if effects:
         verdict = "; ".join(_named(d) for d in effects)
     else:
-        verdict = "no significant discrepancy" if (rms_b / floors).max() < SIGNIFICANT_Z else \
-            "disagreement found, but no candidate effect explains it"
+        verdict = NO_DISCREPANCY if (rms_b / floors).max() < SIGNIFICANT_Z else UNEXPLAINED
     return HumanGap(str(bag), list(SEGMENTS), floors, rms_b, rms_a, sel, effects, verdict)
 
 

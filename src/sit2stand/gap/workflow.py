@@ -46,6 +46,10 @@ from .unexplained import SIGNIFICANT_Z, contact_note, where_and_shape
 from .validate import (REPLAY_ONLY_KINDS, effect_columns, effect_theta, exact_residuals, gap_size, merged_model,
                        replay_effects, replay_floor, replay_gap, replay_residuals, replay_z)
 
+NO_DISCREPANCY = "no significant discrepancy"
+"""The verdict when no channel is above its noise floor (robot and human side)."""
+UNEXPLAINED = "disagreement found, but no candidate effect explains it"
+"""The verdict's opening when a residual stands that no candidate explains."""
 MAX_REFUSAL_ROUNDS = 4      # selection re-run without the refused candidates at most this often
 
 
@@ -439,9 +443,8 @@ def _verdict(res: GapResult) -> str:
     if res.effects:
         return "; ".join(describe(e) for e in res.effects) + (f"; unexplained: {left}" if left else "")
     if left:
-        return f"disagreement found, but no candidate effect explains it: {left}"
-    return ("no significant discrepancy" if worst < SIGNIFICANT_Z
-            else "disagreement found, but no candidate effect explains it")
+        return f"{UNEXPLAINED}: {left}"
+    return NO_DISCREPANCY if worst < SIGNIFICANT_Z else UNEXPLAINED
 
 
 # -- augmented model -------------------------------------------------------------------------------------------------
