@@ -15,8 +15,9 @@ setup:            ## create .venv (pinned wheels, ROS 2 Jazzy), build msgs/, ins
 demo: setup       ## the main job on the shipped demonstration (writes runs/demo/)
 	@$(PY) -m sit2stand.demo --out runs/demo
 
-test: setup lint  ## lint, then the whole test suite: unit tests and graph tests with real node processes
-	@$(PY) -m pytest -q --durations=12 tests
+test: setup lint  ## lint, then the whole test suite: unit tests (2 workers, a file per worker), then the graph tests alone
+	@$(PY) -m pytest -q -n 2 --dist loadfile --durations=8 -m "not graph" tests
+	@$(PY) -m pytest -q --durations=8 -m graph tests
 
 lint: setup       ## ruff (ruff.toml): zero findings
 	@$(VENV)/bin/ruff check
