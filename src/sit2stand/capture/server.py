@@ -22,10 +22,10 @@ NAT_REQUEST_FRAMEOFDATA (the current frame), ``FrameRate`` requests, keep-alives
 is answered NAT_UNRECOGNIZED_REQUEST. Frames go, from the same socket, to the address each NAT_CONNECT came from:
 ``natnet``'s unicast client binds its data socket to a port nobody is told and reads frames on its command socket,
 which keeps the server's path open with keep-alives. A client silent for :data:`CLIENT_TIMEOUT_S` is dropped. The
-clock starts at the first NAT_REQUEST_MODELDEF (a client that connects and asks for the names gets frame 1), or
-:data:`NATNET_START_S` after the first NAT_CONNECT. Markers only: force plates are not served over NatNet (Motive's
-plates stream raw channels without geometry, which the bridge does not publish). Positions are metres in Motive's
-default y-up axes (``--up-axis Y``; ``Z``: the recording's own axes).
+clock starts once the reply to the first NAT_REQUEST_MODELDEF has left (a client that connects and asks for the
+names gets frame 1, after the names), or :data:`NATNET_START_S` after the first NAT_CONNECT. Markers only: force
+plates are not served over NatNet (Motive's plates stream raw channels without geometry, which the bridge does not
+publish). Positions are metres in Motive's default y-up axes (``--up-axis Y``; ``Z``: the recording's own axes).
 """
 
 from __future__ import annotations
@@ -337,6 +337,7 @@ class NatNetServer(_FrameClock):
         self.port = self.sock.getsockname()[1]
         self._lock = threading.Lock()
         self._start_timer: threading.Timer | None = None
+        self._start_after_reply = False     # the clock starts once the NAT_MODELDEF reply has left
 
     # --- requests --------------------------------------------------------------------------------------------
     def reply(self, data: bytes, address: tuple[str, int]) -> bytes | None:
@@ -361,7 +362,7 @@ class NatNetServer(_FrameClock):
                 self._start_timer.start()
             return nn.server_info(data_port=self.port)
         if kind == nn.Message.REQUEST_MODELDEF:
-            self.started.set()
+            self._start_after_reply = True      # frame 1 must not overtake the names (a client drops it unnamed)
             return nn.model_definitions([(self.set_name, self.recording.labels)])
         if kind == nn.Message.REQUEST_FRAMEOFDATA:
             return nn.frame_of_data(self._frame(min(self.current, self.recording.n_frames - 1), 0))
@@ -428,6 +429,8 @@ class NatNetServer(_FrameClock):
                         self.sock.sendto(answer, address)
                     except OSError:
                         pass
+                if self._start_after_reply:
+                    self.started.set()
         finally:
             self.stop()
         return 0
