@@ -37,10 +37,10 @@ from .stream import RetargetConfig, Retargeter, RobotSetup
 STAMP_TOLERANCE_S = 1e-6
 """Two stamps this close are the same frame's."""
 MAX_CATCH_UP_PERIODS = 5.0
-PLANNED_COM_KEPT = 200
-"""Planned COMs kept by the robot time of their command (2 s at 100 Hz), to compare a late robot state with."""
 """A command that comes late (the retargeter or the clock held up) moves the plan on by the robot's time since the
 last one, up to this many periods: after a longer stall the plan waits instead of jumping ahead."""
+PLANNED_COM_KEPT = 200
+"""Planned COMs kept by the robot time of their command (2 s at 100 Hz), to compare a late robot state with."""
 
 
 class HumanComTrack:
