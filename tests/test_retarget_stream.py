@@ -200,3 +200,18 @@ def test_a_recording_that_starts_seated_gets_no_lead_in(retargeted, elderly):
     _, rt, frames, *_ = retargeted
     assert rt.started_seated and len(frames) == len(trial.marker_t_s)
     assert rt.lead_in(0.0, 0.01, trial.positions[0], trial.valid[0], com_h[0]) == []
+
+
+def test_a_joint_pressed_on_its_stop_is_left_out_of_the_torque_criterion(retargeted):
+    """The torso pitch near its upper stop (0.785 rad) with its static torque pressing into it: the stop carries the
+    load, so the joint does not hold the plan; far from the stop, or pulled off it by its static torque, it counts."""
+    robot, _, frames, _, player = retargeted
+    model = player.model
+    jid = model.getJointId("torso_2_joint")
+    iq, iv = model.joints[jid].idx_q, model.joints[jid].idx_v - 6
+    q = frames[0].q.copy()
+    static = np.zeros(model.nv - 6)
+    for q_torso, static_torso, pressed in ((0.75, -70.0, True), (0.5, -70.0, False), (0.75, 70.0, False),
+                                           (-0.2, 30.0, True), (-0.2, -30.0, False)):
+        q[iq], static[iv] = q_torso, static_torso
+        assert player._pressed_on_stop(q, static)[iv] == pressed, (q_torso, static_torso)
