@@ -32,6 +32,7 @@ def _serve_c3d(args: argparse.Namespace) -> int:
         return server.serve(exit_at_end=not args.stay)
     except KeyboardInterrupt:
         server.stop()
+        print(f"serve-c3d: stopped: {server.frames_sent} frames sent", flush=True)
         return 0
 
 

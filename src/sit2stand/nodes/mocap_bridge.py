@@ -10,7 +10,8 @@ Qualisys' ``qtm-rt``, or :class:`~sit2stand.capture.clients.NatNetStream` throug
 * ``~/status`` (diagnostic_msgs/DiagnosticStatus, 1 Hz): connection, frames received and lost, reconnections.
 
 Stamps are capture times, mapped once to the ROS clock (:class:`~sit2stand.capture.convert.ClockMap`). Messages are
-built by :mod:`sit2stand.io.messages` and published as CDR from the client's thread, as soon as a frame is decoded.
+laid out as CDR by :mod:`sit2stand.io.stream_messages` (names fixed per connection, only numbers written) and
+published from the client's thread as soon as a frame is decoded, the markers first.
 
 Parameters:
     protocol (str, qtm)          qtm | natnet
@@ -31,7 +32,6 @@ import sys
 import threading
 import time
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from sit2stand_msgs.msg import ForcePlateSample, MocapFrame
@@ -40,9 +40,8 @@ from ..capture.clients import NatNetStream, QtmStream
 from ..capture.convert import ClockMap, DropCounter, FrameConverter, ReconnectPolicy, plate_names, plate_stamps
 from ..human.marker_sets import load_marker_set
 from ..io.c3d import LabAxes
-from ..io.messages import force_plate_sample, mocap_frame
-from ..io.topics import MARKERS_TOPIC, MOCAP_TYPE, PLATE_TYPE, plate_topic
-from ..io.typestore import typestore
+from ..io.stream_messages import MocapFrameEncoder, PlateSampleEncoder
+from ..io.topics import LAB_FRAME, MARKERS_TOPIC, plate_topic
 from .runtime import PLATE_PUBLISH_DEPTH, NodeError, declare, node_main, qos_from_bag
 
 
@@ -88,11 +87,8 @@ class MocapBridge(Node):
         self._info, self._converter = None, None
         self._lock = threading.Lock()
         self._last_drop_log = 0.0
-        # build the message types' serializers now: done on the first frame, it delayed the first ~10 frames by
-        # ~100 ms (measured), and the clock map takes its offset from the first frame
-        typestore().serialize_cdr(mocap_frame(0, ["m"], np.zeros((1, 3)), np.ones(1, bool)), MOCAP_TYPE)
-        typestore().serialize_cdr(force_plate_sample(0, "p", np.zeros(3), np.zeros(3), np.zeros(3), False, 0.0),
-                                  PLATE_TYPE)
+        self._marker_encoder: MocapFrameEncoder | None = None
+        self._plate_encoders: dict[str, PlateSampleEncoder] = {}
         self.stream = self._make_stream()
         self.create_timer(1.0, self._report)
         self.stream.start()
@@ -139,20 +135,22 @@ class MocapBridge(Node):
         now_ns = self.get_clock().now().nanoseconds     # first: the clock map's offset must not hold our own work
         conv = self._converter_for(info)
         m = conv.markers(frame, self.clock.stamp(frame.timestamp_us * 1000, now_ns))
-        store = typestore()
-        self.marker_pub.publish(bytes(store.serialize_cdr(
-            mocap_frame(m.t_ns, m.names, m.positions_m, m.valid, m.residuals_m), MOCAP_TYPE)))
+        if self._marker_encoder is None or self._marker_encoder.names != m.names:
+            self._marker_encoder = MocapFrameEncoder(m.names, LAB_FRAME)
+        self.marker_pub.publish(self._marker_encoder.encode(m.t_ns, m.positions_m, m.valid, m.residuals_m))
         for chunk in frame.plates:
             plate = conv.plates.get(chunk.plate_id)
             if plate is None or not len(chunk.samples):
                 continue
             t_ns = plate_stamps(chunk.first_sample, len(chunk.samples), plate.rate_hz, self.clock, now_ns)
             s = conv.plate(chunk.plate_id, chunk.samples, t_ns)
+            encoder = self._plate_encoders.get(s.name)
+            if encoder is None:
+                encoder = self._plate_encoders[s.name] = PlateSampleEncoder(s.name, LAB_FRAME)
             pub = self.plate_pubs[s.name]
-            for k in range(len(t_ns)):
-                pub.publish(bytes(store.serialize_cdr(force_plate_sample(
-                    int(t_ns[k]), s.name, s.force_n[k], s.moment_origin_nm[k], s.cop_m[k], bool(s.cop_valid[k]),
-                    float(s.free_moment_nm[k])), PLATE_TYPE)))
+            for data in encoder.encode_many(t_ns, s.force_n, s.moment_origin_nm, s.cop_m, s.cop_valid,
+                                            s.free_moment_nm):
+                pub.publish(data)
         self._count(frame.frame_number)
 
     def _count(self, number: int) -> None:

@@ -1,0 +1,44 @@
+"""io/stream_messages.py: the bridge's MocapFrame and ForcePlateSample bytes equal rosbags' serialization of the same
+messages, and read back in rclpy."""
+
+import numpy as np
+import pytest
+from rclpy.serialization import deserialize_message
+from sit2stand_msgs.msg import ForcePlateSample, MocapFrame
+
+from sit2stand.io.messages import force_plate_sample, mocap_frame
+from sit2stand.io.stream_messages import MocapFrameEncoder, PlateSampleEncoder
+from sit2stand.io.topics import LAB_FRAME, MOCAP_TYPE, PLATE_TYPE
+from sit2stand.io.typestore import typestore
+
+
+@pytest.mark.parametrize("names", [["LASI", "RASI", "T10", "LHEE"], ["a", "bc", "def", "ghij", "klmno"], [], ["X"]])
+def test_a_mocap_frame_is_rosbags_own_bytes(names):
+    rng = np.random.default_rng(len(names))
+    n = len(names)
+    pos, valid = rng.normal(size=(n, 3)), rng.random(n) > 0.3
+    res = rng.random(n).astype(np.float32)
+    enc = MocapFrameEncoder(names, LAB_FRAME)
+    for residuals in (res, None):
+        want = bytes(typestore().serialize_cdr(mocap_frame(1_700_000_123_456_789_012, names, pos, valid, residuals),
+                                               MOCAP_TYPE))
+        assert enc.encode(1_700_000_123_456_789_012, pos, valid, residuals) == want
+
+
+@pytest.mark.parametrize("plate", ["chair", "feet", "plate3", "p"])
+def test_plate_samples_are_rosbags_own_bytes_and_rclpy_reads_them(plate):
+    rng = np.random.default_rng(7)
+    k = 6
+    t = 1_700_000_000_000_000_000 + np.arange(k) * 500_000
+    f, m, c = rng.normal(size=(k, 3)), rng.normal(size=(k, 3)), rng.normal(size=(k, 3))
+    ok, free = np.array([True, False, True, True, False, True]), rng.normal(size=k)
+    got = PlateSampleEncoder(plate, LAB_FRAME).encode_many(t, f, m, c, ok, free)
+    for i in range(k):
+        want = force_plate_sample(int(t[i]), plate, f[i], m[i], c[i], bool(ok[i]), float(free[i]))
+        assert got[i] == bytes(typestore().serialize_cdr(want, PLATE_TYPE))
+    msg = deserialize_message(got[2], ForcePlateSample)
+    assert msg.plate_name == plate and msg.header.frame_id == LAB_FRAME and msg.cop_valid
+    assert msg.wrench.force.z == f[2, 2] and msg.free_moment_z == free[2]
+    frame = deserialize_message(MocapFrameEncoder(["A", "B"], LAB_FRAME).encode(5, c[:2], ok[:2]), MocapFrame)
+    assert list(frame.marker_names) == ["A", "B"] and frame.positions[0].y == c[0, 1]
+    assert np.isnan(frame.positions[1].x) and list(frame.valid) == [True, False]
