@@ -1,16 +1,24 @@
 """The whole-body QP (robot/wbc.py), its torque controller on the plant and the plan's dynamics filter."""
 
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import pytest
 
+from sit2stand.commands.robot import CONTROLLER_CHOICES
+from sit2stand.data import plant_path
 from sit2stand.dynamics import G, model_cop
 from sit2stand.retarget.dynamic import DynamicsFilter
 from sit2stand.retarget.feasibility import support_margin, support_polygon
+from sit2stand.retarget.offline import CONTROLLERS, run
 from sit2stand.robot.model import PlantConfig, add_seat_frame, controller_model
 from sit2stand.robot.plant import Plant
 from sit2stand.robot.model import sole_corners_local
 from sit2stand.robot.wbc import Reference, WbcGains, WholeBodyQP, feet_anchored_reference
+
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -149,3 +157,19 @@ def test_torque_controller_holds_the_seated_robot(plant):
     assert len(plant.wbc.qp_times_s) == pytest.approx(500, abs=2)
     plant.reset()
     assert plant.model.actuator_gainprm[plant.pd_ids, 0].min() > 0    # back under PD after a reset
+
+
+def test_the_robot_stands_up_at_the_humans_timing_under_whole_body_torque_control(tmp_path):
+    """Issue 15's controller on the elderly-like demonstration (CAD plant: the controller knows the robot): the
+    robot stands, the plan stretched at most 10 %, every torque inside its URDF limit, the QP timed."""
+    summary = run(ROOT / "bags" / "elderly", tmp_path / "wbc", plant=plant_path("cad"), simulate=True,
+                  controller="wbc")
+    assert summary["controller"] == "wbc" and summary["stood_up"] and summary["fall"] is None
+    assert summary["time_scale"] <= 1.1          # measured 1.04
+    assert summary["torque_demand_peak_ratio"] <= 1.0 + 1e-9
+    assert summary["com_tracking_rms_m"] < 0.025   # measured 1.9 cm (0.95 cm on the default plant, identified)
+    assert 0.0 < summary["controller_qp_ms_p50"] <= summary["controller_qp_ms_p99"]
+
+
+def test_the_clis_controller_choices_are_the_stand_ups():
+    assert CONTROLLER_CHOICES == CONTROLLERS

@@ -120,7 +120,7 @@ def synthesise(case: Case, attempts: int = SYNTH_ATTEMPTS):
     raise ValueError(f"no demonstration in {attempts} seeds from {case.seed}: {last}")
 
 
-def run_case(case: Case, out: Path, params: Path | None) -> dict:
+def run_case(case: Case, out: Path, params: Path | None, controller: str = "inverse_dynamics") -> dict:
     """Synthesise, bag, retarget and simulate one case; its figures (an ``error`` where a stage raised, and
     ``stage: synthesis`` where the synthesiser refused every seed: no robot run to judge)."""
     t0 = time.monotonic()
@@ -131,7 +131,7 @@ def run_case(case: Case, out: Path, params: Path | None) -> dict:
             demo, row["synth_seed"] = synthesise(case)
             write_demonstration_bag(demo, Path(tmp) / case.name)
             summary = offline.run(Path(tmp) / case.name, out / case.name, params=params,
-                                  plant=plant_path("default"), simulate=True)
+                                  plant=plant_path("default"), simulate=True, controller=controller)
         row.update(_figures(summary, demo.rise_end_s - demo.rise_start_s))
     except Exception as exc:  # noqa: BLE001 - a case that breaks is a result too: recorded, the population goes on
         row["error"] = f"{type(exc).__name__}: {exc}"
@@ -246,17 +246,18 @@ def resolve_params(args: argparse.Namespace) -> tuple[Path | None, str]:
     return args.out / "robot" / "identified_full.yaml", f"identified here: {args.out / 'robot'}"
 
 
-def run_population(cases: list[Case], out: Path, params: Path | None, jobs: int) -> list[dict]:
+def run_population(cases: list[Case], out: Path, params: Path | None, jobs: int,
+                   controller: str = "inverse_dynamics") -> list[dict]:
     """Every case, ``jobs`` at a time; one line per case as it finishes; rows in case order."""
     rows = []
     print(TABLE_HEAD, flush=True)
     if jobs <= 1:
         for case in cases:
-            rows.append(run_case(case, out / "cases", params))
+            rows.append(run_case(case, out / "cases", params, controller))
             print(case_line(rows[-1]), flush=True)
     else:
         with ProcessPoolExecutor(jobs, mp_context=get_context("spawn")) as pool:
-            futures = [pool.submit(run_case, c, out / "cases", params) for c in cases]
+            futures = [pool.submit(run_case, c, out / "cases", params, controller) for c in cases]
             for fut in as_completed(futures):
                 rows.append(fut.result())
                 print(case_line(rows[-1]), flush=True)
@@ -272,19 +273,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only-style", choices=STYLES, help="every case in this style")
     parser.add_argument("--params", type=Path, help="identified parameters (default: make demo's)")
     parser.add_argument("--cad", action="store_true", help="plan and control with the CAD model")
+    parser.add_argument("--controller", choices=offline.CONTROLLERS, default="inverse_dynamics",
+                        help="the simulated robot's: joint PD with an inverse-dynamics feed-forward, or whole-body "
+                        "torque control (wbc)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
     cases = sample_population(args.cases, args.seed, (args.only_style,) if args.only_style else STYLES)
     params, source = resolve_params(args)
-    print(f"bench-standup: {len(cases)} digital humans (seed {args.seed}), default plant, parameters {source}",
-          flush=True)
+    print(f"bench-standup: {len(cases)} digital humans (seed {args.seed}), default plant, parameters {source}, "
+          f"controller {args.controller}", flush=True)
     t0 = time.monotonic()
-    rows = run_population(cases, args.out, params, args.jobs)
+    rows = run_population(cases, args.out, params, args.jobs, args.controller)
     agg = aggregate(rows)
     print("\n" + summary_text(agg))
     args.out.mkdir(parents=True, exist_ok=True)
-    doc = {"seed": args.seed, "parameters": source, "plant": "default", "jobs": args.jobs,
-           "wall_s": round(time.monotonic() - t0, 1), "aggregate": agg, "cases": rows}
+    doc = {"seed": args.seed, "parameters": source, "plant": "default", "controller": args.controller,
+           "jobs": args.jobs, "wall_s": round(time.monotonic() - t0, 1), "aggregate": agg, "cases": rows}
     (args.out / "bench_standup.json").write_text(json.dumps(doc, indent=2) + "\n")
     print(f"wrote {args.out / 'bench_standup.json'}")
     return 1 if agg["errors"] else 0

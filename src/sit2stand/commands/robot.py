@@ -12,6 +12,10 @@ from pathlib import Path
 
 from .graph import ros_params
 
+CONTROLLER_CHOICES = ("inverse_dynamics", "wbc")
+"""``retarget.offline.CONTROLLERS``, spelled here because the CLI builds its parsers without importing the robot
+stack (a test keeps the two equal)."""
+
 
 def _retarget(args: argparse.Namespace) -> int:
     from ..retarget.offline import run
@@ -132,7 +136,7 @@ def add_retarget(sub) -> None:
     p.add_argument("--dynamic", action="store_true",
                    help="experimental: pass the commands through the dynamics filter (whole-body QP: feet COP inside "
                         "the soles, torque limits), stretching time only where it cannot follow")
-    p.add_argument("--controller", choices=("inverse_dynamics", "wbc"), default="inverse_dynamics",
+    p.add_argument("--controller", choices=CONTROLLER_CHOICES, default="inverse_dynamics",
                    help="the simulated robot's controller: joint PD + inverse-dynamics feed-forward (default), or "
                         "experimental whole-body torque control (QP at 500 Hz)")
     p.add_argument("--seat-off-dwell", type=float, default=None,

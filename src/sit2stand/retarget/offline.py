@@ -43,6 +43,10 @@ from .calibration import map_frame
 from .stream import RetargetConfig, Retargeter, retarget_sequence, robot_model, robot_setup
 
 
+CONTROLLERS = ("inverse_dynamics", "wbc")
+"""The simulated robot's on-board controllers a stand-up can run: joint PD with an inverse-dynamics feed-forward,
+or whole-body torque control (:mod:`sit2stand.robot.wbc`)."""
+
 def human_com_series(bag: Path, human_com_bag: Path | None, trial, calibration: StreamCalibration | None = None,
                      marker_set: str | None = None) -> np.ndarray:
     """(N, 3) human COM at the marker frames: ``/human/com`` of a bag, or the offline estimator (with a skeleton
