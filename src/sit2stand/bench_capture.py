@@ -8,8 +8,8 @@ a subscriber here counts ``/mocap/markers`` and times each frame's arrival again
 printed clock origin + frame number / rate, CLOCK_REALTIME). The bridge's resident memory (VmRSS) is sampled every
 5 s; growth is the slope of a line fitted after the first 30 s.
 
-The server was once a thread of this process: its frame clock spins the last millisecond before each frame holding
-Python's GIL, and the subscriber's callbacks waited for it (p99 5.95 ms, an artefact of the benchmark).
+The stand-in is not a thread of this process: its frame clock spins the last millisecond before each frame holding
+Python's GIL, and the subscriber's callbacks would wait for it.
 """
 
 from __future__ import annotations
