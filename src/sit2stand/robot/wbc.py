@@ -120,11 +120,11 @@ class WholeBodyQP:
         n_pts = 4 * len(self.soles) + 1
         self.C_fric = friction_rows(n_pts, self.g.friction)
         self.qp = proxsuite.proxqp.dense.QP(self.n, 6 + 6 * len(self.soles) + 3, self.nj + 4 * n_pts, True)
-        # each step starts from the last step's solution (primal and dual): consecutive control steps differ little.
-        # Measured on a 1 s seated hold, 2 cores: p50 / p99 per step 1.66 / 2.11 ms from proxsuite's default
-        # (equality-constrained) guess at eps 1e-6, 0.85 / 1.04 ms warm at 1e-5 (forces in FORCE_UNIT_N: 1 mN)
+        # 1e-5 in the QP's units (forces in FORCE_UNIT_N: 1 mN). Measured on the elderly stand-up (identified, 2
+        # cores, quiet): p50 / p99 per step 1.19 / 4.5 ms at 1e-6, 0.97 / 3.9 ms at 1e-5; warm-starting each step
+        # from the last solution (proxsuite's WARM_START_WITH_PREVIOUS_RESULT) gave 0.96 / 4.5 ms with 74 cold
+        # re-solves instead of 15, so each step starts from the equality-constrained guess
         self.qp.settings.eps_abs = 1e-5
-        self.qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
         self.qp.settings.verbose = False
         self._initialised = False
         self.weights = np.full(self.nv, self.g.posture_weight)
@@ -193,18 +193,16 @@ class WholeBodyQP:
         return H, c
 
     def _solve_qp(self, *problem) -> tuple[np.ndarray, str]:
-        """Warm-started from the last step; where that ends in a (spurious) infeasibility, solved again cold."""
-        guess = proxsuite.proxqp.InitialGuess
+        """The problem updated in place (proxsuite keeps its workspace); where that solve ends in a (spurious)
+        infeasibility, set up again from scratch."""
         if self._initialised:
             self.qp.update(*problem)
             self.qp.solve()
             if "SOLVED" in str(self.qp.results.info.status):
                 return self.qp.results.x.copy(), str(self.qp.results.info.status)
-        self.qp.settings.initial_guess = guess.EQUALITY_CONSTRAINED_INITIAL_GUESS     # cold: not from a failure
         self.qp.init(*problem)
         self._initialised = True
         self.qp.solve()
-        self.qp.settings.initial_guess = guess.WARM_START_WITH_PREVIOUS_RESULT
         return self.qp.results.x.copy(), str(self.qp.results.info.status)
 
     def _joint_stops(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
