@@ -88,7 +88,11 @@ def test_a_topic_that_appears_mid_run_is_recorded_from_its_first_message(run_nod
     assert recorded_x(out) == [float(i) for i in range(300)], rec.output
 
 
-def test_messages_the_recorder_missed_are_counted_and_fail_it(run_node, run_publisher, tmp_path):
+def test_messages_the_recorder_missed_are_counted_and_fail_it(run_node, run_publisher, ros_env, tmp_path):
+    # Fast DDS's default transports, as a user's graph has them: the loss below is the shared-memory port's. On the
+    # suite's UDP only, a recorder resumed from SIGSTOP hung once for 20 s taking the message-lost event (rclpy
+    # EventHandler.take_data), in 1 of 4 full runs
+    ros_env.pop("FASTDDS_BUILTIN_TRANSPORTS", None)
     out = tmp_path / "rec"
     rec = start_recorder(run_node, out)
     pub = run_publisher(2000, depth=50)
