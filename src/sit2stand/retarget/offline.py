@@ -253,7 +253,8 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
             if stabiliser is not None:
                 fix = stabiliser.correct(c.q, c.com, plant.pin_configuration(plant.data.qpos), c.on_feet, dt)
                 q, offset, lag = fix.q, fix.offset_m, fix.lag_m
-            elif c.on_feet:      # torque control tracks the COM itself; the plan still waits for a robot behind it
+            elif c.on_feet:      # no COM feedback (torque control has its own COM task, or it is off): the plan
+                #                  still waits for a robot behind it, from the measured state
                 measured = pin.centerOfMass(plant.ctrl, plant.ctrl_data, plant.pin_configuration(plant.data.qpos))
                 lag = max(0.0, float(c.com[0] - measured[0]))
             plant.command(q[7:], c.v[6:], c.a[6:], feedforward=controller)
