@@ -71,19 +71,23 @@ class FrameConverter:
             where = {n: i for i, n in enumerate(self.labels)}
             self.index = np.array([where.get(n, -1) for n in self.marker_set])
 
+    @property
+    def marker_names(self) -> list[str]:
+        """The markers each frame is published with: the marker set's, in its order, or the server's labels."""
+        return self.marker_set if self.index is not None else self.labels
+
     def markers(self, frame: DataFrame, t_ns: int) -> MarkerSample:
         """The frame's markers (the marker set's, in its order, if one was given; missing ones invalid)."""
         mm = np.asarray(frame.markers_mm, float).reshape(-1, 3)
         res = frame.residuals_mm if frame.residuals_mm is not None else np.full(len(mm), np.nan)
-        names = self.labels
         if self.index is not None:
             pad_mm = np.vstack([mm, np.full((1, 3), np.nan)])
-            mm, res, names = pad_mm[self.index], np.append(res, np.nan)[self.index], self.marker_set
+            mm, res = pad_mm[self.index], np.append(res, np.nan)[self.index]
         valid = np.all(np.isfinite(mm), axis=1) & ~np.all(mm == 0.0, axis=1) & ~(res < 0)
         pos = (mm * 1e-3) @ self.rotation.T
         pos[~valid] = np.nan
         res_m = np.where(valid & np.isfinite(res), res * 1e-3, np.nan)
-        return MarkerSample(t_ns, list(names), pos, valid, res_m)
+        return MarkerSample(t_ns, list(self.marker_names), pos, valid, res_m)
 
     def plate(self, plate_id: int, samples: np.ndarray, t_ns: np.ndarray) -> PlateSamples:
         """One plate's (K, 9) samples (force [N], moment about the surface centre [N m], application point) at

@@ -18,30 +18,15 @@ import struct
 
 import numpy as np
 
-from .tf_message import ENCAPSULATION_CDR_LE
+from .tf_message import CdrLayout
 
 
-class _Layout:
-    """A growing CDR buffer that records where the numbers go."""
-
-    def __init__(self) -> None:
-        self.buf = bytearray(ENCAPSULATION_CDR_LE)
-
-    def align(self, n: int) -> None:
-        self.buf.extend(b"\x00" * (-(len(self.buf) - 4) % n))
-
-    def uint32(self, value: int) -> None:
-        self.align(4)
-        self.buf.extend(struct.pack("<I", value))
-
-    def string(self, s: str) -> None:
-        raw = s.encode()
-        self.uint32(len(raw) + 1)
-        self.buf.extend(raw + b"\x00")
-
-    def header(self, frame_id: str) -> None:
-        self.buf.extend(b"\x00" * 8)         # stamp at offset 4: written per message
-        self.string(frame_id)
+def _header(frame_id: str) -> CdrLayout:
+    """A layout opening with a std_msgs/Header: the stamp (written per message) and ``frame_id``."""
+    lay = CdrLayout()
+    lay.buf.extend(b"\x00" * 8)
+    lay.string(frame_id)
+    return lay
 
 
 def _stamp(t_ns: int) -> bytes:
@@ -55,8 +40,7 @@ class MocapFrameEncoder:
     def __init__(self, names: list[str], frame_id: str) -> None:
         self.names = list(names)
         n = len(self.names)
-        lay = _Layout()
-        lay.header(frame_id)
+        lay = _header(frame_id)
         lay.uint32(n)
         for name in self.names:
             lay.string(name)
@@ -92,8 +76,7 @@ class PlateSampleEncoder:
     """Serialized sit2stand_msgs/ForcePlateSample of the plate ``plate_name`` in frame ``frame_id``."""
 
     def __init__(self, plate_name: str, frame_id: str) -> None:
-        lay = _Layout()
-        lay.header(frame_id)
+        lay = _header(frame_id)
         lay.string(plate_name)
         lay.align(8)
         self._numbers = len(lay.buf)              # wrench (force, torque) and cop: nine float64

@@ -24,33 +24,45 @@ from ..errors import InputError
 ENCAPSULATION_CDR_LE = b"\x00\x01\x00\x00"
 
 
+class CdrLayout:
+    """A growing XCDR1 little-endian buffer (after the encapsulation header): primitives aligned to their size from
+    the end of the header, padding zero; the encoders record where their numbers go while laying it out."""
+
+    def __init__(self) -> None:
+        self.buf = bytearray(ENCAPSULATION_CDR_LE)
+
+    def align(self, n: int) -> None:
+        self.buf.extend(b"\x00" * (-(len(self.buf) - 4) % n))
+
+    def uint32(self, value: int) -> None:
+        self.align(4)
+        self.buf.extend(struct.pack("<I", value))
+
+    def string(self, s: str) -> None:
+        """uint32 length including the NUL, the characters, NUL."""
+        raw = s.encode()
+        self.uint32(len(raw) + 1)
+        self.buf.extend(raw + b"\x00")
+
+
 class TfEncoder:
     """Serialized TFMessages of the transforms ``pairs`` ((parent, child) frame ids), in that order."""
 
     def __init__(self, pairs: Sequence[tuple[str, str]]) -> None:
         self.pairs = list(pairs)
-        buf = bytearray(ENCAPSULATION_CDR_LE)
-
-        def align(n: int) -> None:
-            buf.extend(b"\x00" * (-(len(buf) - 4) % n))
-
-        def string(s: str) -> None:
-            align(4)
-            raw = s.encode()
-            buf.extend(struct.pack("<I", len(raw) + 1) + raw + b"\x00")
-
-        buf.extend(struct.pack("<I", len(self.pairs)))
+        lay = CdrLayout()
+        lay.uint32(len(self.pairs))
         stamps, values = [], []
         for parent, child in self.pairs:
-            align(4)
-            stamps.append((len(buf) - 4) // 4)
-            buf.extend(b"\x00" * 8)
-            string(parent)
-            string(child)
-            align(8)
-            values.append((len(buf) - 4) // 8)
-            buf.extend(struct.pack("<7d", 0, 0, 0, 0, 0, 0, 1))
-        self._template = np.frombuffer(bytes(buf), np.uint8)
+            lay.align(4)
+            stamps.append((len(lay.buf) - 4) // 4)
+            lay.buf.extend(b"\x00" * 8)
+            lay.string(parent)
+            lay.string(child)
+            lay.align(8)
+            values.append((len(lay.buf) - 4) // 8)
+            lay.buf.extend(struct.pack("<7d", 0, 0, 0, 0, 0, 0, 1))
+        self._template = np.frombuffer(bytes(lay.buf), np.uint8)
         self._sec = np.array(stamps, int)             # uint32 index (from the end of the header) of each stamp
         self._val = np.array(values, int)[:, None] + np.arange(7)   # float64 indices of each transform's numbers
         self._pose = np.zeros((len(self.pairs), 7))

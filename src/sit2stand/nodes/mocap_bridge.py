@@ -87,7 +87,7 @@ class MocapBridge(Node):
         self._info, self._converter = None, None
         self._lock = threading.Lock()
         self._last_drop_log = 0.0
-        self._marker_encoder: MocapFrameEncoder | None = None
+        self._marker_encoder: MocapFrameEncoder | None = None    # per connection, with the converter
         self._plate_encoders: dict[str, PlateSampleEncoder] = {}
         self.stream = self._make_stream()
         self.create_timer(1.0, self._report)
@@ -125,6 +125,7 @@ class MocapBridge(Node):
             names = plate_names(info.plates, self.chair, self.feet)
             self._converter = FrameConverter(info.labels, info.plates, self.axes, names, self.marker_names,
                                              self.threshold_n)
+            self._marker_encoder = MocapFrameEncoder(self._converter.marker_names, LAB_FRAME)
             for name in names.values():
                 if name not in self.plate_pubs:
                     self.plate_pubs[name] = self.create_publisher(ForcePlateSample, plate_topic(name), self.plate_qos)
@@ -135,8 +136,6 @@ class MocapBridge(Node):
         now_ns = self.get_clock().now().nanoseconds     # first: the clock map's offset must not hold our own work
         conv = self._converter_for(info)
         m = conv.markers(frame, self.clock.stamp(frame.timestamp_us * 1000, now_ns))
-        if self._marker_encoder is None or self._marker_encoder.names != m.names:
-            self._marker_encoder = MocapFrameEncoder(m.names, LAB_FRAME)
         self.marker_pub.publish(self._marker_encoder.encode(m.t_ns, m.positions_m, m.valid, m.residuals_m))
         for chunk in frame.plates:
             plate = conv.plates.get(chunk.plate_id)
