@@ -113,7 +113,10 @@ class MocapBridge(Node):
     def _on_status(self, text: str, connected: bool) -> None:
         with self._lock:
             self.connected, self.state = connected, text
-            if connected:
+            # the next connection maps the capture clock again from its first frame: reset when the stream is lost,
+            # not when a connection is announced (NatNet's first frames may be stamped by then, and a frame error
+            # is reported as connected too)
+            if not connected:
                 self.clock.reset()
         if connected:
             self.get_logger().info(text)
