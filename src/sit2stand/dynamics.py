@@ -13,6 +13,7 @@ import pinocchio as pin
 
 from .errors import InputError
 from .io.forceplate import center_of_pressure
+from .vectors import cross
 
 G = 9.81
 
@@ -26,9 +27,9 @@ def model_cop(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, a:
     pin.computeCentroidalMomentumTimeVariation(model, data, q, v, a)
     mass = data.mass[0]
     force = mass * (acom + np.array([0.0, 0.0, G]))
-    moment = np.cross(com, force) + data.dhg.angular
+    moment = cross(com, force) + data.dhg.angular
     point = np.array([0.0, 0.0, floor_z])
-    cop, _ok, _tau = center_of_pressure(force, moment - np.cross(point, force), point, np.array([0.0, 0.0, 1.0]),
+    cop, _ok, _tau = center_of_pressure(force, moment - cross(point, force), point, np.array([0.0, 0.0, 1.0]),
                                         threshold_n=1.0)
     return com, vcom, acom, cop
 
@@ -77,7 +78,7 @@ def smooth_motion(model: pin.Model, qs: np.ndarray, dt: float, window: int = 31,
         w = Jr @ rd
         v_lin = R.T @ xd[k, :3]
         v[k, :3], v[k, 3:6], v[k, 6:] = v_lin, w, xd[k, 6:]
-        a[k, :3] = R.T @ xdd[k, :3] - np.cross(w, v_lin)
+        a[k, :3] = R.T @ xdd[k, :3] - cross(w, v_lin)
         a[k, 3:6] = Jr @ rdd + dJr @ rd
         a[k, 6:] = xdd[k, 6:]
     return q_s, v, a

@@ -16,6 +16,7 @@ from scipy.signal import savgol_coeffs   # at import time: the first frame must 
 
 from ..dynamics import G, model_cop
 from ..io.forceplate import PlateSeries, center_of_pressure
+from ..vectors import cross
 from .calibration import CALIBRATION_MIN_MARKERS, StreamCalibration, calibrate_stream
 from .marker_ik import MIN_MARKERS, MarkerIK, check_marker_units
 from .mass_scaling import (FactorAtBound, FrameRows, MassScaling, apply_scaling, assemble_rows, frame_rows,
@@ -254,7 +255,7 @@ class StreamingComEstimator:
         w = Jr @ rd
         v_lin = R.T @ xd[:3]
         v = np.concatenate([v_lin, w, xd[6:]])
-        a = np.concatenate([R.T @ xdd[:3] - np.cross(w, v_lin), Jr @ rdd + dJr @ rd, xdd[6:]])
+        a = np.concatenate([R.T @ xdd[:3] - cross(w, v_lin), Jr @ rdd + dJr @ rd, xdd[6:]])
         return q, v, a
 
     def _causal_com(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

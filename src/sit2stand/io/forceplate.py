@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from ..errors import InputError
+from ..vectors import cross
 
 DEFAULT_COP_THRESHOLD_N = 20.0
 """Normal force below which a plate counts as unloaded and its COP as undefined (Vicon Nexus' default)."""
@@ -70,7 +71,7 @@ def shift_moment(moment_nm: np.ndarray, force_n: np.ndarray, from_point_m: np.nd
     M_to = M_from + (from - to) x F.
     """
     arm = np.asarray(from_point_m, float) - np.asarray(to_point_m, float)
-    return np.asarray(moment_nm, float) + np.cross(arm, np.asarray(force_n, float))
+    return np.asarray(moment_nm, float) + cross(arm, force_n)
 
 
 def plate_surface(corners_m: np.ndarray, up: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -112,10 +113,10 @@ def center_of_pressure(force_n: np.ndarray, moment_nm: np.ndarray, point_m: np.n
     valid = np.isfinite(fn) & (fn > threshold_n) & np.all(np.isfinite(moment), axis=1)
     r = np.full_like(force, np.nan)
     with np.errstate(divide="ignore", invalid="ignore"):
-        r[valid] = np.cross(n, moment[valid]) / fn[valid, None]
+        r[valid] = cross(n, moment[valid]) / fn[valid, None]
     cop = np.asarray(point_m, float) + r
     tau = np.full(len(force), np.nan)
-    tau[valid] = np.einsum("ij,j->i", moment[valid] - np.cross(r[valid], force[valid]), n)
+    tau[valid] = np.einsum("ij,j->i", moment[valid] - cross(r[valid], force[valid]), n)
     if np.ndim(force_n) == 1:
         return cop[0], valid[0], tau[0]
     return cop, valid, tau

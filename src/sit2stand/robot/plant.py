@@ -28,6 +28,7 @@ import pinocchio as pin
 from ..dynamics import G
 from ..errors import InputError
 from ..io.forceplate import DEFAULT_COP_THRESHOLD_N
+from ..vectors import cross
 from .torque_control import WholeBodyController
 from .model import SIDES, PlantConfig, add_chair, add_seat_frame, build_spec, controller_model, expand
 
@@ -321,7 +322,7 @@ class Plant:
         sole = self.data.site_xpos[self.site_id[f"sole_{side}"]]
         f_ground = -f_parent + m_foot * np.array([0.0, 0.0, G])
         # moments about the sole: ground + leg + gravity balance the (static) foot
-        t_ground = -(t_parent + _cross(site_pos - sole, f_parent)) - _cross(com - sole, np.array([0, 0, -m_foot * G]))
+        t_ground = -(t_parent + cross(site_pos - sole, f_parent)) - cross(com - sole, np.array([0, 0, -m_foot * G]))
         return np.concatenate([f_ground, t_ground])
 
     def sensors(self) -> Sensors:
@@ -340,7 +341,7 @@ class Plant:
             world[side] = self._ground_reaction(side, meas)
         # combined COP on the floor from both feet: sum moments about the origin, then z = 0 plane
         force = sum(world[s][:3] for s in SIDES)
-        moment = sum(world[s][3:] + _cross(self.data.site_xpos[self.site_id[f"sole_{s}"]], world[s][:3])
+        moment = sum(world[s][3:] + cross(self.data.site_xpos[self.site_id[f"sole_{s}"]], world[s][:3])
                      for s in SIDES)
         if force[2] > DEFAULT_COP_THRESHOLD_N:
             cop = np.array([-moment[1] / force[2], moment[0] / force[2], 0.0])
@@ -366,11 +367,6 @@ class Plant:
                 mujoco.mj_contactForce(self.model, self.data, i, f6)
                 total += abs((c.frame.reshape(3, 3).T @ f6[:3])[2])
         return total
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b of two 3-vectors: np.cross's result at a tenth of its cost (the sensors run at the state rate)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 def reference_at(q_ref: np.ndarray, qd_ref: np.ndarray, qdd_ref: np.ndarray,
