@@ -65,6 +65,28 @@ def test_the_robot_stands_up_live_from_the_shipped_elderly_demonstration(tmp_pat
     assert summary["stood_up"] and summary["com_tracking_rms_m"] < 0.03, summary
 
 
+def test_under_whole_body_torque_control_the_robot_stands_up_live_near_the_humans_timing(tmp_path, ros_env):
+    """controller:=wbc: the driver runs the whole-body QP as the robot's on-board controller (the retargeter's COM
+    feedback off) and reports its QP time; the elderly rise plays within 1.5x the human's duration (1.04 when
+    written; joint PD with COM feedback: ~1.1)."""
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(GRAPHS / "standup.yaml"),
+           f"bag:={ROOT / 'bags' / 'elderly'}", f"out:={out}", f"plant:={plant_path('cad')}", "controller:=wbc"]
+    result = subprocess.run(cmd, env=ros_env, capture_output=True, text=True, timeout=240)
+    log = result.stdout[-4000:] + result.stderr[-2000:]
+    assert result.returncode == 0, log
+    assert "COM feedback off (the robot's whole-body torque controller tracks the COM)" in result.stdout, log
+    qp = re.search(r"\[driver\] .*whole-body QP p50 ([\d.]+) ms p99 ([\d.]+) ms \((\d+) steps\)", result.stdout)
+    assert qp and int(qp.group(3)) > 1000, log
+    scale = float(re.search(r"\[retargeter\] .* time scale ([\d.]+)", result.stdout).group(1))
+    assert scale < 1.5, log
+    with BagReader(out) as bag:
+        status = [{kv.key: kv.value for kv in m.values} for _, m in bag.read("/robot/status")]
+    assert status[-1]["controller"] == "wbc" and "qp_p99_ms" in status[-1], status[-1]
+    summary = analyse(out, "elderly", None, plant_path("cad")).summary
+    assert summary["stood_up"] and not summary["fallen"] and summary["com_tracking_rms_m"] < 0.04, summary
+
+
 def test_marker_frames_without_a_human_com_stop_the_retargeter_with_a_clear_error(tmp_path, run_node):
     """A demonstration played without any /human/com: the node names what it waited for and exits 2."""
     node = run_node("sit2stand.nodes.retargeter", "--ros-args", "-p", "wait_for_robot:=false",
@@ -83,3 +105,11 @@ def test_a_bad_parameters_file_stops_the_retargeter_at_start_naming_it(tmp_path,
     node = run_node("sit2stand.nodes.retargeter", "--ros-args", "-p", f"controller_params:={tmp_path / 'params.yaml'}")
     assert node.wait(60) == 2, node.output
     assert "params.yaml" in node.output and "controller_params" in node.output
+
+
+def test_an_unknown_on_board_controller_stops_the_driver_and_the_retargeter_naming_it(run_node):
+    driver = run_node("sit2stand.nodes.driver", "--ros-args", "-p", "controller:=torque")
+    retargeter = run_node("sit2stand.nodes.retargeter", "--ros-args", "-p", "controller:=torque")
+    for node in (driver, retargeter):
+        assert node.wait(60) == 2, node.output
+        assert "controller 'torque'" in node.output and "wbc" in node.output, node.output

@@ -1,8 +1,12 @@
 """sit2stand.retarget.pacing: COM by stamp, command pacing and latency accounting of the live retargeter."""
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
+from sit2stand.data import plant_path
+from sit2stand.retarget.player import Command
+from sit2stand.retarget.stream import robot_model
 from sit2stand.retarget.pacing import (ChairForceTrack, CommandPacer, HumanComTrack, LatencyLog, LiveConfig,
                                        LiveRetargeting, MarkerFrame, percentile_text, summary_line)
 
@@ -118,3 +122,38 @@ def test_after_the_plan_the_last_pose_is_re_sent_once_per_period_of_the_robots_c
     assert not live.tick() and sent == ["last pose, at rest"], "the pose is held; markers not yet taken as stopped"
     robot_now[0] = 10.032
     assert live.tick() is True and len(sent) == 2, "three periods of the robot's clock without markers: done"
+
+
+class _OnePlanCommand:
+    """A plan player that hands out one on-feet command and remembers the lag it was given."""
+    done = finished = False
+    duration_ratio = 1.0
+
+    def __init__(self, command):
+        self.command, self.lags = command, []
+
+    def pull(self, lag_m=0.0, periods=1.0):
+        self.lags.append(lag_m)
+        return self.command
+
+
+def test_under_torque_control_a_robot_behind_the_plan_slows_it_from_its_measured_com():
+    """No COM feedback under whole-body torque control: the plan still waits for a robot whose measured COM (with the
+    plan's model) trails the planned one, as the offline re-simulation does."""
+    model, q_seated, _ = robot_model(plant_path("cad"))
+    com_seated = pin.centerOfMass(model, model.createData(), q_seated)
+    measured = [None]
+    live = LiveRetargeting(LiveConfig(controller="wbc"), send=lambda cmd, offset: 0.0,
+                           measured_q=lambda: measured[0], robot_clock=lambda: 5.0)
+    live.model, live.model_data = model, model.createData()
+    plan = Command(0.0, q_seated, np.zeros(model.nv), np.zeros(model.nv), 1.0, com_seated + [0.05, 0.0, 0.0],
+                   com_seated, np.inf, True)
+    live.player = _OnePlanCommand(plan)
+    live.pull_and_send(5.0)
+    assert live.lag_m == 0.0 and live.state_stale == 1, "no robot state: no lag, counted"
+    measured[0] = (q_seated, 5.0)
+    live.pull_and_send(5.01)
+    assert live.lag_m == pytest.approx(0.05, abs=1e-9)
+    live.pull_and_send(5.02)
+    assert live.player.lags[-1] == pytest.approx(0.05, abs=1e-9), "the next command is pulled with that lag"
+    assert live.stabiliser is None and "whole-body torque controller" in live.figures()["com_feedback"]

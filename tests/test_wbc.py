@@ -11,9 +11,9 @@ from sit2stand.data import plant_path
 from sit2stand.dynamics import G, model_cop
 from sit2stand.retarget.dynamic import DynamicsFilter
 from sit2stand.retarget.feasibility import support_margin, support_polygon
-from sit2stand.retarget.offline import CONTROLLERS, run
+from sit2stand.retarget.offline import run
 from sit2stand.robot.model import PlantConfig, add_seat_frame, controller_model
-from sit2stand.robot.plant import Plant
+from sit2stand.robot.plant import CONTROLLERS, Plant
 from sit2stand.robot.model import sole_corners_local
 from sit2stand.robot.wbc import Reference, WbcGains, WholeBodyQP, feet_anchored_reference
 

@@ -44,6 +44,7 @@ from .demo import robot_identification
 from .human.demonstration_bag import write_demonstration_bag
 from .human.synth import SynthConfig, synthesize
 from .retarget import offline
+from .robot.plant import CONTROLLERS
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_PARAMS = ROOT / "runs" / "demo" / "robot" / "identified_full.yaml"
@@ -273,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only-style", choices=STYLES, help="every case in this style")
     parser.add_argument("--params", type=Path, help="identified parameters (default: make demo's)")
     parser.add_argument("--cad", action="store_true", help="plan and control with the CAD model")
-    parser.add_argument("--controller", choices=offline.CONTROLLERS, default="inverse_dynamics",
+    parser.add_argument("--controller", choices=CONTROLLERS, default="inverse_dynamics",
                         help="the simulated robot's: joint PD with an inverse-dynamics feed-forward, or whole-body "
                         "torque control (wbc)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)

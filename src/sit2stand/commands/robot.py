@@ -13,7 +13,7 @@ from pathlib import Path
 from .graph import ros_params
 
 CONTROLLER_CHOICES = ("inverse_dynamics", "wbc")
-"""``retarget.offline.CONTROLLERS``, spelled here because the CLI builds its parsers without importing the robot
+"""``robot.plant.CONTROLLERS``, spelled here because the CLI builds its parsers without importing the robot
 stack (a test keeps the two equal)."""
 
 

@@ -1,4 +1,11 @@
-"""Robot driver node: TALOS simulated in MuJoCo under joint PD + feed-forward, behaving like the real robot.
+"""Robot driver node: TALOS simulated in MuJoCo under its on-board controller, behaving like the real robot.
+
+The on-board controller (parameter ``controller``): ``inverse_dynamics``, joint PD with a feed-forward (inverse
+dynamics along a trajectory's accelerations, else the ``feedforward`` parameter's), or ``wbc``, whole-body torque
+control (:mod:`sit2stand.robot.torque_control`: a QP at 500 Hz on the measured state, tracking each command's joint
+positions, velocities and accelerations with the soles in contact; its QP time per control step is reported, p50/p99,
+on the status and on exit). Either knows only the identified (or CAD) parameters, never the plant's hidden effects.
+Before the first command the robot sits under joint PD.
 
 Subscribes:
 * ``/robot/joint_command`` (trajectory_msgs/JointTrajectory, what the retargeter sends): the first point's
@@ -27,7 +34,8 @@ local, once: ``/tf_static`` (fixed joints, the soles, ``lab`` -> ``world``) and 
 (std_msgs/String: TALOS's URDF).
 
 Parameters: ``plant`` (YAML, or a packaged plant's name; default ``default``), ``controller_params`` (identified
-parameters YAML from ``sit2stand identify``; empty: CAD), ``feedforward`` (gravity | inverse_dynamics | none),
+parameters YAML from ``sit2stand identify``; empty: CAD), ``controller`` (inverse_dynamics | wbc, above),
+``feedforward`` (joint PD's, for commands without accelerations: gravity | inverse_dynamics | none),
 ``real_time_factor`` (1.0; 0 = as fast as it can), ``state_rate_hz``, ``publish_clock``, ``on_fall`` (limp | hold),
 ``settle_s`` (2: simulated seconds to come to rest on the chair before anything is published), ``tf_rate_hz`` (50;
 at most the state rate, 0: no ``/tf``), ``robot_description_meshes`` (``package``: the URDF's ``package://`` mesh
@@ -65,7 +73,7 @@ from ..data import plant_path
 from ..robot.description import DescriptionError, FrameTree, robot_description
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
-from ..robot.plant import Plant
+from ..robot.plant import CONTROLLERS, Plant
 from .runtime import LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, NodeError, declare, node_main, steady_timer
 
 DEFAULT_PLANT = plant_path("default")
@@ -85,13 +93,19 @@ class Driver(Node):
         super().__init__("driver")
         plant_file = declare(self, "plant", "", "plant YAML or packaged plant name") or str(DEFAULT_PLANT)
         params_file = declare(self, "controller_params", "", "identified parameters YAML (empty: CAD)")
-        self.ff_mode = declare(self, "feedforward", "gravity", "gravity | inverse_dynamics | none")
+        self.controller = declare(self, "controller", "inverse_dynamics",
+                                  "on-board controller: inverse_dynamics (joint PD + feed-forward) | wbc (whole-body "
+                                  "torque control)")
+        self.ff_mode = declare(self, "feedforward", "gravity", "joint PD's feed-forward without accelerations: "
+                               "gravity | inverse_dynamics | none")
         self.rtf = declare(self, "real_time_factor", 1.0, "1 = real time, 0 = as fast as possible")
         self.state_period = 1.0 / declare(self, "state_rate_hz", 500.0, "joint state rate [Hz] of simulated time")
         self.publish_clock = declare(self, "publish_clock", False, "publish /clock (simulated time)")
         self.on_fall = declare(self, "on_fall", "limp", "limp | hold")
-        if self.ff_mode not in ("gravity", "inverse_dynamics", "none") or self.on_fall not in ("limp", "hold"):
-            raise NodeError(f"feedforward {self.ff_mode!r} or on_fall {self.on_fall!r} not recognised")
+        if self.ff_mode not in ("gravity", "inverse_dynamics", "none") or self.on_fall not in ("limp", "hold") or \
+                self.controller not in CONTROLLERS:
+            raise NodeError(f"controller {self.controller!r}, feedforward {self.ff_mode!r} or on_fall "
+                            f"{self.on_fall!r} not recognised (controller: {' | '.join(CONTROLLERS)})")
         try:
             cfg = PlantConfig.load(plant_file)
             ctrl = read_link_parameters(params_file) if params_file else None
@@ -186,7 +200,8 @@ class Driver(Node):
             self.get_logger().error(f"/robot/joint_state_command: {len(msg.name)} names but {len(msg.position)} "
                                     "positions")
             return
-        self._schedule(stamp_ns(msg.header), (msg.name, list(msg.position), list(msg.velocity) or None))
+        self._schedule(stamp_ns(msg.header), (msg.name, list(msg.position), list(msg.velocity) or None, None,
+                                              self._torque_control()))
 
     def _on_trajectory(self, msg: JointTrajectory) -> None:
         if not msg.points:
@@ -194,7 +209,12 @@ class Driver(Node):
         p = msg.points[0]
         self._schedule(stamp_ns(msg.header), (msg.joint_names, list(p.positions), list(p.velocities) or None,
                                               list(p.accelerations) or None,
-                                              "inverse_dynamics" if len(p.accelerations) else None))
+                                              self._torque_control() or
+                                              ("inverse_dynamics" if len(p.accelerations) else None)))
+
+    def _torque_control(self) -> str | None:
+        """The plant's control mode for a command under whole-body torque control (None: joint PD)."""
+        return "wbc" if self.controller == "wbc" else None
 
     def _schedule(self, stamp: int, command: tuple) -> None:
         """Apply ``command`` (the arguments of :meth:`_apply`) when the simulation reaches ``stamp`` [ns]."""
@@ -346,15 +366,29 @@ class Driver(Node):
         status.values = [KeyValue(key=k, value=v) for k, v in (
             ("sim_time_s", f"{plant.t_s:.3f}"),
             ("real_time_factor", f"{(plant.t_s - self._sim0) / max(wall, 1e-9):.2f}"),
-            ("pelvis_height_m", f"{plant.data.qpos[2]:.3f}"), ("feedforward", plant.feedforward))]
+            ("pelvis_height_m", f"{plant.data.qpos[2]:.3f}"), ("feedforward", plant.feedforward),
+            ("controller", self.controller), *self._qp_figures().items())]
         self.status_pub.publish(status)
 
     def close(self) -> None:
         wall = time.monotonic() - self._wall0
         print(f"[driver] simulated {self.plant.t_s - self._sim0:.2f} s in {wall:.2f} s "
               f"(real-time factor {(self.plant.t_s - self._sim0) / max(wall, 1e-9):.2f}); "
-              f"{'FALLEN: ' + self.plant.status_text if self.plant.fallen else 'upright'}; {self._tf_cost_text()}",
-              flush=True)
+              f"{'FALLEN: ' + self.plant.status_text if self.plant.fallen else 'upright'}; {self._tf_cost_text()}"
+              f"{self._qp_text()}", flush=True)
+
+    def _qp_figures(self) -> dict[str, str]:
+        """The whole-body controller's QP wall time per control step (its latest ones), when it has run."""
+        wbc = self.plant.wbc
+        if wbc is None or not wbc.qp_times_s:
+            return {}
+        ms = np.array(wbc.qp_times_s) * 1e3
+        return {"qp_steps": str(len(ms)), "qp_p50_ms": f"{np.percentile(ms, 50):.2f}",
+                "qp_p99_ms": f"{np.percentile(ms, 99):.2f}"}
+
+    def _qp_text(self) -> str:
+        f = self._qp_figures()
+        return f"; whole-body QP p50 {f['qp_p50_ms']} ms p99 {f['qp_p99_ms']} ms ({f['qp_steps']} steps)" if f else ""
 
 
 main = node_main(Driver)

@@ -4,7 +4,8 @@ A thin shell around :class:`sit2stand.retarget.pacing.LiveRetargeting` (stamp ma
 retargeting stages it drives (per-frame IK, plan player, COM feedback). Subscribes ``/mocap/markers``,
 ``/human/com`` (from the human COM estimator), ``/force_plate/chair`` (seat-off, if there is a chair plate) and,
 with ``wait_for_robot``, ``/robot/joint_states`` and ``/robot/base_pose`` (the robot's measured seated posture, which
-the calibration overlays the first human frame on; then, with ``com_feedback``, the measured COM). Publishes:
+the calibration overlays the first human frame on; then the measured COM: the COM feedback's, or without it how far
+the robot trails the plan, which slows the plan). Publishes:
 
 * ``/robot/joint_command`` (trajectory_msgs/JointTrajectory, one point: positions, velocities, accelerations;
   stamped now: the driver applies it at once), one per marker period until the (retimed) plan ends;
@@ -21,8 +22,10 @@ Parameters: ``plant``, ``controller_params`` (identified YAML; empty: CAD), ``ma
 adaptive; else fixed), ``max_time_scale`` (the adaptive one's cap), ``rate_hz``, ``com_wait_s``, ``wait_for_robot``,
 ``marker_map`` (YAML to write the calibration to), ``hold_s`` (hold the last pose this long after the plan ends,
 in ROS time, then exit; 0: never),
-``input_timeout_s`` (marker frames waiting this long for a human COM end the node with an error), ``com_feedback`` and
-its gains ``com_feedback_kp``, ``_ki``, ``_kd``, ``markers_every`` (5; 0: no markers), ``marker_set`` (as the
+``input_timeout_s`` (marker frames waiting this long for a human COM end the node with an error), ``controller``
+(the robot's on-board controller, as the driver's: ``inverse_dynamics``, joint PD, or ``wbc``, whole-body torque
+control, which tracks the plan's COM itself: no COM feedback then), ``com_feedback`` and its gains
+``com_feedback_kp``, ``_ki``, ``_kd``, ``markers_every`` (5; 0: no markers), ``marker_set`` (as the
 human_com node's: which markers are the pelvis, the left knee, ankle and heel, and each marker's body part;
 :func:`sit2stand.retarget.calibration.marker_roles`).
 """
@@ -53,6 +56,7 @@ from ..retarget.pacing import LiveConfig, LiveRetargeting, MarkerFrame, summary_
 from ..retarget.player import (DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S,
                                SEAT_OFF_DWELL_S, Command)
 from ..retarget.stabiliser import StabiliserConfig
+from ..robot.plant import CONTROLLERS
 from ..retarget.stream import robot_model, robot_setup
 from .markers import plan_markers
 from .runtime import (PUBLISH_DEPTH, IdleDrain, NodeError, declare, node_main, qos_matching_publishers,
@@ -81,7 +85,10 @@ def _live_config(node: Node) -> LiveConfig:
         fixed_time_scale=scale if scale > 0 else None,
         max_time_scale=declare(node, "max_time_scale", DEFAULT_MAX_TIME_SCALE, "cap of the adaptive time scale"),
         com_wait_s=declare(node, "com_wait_s", 0.03, "use the latest human COM if at most this old [s]"),
-        com_feedback=declare(node, "com_feedback", True, "correct the commands for the measured robot COM"),
+        com_feedback=declare(node, "com_feedback", True, "correct the commands for the measured robot COM (under "
+                             "joint PD)"),
+        controller=declare(node, "controller", "inverse_dynamics", "the robot's on-board controller, as the driver's: "
+                           "inverse_dynamics (joint PD) | wbc (whole-body torque control: no COM feedback)"),
         marker_set=declare(node, "marker_set", "", "marker set: a packaged set's name or a YAML file (empty: the "
                            "packaged set that covers most of the stream's marker names)"),
         stabiliser=StabiliserConfig(
@@ -107,6 +114,9 @@ class RetargeterNode(Node):
         self.input_timeout_s = declare(self, "input_timeout_s", 20.0, "marker frames may wait this long for a COM")
         self.live = LiveRetargeting(_live_config(self), self._publish, self._measured_q,
                                     lambda: self.get_clock().now().nanoseconds * 1e-9)
+        if self.live.cfg.controller not in CONTROLLERS:
+            raise NodeError(f"retargeter: controller {self.live.cfg.controller!r} is not one of "
+                            f"{', '.join(CONTROLLERS)}")
         try:        # the robot model now (~0.6 s idle, more under load), not when the first frames are queued
             self.robot_model = robot_model(self.plant_file, self.params_file or None)
         except (ValueError, OSError) as err:
@@ -149,10 +159,8 @@ class RetargeterNode(Node):
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
                                             reliability=ReliabilityPolicy.RELIABLE), raw=True)
         # kept as bytes (400 Hz, in the real-time thread); read when a command needs them
-        self.robot_subs = [self.create_subscription(JointState, ros_name(ROBOT_JOINT_STATES_TOPIC),
-                                                    self._on_joint_states, 10, raw=True),
-                           self.create_subscription(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC),
-                                                    self._on_base_pose, 10, raw=True)]
+        self.create_subscription(JointState, ros_name(ROBOT_JOINT_STATES_TOPIC), self._on_joint_states, 10, raw=True)
+        self.create_subscription(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC), self._on_base_pose, 10, raw=True)
 
     # -- inputs ------------------------------------------------------------------------------------------------
     def _on_joint_states(self, data: bytes) -> None:
@@ -218,9 +226,6 @@ class RetargeterNode(Node):
         self.support_xy = robot.support_xy
         if self.map_out:
             marker_map.save(self.map_out)
-        if not self.live.cfg.com_feedback:        # 400 callbacks/s no longer needed, in the same thread as frames
-            for sub in self.robot_subs:
-                self.destroy_subscription(sub)
         waited = f"; the first frames waited {time.monotonic() - self._robot_wait:.2f} s for the robot's state " \
                  "(they count in the latency)" if self._robot_wait else ""
         lead = f"; the recording starts after the human's seat-off: a lead-in of {self.live.lead_in_frames} " \

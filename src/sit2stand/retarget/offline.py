@@ -38,14 +38,9 @@ from .dynamic import DynamicsFilter
 from .phases import Phases, find_phases
 from .report import SAT_DOWN_TOLERANCE_M, STOOD_RISE_M
 from .player import DEFAULT_MARGIN_M, DEFAULT_MAX_TIME_SCALE, SEAT_OFF_DWELL_S, PlanPlayer
-from .stabiliser import ComStabiliser, StabiliserConfig
+from .stabiliser import ComStabiliser, StabiliserConfig, com_feedback_applies, com_lag_m
 from .calibration import map_frame
 from .stream import RetargetConfig, Retargeter, retarget_sequence, robot_model, robot_setup
-
-
-CONTROLLERS = ("inverse_dynamics", "wbc")
-"""The simulated robot's on-board controllers a stand-up can run: joint PD with an inverse-dynamics feed-forward,
-or whole-body torque control (:mod:`sit2stand.robot.wbc`)."""
 
 def human_com_series(bag: Path, human_com_bag: Path | None, trial, calibration: StreamCalibration | None = None,
                      marker_set: str | None = None) -> np.ndarray:
@@ -142,7 +137,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
                                      pull=sim is None)
     simulated = {}
     if sim is not None:      # the commands pulled as the robot moves: a robot that trails its plan slows it
-        com_feedback = com_feedback and controller != "wbc"      # the torque controller has its own COM task
+        com_feedback = com_feedback_applies(com_feedback, controller)
         stab = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, stabiliser) if com_feedback else None
         cmds, simulated = _simulate(sim, player, dt, out, stabiliser=stab, controller=controller)
         simulated = {"com_feedback": bool(com_feedback), "controller": controller, **simulated}
@@ -256,7 +251,7 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
             elif c.on_feet:      # no COM feedback (torque control has its own COM task, or it is off): the plan
                 #                  still waits for a robot behind it, from the measured state
                 measured = pin.centerOfMass(plant.ctrl, plant.ctrl_data, plant.pin_configuration(plant.data.qpos))
-                lag = max(0.0, float(c.com[0] - measured[0]))
+                lag = com_lag_m(c.com, measured)
             plant.command(q[7:], c.v[6:], c.a[6:], feedforward=controller)
         else:           # the last command held, as the driver does when the retargeter stops
             held += 1

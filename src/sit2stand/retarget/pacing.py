@@ -27,11 +27,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+import pinocchio as pin
 
 from ..io.messages import reorder_markers
 from .player import (DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S, SEAT_OFF_DWELL_S,
                      Command, PlanPlayer)
-from .stabiliser import ComStabiliser, StabiliserConfig
+from .stabiliser import ComStabiliser, StabiliserConfig, com_feedback_applies, com_lag_m
 from .stream import RetargetConfig, Retargeter, RobotSetup
 
 STAMP_TOLERANCE_S = 1e-6
@@ -183,6 +184,7 @@ class LiveConfig:
     max_time_scale: float = DEFAULT_MAX_TIME_SCALE
     com_wait_s: float = 0.03
     com_feedback: bool = True
+    controller: str = "inverse_dynamics"    # the robot's on-board controller (robot.plant.CONTROLLERS)
     stabiliser: StabiliserConfig = field(default_factory=StabiliserConfig)
     marker_set: str = ""          # a packaged set's name or a YAML file; empty: chosen from the stream's names
 
@@ -212,6 +214,7 @@ class LiveRetargeting:
         self.retargeter: Retargeter | None = None
         self.player: PlanPlayer | None = None
         self.stabiliser: ComStabiliser | None = None
+        self.model = self.model_data = None       # the robot model (the plan's COM parameters), once started
         self.names: list[str] = []
         self.infeasible = self.skipped = self.processed = self.state_stale = self.lead_in_frames = 0
         self.feedback_max_m = 0.0
@@ -239,8 +242,9 @@ class LiveRetargeting:
         vx = float(self.coms.velocity_at(frame.t_s)[0])
         self.lead_in_frames = len(self.retargeter.lead_in(frame.t_s, 1.0 / c.rate_hz, frame.positions_m,
                                                           frame.valid, com_m, vx, on_frame=self._push))
-        if c.com_feedback:
+        if com_feedback_applies(c.com_feedback, c.controller):
             self.stabiliser = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, c.stabiliser)
+        self.model, self.model_data = robot.model, robot.model.createData()
         self.names = frame.names
         return marker_map
 
@@ -306,9 +310,20 @@ class LiveRetargeting:
             offset = fix.offset_m
             self.lag_m = fix.lag_m if q_measured is not None else 0.0
             self.feedback_max_m = max(self.feedback_max_m, float(np.abs(offset).max()))
+        elif cmd.on_feet:       # no COM feedback: the plan still waits for a robot behind it, from its measured state
+            self.lag_m = self._measured_lag_m(cmd.com)
         # held after the plan: the same pose, at rest
         self._last_sent = (dataclasses.replace(cmd, v=np.zeros_like(cmd.v), a=np.zeros_like(cmd.a)), offset)
         return self.send(cmd, offset)
+
+    def _measured_lag_m(self, plan_com: np.ndarray) -> float:
+        """The robot's measured COM behind the plan's of its stamp [m] (0 without a recent state)."""
+        measured = self.measured_q()
+        if measured is None:
+            self.state_stale += 1
+            return 0.0
+        com = pin.centerOfMass(self.model, self.model_data, measured[0])
+        return com_lag_m(self._planned_com_at(measured[1], plan_com), com)
 
     def _planned_com_at(self, t_s: float, default: np.ndarray) -> np.ndarray:
         """The planned COM of the last command sent at or before robot time ``t_s``: what a state measured then
@@ -341,7 +356,9 @@ class LiveRetargeting:
 
     def figures(self) -> dict[str, str]:
         """The run's figures as text, for the node's status and summary line."""
-        feedback = "off" if not self.cfg.com_feedback else (
+        torque_control = " (the robot's whole-body torque controller tracks the COM)" \
+            if self.cfg.controller == "wbc" else ""
+        feedback = f"off{torque_control}" if self.stabiliser is None else (
             f"largest shift {self.feedback_max_m * 100:.1f} cm; {self.state_stale} on-feet commands without a "
             "recent robot state")
         return {"frames": str(self.processed), "infeasible_frames": str(self.infeasible),

@@ -32,6 +32,18 @@ from ..robot.model import UPPER_LIMB_PREFIXES
 from .ik import ComIk
 
 
+def com_feedback_applies(asked: bool, controller: str) -> bool:
+    """Whether the COM feedback corrects the commands: asked for, and the robot under joint PD (``controller``: one of
+    :data:`sit2stand.robot.plant.CONTROLLERS`); whole-body torque control tracks the plan's COM itself."""
+    return asked and controller != "wbc"
+
+
+def com_lag_m(planned_com_m: np.ndarray, measured_com_m: np.ndarray) -> float:
+    """How far the measured COM trails the planned one forward [m] (0 when it is ahead): a sit-to-stand moves the COM
+    forward, and only a robot behind its plan is helped by the plan waiting (``PlanPlayer.pull(lag_m=...)``)."""
+    return max(0.0, float(planned_com_m[0] - measured_com_m[0]))
+
+
 @dataclass
 class StabiliserConfig:
     """COM feedback gains and bounds (SI units)."""
@@ -59,9 +71,8 @@ class Correction:
 
     @property
     def lag_m(self) -> float:
-        """How far the measured COM trails the planned one forward [m] (0 when it is ahead): a sit-to-stand moves
-        the COM forward, and only a robot behind its plan is helped by the plan waiting."""
-        return max(0.0, float(self.error_m[0]))
+        """How far the measured COM trails the planned one forward [m] (:func:`com_lag_m`)."""
+        return com_lag_m(self.error_m, np.zeros(2))
 
 
 class ComStabiliser:

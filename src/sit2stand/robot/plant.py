@@ -32,6 +32,10 @@ from ..vectors import cross
 from .torque_control import WholeBodyController
 from .model import SIDES, PlantConfig, add_chair, add_seat_frame, build_spec, controller_model, expand
 
+CONTROLLERS = ("inverse_dynamics", "wbc")
+"""The simulated robot's on-board controllers (``Plant.command``'s ``feedforward`` for a planned motion): joint PD
+with an inverse-dynamics feed-forward along the plan, or whole-body torque control
+(:mod:`sit2stand.robot.torque_control`)."""
 WBC_RATE_HZ = 500.0          # the whole-body torque controller's rate (tsid's TALOS examples run at 1 kHz)
 EXTRAPOLATE_MAX_S = 0.05      # a reference is followed along its velocity for at most this long after its message
 

@@ -8,15 +8,21 @@ followed along its velocity between commands) into a whole-body reference with t
 soles only: a robot has no force sensor under its pelvis, so while it sits the seat's force is estimated as the weight
 the feet's force sensors do not carry, and enters the dynamics as a known external force (a rigid seat contact in the
 QP would let it assume a seat force the real chair, which cannot pull, does not give). The controller's model has only
-the identified (or CAD) parameters, never the plant's hidden effects. Each QP's wall time is kept (``qp_times_s``).
+the identified (or CAD) parameters, never the plant's hidden effects. The latest QPs' wall times are kept
+(``qp_times_s``).
 """
 
 from __future__ import annotations
+
+from collections import deque
 
 import numpy as np
 import pinocchio as pin
 
 from .wbc import WbcGains, WholeBodyQP, feet_anchored_reference
+
+QP_TIMES_KEPT = 60_000
+"""QP wall times kept (the last 2 min at 500 Hz): a driver runs for hours."""
 
 
 class WholeBodyController:
@@ -27,7 +33,7 @@ class WholeBodyController:
         self.qp = WholeBodyQP(model, seat_frame, gains)
         self.sole = model.getFrameId("sole_left")
         self.oM_sole: pin.SE3 | None = None
-        self.qp_times_s: list[float] = []
+        self.qp_times_s: deque[float] = deque(maxlen=QP_TIMES_KEPT)
         self.last = None
 
     def anchor(self, q: np.ndarray) -> None:
