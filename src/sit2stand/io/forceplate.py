@@ -106,6 +106,9 @@ def center_of_pressure(force_n: np.ndarray, moment_nm: np.ndarray, point_m: np.n
     Returns:
         cop_m (…, 3) with NaN where invalid; valid (…,) bool; free_moment_nm (…,) about the normal, NaN where invalid.
     """
+    if np.ndim(force_n) == 1:
+        return _center_of_pressure_one(np.asarray(force_n, float), np.asarray(moment_nm, float),
+                                       np.asarray(point_m, float), np.asarray(normal, float), threshold_n)
     force = np.atleast_2d(np.asarray(force_n, float))
     moment = np.atleast_2d(np.asarray(moment_nm, float))
     n = np.asarray(normal, float)
@@ -117,9 +120,17 @@ def center_of_pressure(force_n: np.ndarray, moment_nm: np.ndarray, point_m: np.n
     cop = np.asarray(point_m, float) + r
     tau = np.full(len(force), np.nan)
     tau[valid] = np.einsum("ij,j->i", moment[valid] - cross(r[valid], force[valid]), n)
-    if np.ndim(force_n) == 1:
-        return cop[0], valid[0], tau[0]
     return cop, valid, tau
+
+
+def _center_of_pressure_one(force: np.ndarray, moment: np.ndarray, point: np.ndarray, n: np.ndarray,
+                            threshold_n: float) -> tuple[np.ndarray, bool, float]:
+    """:func:`center_of_pressure` of one wrench (the per-frame and per-command case, without the masking)."""
+    fn = float(force @ n)
+    if not (np.isfinite(fn) and fn > threshold_n and np.all(np.isfinite(moment))):
+        return np.full(3, np.nan), False, float("nan")
+    r = cross(n, moment) / fn
+    return point + r, True, float((moment - cross(r, force)) @ n)
 
 
 @dataclass

@@ -15,7 +15,6 @@ import pinocchio as pin
 from scipy.spatial import ConvexHull
 
 from ..dynamics import G, model_cop, plan_derivatives
-from ..io.forceplate import point_in_polygon
 
 
 def plan_dynamics(model: pin.Model, qs: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -59,16 +58,24 @@ def support_polygon(corners_xy: np.ndarray) -> np.ndarray:
 
 
 def support_margin(points_xy: np.ndarray, polygon_xy: np.ndarray) -> np.ndarray:
-    """Signed distance [m] of each point inside the convex polygon (negative: outside)."""
-    pts = np.atleast_2d(points_xy)
+    """Signed distance [m] of each point inside the convex polygon (negative: outside, by the edge it is furthest
+    past; NaN for a NaN point): the smallest of its distances inward from the polygon's edges. Called twice per
+    command by the plan player, so it is kept to a few array operations."""
+    pts = np.atleast_2d(np.asarray(points_xy, float))
+    inward, offsets = edge_normals(polygon_xy)
+    return (pts @ inward.T - offsets).min(axis=1)
+
+
+def edge_normals(polygon_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit inward normals (V, 2) of a convex polygon's edges (vertices in order, either way round) and each edge's
+    offset n . vertex: a point p is inside edge k by n_k . p - offset_k."""
     poly = np.asarray(polygon_xy, float)
-    edges = np.roll(poly, -1, axis=0) - poly
-    normals = np.stack([edges[:, 1], -edges[:, 0]], axis=1) / np.linalg.norm(edges, axis=1)[:, None]
-    sign = np.sign(np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1]))
-    dist = -sign * ((pts[:, None, :] - poly[None, :, :]) * normals[None, :, :]).sum(axis=2)
-    out = dist.min(axis=1)
-    inside = point_in_polygon(pts, poly)
-    return np.where(inside, np.abs(out), -np.abs(out))
+    nxt = np.concatenate([poly[1:], poly[:1]])
+    edges = nxt - poly
+    area2 = float(np.sum(poly[:, 0] * nxt[:, 1] - nxt[:, 0] * poly[:, 1]))
+    inward = np.sign(area2) * np.stack([-edges[:, 1], edges[:, 0]], axis=1)
+    inward /= np.sqrt((inward ** 2).sum(axis=1))[:, None]
+    return inward, (inward * poly).sum(axis=1)
 
 
 def frame_time_scales(com_m: np.ndarray, com_acc: np.ndarray, dl_nm: np.ndarray, mass_kg: float,
