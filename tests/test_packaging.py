@@ -22,7 +22,7 @@ SRC = ROOT / "src"
 COPY_IGNORE = shutil.ignore_patterns("*.egg-info", "__pycache__", "build", "dist")
 # what src/ imports -> the distribution that provides it (PyPI names, as in pyproject.toml's dependencies)
 IMPORT_TO_DIST = {"numpy": "numpy", "scipy": "scipy", "matplotlib": "matplotlib", "yaml": "pyyaml",
-                  "pinocchio": "pin", "proxsuite": "proxsuite", "mujoco": "mujoco", "ezc3d": "ezc3d",
+                  "pinocchio": "pin", "proxsuite": "proxsuite", "daqp": "daqp", "mujoco": "mujoco", "ezc3d": "ezc3d",
                   "rosbags": "rosbags", "mcap": "mcap", "rclpy": "ros-jazzy-rclpy",
                   "zstandard": "mcap", "lz4": "mcap",   # mcap's own dependencies (MCAP chunk compressions)
                   "qtm_rt": "qtm-rt", "natnet": "natnet", "foxglove": "foxglove-sdk"}
@@ -31,8 +31,8 @@ WITH_RCLPY = {"builtin_interfaces", "rcl_interfaces", "rosgraph_msgs"}
 COMMON_INTERFACES = {"std_msgs", "std_srvs", "sensor_msgs", "geometry_msgs", "trajectory_msgs", "diagnostic_msgs",
                      "visualization_msgs"}
 RUNTIME_DISTS = {"ros-jazzy-rclpy", "ros-jazzy-common-interfaces", "ros-jazzy-rmw-fastrtps-cpp", "rosbags", "mcap",
-                 "ezc3d", "pin", "proxsuite", "mujoco", "example-robot-data", "numpy", "scipy", "matplotlib", "pyyaml",
-                 "qtm-rt", "natnet", "foxglove-sdk"}
+                 "ezc3d", "pin", "proxsuite", "daqp", "mujoco", "example-robot-data", "numpy", "scipy", "matplotlib",
+                 "pyyaml", "qtm-rt", "natnet", "foxglove-sdk"}
 
 
 def _dist_name(requirement: str) -> str:

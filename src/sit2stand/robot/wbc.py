@@ -1,7 +1,9 @@
 """Whole-body inverse dynamics as one QP per control step: the robot's torque-controlled on-board controller.
 
 The formulation of task-space inverse dynamics (TSID; Del Prete et al., "Implementing torque control with high-rate,
-low-latency loops", and the `tsid` library's TALOS examples), written on Pinocchio and proxsuite. Unknowns:
+low-latency loops", and the `tsid` library's TALOS examples), written on Pinocchio and DAQP (Arnström et al., "A dual
+active-set solver for embedded quadratic programming using recursive LDL' updates", IEEE TAC 2022): a dual active-set
+solver, as tsid's eiquadprog is, warm-started each step from the last step's multipliers (its active set). Unknowns:
 x = (a, f): the generalised acceleration (nv) and the contact forces, 3D forces at the four corners of each sole
 (shrunk by ``cop_margin_m``, so the feet's centre of pressure stays that far inside them) and at one seat point under
 the pelvis. Constraints:
@@ -27,16 +29,19 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+import daqp
 import numpy as np
 import pinocchio as pin
-import proxsuite
 
+from ..vectors import cross
 from .model import SIDES, sole_corners_local
 
-INF = 1e20           # proxsuite's "no bound"
+INF = np.inf         # no bound
 FORCE_UNIT_N = 100.0
-"""The QP's forces are in this unit: accelerations (~1-10 m/s^2) and forces (~100-1000 N) then weigh alike, and
-proxsuite does not mistake a badly scaled problem for an infeasible one."""
+"""The QP's forces are in this unit: accelerations (~1-10 m/s^2) and forces (~100-1000 N) then weigh alike, a
+well-scaled problem for the solver."""
+DAQP_EQUALITY = 5
+"""DAQP's ``sense`` of an equality row."""
 
 
 @dataclass
@@ -119,24 +124,28 @@ class WholeBodyQP:
         self.mass = float(pin.computeTotalMass(model))
         n_pts = 4 * len(self.soles) + 1
         self.C_fric = friction_rows(n_pts, self.g.friction)
-        self.qp = proxsuite.proxqp.dense.QP(self.n, 6 + 6 * len(self.soles) + 3, self.nj + 4 * n_pts, True)
-        # 1e-5 in the QP's units (forces in FORCE_UNIT_N: 1 mN). Measured on the elderly stand-up (identified, 2
-        # cores, quiet): p50 / p99 per step 1.19 / 4.5 ms at 1e-6, 0.97 / 3.9 ms at 1e-5; warm-starting each step
-        # from the last solution (proxsuite's WARM_START_WITH_PREVIOUS_RESULT) gave 0.96 / 4.5 ms with 74 cold
-        # re-solves instead of 15, so each step starts from the equality-constrained guess
-        self.qp.settings.eps_abs = 1e-5
-        self.qp.settings.verbose = False
-        self._initialised = False
+        n_eq = 6 + 6 * len(self.soles) + 3
+        self._sense = np.zeros(self.n + n_eq + self.nj + 4 * n_pts, np.int32)   # bounds, equalities, inequalities
+        self._sense[self.n:self.n + n_eq] = DAQP_EQUALITY
+        self._multipliers: np.ndarray | None = None     # the last solve's: its active set starts the next
+        self.cold_solves = 0
         self.weights = np.full(self.nv, self.g.posture_weight)
         self.weights[:3] = 0.0                 # base translation: the COM task's
         self.weights[3:6] = self.g.base_orientation_weight
+        # the cost's constant part: posture weights and force regularisation (in FORCE_UNIT_N), the seat's normal
+        # force more (the feet carry what they can)
+        fw = np.full(self.n_f, self.g.force_weight)
+        fw[-1] += self.g.seat_force_weight
+        self._H0 = np.diag(np.concatenate([self.weights, fw * FORCE_UNIT_N**2]))
+        self._lower = np.tril_indices(self.nv, -1)
 
     # -- matrices ---------------------------------------------------------------------------------------------
     def _kinematics(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """M (symmetric) and h = C v + g at (q, v); fills data with Jacobians and zero-acceleration drifts."""
         model, data = self.model, self.data
         pin.computeAllTerms(model, data, q, v)
-        M = np.triu(data.M) + np.triu(data.M, 1).T
+        M = data.M.copy()                     # Pinocchio fills the upper triangle
+        M[self._lower] = M.T[self._lower]
         h = data.nle.copy()
         self._jcom = data.Jcom.copy()
         pin.centerOfMass(model, data, q, v, np.zeros(self.nv))     # FK with a = 0: the drifts
@@ -156,10 +165,10 @@ class WholeBodyQP:
             b_c.append(-drift - self.g.foot_kd * vel)
             Jw = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
             oMf = data.oMf[fid]
-            for p in self.corner_local:
-                r = oMf.rotation @ p
-                rows_f.append(Jw[:3] - pin.skew(r) @ Jw[3:])
-                corners.append(oMf.translation + r)
+            r = self.corner_local @ oMf.rotation.T                     # (4, 3) sole point -> corner, world axes
+            # a corner's velocity: v_sole + omega x r = (J_lin - [r]x J_ang) v
+            rows_f.extend(Jw[:3] - cross(r[:, None, :], Jw[3:].T[None]).transpose(0, 2, 1))
+            corners.extend(oMf.translation + r)
         if self.seat is not None:
             Js = pin.getFrameJacobian(model, data, self.seat, pin.LOCAL_WORLD_ALIGNED)[:3]
             rows_f.append(Js)
@@ -174,11 +183,10 @@ class WholeBodyQP:
     def _cost(self, q: np.ndarray, v: np.ndarray, ref: Reference) -> tuple[np.ndarray, np.ndarray]:
         """H, g of the weighted tasks over x = (a, f)."""
         g, nv = self.g, self.nv
-        H = np.zeros((self.n, self.n))
+        H = self._H0.copy()          # posture weights, force regularisation
         c = np.zeros(self.n)
         # posture (base orientation and joints): a = a*
         a_post = ref.a + g.posture_kp * pin.difference(self.model, q, ref.q) + g.posture_kd * (ref.v - v)
-        H[:nv, :nv] += np.diag(self.weights)
         c[:nv] -= self.weights * a_post
         # COM: Jcom a + drift = a_com*
         com, vcom, drift = self.data.com[0], self.data.vcom[0], self.data.acom[0]
@@ -186,24 +194,25 @@ class WholeBodyQP:
         J = self._jcom
         H[:nv, :nv] += g.com_weight * J.T @ J
         c[:nv] -= g.com_weight * J.T @ (a_com - drift)
-        # forces (in FORCE_UNIT_N): all small, the seat's normal force more
-        fw = np.full(self.n_f, g.force_weight)
-        fw[-1] += g.seat_force_weight
-        H[nv:, nv:] += np.diag(fw * FORCE_UNIT_N**2)
         return H, c
 
-    def _solve_qp(self, *problem) -> tuple[np.ndarray, str]:
-        """The problem updated in place (proxsuite keeps its workspace); where that solve ends in a (spurious)
-        infeasibility, set up again from scratch."""
-        if self._initialised:
-            self.qp.update(*problem)
-            self.qp.solve()
-            if "SOLVED" in str(self.qp.results.info.status):
-                return self.qp.results.x.copy(), str(self.qp.results.info.status)
-        self.qp.init(*problem)
-        self._initialised = True
-        self.qp.solve()
-        return self.qp.results.x.copy(), str(self.qp.results.info.status)
+    def _solve_qp(self, H, c, A, b, C, lo, hi, x_lo, x_hi) -> tuple[np.ndarray, bool]:
+        """x minimising 0.5 x'Hx + c'x with A x = b, lo <= C x <= hi, x_lo <= x <= x_hi, and whether it was solved.
+        Warm-started from the last step's multipliers (the active set changes little from one step to the next); a
+        warm start that fails is solved again from an empty active set (counted in ``cold_solves``)."""
+        rows = np.vstack([A, C])
+        upper, lower = np.concatenate([x_hi, b, hi]), np.concatenate([x_lo, b, lo])
+        for start in (self._multipliers, None):
+            if start is None and self._multipliers is not None:
+                self.cold_solves += 1
+            x, _, flag, info = daqp.solve(H, c, rows, upper, lower, self._sense, dual_start=start)
+            if flag == 1:
+                self._multipliers = info["lam"]
+                return x, True
+            if start is None:
+                break
+        self._multipliers = None
+        return x, False
 
     def _joint_stops(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Joints on (or reaching within ``limit_horizon_s``) their lower and upper mechanical stops."""
@@ -238,7 +247,7 @@ class WholeBodyQP:
         Jf_u = Jf * FORCE_UNIT_N
         A[:6, :nv], A[:6, nv:], b[:6] = M[:6], -Jf_u[:, :6].T, -h[:6]
         A[6:, :nv], b[6:] = A_c, b_c
-        if not seat_on:     # the seat's rows say its force is zero (zero rows would make proxsuite see infeasibility)
+        if not seat_on:     # the seat's rows say its force is zero (zero rows are degenerate equalities)
             A[-3:], b[-3:] = 0.0, 0.0
             A[-3:, -3:] = np.eye(3)
         C = np.zeros((nj + len(self.C_fric), self.n))
@@ -254,14 +263,14 @@ class WholeBodyQP:
         x_lo[nv + 2:self.n:3] = 0.0                              # unilateral normal forces
         x_lo[-3:] = (-INF, -INF, 0.0) if seat_on else 0.0           # the seat's force: (x, y, z)
         x_hi[-3:] = (INF, INF, seat_force_max_n / FORCE_UNIT_N) if seat_on else 0.0
-        x, status = self._solve_qp(H, c, A, b, C, lo, hi, x_lo, x_hi)
+        x, solved = self._solve_qp(H, c, A, b, C, lo, hi, x_lo, x_hi)
         a, f = x[:nv], x[nv:] * FORCE_UNIT_N
         tau = np.clip(M[6:] @ a + h[6:] - Jf[:, 6:].T @ f, -self.tau_max, self.tau_max)   # the stops take the rest
         feet = f[:-3].reshape(-1, 3)
         fz = feet[:, 2].sum()
         cop = (feet[:, 2] @ corners) / fz if fz > 1.0 else np.full(3, np.nan)
-        return WbcResult(a, tau, feet, f[-3:].copy(), cop, corners, self.data.com[0].copy(),
-                         "SOLVED" in status and "INACCURATE" not in status, time.perf_counter() - t0)
+        return WbcResult(a, tau, feet, f[-3:].copy(), cop, corners, self.data.com[0].copy(), solved,
+                         time.perf_counter() - t0)
 
 
 def feet_anchored_reference(model: pin.Model, data: pin.Data, q: np.ndarray, v_joints: np.ndarray,
