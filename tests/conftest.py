@@ -54,14 +54,24 @@ def ros_env(monkeypatch) -> dict[str, str]:
     return env
 
 
+def _try_fifo(priority: int) -> None:
+    """SCHED_FIFO for the calling process (and the threads it makes), where permitted."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except PermissionError:
+        pass
+
+
 class NodeProcess:
     """A node (or the sit2stand CLI) in its own process; output goes to a log file in the test's tmp dir."""
 
-    def __init__(self, args: list[str], env: dict[str, str], log: Path) -> None:
+    def __init__(self, args: list[str], env: dict[str, str], log: Path, fifo_priority: int | None = None) -> None:
+        """``fifo_priority``: run it under SCHED_FIFO at that priority where permitted (else as usual)."""
         self.log_path = log
         self._log = open(log, "wb")
         self.proc = subprocess.Popen([sys.executable, "-m", *args], env=env, stdout=self._log,
-                                     stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+                                     stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                     preexec_fn=None if fifo_priority is None else lambda: _try_fifo(fifo_priority))
 
     def wait(self, timeout: float = 60.0) -> int:
         """The exit code; a process still running ``timeout`` later fails the test with its output and Python stacks

@@ -25,9 +25,11 @@ def test_the_robot_stands_up_from_a_live_qtm_stream_of_the_shipped_elderly_demon
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     out, probe_out = tmp_path / "run", tmp_path / "latency.json"
+    # the estimator in real time (below the bridge and the retargeter): with a calibration made beforehand it has no
+    # calibration pause to starve the rest with
     graph = NodeProcess(["sit2stand.cli", "launch", str(GRAPHS / "live.yaml"), f"out:={out}",
                          f"plant:={plant_path('cad')}", f"capture_port:={port}", f"calibration:={calibration}",
-                         "--timeout", "200"], ros_env, tmp_path / "launch.log")
+                         "estimator_policy:=fifo", "--timeout", "200"], ros_env, tmp_path / "launch.log")
     probe = NodeProcess(["latency_probe", str(probe_out), "/mocap/markers", "/robot/retarget/ik"],
                         {**ros_env, "PYTHONPATH": str(HERE)}, tmp_path / "probe.log")
     server = None
@@ -35,8 +37,10 @@ def test_the_robot_stands_up_from_a_live_qtm_stream_of_the_shipped_elderly_demon
         assert graph.wait_for_output("TALOS seated", 120), graph.output[-3000:]
         assert graph.wait_for_output("/human/com publisher found", 60), graph.output[-3000:]
         assert probe.wait_for_output("probe ready", 30), probe.output
+        # the capture system runs on its own PC in a lab; here it shares 2 cores with the graph it feeds, and its
+        # frames sent late would count as the graph's latency: it runs in real time, above the graph, where permitted
         server = NodeProcess(["sit2stand.cli", "serve-c3d", str(ROOT / "bags" / "elderly"), "--port", str(port),
-                              "--host", "127.0.0.1"], ros_env, tmp_path / "serve.log")
+                              "--host", "127.0.0.1"], ros_env, tmp_path / "serve.log", fifo_priority=60)
         assert server.wait(60) == 0, server.output
         assert graph.wait(240) == 0 or "FALLEN" in graph.output, graph.output[-4000:]
     finally:
