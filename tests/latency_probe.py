@@ -1,5 +1,6 @@
-"""A test helper process: records, per message of the given topics, its header stamp and its arrival time
-(CLOCK_REALTIME, the clock serve-c3d prints its capture origin on), then writes them as JSON at SIGINT.
+"""A test helper process: records, per message of the given topics, its header stamp and its arrival time (when DDS
+received it: the sample's ``received_timestamp``, CLOCK_REALTIME, the clock serve-c3d prints its capture origin on;
+not when this process's executor got round to the callback), then writes them as JSON at SIGINT.
 
     python tests/latency_probe.py OUT.json /mocap/markers /robot/retarget/ik
 """
@@ -7,7 +8,6 @@
 import json
 import signal
 import sys
-import time
 
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -24,8 +24,9 @@ def main() -> int:
     seen: dict[str, list[tuple[int, int]]] = {t: [] for t in topics}
 
     def on(topic):
-        def cb(msg):
-            seen[topic].append((msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec, time.time_ns()))
+        def cb(msg, info):
+            seen[topic].append((msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec,
+                                info["received_timestamp"]))
         return cb
 
     for t in topics:

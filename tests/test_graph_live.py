@@ -31,7 +31,7 @@ def test_the_robot_stands_up_from_a_live_qtm_stream_of_the_shipped_elderly_demon
                          f"plant:={plant_path('cad')}", f"capture_port:={port}", f"calibration:={calibration}",
                          "estimator_policy:=fifo", "--timeout", "200"], ros_env, tmp_path / "launch.log")
     probe = NodeProcess(["latency_probe", str(probe_out), "/mocap/markers", "/robot/retarget/ik"],
-                        {**ros_env, "PYTHONPATH": str(HERE)}, tmp_path / "probe.log")
+                        {**ros_env, "PYTHONPATH": str(HERE)}, tmp_path / "probe.log", fifo_priority=59)
     server = None
     try:
         assert graph.wait_for_output("TALOS seated", 120), graph.output[-3000:]

@@ -129,6 +129,12 @@ class HumanComNode(Node):
         self.finished = False
         self.exit_code = 0
         self.drain = IdleDrain(lambda: len(self.costs))   # after a signal, finish the frames already received
+        self.names: list[str] = []
+        self._stream_checked = False
+        if self.calibration is not None and self.subject is not None:
+            # the skeleton now, for the calibration's markers (each frame is put in their order), not on the first
+            # frame: ~0.1 s there held up the stream's first 25 frames on 2 cores
+            self._start(list(self.calibration.marker_placements_m))
         steady_timer(self, 0.5, self._discover_plates)
         steady_timer(self, 2.0, self._report)
         self._discover_plates()
@@ -210,6 +216,15 @@ class HumanComNode(Node):
                                f"{len(names)} markers")
         return True
 
+    def _check_stream(self, names: list[str]) -> None:
+        """The first frame's marker names against the estimator's (made before the stream from a calibration)."""
+        self._stream_checked = True
+        missing = [n for n in self.names if n not in names]
+        if missing:
+            self.get_logger().warning(f"{MARKERS_TOPIC} lacks {len(missing)} of the calibration's markers "
+                                      f"({', '.join(missing[:8])}{', ...' if len(missing) > 8 else ''}): treated "
+                                      "as occluded")
+
     def _on_markers(self, msg: MocapFrame) -> None:
         if self.finished:
             return
@@ -222,6 +237,8 @@ class HumanComNode(Node):
         t0 = time.perf_counter()
         if self.estimator is None and not self._start(list(msg.marker_names)):
             return
+        if not self._stream_checked:
+            self._check_stream(list(msg.marker_names))
         pos, valid = reorder_markers(*mocap_arrays(msg), self.names)
         t_s = stamp_ns(msg.header) * 1e-9
         self._flush_plates()
