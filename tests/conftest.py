@@ -54,8 +54,8 @@ def ros_env(monkeypatch) -> dict[str, str]:
     return env
 
 
-def _try_fifo(priority: int) -> None:
-    """SCHED_FIFO for the calling process (and the threads it makes), where permitted."""
+def try_fifo(priority: int) -> None:
+    """SCHED_FIFO for the calling process (and the threads it makes), where permitted (a ``preexec_fn``)."""
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except PermissionError:
@@ -71,7 +71,7 @@ class NodeProcess:
         self._log = open(log, "wb")
         self.proc = subprocess.Popen([sys.executable, "-m", *args], env=env, stdout=self._log,
                                      stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                     preexec_fn=None if fifo_priority is None else lambda: _try_fifo(fifo_priority))
+                                     preexec_fn=None if fifo_priority is None else lambda: try_fifo(fifo_priority))
 
     def wait(self, timeout: float = 60.0) -> int:
         """The exit code; a process still running ``timeout`` later fails the test with its output and Python stacks

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import GRAPHS
+from conftest import GRAPHS, try_fifo
 from live_support import capture_origin_ns, latencies_ms, p50_p99
 from sit2stand.data import plant_path
 from sit2stand.io.bag import BagReader
@@ -63,9 +63,11 @@ def lab():
             subprocess.run(["ip", "netns", "del", ns], capture_output=True)
 
 
-def _start(ns: str, args: list[str], env: dict, log: Path) -> subprocess.Popen:
+def _start(ns: str, args: list[str], env: dict, log: Path, fifo_priority: int | None = None) -> subprocess.Popen:
+    """``fifo_priority``: under SCHED_FIFO at that priority where permitted (see test_graph_live.py)."""
     return subprocess.Popen(["ip", "netns", "exec", ns, sys.executable, "-m", *args], env=env,
-                            stdout=open(log, "wb"), stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+                            stdout=open(log, "wb"), stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                            preexec_fn=None if fifo_priority is None else lambda: try_fifo(fifo_priority))
 
 
 def _wait_for(log: Path, text: str, timeout_s: float) -> bool:
@@ -91,20 +93,22 @@ def test_the_live_stand_up_runs_with_capture_control_and_robot_on_three_hosts(tm
     procs = {
         "robot": _start(lab["robot"], ["sit2stand.cli", "launch", graph, f"out:={out}", *common, "--host",
                                        "robot", "--timeout", "200"], env, tmp_path / "robot.log"),
-        "control": _start(lab["control"], ["sit2stand.cli", "launch", graph, *common, "--host", "control",
-                                           "--timeout", "200"], env, tmp_path / "control.log"),
+        "control": _start(lab["control"], ["sit2stand.cli", "launch", graph, *common, "estimator_policy:=fifo",
+                                           "--host", "control", "--timeout", "200"], env,
+                          tmp_path / "control.log"),
         "capture": _start(lab["capture"], ["sit2stand.cli", "launch", graph,
                                            f"capture_host:={HOSTS['capture']}", f"capture_port:={PORT}", "--host",
                                            "capture", "--timeout", "200"], env, tmp_path / "capture.log"),
         "probe": _start(lab["robot"], ["latency_probe", str(probe_out), "/mocap/markers", "/robot/retarget/ik"],
-                        env, tmp_path / "probe.log"),
+                        env, tmp_path / "probe.log", fifo_priority=59),
     }
     try:
         assert _wait_for(tmp_path / "robot.log", "TALOS seated", 120), (tmp_path / "robot.log").read_text()
         assert _wait_for(tmp_path / "control.log", "/human/com publisher found", 90), \
             (tmp_path / "control.log").read_text()[-3000:]
         server = _start(lab["capture"], ["sit2stand.cli", "serve-c3d", str(ROOT / "bags" / "elderly"),
-                                         "--host", HOSTS["capture"], "--port", str(PORT)], env, tmp_path / "serve.log")
+                                         "--host", HOSTS["capture"], "--port", str(PORT)], env, tmp_path / "serve.log",
+                        fifo_priority=60)
         assert server.wait(90) == 0, (tmp_path / "serve.log").read_text()
         assert procs["control"].wait(240) == 0, (tmp_path / "control.log").read_text()[-4000:]
     finally:
