@@ -301,11 +301,13 @@ def _torques(plant, demand: np.ndarray) -> dict:
 
 
 def _qp_times(plant) -> dict:
-    """The torque controller's QP time per control step (p50, p99) [ms], when it ran."""
+    """The torque controller's QP time per control step (p50, p99) [ms] and its QPs whose warm start failed (solved
+    again from an empty active set), when it ran."""
     if plant.wbc is None or not plant.wbc.qp_times_s:
         return {}
     ms = np.array(plant.wbc.qp_times_s) * 1e3
-    return {"controller_qp_ms_p50": float(np.percentile(ms, 50)), "controller_qp_ms_p99": float(np.percentile(ms, 99))}
+    return {"controller_qp_ms_p50": float(np.percentile(ms, 50)), "controller_qp_ms_p99": float(np.percentile(ms, 99)),
+            "controller_qp_cold_solves": plant.wbc.qp.cold_solves}
 
 
 def _timing_figure(trial, com_h, frames, cmds, sim: np.ndarray, png: Path, summary: dict) -> None:
