@@ -382,13 +382,10 @@ class Driver(Node):
               f"{self._qp_text()}", flush=True)
 
     def _qp_figures(self) -> dict[str, str]:
-        """The whole-body controller's QP wall time per control step (its latest ones), when it has run."""
-        wbc = self.plant.wbc
-        if wbc is None or not wbc.qp_times_s:
-            return {}
-        ms = np.array(wbc.qp_times_s) * 1e3
-        return {"qp_steps": str(len(ms)), "qp_p50_ms": f"{np.percentile(ms, 50):.2f}",
-                "qp_p99_ms": f"{np.percentile(ms, 99):.2f}"}
+        """The whole-body controller's QP figures (its latest steps) as status text, when it has run."""
+        f = self.plant.wbc.qp_figures() if self.plant.wbc is not None else {}
+        return {"qp_steps": str(f["qp_steps"]), "qp_p50_ms": f"{f['qp_ms_p50']:.2f}",
+                "qp_p99_ms": f"{f['qp_ms_p99']:.2f}"} if f else {}
 
     def _qp_text(self) -> str:
         f = self._qp_figures()

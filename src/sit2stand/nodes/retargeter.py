@@ -56,8 +56,8 @@ from ..retarget.pacing import LiveConfig, LiveRetargeting, MarkerFrame, summary_
 from ..retarget.player import (DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S,
                                SEAT_OFF_DWELL_S, Command)
 from ..retarget.stabiliser import StabiliserConfig
-from ..robot.plant import CONTROLLERS
 from ..retarget.stream import robot_model, robot_setup
+from ..robot.plant import CONTROLLERS
 from .markers import plan_markers
 from .runtime import (PUBLISH_DEPTH, IdleDrain, NodeError, declare, node_main, qos_matching_publishers,
                       scheduling_text, steady_timer)

@@ -251,7 +251,7 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
             elif c.on_feet:      # no COM feedback (torque control has its own COM task, or it is off): the plan
                 #                  still waits for a robot behind it, from the measured state
                 measured = pin.centerOfMass(plant.ctrl, plant.ctrl_data, plant.pin_configuration(plant.data.qpos))
-                lag = com_lag_m(c.com, measured)
+                lag = com_lag_m(c.com - measured)
             plant.command(q[7:], c.v[6:], c.a[6:], feedforward=controller)
         else:           # the last command held, as the driver does when the retargeter stops
             held += 1
@@ -301,13 +301,9 @@ def _torques(plant, demand: np.ndarray) -> dict:
 
 
 def _qp_times(plant) -> dict:
-    """The torque controller's QP time per control step (p50, p99) [ms] and its QPs whose warm start failed (solved
-    again from an empty active set), when it ran."""
-    if plant.wbc is None or not plant.wbc.qp_times_s:
-        return {}
-    ms = np.array(plant.wbc.qp_times_s) * 1e3
-    return {"controller_qp_ms_p50": float(np.percentile(ms, 50)), "controller_qp_ms_p99": float(np.percentile(ms, 99)),
-            "controller_qp_cold_solves": plant.wbc.qp.cold_solves}
+    """The torque controller's QP figures (``WholeBodyController.qp_figures``), prefixed ``controller_``, when it
+    ran."""
+    return {} if plant.wbc is None else {f"controller_{k}": v for k, v in plant.wbc.qp_figures().items()}
 
 
 def _timing_figure(trial, com_h, frames, cmds, sim: np.ndarray, png: Path, summary: dict) -> None:

@@ -323,7 +323,7 @@ class LiveRetargeting:
             self.state_stale += 1
             return 0.0
         com = pin.centerOfMass(self.model, self.model_data, measured[0])
-        return com_lag_m(self._planned_com_at(measured[1], plan_com), com)
+        return com_lag_m(self._planned_com_at(measured[1], plan_com) - com)
 
     def _planned_com_at(self, t_s: float, default: np.ndarray) -> np.ndarray:
         """The planned COM of the last command sent at or before robot time ``t_s``: what a state measured then

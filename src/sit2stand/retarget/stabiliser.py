@@ -38,10 +38,11 @@ def com_feedback_applies(asked: bool, controller: str) -> bool:
     return asked and controller != "wbc"
 
 
-def com_lag_m(planned_com_m: np.ndarray, measured_com_m: np.ndarray) -> float:
-    """How far the measured COM trails the planned one forward [m] (0 when it is ahead): a sit-to-stand moves the COM
-    forward, and only a robot behind its plan is helped by the plan waiting (``PlanPlayer.pull(lag_m=...)``)."""
-    return max(0.0, float(planned_com_m[0] - measured_com_m[0]))
+def com_lag_m(error_m: np.ndarray) -> float:
+    """How far the measured COM trails the planned one forward [m], from ``error_m`` = planned - measured COM (x
+    first); 0 when it is ahead: a sit-to-stand moves the COM forward, and only a robot behind its plan is helped by
+    the plan waiting (``PlanPlayer.pull(lag_m=...)``)."""
+    return max(0.0, float(error_m[0]))
 
 
 @dataclass
@@ -72,7 +73,7 @@ class Correction:
     @property
     def lag_m(self) -> float:
         """How far the measured COM trails the planned one forward [m] (:func:`com_lag_m`)."""
-        return com_lag_m(self.error_m, np.zeros(2))
+        return com_lag_m(self.error_m)
 
 
 class ComStabiliser:
