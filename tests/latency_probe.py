@@ -2,7 +2,7 @@
 received it: the sample's ``received_timestamp``, CLOCK_REALTIME, the clock serve-c3d prints its capture origin on;
 not when this process's executor got round to the callback), then writes them as JSON at SIGINT.
 
-    python tests/latency_probe.py OUT.json /mocap/markers /robot/retarget/ik
+    python tests/latency_probe.py OUT.json /mocap/markers /human/com /robot/retarget/ik
 """
 
 import json
@@ -12,9 +12,9 @@ import sys
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from sit2stand_msgs.msg import MocapFrame
+from sit2stand_msgs.msg import CenterOfMass, MocapFrame
 
-TYPES = {"/mocap/markers": MocapFrame, "/robot/retarget/ik": JointState}
+TYPES = {"/mocap/markers": MocapFrame, "/human/com": CenterOfMass, "/robot/retarget/ik": JointState}
 
 
 def main() -> int:

@@ -30,7 +30,7 @@ def test_the_robot_stands_up_from_a_live_qtm_stream_of_the_shipped_elderly_demon
     graph = NodeProcess(["sit2stand.cli", "launch", str(GRAPHS / "live.yaml"), f"out:={out}",
                          f"plant:={plant_path('cad')}", f"capture_port:={port}", f"calibration:={calibration}",
                          "estimator_policy:=fifo", "--timeout", "200"], ros_env, tmp_path / "launch.log")
-    probe = NodeProcess(["latency_probe", str(probe_out), "/mocap/markers", "/robot/retarget/ik"],
+    probe = NodeProcess(["latency_probe", str(probe_out), "/mocap/markers", "/human/com", "/robot/retarget/ik"],
                         {**ros_env, "PYTHONPATH": str(HERE)}, tmp_path / "probe.log", fifo_priority=59)
     server = None
     try:
@@ -50,9 +50,10 @@ def test_the_robot_stands_up_from_a_live_qtm_stream_of_the_shipped_elderly_demon
                 p.kill()
     log = graph.log_path.read_text(errors="replace")
     origin = capture_origin_ns(server.log_path.read_text())
-    markers, commands = latencies_ms(probe_out, "/mocap/markers", origin, 100.0), \
-        latencies_ms(probe_out, "/robot/retarget/ik", origin, 100.0)
-    print(f"capture -> /mocap/markers {p50_p99(markers)}; capture -> joint command {p50_p99(commands)}")
+    markers, coms, commands = (latencies_ms(probe_out, topic, origin, 100.0)
+                               for topic in ("/mocap/markers", "/human/com", "/robot/retarget/ik"))
+    print(f"capture -> /mocap/markers {p50_p99(markers)}; capture -> /human/com {p50_p99(coms)}; capture -> joint "
+          f"command {p50_p99(commands)}")
     assert "[mocap_bridge] 531 frames, 0 lost, 1 connection(s)" in log, log[-4000:]
     assert "[retargeter] 531 frames" in log, log[-4000:]
     assert len(markers) == 531

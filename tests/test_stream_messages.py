@@ -1,13 +1,16 @@
 """io/stream_messages.py: the bridge's MocapFrame and ForcePlateSample bytes equal rosbags' serialization of the same
-messages, and read back in rclpy."""
+messages, and read back in rclpy; the robot state's JointState and stamped geometry bytes equal rclpy's."""
 
 import numpy as np
 import pytest
+from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
 from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import JointState
 from sit2stand_msgs.msg import ForcePlateSample, MocapFrame
 
 from sit2stand.io.messages import force_plate_sample, mocap_frame
-from sit2stand.io.stream_messages import MocapFrameEncoder, PlateSampleEncoder
+from sit2stand.io.stream_messages import (JointStateEncoder, MocapFrameEncoder, PlateSampleEncoder,
+                                          StampedNumbersEncoder)
 from sit2stand.io.topics import LAB_FRAME, MOCAP_TYPE, PLATE_TYPE
 from sit2stand.io.typestore import typestore
 
@@ -42,3 +45,40 @@ def test_plate_samples_are_rosbags_own_bytes_and_rclpy_reads_them(plate):
     frame = deserialize_message(MocapFrameEncoder(["A", "B"], LAB_FRAME).encode(5, c[:2], ok[:2]), MocapFrame)
     assert list(frame.marker_names) == ["A", "B"] and frame.positions[0].y == c[0, 1]
     assert np.isnan(frame.positions[1].x) and list(frame.valid) == [True, False]
+
+
+def _canonical(data: bytes, msg_type: str) -> bytes:
+    """The bytes rosbags writes for the message ``data`` holds (padding zero, as the encoders write it)."""
+    store = typestore()
+    return bytes(store.serialize_cdr(store.deserialize_cdr(data, msg_type), msg_type))
+
+
+@pytest.mark.parametrize("names", [["leg_left_1_joint", "leg_left_2_joint", "torso_1_joint"], ["a"], []])
+def test_a_joint_state_is_the_message_rclpy_builds(names):
+    rng = np.random.default_rng(3)
+    n = len(names)
+    q, v, tau = rng.normal(size=n), rng.normal(size=n), rng.normal(size=n)
+    data = JointStateEncoder(names, "base_link").encode(1_700_000_123_456_789_012, q, v, tau)
+    want = JointState(name=names, position=list(q), velocity=list(v), effort=list(tau))
+    want.header.frame_id, want.header.stamp.sec, want.header.stamp.nanosec = "base_link", 1_700_000_123, 456_789_012
+    assert deserialize_message(data, JointState) == want
+    assert data == _canonical(data, "sensor_msgs/msg/JointState")
+    only = deserialize_message(JointStateEncoder(names, "pelvis", ("position",)).encode(5, q), JointState)
+    assert list(only.position) == list(q) and len(only.velocity) == 0 and len(only.effort) == 0
+
+
+@pytest.mark.parametrize(("msg_type", "count", "fields"), [
+    (PointStamped, 3, lambda m: [(m.point, "xyz")]),
+    (WrenchStamped, 6, lambda m: [(m.wrench.force, "xyz"), (m.wrench.torque, "xyz")]),
+    (PoseStamped, 7, lambda m: [(m.pose.position, "xyz"), (m.pose.orientation, "xyzw")])])
+def test_stamped_geometry_is_the_message_rclpy_builds(msg_type, count, fields):
+    numbers = np.arange(1, count + 1) * 0.5
+    want = msg_type()
+    want.header.frame_id, want.header.stamp.sec, want.header.stamp.nanosec = "sole_left", 12, 345
+    values = iter(numbers)
+    for part, axes in fields(want):
+        for axis in axes:
+            setattr(part, axis, float(next(values)))
+    data = StampedNumbersEncoder("sole_left", count).encode(12_000_000_345, numbers)
+    assert deserialize_message(data, msg_type) == want
+    assert data == _canonical(data, f"geometry_msgs/msg/{msg_type.__name__}")

@@ -64,6 +64,7 @@ from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 
 from ..io.messages import stamp_ns
+from ..io.stream_messages import JointStateEncoder, StampedNumbersEncoder
 from ..io.tf_message import TfEncoder
 from ..io.topics import (BASE_FRAME, CLOCK_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_DESCRIPTION_TOPIC,
                          ROBOT_JOINT_COMMAND_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_JOINT_STATE_COMMAND_TOPIC,
@@ -122,6 +123,12 @@ class Driver(Node):
         self.ft_pubs = {s: self.create_publisher(WrenchStamped, ros_name(ft_topic(s)), PUBLISH_DEPTH) for s in SIDES}
         self.cop_pub = self.create_publisher(PointStamped, ros_name(ROBOT_COP_TOPIC), PUBLISH_DEPTH)
         self.base_pub = self.create_publisher(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC), PUBLISH_DEPTH)
+        self.state_encoders = {
+            "joints": JointStateEncoder(self.names, BASE_FRAME),
+            **{side: StampedNumbersEncoder(sole_world_aligned_frame(side), StampedNumbersEncoder.WRENCH)
+               for side in SIDES},
+            "cop": StampedNumbersEncoder(WORLD_FRAME, StampedNumbersEncoder.POINT),
+            "base": StampedNumbersEncoder(WORLD_FRAME, StampedNumbersEncoder.POSE)}
         self.status_pub = self.create_publisher(DiagnosticStatus, ros_name(ROBOT_STATUS_TOPIC), PUBLISH_DEPTH)
         self.clock_pub = self.create_publisher(Clock, ros_name(CLOCK_TOPIC), fast) if self.publish_clock else None
         self._setup_frames(cfg.robot)
@@ -284,9 +291,6 @@ class Driver(Node):
                 else:
                     plant.command(plant.data.qpos[plant.qadr].copy())
 
-    def _stamp(self, msg_header) -> None:
-        msg_header.stamp = self._sample_stamp       # one stamp for every message of a state sample
-
     def _sim_ros_ns(self) -> int | None:
         """The ROS time [ns] of the simulated state now: the /clock time it simulates, the published simulated
         time, or in wall-clock mode the time it stands for; None when running as fast as it can."""
@@ -299,44 +303,29 @@ class Driver(Node):
             return None
         return self._ros0_ns + int(round(elapsed_s / self.rtf * 1e9))
 
-    def _now_stamp(self):
+    def _now_ns(self) -> int:
         ns = self._sim_ros_ns()
-        if ns is None:
-            return self.get_clock().now().to_msg()
-        sec, nsec = divmod(ns, 1_000_000_000)
+        return self.get_clock().now().nanoseconds if ns is None else ns
+
+    def _now_stamp(self):
+        sec, nsec = divmod(self._now_ns(), 1_000_000_000)
         return BuiltinTime(sec=sec, nanosec=nsec)
 
     def _publish_state(self) -> None:
+        """One state sample, every message with its stamp; laid out as bytes (:mod:`sit2stand.io.stream_messages`)."""
         s = self.plant.sensors()
-        self._sample_stamp = self._now_stamp()
+        self._sample_ns = t_ns = self._now_ns()
         if self.clock_pub is not None:
             c = Clock()
             c.clock.sec, c.clock.nanosec = divmod(int(round((SIM_EPOCH_S + self.plant.t_s) * 1e9)), 1_000_000_000)
             self.clock_pub.publish(c)
-        js = JointState(name=self.names, position=s.q.tolist(), velocity=s.qd.tolist(), effort=s.tau.tolist())
-        self._stamp(js.header)
-        js.header.frame_id = BASE_FRAME
-        self.js_pub.publish(js)
+        enc = self.state_encoders
+        self.js_pub.publish(enc["joints"].encode(t_ns, s.q, s.qd, s.tau))
         for side in SIDES:
-            w = WrenchStamped()
-            self._stamp(w.header)
-            w.header.frame_id = sole_world_aligned_frame(side)
-            f, t = s.wrench_world[side][:3], s.wrench_world[side][3:]
-            w.wrench.force.x, w.wrench.force.y, w.wrench.force.z = map(float, f)
-            w.wrench.torque.x, w.wrench.torque.y, w.wrench.torque.z = map(float, t)
-            self.ft_pubs[side].publish(w)
-        p = PointStamped()
-        self._stamp(p.header)
-        p.header.frame_id = WORLD_FRAME
-        p.point.x, p.point.y, p.point.z = (float(v) for v in s.cop_m) if s.cop_valid else (float("nan"),) * 3
-        self.cop_pub.publish(p)
-        b = PoseStamped()
-        self._stamp(b.header)
-        b.header.frame_id = WORLD_FRAME
-        b.pose.position.x, b.pose.position.y, b.pose.position.z = map(float, s.base_pose[:3])
-        (b.pose.orientation.w, b.pose.orientation.x, b.pose.orientation.y,
-         b.pose.orientation.z) = map(float, s.base_pose[3:7])
-        self.base_pub.publish(b)
+            self.ft_pubs[side].publish(enc[side].encode(t_ns, s.wrench_world[side][:6]))
+        self.cop_pub.publish(enc["cop"].encode(t_ns, s.cop_m if s.cop_valid else np.full(3, np.nan)))
+        b = s.base_pose            # x y z, then the quaternion w x y z (MuJoCo's order); the message's is x y z w
+        self.base_pub.publish(enc["base"].encode(t_ns, [b[0], b[1], b[2], b[4], b[5], b[6], b[3]]))
         self._samples += 1
         if self.tf_every and (self._samples - 1) % self.tf_every == 0:     # from the first sample on
             self._publish_tf(s)
@@ -345,9 +334,7 @@ class Driver(Node):
         """world -> base_link and every moving joint of this state sample (raw CDR: see io/tf_message.py)."""
         t0 = time.perf_counter()
         translations, rotations = self.frames.transforms(s.base_pose, s.q)
-        stamp = self._sample_stamp
-        self.tf_pub.publish(self.tf_encoder.encode(stamp.sec * 1_000_000_000 + stamp.nanosec, translations,
-                                                   rotations))
+        self.tf_pub.publish(self.tf_encoder.encode(self._sample_ns, translations, rotations))
         if len(self.tf_cost_s) < 1_000_000:
             self.tf_cost_s.append(time.perf_counter() - t0)
 

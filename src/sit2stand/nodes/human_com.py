@@ -57,6 +57,7 @@ from ..human.marker_ik import MarkerUnitsError, TooFewMarkers
 from ..human.marker_sets import MarkerSetError, choose_marker_set
 from ..human.skeleton import Subject
 from ..io.messages import mocap_arrays, plate_sample_from_cdr, reorder_markers, stamp_ns
+from ..io.stream_messages import JointStateEncoder, StampedNumbersEncoder
 from ..io.tf_message import TfEncoder
 from ..io.topics import (FORCE_PLATE_PREFIX, HUMAN_COM_TOPIC, HUMAN_DESCRIPTION_TOPIC, HUMAN_JOINTS_TOPIC,
                          HUMAN_MARKERS_TOPIC, HUMAN_MEASURED_COP_TOPIC, HUMAN_MODEL_COP_TOPIC, HUMAN_PELVIS_POSE_TOPIC,
@@ -116,6 +117,10 @@ class HumanComNode(Node):
         self.pelvis_pub = self.create_publisher(PoseStamped, ros_name(HUMAN_PELVIS_POSE_TOPIC), history)
         self.model_cop_pub = self.create_publisher(PointStamped, ros_name(HUMAN_MODEL_COP_TOPIC), history)
         self.measured_cop_pub = self.create_publisher(PointStamped, ros_name(HUMAN_MEASURED_COP_TOPIC), history)
+        self._joint_encoder: JointStateEncoder | None = None     # for the skeleton's joint names, once known
+        self._lab_pose = StampedNumbersEncoder(LAB_FRAME, StampedNumbersEncoder.POSE)
+        self._lab_point = StampedNumbersEncoder(LAB_FRAME, StampedNumbersEncoder.POINT)
+        self.point_numbers = np.zeros(3)        # a COP on the floor: z 0
         self.scaling_pub = self.create_publisher(InertialParameters, ros_name(HUMAN_SCALING_TOPIC), LATCHED_QOS)
         self._setup_viz(declare(self, "viz_rate_hz", 50.0, "/tf and /viz/human rate [Hz] of marker time (0: none)"))
         self.stats_pub = self.create_publisher(DiagnosticStatus, "~/stats", 10)
@@ -278,23 +283,20 @@ class HumanComNode(Node):
         self.com_pub.publish(com_msg)
 
     def _publish_rest(self, header, out) -> None:
+        """Joint angles (of the chain below the pelvis), the pelvis pose in lab, both COPs of the delayed frame: laid
+        out as bytes (:mod:`sit2stand.io.stream_messages`), not built as messages, at 100 Hz beside the fit."""
         if out.model_cop_m is not None and out.measured_cop_m is not None:
             self.last_cop_error = float(np.linalg.norm(out.model_cop_m[:2] - out.measured_cop_m[:2]))
-        # every message its own header: a shared one changed for one message changes them all (the COPs once said
-        # 'pelvis' so); joint angles are of the chain below the pelvis, the pelvis pose is in lab
-        self.joint_pub.publish(JointState(header=_header(header.stamp, HUMAN_ROOT_FRAME),
-                                          name=self.estimator.human.joint_names(),
-                                          position=[float(x) for x in out.q[7:]]))
-        pose = PoseStamped(header=_header(header.stamp, LAB_FRAME))
-        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in out.q[:3])
-        o = pose.pose.orientation
-        o.x, o.y, o.z, o.w = (float(v) for v in out.q[3:7])
-        self.pelvis_pub.publish(pose)
+        names = self.estimator.human.joint_names()
+        if self._joint_encoder is None or self._joint_encoder.names != names:
+            self._joint_encoder = JointStateEncoder(names, HUMAN_ROOT_FRAME, ("position",))
+        t_ns = stamp_ns(header)
+        self.joint_pub.publish(self._joint_encoder.encode(t_ns, out.q[7:]))
+        self.pelvis_pub.publish(self._lab_pose.encode(t_ns, out.q[:7]))     # Pinocchio's x y z, qx qy qz qw
         for pub, cop in ((self.model_cop_pub, out.model_cop_m), (self.measured_cop_pub, out.measured_cop_m)):
             if cop is not None and out.delayed_t_s is not None:
-                p = PointStamped(header=_header(_stamp_of(out.delayed_t_s), LAB_FRAME))
-                p.point.x, p.point.y = float(cop[0]), float(cop[1])
-                pub.publish(p)
+                self.point_numbers[:2] = cop[:2]
+                pub.publish(self._lab_point.encode(int(round(out.delayed_t_s * 1e9)), self.point_numbers))
 
     def _publish_viz(self, header, markers_m: np.ndarray, out) -> None:
         """The skeleton's /tf and the human's markers every ``viz_every`` frames (~0.1 ms together)."""
