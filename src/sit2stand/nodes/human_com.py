@@ -28,7 +28,10 @@ under load, that the stream then runs behind), ``calibration_file`` (a calibrati
 trial, ``sit2stand human-calibrate``: no pause), ``rescale_every`` (100),
 ``chair_on_plate`` (true: every frame with the whole weight on plates is used; false: only after seat-off),
 ``plates`` (names of the plates to expect, e.g. [chair, feet]: frames count only when all have data; default:
-the plates that appear), ``viz_rate_hz`` (50; 0: no /tf nor markers).
+the plates that appear), ``viz_rate_hz`` (50; 0: no /tf nor markers), ``shed_behind_s`` (0: off; live, e.g.
+0.03: a frame that reaches the estimator this far behind the ROS clock gets its COM, joint angles and pelvis pose
+only, not the delayed window's COPs and scaling rows nor /tf, so that an estimator held up catches up in a few
+frames instead of running behind for the rest of the stream; the frames so shed are counted).
 The per-frame cost is logged on exit (p50/p99) and on ``~/stats`` (diagnostic_msgs/DiagnosticStatus) every 2 s.
 """
 
@@ -97,6 +100,9 @@ class HumanComNode(Node):
         self.expected_plates = declare(self, "plates", [], "plate names to expect (default: whatever appears)")
         cal_file = declare(self, "calibration_file", "", "skeleton calibration YAML made beforehand (sit2stand "
                            "human-calibrate); empty: calibrate on the first frames")
+        self.shed_behind_s = declare(self, "shed_behind_s", 0.0, "a frame this far behind the clock [s] gets its "
+                                     "COM only: no COPs, scaling rows nor /tf (0: never)")
+        self.shed = 0
         self.calibration = None
         if cal_file:
             try:
@@ -128,6 +134,7 @@ class HumanComNode(Node):
         self._pending_plates: dict[str, list[tuple]] = {}   # samples received since the last marker frame
         self.estimator: StreamingComEstimator | None = None
         self.costs: list[float] = []
+        self.cpu_costs: list[float] = []     # the thread's CPU time per frame: below the wall time, it waited
         self.skipped = 0
         self.last_com: np.ndarray | None = None
         self.last_cop_error = float("nan")
@@ -239,7 +246,7 @@ class HumanComNode(Node):
                 self._fail(f"no {SUBJECT_TOPIC} after {SUBJECT_WAIT_FRAMES} marker frames and no height_m/mass_kg "
                            f"parameters: give them")
             return
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         if self.estimator is None and not self._start(list(msg.marker_names)):
             return
         if not self._stream_checked:
@@ -259,10 +266,16 @@ class HumanComNode(Node):
         if not out.valid:
             self.skipped += 1
         self._publish_com(msg.header, out)        # first: the retargeter waits for it
-        self.estimator.process_delayed(out)        # then the window half a window back (COPs, scaling rows)
+        behind_s = self.get_clock().now().nanoseconds * 1e-9 - t_s
+        if 0 < self.shed_behind_s < behind_s:
+            self.shed += 1                          # catching up: the COM only, as the stream needs it
+        else:
+            self.estimator.process_delayed(out)    # then the window half a window back (COPs, scaling rows)
         self._publish_rest(msg.header, out)
-        self._publish_viz(msg.header, pos, out)
+        if not 0 < self.shed_behind_s < behind_s:
+            self._publish_viz(msg.header, pos, out)
         self.costs.append(time.perf_counter() - t0)
+        self.cpu_costs.append(time.thread_time() - c0)
         if self.estimator.rescale_pending:     # after the frame is out: the re-solve does not delay its COM
             self.estimator.rescale_pending = False
             if self.estimator.rescale() is not None:
@@ -329,9 +342,10 @@ class HumanComNode(Node):
     def _stats(self) -> dict[str, str]:
         c = np.array(self.costs[-2000:]) * 1e3
         gaps = self.estimator.plate_gaps if self.estimator else {}
-        return {"frames": str(len(self.costs)), "skipped_frames": str(self.skipped),
+        return {"frames": str(len(self.costs)), "skipped_frames": str(self.skipped), "shed_frames": str(self.shed),
                 "cost_p50_ms": f"{np.percentile(c, 50):.3f}" if len(c) else "nan",
                 "cost_p99_ms": f"{np.percentile(c, 99):.3f}" if len(c) else "nan",
+                "cpu_p50_ms": f"{np.median(self.cpu_costs[-2000:]) * 1e3:.3f}" if len(c) else "nan",
                 "plate_dropouts": ", ".join(f"{k}: {v} frames" for k, v in gaps.items()) or "none"}
 
     def _report(self) -> None:
@@ -350,8 +364,10 @@ class HumanComNode(Node):
             header.stamp = self.get_clock().now().to_msg()
             self._publish_scaling(header)
         stats = self._stats()
-        print(f"[human_com] {stats['frames']} frames, {stats['skipped_frames']} skipped (too few markers), per-frame "
-              f"cost p50 {stats['cost_p50_ms']} ms p99 {stats['cost_p99_ms']} ms; plate dropouts: "
+        print(f"[human_com] {stats['frames']} frames, {stats['skipped_frames']} skipped (too few markers), "
+              f"{stats['shed_frames']} with the COM only (behind the clock), per-frame "
+              f"cost p50 {stats['cost_p50_ms']} ms p99 {stats['cost_p99_ms']} ms (CPU p50 {stats['cpu_p50_ms']} ms); "
+              f"plate dropouts: "
               f"{stats['plate_dropouts']}", flush=True)
 
 
