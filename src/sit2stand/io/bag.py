@@ -35,6 +35,7 @@ from rosbags.typesys import get_types_from_msg
 
 from ..errors import Sit2StandError
 from .mcap_chunks import find_bad_chunks
+from .topics import ESTIMATE_TOPICS
 from .typestore import UnknownMessageType, ensure_type, typestore
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -213,7 +214,9 @@ class BagWriter:
         self._closed = False
 
     def add_topic(self, topic: str, msgtype: str, qos: Iterable[Qos] | None = None) -> None:
-        """Declare ``topic`` with type ``pkg/msg/Type`` (registered from share/ if the store lacks it)."""
+        """Declare ``topic`` with type ``pkg/msg/Type`` (registered from share/ if the store lacks it); ``qos``
+        default: reliable, transient local for the estimator's stream (:data:`~sit2stand.io.topics.ESTIMATE_TOPICS`,
+        as the estimator publishes it), else volatile."""
         if topic in self._connections:
             if self._connections[topic].msgtype != msgtype:
                 raise BagError(f"{self.path}: topic {topic} declared as {self._connections[topic].msgtype}, "
@@ -223,7 +226,7 @@ class BagWriter:
             ensure_type(self.store, msgtype)
         except UnknownMessageType as err:
             raise BagError(f"{self.path}: topic {topic}: {err}") from None
-        qos_list = list(qos) if qos is not None else [reliable_qos()]
+        qos_list = list(qos) if qos is not None else [reliable_qos(transient_local=topic in ESTIMATE_TOPICS)]
         self._connections[topic] = self._writer.add_connection(
             topic, msgtype, typestore=self.store, offered_qos_profiles=qos_list)
         self.counts[topic] = 0

@@ -106,6 +106,11 @@ TOPIC_TYPES: dict[str, str] = {
 }
 LATCHED_TOPICS = frozenset({HUMAN_SCALING_TOPIC, HUMAN_DESCRIPTION_TOPIC, SUBJECT_TOPIC, TF_STATIC_TOPIC,
                             ROBOT_DESCRIPTION_TOPIC, ROBOT_INERTIAL_PARAMETERS_TOPIC})
+ESTIMATE_TOPICS = frozenset({HUMAN_COM_TOPIC, HUMAN_JOINTS_TOPIC, HUMAN_PELVIS_POSE_TOPIC, HUMAN_MODEL_COP_TOPIC,
+                             HUMAN_MEASURED_COP_TOPIC})
+"""The human COM estimator's stream, published transient local with a deep history (and so declared in the bags
+that hold it): a subscriber that matches late, as a recorder still discovering the estimator when its first frames
+come, still gets every estimate."""
 
 def ros_name(topic: str) -> str:
     """The name a node uses for ``topic``: relative (no leading ``/``), so it resolves in the node's namespace."""

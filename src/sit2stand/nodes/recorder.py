@@ -44,7 +44,8 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ..io.topics import CLOCK_TOPIC, GRAPH_TOPIC, LATCHED_TOPICS, RUN_ID_ENV, TOPIC_TYPES, bag_name, ros_name
+from ..io.topics import (CLOCK_TOPIC, ESTIMATE_TOPICS, GRAPH_TOPIC, LATCHED_TOPICS, RUN_ID_ENV, TOPIC_TYPES, bag_name,
+                         ros_name)
 from ..io.bag import BagError, BagWriter
 from .runtime import (IdleDrain, NodeError, declare, message_class, node_main, qos_matching_publishers, qos_to_bag,
                       steady_timer)
@@ -57,7 +58,8 @@ DEFAULT_EXCLUDE = r"^/rosout$|^/parameter_events$"
 
 def known_topic_qos(latched: bool) -> QoSProfile:
     """The subscription QoS of a topic of :data:`TOPIC_TYPES` before its publishers are seen: what every sit2stand
-    publisher offers (reliable; transient local when latched), keep-all as a recorder should."""
+    publisher offers (reliable; transient local when latched or an estimate, :data:`ESTIMATE_TOPICS`: a volatile
+    reader matched late lost the first 0.3 s of /human/com in 2 of 5 replays), keep-all as a recorder should."""
     return QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
@@ -135,7 +137,7 @@ class Recorder(Node):
         """Subscribe now to every wanted topic whose type is known, before its publisher exists."""
         for topic, msgtype in TOPIC_TYPES.items():
             if self._wanted(topic):
-                qos = known_topic_qos(topic in LATCHED_TOPICS)
+                qos = known_topic_qos(topic in LATCHED_TOPICS or topic in ESTIMATE_TOPICS)
                 self._subscribe(topic, ros_name(topic), message_class(msgtype), qos)
                 self.unconfirmed[topic] = (msgtype, qos)
 
