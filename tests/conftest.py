@@ -15,6 +15,7 @@ import pytest
 
 from sit2stand.data import folder
 from sit2stand.io.c3d import read_c3d, write_trial_bag
+from sit2stand.launch import Scheduling
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL = (ROOT / ".." / "shared" / "data" / "real").resolve()
@@ -56,10 +57,7 @@ def ros_env(monkeypatch) -> dict[str, str]:
 
 def try_fifo(priority: int) -> None:
     """SCHED_FIFO for the calling process (and the threads it makes), where permitted (a ``preexec_fn``)."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except PermissionError:
-        pass
+    Scheduling("fifo", priority).try_apply(0)
 
 
 class NodeProcess:

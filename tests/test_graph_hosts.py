@@ -17,6 +17,7 @@ import pytest
 from conftest import GRAPHS, try_fifo
 from live_support import capture_origin_ns, latencies_ms, p50_p99
 from sit2stand.data import plant_path
+from sit2stand.launch import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY
 from sit2stand.io.bag import BagReader
 
 pytestmark = pytest.mark.graph
@@ -100,7 +101,7 @@ def test_the_live_stand_up_runs_with_capture_control_and_robot_on_three_hosts(tm
                                            f"capture_host:={HOSTS['capture']}", f"capture_port:={PORT}", "--host",
                                            "capture", "--timeout", "200"], env, tmp_path / "capture.log"),
         "probe": _start(lab["robot"], ["latency_probe", str(probe_out), "/mocap/markers", "/robot/retarget/ik"],
-                        env, tmp_path / "probe.log", fifo_priority=59),
+                        env, tmp_path / "probe.log", fifo_priority=OBSERVER_PRIORITY),
     }
     try:
         assert _wait_for(tmp_path / "robot.log", "TALOS seated", 120), (tmp_path / "robot.log").read_text()
@@ -108,7 +109,7 @@ def test_the_live_stand_up_runs_with_capture_control_and_robot_on_three_hosts(tm
             (tmp_path / "control.log").read_text()[-3000:]
         server = _start(lab["capture"], ["sit2stand.cli", "serve-c3d", str(ROOT / "bags" / "elderly"),
                                          "--host", HOSTS["capture"], "--port", str(PORT)], env, tmp_path / "serve.log",
-                        fifo_priority=60)
+                        fifo_priority=CAPTURE_STAND_IN_PRIORITY)
         assert server.wait(90) == 0, (tmp_path / "serve.log").read_text()
         assert procs["control"].wait(240) == 0, (tmp_path / "control.log").read_text()[-4000:]
     finally:

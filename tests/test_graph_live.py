@@ -11,6 +11,7 @@ from conftest import GRAPHS, NodeProcess
 from live_support import capture_origin_ns, latencies_ms, p50_p99
 from sit2stand.data import plant_path
 from sit2stand.io.bag import BagReader
+from sit2stand.launch import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY
 
 pytestmark = pytest.mark.graph
 ROOT = Path(__file__).resolve().parents[1]
@@ -31,7 +32,7 @@ def test_the_robot_stands_up_from_a_live_qtm_stream_of_the_shipped_elderly_demon
                          f"plant:={plant_path('cad')}", f"capture_port:={port}", f"calibration:={calibration}",
                          "estimator_policy:=fifo", "--timeout", "200"], ros_env, tmp_path / "launch.log")
     probe = NodeProcess(["latency_probe", str(probe_out), "/mocap/markers", "/human/com", "/robot/retarget/ik"],
-                        {**ros_env, "PYTHONPATH": str(HERE)}, tmp_path / "probe.log", fifo_priority=59)
+                        {**ros_env, "PYTHONPATH": str(HERE)}, tmp_path / "probe.log", fifo_priority=OBSERVER_PRIORITY)
     server = None
     try:
         assert graph.wait_for_output("TALOS seated", 120), graph.output[-3000:]
@@ -40,7 +41,8 @@ def test_the_robot_stands_up_from_a_live_qtm_stream_of_the_shipped_elderly_demon
         # the capture system runs on its own PC in a lab; here it shares 2 cores with the graph it feeds, and its
         # frames sent late would count as the graph's latency: it runs in real time, above the graph, where permitted
         server = NodeProcess(["sit2stand.cli", "serve-c3d", str(ROOT / "bags" / "elderly"), "--port", str(port),
-                              "--host", "127.0.0.1"], ros_env, tmp_path / "serve.log", fifo_priority=60)
+                              "--host", "127.0.0.1"], ros_env, tmp_path / "serve.log",
+                             fifo_priority=CAPTURE_STAND_IN_PRIORITY)
         assert server.wait(60) == 0, server.output
         assert graph.wait(240) == 0 or "FALLEN" in graph.output, graph.output[-4000:]
     finally:

@@ -9,7 +9,9 @@ printed clock origin + frame number / rate, CLOCK_REALTIME). The bridge's reside
 5 s; growth is the slope of a line fitted after the first 30 s.
 
 The stand-in is not a thread of this process: its frame clock spins the last millisecond before each frame holding
-Python's GIL, and the subscriber's callbacks would wait for it.
+Python's GIL, and the subscriber's callbacks would wait for it. Scheduling as in the live test, where permitted: the
+bridge in the live graph's class (SCHED_FIFO 55), the stand-in and this observer in real time above it (a capture PC
+and an observer are not the bridge's to wait for); the figures say which took.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import argparse
 import json
 import os
 import re
+import shutil
 import signal
 import socket
 import subprocess
@@ -32,6 +35,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sit2stand_msgs.msg import MocapFrame
 
 from .capture.recording import load_recording
+from .launch import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY, Scheduling, load_graph
 
 RATE_HZ = 200.0
 
@@ -52,7 +56,8 @@ class _Server:
         speed = RATE_HZ / load_recording(bag).rate_hz
         self.proc = subprocess.Popen([sys.executable, "-m", "sit2stand.cli", "serve-c3d", str(bag), "--protocol",
                                       "qtm", "--host", "127.0.0.1", "--port", str(port), "--rate", f"{speed:g}",
-                                      "--loop"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                                      "--loop"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                     preexec_fn=Scheduling("fifo", CAPTURE_STAND_IN_PRIORITY).try_apply)
         self.lines: list[str] = []
         self.origin_ns, self.frames_sent = 0, 0
         threading.Thread(target=self._read, daemon=True).start()
@@ -71,6 +76,14 @@ class _Server:
         time.sleep(0.2)             # the reader thread takes the last line
 
 
+def _live_graph_scheduling(node: str) -> Scheduling:
+    """The scheduling class the live graph gives ``node`` (its one home: ``graphs/live.yaml``)."""
+    graph = load_graph("live")
+    if graph.tmpdir is not None:
+        shutil.rmtree(graph.tmpdir, ignore_errors=True)       # its inline parameter files: not needed here
+    return next(n for n in graph.nodes if n.name == node).scheduling or Scheduling()
+
+
 def run(duration_s: float, root: Path) -> dict[str, object]:
     """Stream for ``duration_s`` and return the figures."""
     env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "92"),
@@ -78,9 +91,13 @@ def run(duration_s: float, root: Path) -> dict[str, object]:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
+    live_bridge = _live_graph_scheduling("mocap_bridge")
     bridge = subprocess.Popen([sys.executable, "-m", "sit2stand.nodes.mocap_bridge", "--ros-args", "-p",
                                f"port:={port}", "-p", "reconnect_max_s:=0.5"], env=env, stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT, text=True)
+                              stderr=subprocess.STDOUT, text=True, preexec_fn=live_bridge.try_apply)
+    observer = Scheduling("fifo", OBSERVER_PRIORITY)
+    scheduling = {"bridge": str(live_bridge) if live_bridge.holds_for(bridge.pid) else "SCHED_OTHER (not permitted)",
+                  "observer": str(observer) if observer.try_apply(0) else "SCHED_OTHER (not permitted)"}
     os.environ["ROS_DOMAIN_ID"], os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = env["ROS_DOMAIN_ID"], "LOCALHOST"
     rclpy.init()
     node = rclpy.create_node("bench_capture")
@@ -105,7 +122,7 @@ def run(duration_s: float, root: Path) -> dict[str, object]:
     report = bridge.communicate(timeout=30)[0].strip().splitlines()[-1]
     node.destroy_node()
     rclpy.try_shutdown()
-    return _figures(arrivals, rss, server, report, duration_s)
+    return {**_figures(arrivals, rss, server, report, duration_s), "scheduling": scheduling}
 
 
 def _figures(arrivals, rss, server: _Server, report: str, duration_s: float) -> dict[str, object]:

@@ -91,6 +91,12 @@ class LaunchError(Sit2StandError, ValueError):
 
 
 POLICIES = {"other": os.SCHED_OTHER, "fifo": os.SCHED_FIFO, "rr": os.SCHED_RR}
+CAPTURE_STAND_IN_PRIORITY = 60
+"""SCHED_FIFO priority of a capture-system stand-in (``serve-c3d``) on the machine of the live graph it feeds, in tests
+and benchmarks: a capture system runs on a computer of its own, and frames it sent late would count as the graph's
+latency."""
+OBSERVER_PRIORITY = 59
+"""SCHED_FIFO priority of a latency observer (a probe's subscriber) in tests and benchmarks, for the same reason."""
 
 
 @dataclass(frozen=True)
@@ -115,6 +121,14 @@ class Scheduling:
                 os.setpriority(os.PRIO_PROCESS, pid, self.nice)
         else:
             os.sched_setscheduler(pid, POLICIES[self.policy], os.sched_param(self.priority))
+
+    def try_apply(self, pid: int = 0) -> bool:
+        """:meth:`apply` where permitted; whether it was."""
+        try:
+            self.apply(pid)
+        except OSError:
+            return False
+        return True
 
     def holds_for(self, pid: int) -> bool:
         """Whether process ``pid`` runs under this class."""
@@ -328,10 +342,7 @@ def _child_setup(scheduling: Scheduling | None) -> None:
     checks afterwards whether it took)."""
     _set_parent_death_signal()
     if scheduling is not None:
-        try:
-            scheduling.apply(0)
-        except OSError:
-            pass
+        scheduling.try_apply(0)
 
 
 class Launcher:
