@@ -9,9 +9,12 @@ printed clock origin + frame number / rate, CLOCK_REALTIME). The bridge's reside
 5 s; growth is the slope of a line fitted after the first 30 s.
 
 The stand-in is not a thread of this process: its frame clock spins the last millisecond before each frame holding
-Python's GIL, and the subscriber's callbacks would wait for it. Scheduling as in the live test, where permitted: the
-bridge in the live graph's class (SCHED_FIFO 55), the stand-in and this observer in real time above it (a capture PC
-and an observer are not the bridge's to wait for); the figures say which took.
+Python's GIL, and the subscriber's callbacks would wait for it. The bridge runs in the live graph's scheduling class
+(SCHED_FIFO 55, where permitted; the figures say whether it took); the stand-in and this observer are time-shared.
+Two-minute runs on the 2-core host, capture -> ``/mocap/markers`` p99: all three time-shared 9.3 ms, the bridge in
+real time 4.8 ms, all three in real time (the stand-in and the observer above the bridge, as the live test runs
+them at 100 Hz) 18.4 ms: the stand-in's frame clock spinning at real-time priority every 5 ms holds off the
+kernel's time-shared network work.
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sit2stand_msgs.msg import MocapFrame
 
 from .capture.recording import load_recording
-from .launch import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY, Scheduling, load_graph
+from .launch import Scheduling, load_graph
 
 RATE_HZ = 200.0
 
@@ -56,8 +59,7 @@ class _Server:
         speed = RATE_HZ / load_recording(bag).rate_hz
         self.proc = subprocess.Popen([sys.executable, "-m", "sit2stand.cli", "serve-c3d", str(bag), "--protocol",
                                       "qtm", "--host", "127.0.0.1", "--port", str(port), "--rate", f"{speed:g}",
-                                      "--loop"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                     preexec_fn=Scheduling("fifo", CAPTURE_STAND_IN_PRIORITY).try_apply)
+                                      "--loop"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         self.lines: list[str] = []
         self.origin_ns, self.frames_sent = 0, 0
         threading.Thread(target=self._read, daemon=True).start()
@@ -95,9 +97,7 @@ def run(duration_s: float, root: Path) -> dict[str, object]:
     bridge = subprocess.Popen([sys.executable, "-m", "sit2stand.nodes.mocap_bridge", "--ros-args", "-p",
                                f"port:={port}", "-p", "reconnect_max_s:=0.5"], env=env, stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT, text=True, preexec_fn=live_bridge.try_apply)
-    observer = Scheduling("fifo", OBSERVER_PRIORITY)
-    scheduling = {"bridge": str(live_bridge) if live_bridge.holds_for(bridge.pid) else "SCHED_OTHER (not permitted)",
-                  "observer": str(observer) if observer.try_apply(0) else "SCHED_OTHER (not permitted)"}
+    scheduling = {"bridge": str(live_bridge) if live_bridge.holds_for(bridge.pid) else "SCHED_OTHER (not permitted)"}
     os.environ["ROS_DOMAIN_ID"], os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = env["ROS_DOMAIN_ID"], "LOCALHOST"
     rclpy.init()
     node = rclpy.create_node("bench_capture")
