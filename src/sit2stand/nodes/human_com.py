@@ -126,7 +126,7 @@ class HumanComNode(Node):
         self._joint_encoder: JointStateEncoder | None = None     # for the skeleton's joint names, once known
         self._lab_pose = StampedNumbersEncoder(LAB_FRAME, StampedNumbersEncoder.POSE)
         self._lab_point = StampedNumbersEncoder(LAB_FRAME, StampedNumbersEncoder.POINT)
-        self.point_numbers = np.zeros(3)        # a COP on the floor: z 0
+        self._cop_numbers = np.zeros(3)        # a COP on the floor: z 0
         self.scaling_pub = self.create_publisher(InertialParameters, ros_name(HUMAN_SCALING_TOPIC), LATCHED_QOS)
         self._setup_viz(declare(self, "viz_rate_hz", 50.0, "/tf and /viz/human rate [Hz] of marker time (0: none)"))
         self.stats_pub = self.create_publisher(DiagnosticStatus, "~/stats", 10)
@@ -266,13 +266,13 @@ class HumanComNode(Node):
         if not out.valid:
             self.skipped += 1
         self._publish_com(msg.header, out)        # first: the retargeter waits for it
-        behind_s = self.get_clock().now().nanoseconds * 1e-9 - t_s
-        if 0 < self.shed_behind_s < behind_s:
+        shedding = 0 < self.shed_behind_s < self.get_clock().now().nanoseconds * 1e-9 - t_s
+        if shedding:
             self.shed += 1                          # catching up: the COM only, as the stream needs it
         else:
             self.estimator.process_delayed(out)    # then the window half a window back (COPs, scaling rows)
         self._publish_rest(msg.header, out)
-        if not 0 < self.shed_behind_s < behind_s:
+        if not shedding:
             self._publish_viz(msg.header, pos, out)
         self.costs.append(time.perf_counter() - t0)
         self.cpu_costs.append(time.thread_time() - c0)
@@ -308,8 +308,8 @@ class HumanComNode(Node):
         self.pelvis_pub.publish(self._lab_pose.encode(t_ns, out.q[:7]))     # Pinocchio's x y z, qx qy qz qw
         for pub, cop in ((self.model_cop_pub, out.model_cop_m), (self.measured_cop_pub, out.measured_cop_m)):
             if cop is not None and out.delayed_t_s is not None:
-                self.point_numbers[:2] = cop[:2]
-                pub.publish(self._lab_point.encode(int(round(out.delayed_t_s * 1e9)), self.point_numbers))
+                self._cop_numbers[:2] = cop[:2]
+                pub.publish(self._lab_point.encode(int(round(out.delayed_t_s * 1e9)), self._cop_numbers))
 
     def _publish_viz(self, header, markers_m: np.ndarray, out) -> None:
         """The skeleton's /tf and the human's markers every ``viz_every`` frames (~0.1 ms together)."""
