@@ -123,7 +123,7 @@ class HumanComNode(Node):
         self.pelvis_pub = self.create_publisher(PoseStamped, ros_name(HUMAN_PELVIS_POSE_TOPIC), history)
         self.model_cop_pub = self.create_publisher(PointStamped, ros_name(HUMAN_MODEL_COP_TOPIC), history)
         self.measured_cop_pub = self.create_publisher(PointStamped, ros_name(HUMAN_MEASURED_COP_TOPIC), history)
-        self._joint_encoder: JointStateEncoder | None = None     # for the skeleton's joint names, once known
+        self._joint_encoder: JointStateEncoder | None = None     # the skeleton's joints: made with the estimator
         self._lab_pose = StampedNumbersEncoder(LAB_FRAME, StampedNumbersEncoder.POSE)
         self._lab_point = StampedNumbersEncoder(LAB_FRAME, StampedNumbersEncoder.POINT)
         self._cop_numbers = np.zeros(3)        # a COP on the floor: z 0
@@ -224,6 +224,8 @@ class HumanComNode(Node):
         for name in self.expected_plates:
             self.estimator.expect_plate(name)
         self.names = names
+        # the skeleton's joints never change (a calibration rescales lengths only): their names laid out once
+        self._joint_encoder = JointStateEncoder(self.estimator.human.joint_names(), HUMAN_ROOT_FRAME, ("position",))
         self.get_logger().info(f"marker set {markers.name}: {len(markers.covered(names))} of the stream's "
                                f"{len(names)} markers")
         return True
@@ -300,16 +302,13 @@ class HumanComNode(Node):
         out as bytes (:mod:`sit2stand.io.stream_messages`), not built as messages, at 100 Hz beside the fit."""
         if out.model_cop_m is not None and out.measured_cop_m is not None:
             self.last_cop_error = float(np.linalg.norm(out.model_cop_m[:2] - out.measured_cop_m[:2]))
-        names = self.estimator.human.joint_names()
-        if self._joint_encoder is None or self._joint_encoder.names != names:
-            self._joint_encoder = JointStateEncoder(names, HUMAN_ROOT_FRAME, ("position",))
         t_ns = stamp_ns(header)
         self.joint_pub.publish(self._joint_encoder.encode(t_ns, out.q[7:]))
         self.pelvis_pub.publish(self._lab_pose.encode(t_ns, out.q[:7]))     # Pinocchio's x y z, qx qy qz qw
         for pub, cop in ((self.model_cop_pub, out.model_cop_m), (self.measured_cop_pub, out.measured_cop_m)):
             if cop is not None and out.delayed_t_s is not None:
                 self._cop_numbers[:2] = cop[:2]
-                pub.publish(self._lab_point.encode(int(round(out.delayed_t_s * 1e9)), self._cop_numbers))
+                pub.publish(self._lab_point.encode(_ns_of(out.delayed_t_s), self._cop_numbers))
 
     def _publish_viz(self, header, markers_m: np.ndarray, out) -> None:
         """The skeleton's /tf and the human's markers every ``viz_every`` frames (~0.1 ms together)."""
@@ -367,8 +366,7 @@ class HumanComNode(Node):
         print(f"[human_com] {stats['frames']} frames, {stats['skipped_frames']} skipped (too few markers), "
               f"{stats['shed_frames']} with the COM only (behind the clock), per-frame "
               f"cost p50 {stats['cost_p50_ms']} ms p99 {stats['cost_p99_ms']} ms (CPU p50 {stats['cpu_p50_ms']} ms); "
-              f"plate dropouts: "
-              f"{stats['plate_dropouts']}", flush=True)
+              f"plate dropouts: {stats['plate_dropouts']}", flush=True)
 
 
 def _header(stamp, frame_id: str) -> Header:
@@ -376,9 +374,14 @@ def _header(stamp, frame_id: str) -> Header:
     return Header(stamp=Time(sec=stamp.sec, nanosec=stamp.nanosec), frame_id=frame_id)
 
 
+def _ns_of(t_s: float) -> int:
+    """``t_s`` [s] in integer nanoseconds."""
+    return int(round(t_s * 1e9))
+
+
 def _stamp_of(t_s: float):
     """builtin_interfaces/Time of ``t_s`` [s]."""
-    sec, nsec = divmod(int(round(t_s * 1e9)), 1_000_000_000)
+    sec, nsec = divmod(_ns_of(t_s), 1_000_000_000)
     return Time(sec=sec, nanosec=nsec)
 
 
