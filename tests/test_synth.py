@@ -86,3 +86,18 @@ def test_bag_hides_the_extra_mass_except_on_ground_truth_topics(tmp_path):
 def test_bad_configurations_are_named(kwargs, match):
     with pytest.raises(ValueError, match=match):
         SynthConfig(**kwargs)
+
+
+def test_short_thighs_for_the_seat_get_a_chair_plate_cut_short_in_front_of_the_feet():
+    """A body whose seated hips sit close to its feet (a stand-up benchmark body that 20 seeds could not synthesise
+    while the chair plate kept its full size): the chair plate ends behind the feet plate, the chair's COP is not in
+    front of it where the chair carries weight, and the plates still carry the body's rate of momentum."""
+    d = synthesize(SynthConfig(style="natural", height_m=1.589, mass_kg=54.2, sex="female", seat_height_m=0.393,
+                               duration_s=1.1, seed=868768460))
+    chair, feet = d.plates
+    assert chair.corners_m[:, 0].max() < feet.corners_m[:, 0].min()
+    loaded = chair.force_n[:, 2] > 50.0             # the plate's 0.3 N m moment noise moves its COP < 1 cm
+    assert chair.cop_m[loaded, 0].max() < chair.corners_m[:, 0].max()
+    force = sum(p.force_n for p in d.plates)
+    expected = d.human.total_mass * (d.com_acc + np.array([0.0, 0.0, G]))
+    assert np.sqrt(np.mean((force - expected) ** 2)) < 2.0

@@ -138,6 +138,11 @@ def _leg_ik(hip_xz: np.ndarray, ankle_xz: np.ndarray, l_th: float, l_sh: float) 
 
 PELVIS_SEATED_RAD = -0.12
 """Pelvis pitch when sitting [rad] (about +y; negative: the posterior tilt of a seated pelvis)."""
+PLATE_GAP_M = 0.01
+"""Space between the chair plate and the feet plate, and the seat COP's least distance from the chair plate's front
+edge [m]."""
+MIN_SEAT_AHEAD_M = 0.05
+"""The least chair plate in front of the seated hips, at the reference stature [m]: under the thighs."""
 
 
 @dataclass
@@ -404,8 +409,10 @@ def _share_loads(body: _Body, style: dict, tl: _Timeline, q: np.ndarray,
     f_chair = alpha[:, None] * force
     with np.errstate(divide="ignore", invalid="ignore"):
         x_seat = (seat * f_chair[:, 0] - x_feet * (force[:, 2] - f_chair[:, 2]) - moment_o[:, 1]) / f_chair[:, 2]
+        # the chair's COP on its plate lies seat * fx / fz behind the seat point: keep it on a plate cut short
+        cop_front = _plate_rects(body)[0][:, 0].max() - PLATE_GAP_M + seat * f_chair[:, 0] / f_chair[:, 2]
     x_seat = np.clip(np.nan_to_num(x_seat, nan=0.0), hx - 0.12 * H / REFERENCE_STATURE_M,
-                     hx + 0.15 * H / REFERENCE_STATURE_M)
+                     np.fmin(hx + 0.15 * H / REFERENCE_STATURE_M, cop_front))
     seat_point = np.stack([x_seat, np.zeros(n), np.full(n, seat)], axis=1)
     m_chair = np.cross(seat_point, f_chair)
     return (f_chair, m_chair), (force - f_chair, moment_o - m_chair)
@@ -414,11 +421,7 @@ def _share_loads(body: _Body, style: dict, tl: _Timeline, q: np.ndarray,
 def _measure_plates(cfg: SynthConfig, rng: np.random.Generator, body: _Body, t: np.ndarray,
                     loads: tuple[tuple[np.ndarray, np.ndarray], ...]) -> list[PlateSeries]:
     """The chair plate under the seat and the feet plate under the feet, on the floor, with sensor noise [N, N m]."""
-    scale = body.height_m / REFERENCE_STATURE_M
-    chair_plate = _rect(np.array([body.hip_seated_xz[0] - 0.02 * scale, 0.0, 0.0]), 0.22 * scale, 0.25 * scale)
-    feet_plate = _rect(np.array([0.09 * scale, 0.0, 0.0]), 0.18 * scale, 0.25 * scale)
-    if chair_plate[:, 0].max() >= feet_plate[:, 0].min():
-        raise ValueError("chair and feet plates overlap; raise the seat or shorten the thighs")
+    chair_plate, feet_plate = _plate_rects(body)
     plates = []
     for name, corners, (f, m_o) in zip(("chair", "feet"), (chair_plate, feet_plate), loads):
         centre = corners.mean(axis=0)
@@ -481,6 +484,22 @@ def _quintic(t: np.ndarray, T: float, x0: float, v0: float, a0: float, x1: float
     vel = sum(i * c[i] * s ** (i - 1) for i in range(1, 6))
     acc = sum(i * (i - 1) * c[i] * s ** (i - 2) for i in range(2, 6))
     return pos, vel, acc
+
+
+def _plate_rects(body: _Body) -> tuple[np.ndarray, np.ndarray]:
+    """Corners (4, 3) [m] of the chair plate (under the seated hips) and the feet plate (under the feet). Where the
+    thighs are short for the seat the chair plate is cut short in front, ``PLATE_GAP_M`` behind the feet plate, as a
+    lab places two plates; ValueError where that would leave the seated hips less than ``MIN_SEAT_AHEAD_M`` (scaled)
+    of plate ahead of them."""
+    scale = body.height_m / REFERENCE_STATURE_M
+    hip_x = body.hip_seated_xz[0]
+    feet_plate = _rect(np.array([0.09 * scale, 0.0, 0.0]), 0.18 * scale, 0.25 * scale)
+    back, front = hip_x - 0.24 * scale, min(hip_x + 0.20 * scale, feet_plate[:, 0].min() - PLATE_GAP_M)
+    if front < hip_x + MIN_SEAT_AHEAD_M * scale:
+        raise ValueError(f"the chair plate would end {front - hip_x:+.3f} m from the seated hips, in front of them "
+                         "the feet plate; raise the seat or shorten the thighs")
+    chair_plate = _rect(np.array([(back + front) / 2, 0.0, 0.0]), (front - back) / 2, 0.25 * scale)
+    return chair_plate, feet_plate
 
 
 def _rect(centre: np.ndarray, half_x: float, half_y: float) -> np.ndarray:
