@@ -4,13 +4,15 @@ messages, and read back in rclpy; the robot state's JointState and stamped geome
 import numpy as np
 import pytest
 from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
-from sit2stand_msgs.msg import ForcePlateSample, MocapFrame
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, MocapFrame
 
 from sit2stand.io.messages import force_plate_sample, mocap_frame
-from sit2stand.io.stream_messages import (JointStateEncoder, MocapFrameEncoder, PlateSampleEncoder,
-                                          StampedNumbersEncoder)
+from sit2stand.io.stream_messages import (CenterOfMassEncoder, JointStateEncoder, JointStateReader,
+                                          JointTrajectoryEncoder, MocapFrameEncoder, PlateSampleEncoder,
+                                          StampedNumbersEncoder, pose_from_cdr)
 from sit2stand.io.topics import LAB_FRAME, MOCAP_TYPE, PLATE_TYPE
 from sit2stand.io.typestore import typestore
 
@@ -82,3 +84,49 @@ def test_stamped_geometry_is_the_message_rclpy_builds(msg_type, count, fields):
     data = StampedNumbersEncoder("sole_left", count).encode(12_000_000_345, numbers)
     assert deserialize_message(data, msg_type) == want
     assert data == _canonical(data, f"geometry_msgs/msg/{msg_type.__name__}")
+
+
+@pytest.mark.parametrize("names", [["leg_left_1_joint", "leg_left_2_joint", "torso_1_joint"], ["a"], []])
+def test_a_joint_command_is_the_trajectory_rclpy_builds(names):
+    rng = np.random.default_rng(4)
+    q, v, a = (rng.normal(size=len(names)) for _ in range(3))
+    data = JointTrajectoryEncoder(names, "base_link").encode(1_700_000_123_456_789_012, q, v, a)
+    want = JointTrajectory(joint_names=names, points=[JointTrajectoryPoint(
+        positions=list(q), velocities=list(v), accelerations=list(a))])
+    want.header.frame_id, want.header.stamp.sec, want.header.stamp.nanosec = "base_link", 1_700_000_123, 456_789_012
+    assert deserialize_message(data, JointTrajectory) == want
+    assert data == _canonical(data, "trajectory_msgs/msg/JointTrajectory")
+
+
+def test_joint_states_and_poses_are_read_from_their_bytes():
+    """The retargeter's reading of the robot's state: stamp and positions as rclpy's message has them, whichever
+    frame id and joint names (read again when they change)."""
+    reader = JointStateReader()
+    for names, frame in [(["a", "bb", "ccc"], "base_link"), (["a", "bb", "ccc"], "base_link"), (["x"], "w"),
+                         ([], "pelvis"), (["a", "bb", "ccc"], "base_link")]:
+        q = np.arange(len(names)) + 0.25
+        data = JointStateEncoder(names, frame).encode(3_000_000_007, q, -q, 2 * q)
+        t_ns, got = reader.read(data)
+        assert t_ns == 3_000_000_007 and reader.names == names and got.tolist() == q.tolist()
+    ref = serialize_message(JointState(name=["j1", "j2"], position=[0.5, -1.0]))
+    assert reader.read(ref)[1].tolist() == [0.5, -1.0] and reader.names == ["j1", "j2"]
+    for frame in ["", "world", "odom_frame"]:
+        pose = PoseStamped()
+        pose.header.frame_id, pose.header.stamp.sec, pose.header.stamp.nanosec = frame, 7, 8
+        pose.pose.position.x, pose.pose.orientation.z, pose.pose.orientation.w = 1.5, 0.6, 0.8
+        t_ns, numbers = pose_from_cdr(serialize_message(pose))
+        assert t_ns == 7_000_000_008 and numbers.tolist() == [1.5, 0, 0, 0, 0, 0.6, 0.8]
+
+
+@pytest.mark.parametrize(("source", "frame"), [("robot_plan", "world"), ("skeleton_fit", "lab"), ("", "")])
+def test_a_com_estimate_is_the_message_rclpy_builds(source, frame):
+    enc = CenterOfMassEncoder(source, frame)
+    for valid, rms, cop_error, n in [(True, 0.004, 0.012, 39), (False, float("nan"), float("nan"), 0)]:
+        data = enc.encode(1_700_000_123_456_789_012, [1, 2, 3], [4, 5, 6], [7, 8, 9], valid, rms, cop_error, n)
+        got = deserialize_message(data, CenterOfMass)
+        assert (got.header.frame_id, got.header.stamp.sec, got.header.stamp.nanosec) == (frame, 1_700_000_123,
+                                                                                        456_789_012)
+        assert [got.position.x, got.velocity.y, got.acceleration.z] == [1, 5, 9]
+        assert (got.source, got.valid, got.n_markers) == (source, valid, n)
+        assert np.array_equal([got.marker_rms_m, got.cop_error_m], [rms, cop_error], equal_nan=True)
+        assert data == _canonical(data, "sit2stand_msgs/msg/CenterOfMass")

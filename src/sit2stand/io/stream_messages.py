@@ -163,3 +163,118 @@ class StampedNumbersEncoder:
         buf[4:12] = _stamp(t_ns)
         buf[self._numbers:] = np.asarray(numbers, "<f8").reshape(self.count).tobytes()
         return bytes(buf)
+
+
+class JointTrajectoryEncoder:
+    """Serialized trajectory_msgs/JointTrajectory of one point for the joints ``names`` (a joint command): positions,
+    velocities and accelerations, no effort, ``time_from_start`` zero. The retargeter sends one per command (100 Hz,
+    in its real-time thread)."""
+
+    def __init__(self, names: list[str], frame_id: str) -> None:
+        self.names = list(names)
+        n = len(self.names)
+        lay = _header(frame_id)
+        lay.uint32(n)
+        for name in self.names:
+            lay.string(name)
+        lay.uint32(1)                                   # one point
+        self._arrays = []
+        for _ in ("positions", "velocities", "accelerations"):
+            lay.uint32(n)
+            if n:
+                lay.align(8)
+            self._arrays.append(len(lay.buf))
+            lay.buf.extend(b"\x00" * (8 * n))
+        lay.uint32(0)                                   # effort
+        lay.buf.extend(b"\x00" * 8)                     # time_from_start: int32 sec, uint32 nanosec (aligned)
+        self._template = bytes(lay.buf)
+
+    def encode(self, t_ns: int, positions: np.ndarray, velocities: np.ndarray, accelerations: np.ndarray) -> bytes:
+        """The command stamped ``t_ns`` [rad, rad/s, rad/s^2], each (N,)."""
+        n = len(self.names)
+        buf = bytearray(self._template)
+        buf[4:12] = _stamp(t_ns)
+        for at, values in zip(self._arrays, (positions, velocities, accelerations), strict=True):
+            buf[at:at + 8 * n] = np.asarray(values, "<f8").reshape(n).tobytes()
+        return bytes(buf)
+
+
+def stamp_and_frame_end(data: bytes) -> tuple[int, int]:
+    """The header's stamp [ns] of serialized ``data`` and the offset just after its frame_id (where the message's own
+    fields begin, before their alignment)."""
+    sec, nsec, length = struct.unpack_from("<iII", data, 4)
+    return sec * 1_000_000_000 + nsec, 16 + length
+
+
+def pose_from_cdr(data: bytes) -> tuple[int, np.ndarray]:
+    """Stamp [ns] and the 7 numbers (position x y z, orientation x y z w) of a serialized PoseStamped."""
+    t_ns, end = stamp_and_frame_end(data)
+    end += -(end - 4) % 8
+    return t_ns, np.frombuffer(data, "<f8", 7, end).copy()
+
+
+class JointStateReader:
+    """Positions out of serialized sensor_msgs/JointState messages without building them. A message's joint names
+    are read once and compared as bytes afterwards: a publisher's names rarely change."""
+
+    def __init__(self) -> None:
+        self._names_bytes = b""
+        self.names: list[str] = []
+        self._positions_at = 0
+
+    def read(self, data: bytes) -> tuple[int, np.ndarray]:
+        """Stamp [ns] and positions (N,) [rad] in the message's own joint order (``names``)."""
+        t_ns, end = stamp_and_frame_end(data)
+        n_at = end + (-(end - 4) % 4)
+        if data[n_at:self._positions_at] != self._names_bytes or not self._names_bytes:
+            self._layout(data, n_at)
+        n = len(self.names)
+        return t_ns, np.frombuffer(data, "<f8", n, self._positions_at).copy()
+
+    def _layout(self, data: bytes, n_at: int) -> None:
+        (n,) = struct.unpack_from("<I", data, n_at)
+        at, names = n_at + 4, []
+        for _ in range(n):
+            at += -(at - 4) % 4
+            (length,) = struct.unpack_from("<I", data, at)
+            names.append(data[at + 4:at + 3 + length].decode())
+            at += 4 + length
+        at += -(at - 4) % 4
+        (count,) = struct.unpack_from("<I", data, at)
+        if count != n:
+            raise ValueError(f"JointState with {n} names and {count} positions")
+        at += 4
+        if n:
+            at += -(at - 4) % 8
+        self.names, self._positions_at = names, at
+        self._names_bytes = data[n_at:at]
+
+
+class CenterOfMassEncoder:
+    """Serialized sit2stand_msgs/CenterOfMass from one ``source`` in frame ``frame_id`` (the estimator's per marker
+    frame, the retargeter's planned COM per command)."""
+
+    def __init__(self, source: str, frame_id: str) -> None:
+        lay = _header(frame_id)
+        lay.align(8)
+        self._vectors = len(lay.buf)
+        lay.buf.extend(b"\x00" * (8 * 9))               # position, velocity, acceleration
+        lay.string(source)
+        self._valid = len(lay.buf)
+        lay.buf.extend(b"\x00")
+        lay.align(8)
+        self._quality = len(lay.buf)
+        lay.buf.extend(b"\x00" * 20)                    # marker_rms_m, cop_error_m (float64), n_markers (uint32)
+        self._template = bytes(lay.buf)
+
+    def encode(self, t_ns: int, position_m: np.ndarray, velocity_mps: np.ndarray = (0.0, 0.0, 0.0),
+               acceleration_mps2: np.ndarray = (0.0, 0.0, 0.0), valid: bool = True,
+               marker_rms_m: float = float("nan"), cop_error_m: float = float("nan"), n_markers: int = 0) -> bytes:
+        """The estimate stamped ``t_ns`` (see the message's fields)."""
+        buf = bytearray(self._template)
+        buf[4:12] = _stamp(t_ns)
+        buf[self._vectors:self._vectors + 72] = np.concatenate(
+            [np.asarray(v, "<f8").reshape(3) for v in (position_m, velocity_mps, acceleration_mps2)]).tobytes()
+        buf[self._valid] = 1 if valid else 0
+        buf[self._quality:] = struct.pack("<ddI", marker_rms_m, cop_error_m, n_markers)
+        return bytes(buf)

@@ -40,14 +40,15 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, Vector3Stamped
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, MocapFrame
-from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from ..data import plant_path
 from ..io.messages import plate_sample_from_cdr, stamp_ns
+from ..io.stream_messages import (CenterOfMassEncoder, JointStateEncoder, JointStateReader, JointTrajectoryEncoder,
+                                  StampedNumbersEncoder, pose_from_cdr)
 from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_BASE_POSE_TOPIC,
                          ROBOT_COM_FEEDBACK_TOPIC, ROBOT_JOINT_COMMAND_TOPIC, ROBOT_JOINT_STATES_TOPIC,
                          ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC, ROBOT_RETARGET_IK_TOPIC, VIZ_MARKERS_TOPIC,
@@ -65,8 +66,8 @@ from .runtime import (PUBLISH_DEPTH, IdleDrain, NodeError, declare, node_main, q
 ROBOT_STATE_MAX_AGE_S = 0.1
 ROBOT_STATE_MAX_DELAY_S = 1.0
 """A robot state received within ``ROBOT_STATE_MAX_AGE_S`` (the robot is alive) and stamped within this of now is
-used by the COM feedback, compared with the plan of its own stamp; one from a simulation lagging more is not."""
-"""An older robot state is not used by the COM feedback (the last shift is kept instead)."""
+used by the COM feedback, compared with the plan of its own stamp; one from a simulation lagging more is not (the
+last shift is kept instead)."""
 
 
 def _live_config(node: Node) -> LiveConfig:
@@ -137,6 +138,12 @@ class RetargeterNode(Node):
         self.robot_base: bytes | None = None
         self.robot_rx = (0.0, 0.0)
         self._js_order: tuple[list[str], np.ndarray] | None = None
+        self._js_reader = JointStateReader()
+        # the commands' messages laid out once, when the joints are known (the per-command path: 100 Hz, real time)
+        self._encoders: dict[str, object] = {
+            "com": CenterOfMassEncoder("robot_plan", WORLD_FRAME),
+            "zmp": StampedNumbersEncoder(WORLD_FRAME, StampedNumbersEncoder.POINT),
+            "feedback": StampedNumbersEncoder(WORLD_FRAME, 3)}
         self._t_init = time.monotonic()
         self._first_wait: float | None = None     # when a frame first waited (for a COM or the robot's state)
         self._robot_wait: float | None = None
@@ -203,10 +210,8 @@ class RetargeterNode(Node):
             if self.live.retargeter is None and not self._start(frame, com):
                 return
             q = self.live.step(frame, com)
-            js = JointState(name=[f"root_{c}" for c in ("x", "y", "z", "qx", "qy", "qz", "qw")]
-                            + self.joint_names, position=q.tolist())
-            js.header.stamp, js.header.frame_id = frame.header.stamp, WORLD_FRAME
-            self.ik_pub.publish(js)          # after the command: it is for the record, not on the path
+            # after the command: it is for the record, not on the path
+            self.ik_pub.publish(self._encoders["ik"].encode(stamp_ns(frame.header), q))
 
     def _start(self, frame: MarkerFrame, com: np.ndarray) -> bool:
         """Calibrate on the first ready frame, over the robot's measured posture (False: wait for it)."""
@@ -215,8 +220,8 @@ class RetargeterNode(Node):
             if self.robot_js is None or self.robot_base is None:
                 self._robot_wait = self._robot_wait or time.monotonic()
                 return False
-            js = deserialize_message(self.robot_js, JointState)
-            q_start, joint_names = self._robot_q(js), list(js.name)
+            _, positions = self._js_reader.read(self.robot_js)
+            q_start, joint_names = self._robot_q(positions), list(self._js_reader.names)
         try:
             robot = robot_setup(q_start=q_start, start_joint_names=joint_names, prebuilt=self.robot_model)
             marker_map = self.live.start(robot, frame, com)
@@ -224,6 +229,9 @@ class RetargeterNode(Node):
             raise NodeError(f"retargeter calibration: {err}") from None
         self.joint_names = robot.joint_names
         self.support_xy = robot.support_xy
+        self._encoders["command"] = JointTrajectoryEncoder(self.joint_names, "base_link")
+        self._encoders["ik"] = JointStateEncoder([f"root_{c}" for c in ("x", "y", "z", "qx", "qy", "qz", "qw")]
+                                                 + self.joint_names, WORLD_FRAME, ("position",))
         if self.map_out:
             marker_map.save(self.map_out)
         waited = f"; the first frames waited {time.monotonic() - self._robot_wait:.2f} s for the robot's state " \
@@ -234,12 +242,10 @@ class RetargeterNode(Node):
                                f"leg-length scale {self.live.retargeter.scale:.3f}{waited}{lead}")
         return True
 
-    def _robot_q(self, js: JointState) -> np.ndarray:
-        """The measured configuration: base pose (x y z, quaternion x y z w), then the joints in ``js``'s order."""
-        b = deserialize_message(self.robot_base, PoseStamped).pose
-        return np.concatenate([[b.position.x, b.position.y, b.position.z],
-                               [b.orientation.x, b.orientation.y, b.orientation.z, b.orientation.w],
-                               np.asarray(js.position, float)])
+    def _robot_q(self, positions: np.ndarray) -> np.ndarray:
+        """The measured configuration: base pose (x y z, quaternion x y z w), then the joint ``positions`` in the
+        joint state's order."""
+        return np.concatenate([pose_from_cdr(self.robot_base)[1], positions])
 
     def _measured_q(self) -> tuple[np.ndarray, float] | None:
         """The robot's measured configuration in the model's order and its stamp [s]; None if received longer than
@@ -247,15 +253,15 @@ class RetargeterNode(Node):
         if self.robot_js is None or self.robot_base is None or \
                 time.monotonic() - min(self.robot_rx) > ROBOT_STATE_MAX_AGE_S:
             return None
-        js = deserialize_message(self.robot_js, JointState)
-        stamp = stamp_ns(js.header)
+        stamp, positions = self._js_reader.read(self.robot_js)
         if self.get_clock().now().nanoseconds - stamp > ROBOT_STATE_MAX_DELAY_S * 1e9:
             return None          # received now, but a simulation held up sent it long ago
-        if self._js_order is None or self._js_order[0] != list(js.name):
-            if not set(self.joint_names) <= set(js.name):
+        names = self._js_reader.names
+        if self._js_order is None or self._js_order[0] is not names:
+            if not set(self.joint_names) <= set(names):
                 return None
-            self._js_order = (list(js.name), np.array([list(js.name).index(n) for n in self.joint_names]) + 7)
-        q = self._robot_q(js)
+            self._js_order = (names, np.array([names.index(n) for n in self.joint_names]) + 7)
+        q = self._robot_q(positions)
         return np.concatenate([q[:7], q[self._js_order[1]]]), stamp * 1e-9
 
     def _tick(self) -> None:
@@ -280,26 +286,14 @@ class RetargeterNode(Node):
     def _publish(self, cmd: Command, offset_m: np.ndarray | None) -> float:
         """The joint command first (its send time is returned: the latency ends there), then the planned COM and
         ZMP and the feedback's shift."""
-        stamp = self.get_clock().now().to_msg()         # a command is for now: the driver applies it at once
-        msg = JointTrajectory(joint_names=self.joint_names, points=[JointTrajectoryPoint(
-            positions=cmd.q[7:].tolist(), velocities=cmd.v[6:].tolist(), accelerations=cmd.a[6:].tolist())])
-        msg.header.stamp, msg.header.frame_id = stamp, "base_link"
-        self.cmd_pub.publish(msg)
+        now = self.get_clock().now()        # a command is for now: the driver applies it at once
+        t_ns, stamp = now.nanoseconds, now.to_msg()
+        self.cmd_pub.publish(self._encoders["command"].encode(t_ns, cmd.q[7:], cmd.v[6:], cmd.a[6:]))
         sent = time.perf_counter()
-        com = CenterOfMass(source="robot_plan", valid=True, n_markers=0, marker_rms_m=float("nan"),
-                           cop_error_m=float("nan"))
-        com.header.stamp, com.header.frame_id = stamp, WORLD_FRAME
-        com.position.x, com.position.y, com.position.z = map(float, cmd.com)
-        self.com_pub.publish(com)
-        z = PointStamped()
-        z.header.stamp, z.header.frame_id = stamp, WORLD_FRAME
-        z.point.x, z.point.y, z.point.z = map(float, cmd.zmp)
-        self.zmp_pub.publish(z)
+        self.com_pub.publish(self._encoders["com"].encode(t_ns, cmd.com))
+        self.zmp_pub.publish(self._encoders["zmp"].encode(t_ns, cmd.zmp))
         if offset_m is not None:
-            f = Vector3Stamped()
-            f.header.stamp, f.header.frame_id = stamp, WORLD_FRAME
-            f.vector.x, f.vector.y = float(offset_m[0]), float(offset_m[1])
-            self.feedback_pub.publish(f)
+            self.feedback_pub.publish(self._encoders["feedback"].encode(t_ns, [offset_m[0], offset_m[1], 0.0]))
         self._commands += 1
         if self.markers_every > 0 and self.support_xy is not None and (self._commands - 1) % self.markers_every == 0:
             self.viz_pub.publish(plan_markers(stamp, cmd.com, cmd.zmp, self.support_xy))   # ~0.15 ms
