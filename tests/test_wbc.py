@@ -14,6 +14,7 @@ from sit2stand.retarget.feasibility import support_margin, support_polygon
 from sit2stand.retarget.offline import run
 from sit2stand.robot.model import PlantConfig, add_seat_frame, controller_model
 from sit2stand.robot.plant import CONTROLLERS, Plant
+from sit2stand.robot.torque_control import ANCHOR_BLEND_S, STANDING_SETTLE_S, WholeBodyController
 from sit2stand.robot.model import sole_corners_local
 from sit2stand.robot.wbc import Reference, WbcGains, WholeBodyQP, feet_anchored_reference
 
@@ -157,6 +158,33 @@ def test_torque_controller_holds_the_seated_robot(plant):
     assert len(plant.wbc.qp_times_s) == pytest.approx(500, abs=2)
     plant.reset()
     assert plant.model.actuator_gainprm[plant.pd_ids, 0].min() > 0    # back under PD after a reset
+
+
+def test_the_reference_sole_lies_flat_until_the_feet_carry_the_weight_then_moves_to_as_measured(plant):
+    """The torque controller's reference sole: flat on the floor while the seat carries weight; as measured at the
+    start (pitched, where the plan has the soles) after the feet have carried the whole weight for the settling
+    time and the blend; flat again once the seat takes weight back."""
+    ctrl = WholeBodyController(plant.ctrl, plant.seat_frame, period_s=0.01)
+    q = _standing(plant)
+    q[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(0.0, -0.02, 0.0)).coeffs()     # the body (and its soles) pitched
+    ctrl.anchor(q)
+    flat, measured = ctrl.sole_flat, ctrl.sole_measured
+    assert np.allclose(flat.rotation, np.eye(3)) and flat.translation[2] == 0.0
+    assert pin.rpy.matrixToRpy(measured.rotation)[1] == pytest.approx(-0.02, abs=1e-9)
+
+    def run(seconds, seat_load_n):
+        for _ in range(round(seconds / 0.01)):
+            ctrl._move_anchor(seat_load_n)
+    run(2.0, 300.0)
+    assert ctrl.oM_sole.isApprox(flat)
+    run(STANDING_SETTLE_S - 0.02, 0.0)
+    assert ctrl.oM_sole.isApprox(flat)
+    run(0.02 + ANCHOR_BLEND_S / 2, 0.0)
+    assert pin.rpy.matrixToRpy(ctrl.oM_sole.rotation)[1] == pytest.approx(-0.01, abs=1e-3)
+    run(ANCHOR_BLEND_S, 0.0)
+    assert ctrl.oM_sole.isApprox(measured)
+    run(ANCHOR_BLEND_S + 0.01, 300.0)
+    assert ctrl.oM_sole.isApprox(flat)
 
 
 def test_the_robot_stands_up_at_the_humans_timing_under_whole_body_torque_control(tmp_path):

@@ -250,7 +250,8 @@ class Plant:
         """Whole-body torque control (:mod:`sit2stand.robot.torque_control`) at its rate; the servos off."""
         if self._ff_age >= self.wbc_every:
             if self.wbc is None:
-                self.wbc = WholeBodyController(self.ctrl, self.seat_frame)
+                self.wbc = WholeBodyController(self.ctrl, self.seat_frame,
+                                               period_s=self.wbc_every * self.model.opt.timestep)
             s = self.data
             q = self.pin_configuration(s.qpos)
             q[7:] += self.q_offset                     # what the encoders read
