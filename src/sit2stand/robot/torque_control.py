@@ -23,9 +23,9 @@ from .wbc import WbcGains, WholeBodyQP, feet_anchored_reference
 
 QP_TIMES_KEPT = 60_000
 """QP wall times kept (the last 2 min at 500 Hz): a driver runs for hours."""
-STANDING_SETTLE_S = 0.5
+STANDING_SETTLE_S = 0.2
 """The feet carry the whole weight this long [s] before the reference's sole moves from flat to as measured."""
-ANCHOR_BLEND_S = 1.0
+ANCHOR_BLEND_S = 0.5
 """Time over which the reference's sole moves between flat and as measured [s]."""
 
 
