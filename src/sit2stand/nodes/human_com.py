@@ -31,7 +31,9 @@ trial, ``sit2stand human-calibrate``: no pause), ``rescale_every`` (100),
 the plates that appear), ``viz_rate_hz`` (50; 0: no /tf nor markers), ``shed_behind_s`` (0: off; live, e.g.
 0.03: a frame that reaches the estimator this far behind the ROS clock gets its COM, joint angles and pelvis pose
 only, not the delayed window's COPs and scaling rows nor /tf, so that an estimator held up catches up in a few
-frames instead of running behind for the rest of the stream; the frames so shed are counted).
+frames instead of running behind for the rest of the stream; the frames so shed are counted),
+``fifo_after_calibration`` (0: off; e.g. 40: once calibrated, the estimator moves itself to that SCHED_FIFO
+priority where permitted: live, on a computer shared with the robot's loop).
 The per-frame cost is logged on exit (p50/p99) and on ``~/stats`` (diagnostic_msgs/DiagnosticStatus) every 2 s.
 """
 
@@ -67,7 +69,8 @@ from ..io.topics import (FORCE_PLATE_PREFIX, HUMAN_COM_TOPIC, HUMAN_DESCRIPTION_
                          HUMAN_ROOT_FRAME, HUMAN_SCALING_TOPIC, LAB_FRAME, MARKERS_TOPIC, SUBJECT_TOPIC, TF_TOPIC,
                          bag_name, ros_name)
 from .markers import human_markers
-from .runtime import LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, IdleDrain, NodeError, declare, node_main, steady_timer
+from .runtime import (LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, IdleDrain, NodeError, declare, enter_fifo, node_main,
+                      scheduling_text, steady_timer)
 
 SUBJECT_WAIT_FRAMES = 500        # marker frames held for /human/subject (5 s at 100 Hz; a bag latches it first)
 PENDING_PLATE_SAMPLES = 4000      # per plate, between two marker frames (4 s at 1 kHz; the estimator keeps ~2 s)
@@ -98,6 +101,8 @@ class HumanComNode(Node):
         self.rescale_every = declare(self, "rescale_every", 250, "re-solve the masses every N frames with plates")
         self.chair_on_plate = declare(self, "chair_on_plate", True, "the chair stands on a force plate")
         self.expected_plates = declare(self, "plates", [], "plate names to expect (default: whatever appears)")
+        self.fifo_after_calibration = declare(self, "fifo_after_calibration", 0, "once calibrated, run at this "
+                                              "SCHED_FIFO priority (0: stay as started)")
         cal_file = declare(self, "calibration_file", "", "skeleton calibration YAML made beforehand (sit2stand "
                            "human-calibrate); empty: calibrate on the first frames")
         self.shed_behind_s = declare(self, "shed_behind_s", 0.0, "a frame this far behind the clock [s] gets its "
@@ -278,10 +283,22 @@ class HumanComNode(Node):
             self._publish_viz(msg.header, pos, out)
         self.costs.append(time.perf_counter() - t0)
         self.cpu_costs.append(time.thread_time() - c0)
+        if self.fifo_after_calibration and self.estimator.calibrated:
+            self._enter_real_time()
         if self.estimator.rescale_pending:     # after the frame is out: the re-solve does not delay its COM
             self.estimator.rescale_pending = False
             if self.estimator.rescale() is not None:
                 self._publish_scaling(msg.header)
+
+    def _enter_real_time(self) -> None:
+        """Real time once the live calibration (a pause of 1-2 s that at real-time priority would starve the
+        robot's loop on a small computer) is over: the estimator's frames then wait for no time-shared process."""
+        priority, self.fifo_after_calibration = self.fifo_after_calibration, 0
+        refused = enter_fifo(priority)
+        if refused:
+            self.get_logger().warning(f"calibrated; staying at {scheduling_text()}: {refused}")
+        else:
+            self.get_logger().info(f"calibrated; now at {scheduling_text()}")
 
     def _publish_com(self, header, out) -> None:
         com_msg = CenterOfMass(header=_header(header.stamp, LAB_FRAME), source="skeleton_fit", valid=bool(out.valid),
