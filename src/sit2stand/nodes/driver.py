@@ -75,7 +75,8 @@ from ..robot.description import DescriptionError, FrameTree, robot_description
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
 from ..robot.plant import CONTROLLERS, Plant
-from .runtime import LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, NodeError, declare, node_main, steady_timer
+from .runtime import (LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, NodeError, declare, node_main, publish_depth,
+                      steady_timer)
 
 DEFAULT_PLANT = plant_path("default")
 SIM_EPOCH_S = 100.0      # simulated time starts here when the driver is the time source (0 reads as "unset")
@@ -119,10 +120,11 @@ class Driver(Node):
         self.names = self.plant.joint_names
         self.index = {n: i for i, n in enumerate(self.names)}
         fast = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.js_pub = self.create_publisher(JointState, ros_name(ROBOT_JOINT_STATES_TOPIC), PUBLISH_DEPTH)
-        self.ft_pubs = {s: self.create_publisher(WrenchStamped, ros_name(ft_topic(s)), PUBLISH_DEPTH) for s in SIDES}
-        self.cop_pub = self.create_publisher(PointStamped, ros_name(ROBOT_COP_TOPIC), PUBLISH_DEPTH)
-        self.base_pub = self.create_publisher(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC), PUBLISH_DEPTH)
+        depth = publish_depth(1.0 / self.state_period)     # a recorder held up on a loaded machine loses none
+        self.js_pub = self.create_publisher(JointState, ros_name(ROBOT_JOINT_STATES_TOPIC), depth)
+        self.ft_pubs = {s: self.create_publisher(WrenchStamped, ros_name(ft_topic(s)), depth) for s in SIDES}
+        self.cop_pub = self.create_publisher(PointStamped, ros_name(ROBOT_COP_TOPIC), depth)
+        self.base_pub = self.create_publisher(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC), depth)
         self.state_encoders = {
             "joints": JointStateEncoder(self.names, BASE_FRAME),
             **{side: StampedNumbersEncoder(sole_world_aligned_frame(side), StampedNumbersEncoder.WRENCH)
