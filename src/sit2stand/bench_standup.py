@@ -111,7 +111,7 @@ def sample_population(n: int, seed: int = 0, styles: tuple[str, ...] = STYLES) -
 
 def synthesise(case: Case, attempts: int = SYNTH_ATTEMPTS):
     """The case's demonstration and the seed that made it. The synthesiser refuses some random segment proportions
-    (``ValueError``, e.g. chair and feet plates overlapping: with ``vary_subject`` off every stature, seat and style
+    (``ValueError``, e.g. a joint angle out of its range; with ``vary_subject`` off every stature, seat and style
     here synthesises); those are redrawn with the next seeds, the same stature, mass, seat and style."""
     for k in range(attempts):
         try:

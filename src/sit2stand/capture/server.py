@@ -13,7 +13,7 @@ clock measures latency from capture. At the end (without ``loop``) every streami
 packet and the event RT From File Stopped.
 
 Threads, not asyncio: the frame clock sleeps to 1 ms before a frame's time and spins the rest, so frames leave
-within ~0.1 ms of their capture time (an asyncio timer was 1 ms late at p50).
+within ~0.1 ms of their capture time (an asyncio timer was 1 ms late at p50); at real-time priority it only sleeps.
 
 ``sit2stand serve-c3d FILE --protocol natnet --port P [--rate R] [--loop]`` (:class:`NatNetServer`) stands in for
 OptiTrack Motive streaming NatNet 4.1 in unicast (see :mod:`.natnet_protocol`): one UDP socket on the command port
@@ -30,6 +30,7 @@ publish). Positions are metres in Motive's default y-up axes (``--up-axis Y``; `
 
 from __future__ import annotations
 
+import os
 import socket
 import struct
 import threading
@@ -129,12 +130,15 @@ class _FrameClock:
 
     # --- the frame clock -------------------------------------------------------------------------------------
     def _wait_until(self, t_ns: int) -> None:
+        # time-shared, a sleep wakes up to ~1 ms late: sleep to SPIN_S before, spin the rest; in real time it wakes
+        # within tens of microseconds, and a spin at real-time priority would hold the rest of a small machine off
+        spin_s = 0.0 if os.sched_getscheduler(0) in (os.SCHED_FIFO, os.SCHED_RR) else SPIN_S
         while not self.stopped.is_set():
             left = (t_ns - time.time_ns()) * 1e-9
             if left <= 0:
                 return
-            if left > SPIN_S:
-                time.sleep(left - SPIN_S)
+            if left > spin_s:
+                time.sleep(left - spin_s)
 
     def _play(self) -> None:
         self.started.wait()
