@@ -76,7 +76,7 @@ from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
 from ..robot.plant import CONTROLLERS, Plant
 from .runtime import (LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, NodeError, declare, node_main, publish_depth,
-                      steady_timer)
+                      robot_state_qos, steady_timer)
 
 DEFAULT_PLANT = plant_path("default")
 SIM_EPOCH_S = 100.0      # simulated time starts here when the driver is the time source (0 reads as "unset")
@@ -120,11 +120,12 @@ class Driver(Node):
         self.names = self.plant.joint_names
         self.index = {n: i for i, n in enumerate(self.names)}
         fast = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
-        depth = publish_depth(1.0 / self.state_period)     # a recorder held up on a loaded machine loses none
-        self.js_pub = self.create_publisher(JointState, ros_name(ROBOT_JOINT_STATES_TOPIC), depth)
+        rate_hz = 1.0 / self.state_period
+        depth = publish_depth(rate_hz)     # a recorder held up on a loaded machine loses none
+        self.js_pub = self.create_publisher(JointState, ros_name(ROBOT_JOINT_STATES_TOPIC), robot_state_qos(rate_hz))
         self.ft_pubs = {s: self.create_publisher(WrenchStamped, ros_name(ft_topic(s)), depth) for s in SIDES}
         self.cop_pub = self.create_publisher(PointStamped, ros_name(ROBOT_COP_TOPIC), depth)
-        self.base_pub = self.create_publisher(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC), depth)
+        self.base_pub = self.create_publisher(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC), robot_state_qos(rate_hz))
         self.state_encoders = {
             "joints": JointStateEncoder(self.names, BASE_FRAME),
             **{side: StampedNumbersEncoder(sole_world_aligned_frame(side), StampedNumbersEncoder.WRENCH)

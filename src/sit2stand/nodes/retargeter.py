@@ -60,8 +60,8 @@ from ..retarget.stabiliser import StabiliserConfig
 from ..retarget.stream import robot_model, robot_setup
 from ..robot.plant import CONTROLLERS
 from .markers import plan_markers
-from .runtime import (PUBLISH_DEPTH, IdleDrain, NodeError, declare, node_main, qos_matching_publishers,
-                      scheduling_text, steady_timer)
+from .runtime import (PUBLISH_DEPTH, ROBOT_STATE_READER_QOS, IdleDrain, NodeError, declare, node_main,
+                      qos_matching_publishers, scheduling_text, steady_timer)
 
 ROBOT_STATE_MAX_AGE_S = 0.1
 ROBOT_STATE_MAX_DELAY_S = 1.0
@@ -166,8 +166,10 @@ class RetargeterNode(Node):
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
                                             reliability=ReliabilityPolicy.RELIABLE), raw=True)
         # kept as bytes (400 Hz, in the real-time thread); read when a command needs them
-        self.create_subscription(JointState, ros_name(ROBOT_JOINT_STATES_TOPIC), self._on_joint_states, 10, raw=True)
-        self.create_subscription(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC), self._on_base_pose, 10, raw=True)
+        self.create_subscription(JointState, ros_name(ROBOT_JOINT_STATES_TOPIC), self._on_joint_states,
+                                 ROBOT_STATE_READER_QOS, raw=True)
+        self.create_subscription(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC), self._on_base_pose,
+                                 ROBOT_STATE_READER_QOS, raw=True)
 
     # -- inputs ------------------------------------------------------------------------------------------------
     def _on_joint_states(self, data: bytes) -> None:
