@@ -114,3 +114,23 @@ def test_closed_on_the_plant_the_feedback_brings_the_robot_com_onto_the_plan(tmp
     open_loop, closed = runs[False]["com_tracking_rms_m"], runs[True]["com_tracking_rms_m"]
     assert closed < 0.01 and closed < 0.5 * open_loop, f"COM tracking {open_loop:.4f} m as planned, {closed:.4f} m"
     assert 0.0 < runs[True]["com_feedback_max_offset_m"] <= StabiliserConfig().max_offset_m + 1e-9
+
+
+def test_after_a_long_gap_without_robot_states_the_loop_fades_in_again_from_the_shift_it_held(standing):
+    """A robot that ran behind real time gave no recent state for seconds: the loop does not meet its full gains on
+    the error gathered meanwhile; it restarts from the shift it held and fades in over ``ramp_s``."""
+    robot, q = standing
+    cfg = StabiliserConfig(kp=1.0, ki=1.0, kd=0.0, ramp_s=0.5)
+    stab = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, cfg)
+    planned = _com(robot.model, q)
+    planned[0] += 0.005
+    for _ in range(100):                                   # 1 s on the feet with states: faded in
+        held = stab.correct(q, planned, q, on_feet=True, dt_s=0.01).offset_m
+    for _ in range(300):                                   # 3 s without a state: the shift held
+        assert np.array_equal(stab.correct(q, planned, None, on_feet=True, dt_s=0.01).offset_m, held)
+    planned[0] += 0.02                                     # meanwhile the robot drifted 2 cm from its plan
+    back = stab.correct(q, planned, q, on_feet=True, dt_s=0.01).offset_m
+    assert abs(back[0] - held[0]) < 0.002, (back, held)    # full gains would have stepped it by ~2 cm
+    for _ in range(60):
+        late = stab.correct(q, planned, q, on_feet=True, dt_s=0.01).offset_m
+    assert late[0] == pytest.approx(min(cfg.max_offset_m, 0.025 + stab.integral[0]), abs=1e-6)

@@ -18,7 +18,9 @@ until the robot fell (offline re-simulation of the natural demonstration).
 
 The loop runs only while the plan has the robot on its feet (from the plan's seat-off, while the hips unload),
 fading in over ``ramp_s``; ``delta`` is bounded by ``max_offset_m`` per axis and the integral by the same
-(anti-windup). Units SI; world frame REP-103.
+(anti-windup). Without a recent measured state the last shift is held; when states come back after a gap longer than
+``ramp_s`` the loop fades in again from there, its velocity filter restarted (a robot behind real time for seconds
+otherwise met the full gains on the error it had gathered). Units SI; world frame REP-103.
 """
 
 from __future__ import annotations
@@ -99,7 +101,9 @@ class ComStabiliser:
         self.ik = ComIk(model, sole_frames, velocity_limit=1e3, posture_weight=mu, damping=1e-6)
         self.integral = np.zeros(2)
         self.offset = np.zeros(2)              # the COM shift in force [m]
-        self.on_feet_s = 0.0
+        self.on_feet_s = 0.0               # on the feet with measured states, since the loop (re)started [s]
+        self.unmeasured_s = 0.0            # on the feet without a measured state, since the last one [s]
+        self._held = np.zeros(2)           # the shift beyond the integral held when the loop restarted, faded out
         self._last: tuple[np.ndarray, np.ndarray] | None = None     # (planned, measured) COM of the last call
         self.velocity_error = np.zeros(2)
 
@@ -110,9 +114,19 @@ class ComStabiliser:
     def reset(self) -> None:
         self.integral[:] = 0.0
         self.offset[:] = 0.0
-        self.on_feet_s = 0.0
+        self.on_feet_s = self.unmeasured_s = 0.0
         self._last = None
         self.velocity_error[:] = 0.0
+        self._held[:] = 0.0
+
+    def _restart_after_gap(self) -> None:
+        """After more than ``ramp_s`` without a measured state: fade in again from the shift held (no step), the
+        velocity filter anew."""
+        if self.unmeasured_s > self.cfg.ramp_s:
+            self.on_feet_s, self._last = 0.0, None
+            self.velocity_error[:] = 0.0
+            self._held = self.offset - self.integral
+        self.unmeasured_s = 0.0
 
     def correct(self, q_command: np.ndarray, com_planned_m: np.ndarray, q_measured: np.ndarray | None,
                 on_feet: bool, dt_s: float) -> Correction:
@@ -125,7 +139,10 @@ class ComStabiliser:
             self.reset()
             return Correction(q_command, np.zeros(2), np.zeros(2), False)
         err = np.zeros(2)
-        if q_measured is not None:
+        if q_measured is None:
+            self.unmeasured_s += dt_s
+        else:
+            self._restart_after_gap()
             plan, meas = np.asarray(com_planned_m, float)[:2], self.measured_com(q_measured)[:2]
             err = plan - meas
             if self._last is not None and dt_s > 0:
@@ -137,8 +154,8 @@ class ComStabiliser:
             fade = min(1.0, self.on_feet_s / cfg.ramp_s) if cfg.ramp_s > 0 else 1.0
             bound = cfg.max_offset_m
             self.integral = np.clip(self.integral + fade * cfg.ki * dt_s * err, -bound, bound)
-            self.offset = np.clip(fade * (cfg.kp * err + cfg.kd * self.velocity_error) + self.integral,
-                                  -bound, bound)
+            self.offset = np.clip(fade * (cfg.kp * err + cfg.kd * self.velocity_error) + self.integral
+                                  + (1.0 - fade) * self._held, -bound, bound)
         if not np.any(self.offset):
             return Correction(q_command, self.offset.copy(), err, False)
         target = self.measured_com(q_command)       # the command's own COM, shifted
