@@ -32,6 +32,34 @@ def _header(frame_id: str) -> CdrLayout:
     return lay
 
 
+def _named(frame_id: str, names: list[str]) -> CdrLayout:
+    """A layout opening with a std_msgs/Header and a string sequence: the marker or joint ``names``."""
+    lay = _header(frame_id)
+    lay.uint32(len(names))
+    for name in names:
+        lay.string(name)
+    return lay
+
+
+def _float64_slot(lay: CdrLayout, count: int) -> int:
+    """Lay out a float64 sequence of ``count`` zeros; where its numbers start."""
+    lay.uint32(count)
+    if count:
+        lay.align(8)
+    at = len(lay.buf)
+    lay.buf.extend(b"\x00" * (8 * count))
+    return at
+
+
+def _with_arrays(template: bytes, t_ns: int, slots: list[int], arrays, n: int) -> bytes:
+    """``template`` stamped ``t_ns`` with each (n,) array of ``arrays`` written at its slot."""
+    buf = bytearray(template)
+    buf[4:12] = _stamp(t_ns)
+    for at, values in zip(slots, arrays, strict=True):
+        buf[at:at + 8 * n] = np.asarray(values, "<f8").reshape(n).tobytes()
+    return bytes(buf)
+
+
 def _stamp(t_ns: int) -> bytes:
     t_ns = int(t_ns)
     return struct.pack("<iI", t_ns // 1_000_000_000, t_ns % 1_000_000_000)
@@ -43,10 +71,7 @@ class MocapFrameEncoder:
     def __init__(self, names: list[str], frame_id: str) -> None:
         self.names = list(names)
         n = len(self.names)
-        lay = _header(frame_id)
-        lay.uint32(n)
-        for name in self.names:
-            lay.string(name)
+        lay = _named(frame_id, self.names)
         lay.uint32(n)
         lay.align(8)
         self._positions = len(lay.buf)
@@ -119,29 +144,17 @@ class JointStateEncoder:
         self.names = list(names)
         self.fields = fields
         n = len(self.names)
-        lay = _header(frame_id)
-        lay.uint32(n)
-        for name in self.names:
-            lay.string(name)
+        lay = _named(frame_id, self.names)
         self._arrays = []
         for field in ("position", "velocity", "effort"):
-            count = n if field in fields else 0
-            lay.uint32(count)
+            at = _float64_slot(lay, n if field in fields else 0)
             if field in fields:
-                if count:
-                    lay.align(8)
-                self._arrays.append(len(lay.buf))
-                lay.buf.extend(b"\x00" * (8 * count))
+                self._arrays.append(at)
         self._template = bytes(lay.buf)
 
     def encode(self, t_ns: int, *arrays: np.ndarray) -> bytes:
         """The state stamped ``t_ns``: one (N,) array per field of ``fields``, in that order [rad, rad/s, N m]."""
-        n = len(self.names)
-        buf = bytearray(self._template)
-        buf[4:12] = _stamp(t_ns)
-        for at, values in zip(self._arrays, arrays, strict=True):
-            buf[at:at + 8 * n] = np.asarray(values, "<f8").reshape(n).tobytes()
-        return bytes(buf)
+        return _with_arrays(self._template, t_ns, self._arrays, arrays, len(self.names))
 
 
 class StampedNumbersEncoder:
@@ -173,30 +186,17 @@ class JointTrajectoryEncoder:
     def __init__(self, names: list[str], frame_id: str) -> None:
         self.names = list(names)
         n = len(self.names)
-        lay = _header(frame_id)
-        lay.uint32(n)
-        for name in self.names:
-            lay.string(name)
+        lay = _named(frame_id, self.names)
         lay.uint32(1)                                   # one point
-        self._arrays = []
-        for _ in ("positions", "velocities", "accelerations"):
-            lay.uint32(n)
-            if n:
-                lay.align(8)
-            self._arrays.append(len(lay.buf))
-            lay.buf.extend(b"\x00" * (8 * n))
+        self._arrays = [_float64_slot(lay, n) for _ in ("positions", "velocities", "accelerations")]
         lay.uint32(0)                                   # effort
         lay.buf.extend(b"\x00" * 8)                     # time_from_start: int32 sec, uint32 nanosec (aligned)
         self._template = bytes(lay.buf)
 
     def encode(self, t_ns: int, positions: np.ndarray, velocities: np.ndarray, accelerations: np.ndarray) -> bytes:
         """The command stamped ``t_ns`` [rad, rad/s, rad/s^2], each (N,)."""
-        n = len(self.names)
-        buf = bytearray(self._template)
-        buf[4:12] = _stamp(t_ns)
-        for at, values in zip(self._arrays, (positions, velocities, accelerations), strict=True):
-            buf[at:at + 8 * n] = np.asarray(values, "<f8").reshape(n).tobytes()
-        return bytes(buf)
+        return _with_arrays(self._template, t_ns, self._arrays, (positions, velocities, accelerations),
+                            len(self.names))
 
 
 def stamp_and_frame_end(data: bytes) -> tuple[int, int]:
