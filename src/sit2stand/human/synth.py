@@ -11,7 +11,8 @@ accelerations by differentiation; whole-body inverse dynamics of the skeleton (P
 give the total external wrench  F = m (a_com - g),  M_O = c x F + dL_G/dt  (about the lab origin), shared between the
 chair and the feet: before seat-off the chair takes the static share that puts the feet COP at mid-foot, fading to
 zero over the unloading window that ends at seat-off. Markers: forward kinematics at 100 Hz, with a per-trial
-placement error, measurement noise and occlusion gaps. Plates: 1000 Hz with noise, COP from the wrench.
+placement error, measurement noise and occlusion gaps. Plates: 1000 Hz with noise, COP from the wrench
+(:mod:`sit2stand.human.synth_plates`).
 
 Lab frame: REP-103, origin on the floor midway between the ankles; the chair is behind (x < 0).
 """
@@ -24,9 +25,10 @@ import numpy as np
 import pinocchio as pin
 
 from ..dynamics import G, plan_derivatives
-from ..io.forceplate import PlateSeries, center_of_pressure, point_in_polygon
+from ..io.forceplate import PlateSeries
 from .anthropometry import ankle_height_m
 from .skeleton import LENGTH_GROUPS, REFERENCE_STATURE_M, SEGMENTS, ExtraMass, HumanModel, Subject, build_human
+from .synth_plates import feet_cop_warnings, foot_span_x, measure_plates, min_jerk, share_loads
 
 STYLES = {
     # rise duration [s], seat-off as a fraction of it, peak pelvis tilt and lumbar flexion [rad], shank tilt at
@@ -96,12 +98,6 @@ class Demonstration:
     warnings: list[str] = field(default_factory=list)
 
 
-def _min_jerk(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
-    """0 -> 1 minimum-jerk ramp between t0 and t1 (zero velocity and acceleration at both ends)."""
-    s = np.clip((t - t0) / max(t1 - t0, 1e-9), 0.0, 1.0)
-    return s**3 * (10 - 15 * s + 6 * s**2)
-
-
 def _random_subject(cfg: SynthConfig, rng: np.random.Generator) -> Subject:
     """The configured subject, with random segment length and mass factors where ``cfg.vary_subject``."""
     lengths, masses = {}, {}
@@ -138,11 +134,6 @@ def _leg_ik(hip_xz: np.ndarray, ankle_xz: np.ndarray, l_th: float, l_sh: float) 
 
 PELVIS_SEATED_RAD = -0.12
 """Pelvis pitch when sitting [rad] (about +y; negative: the posterior tilt of a seated pelvis)."""
-PLATE_GAP_M = 0.01
-"""Space between the chair plate and the feet plate, and the seat COP's least distance from the chair plate's front
-edge [m]."""
-MIN_SEAT_AHEAD_M = 0.05
-"""The least chair plate in front of the seated hips, at the reference stature [m]: under the thighs."""
 
 
 @dataclass
@@ -212,8 +203,8 @@ def synthesize(cfg: SynthConfig) -> Demonstration:
     _track_com_path(body, plan, k_so, _com_path_after_seat_off(body, plan, tl, k_so, com_at_seat_off))
     _check_limits(body.human, plan.q)
     dyn = _centroidal(body, plan.q, tl.dt)
-    plates = _measure_plates(cfg, rng, body, tl.t, _share_loads(body, style, tl, plan.q, dyn))
-    warnings = _feet_cop_warnings(body.human, plates[1])
+    plates = measure_plates(cfg, rng, body, tl.t, share_loads(body, style, tl, plan.q, dyn))
+    warnings = feet_cop_warnings(body.human, plates[1])
     idx, markers, valid = _markers(cfg, rng, body, plan.q)
     return Demonstration(cfg, body.human, tl.t, plan.q, dyn.com_m, dyn.com_vel, dyn.com_acc, tl.t[idx],
                          body.human.marker_names, markers, valid, plates, tl.seat_off, tl.rise_start, tl.rise_end,
@@ -263,16 +254,16 @@ def _trunk_and_arms(body: _Body, tl: _Timeline, style: dict) -> _Plan:
     # trunk: seated posterior pelvic tilt -> anterior tilt + lumbar flexion peaking just after seat-off -> upright
     t, duration, t_rise0, t_peak, t_rise1 = tl.t, tl.duration, tl.rise_start, tl.peak, tl.rise_end
     p_seated = PELVIS_SEATED_RAD
-    pel = p_seated + (style["pelvis_tilt"] - p_seated) * _min_jerk(t, t_rise0, t_peak) \
-        - style["pelvis_tilt"] * _min_jerk(t, t_peak, t_rise1)
-    lum = style["lumbar"] * (_min_jerk(t, t_rise0, t_peak) - _min_jerk(t, t_peak + 0.05 * duration, t_rise1))
+    pel = p_seated + (style["pelvis_tilt"] - p_seated) * min_jerk(t, t_rise0, t_peak) \
+        - style["pelvis_tilt"] * min_jerk(t, t_peak, t_rise1)
+    lum = style["lumbar"] * (min_jerk(t, t_rise0, t_peak) - min_jerk(t, t_peak + 0.05 * duration, t_rise1))
     breathing = 0.012 * np.sin(2 * np.pi * 0.25 * t)
-    lum = lum + breathing * (1 - _min_jerk(t, t_rise0, t_rise0 + 0.2))
+    lum = lum + breathing * (1 - min_jerk(t, t_rise0, t_rise0 + 0.2))
     trunk = pel + lum
     s_rise = np.clip((t - t_rise0) / duration, 0, 1)
     swing = 0.5 * (1 - np.cos(2 * np.pi * s_rise))   # 0 -> 1 -> 0 with zero slope at both ends
     hip0, hip1 = body.hip_seated_xz, body.hip_standing_xz
-    hz = hip0[1] + (hip1[1] - hip0[1]) * _min_jerk(t, tl.seat_off, t_rise1)   # hips leave the seat at seat-off
+    hz = hip0[1] + (hip1[1] - hip0[1]) * min_jerk(t, tl.seat_off, t_rise1)   # hips leave the seat at seat-off
 
     jid = body.jid
     q = np.tile(body.q0, (len(t), 1))
@@ -327,20 +318,12 @@ def _roll_forward_on_seat(body: _Body, plan: _Plan, tl: _Timeline) -> tuple[int,
     return k_so, (x0, v0, a0)
 
 
-def _foot_span_x(human: HumanModel) -> tuple[float, float]:
-    """Heel and toe-tip x [m] of the (flat, fixed) feet in the lab frame."""
-    model = human.model
-    heel_x = human.geometry["foot_l"]["from"][0]
-    tip_x = model.jointPlacements[model.getJointId("toe_l_y")].translation[0] + human.geometry["toes_l"]["to"][0]
-    return heel_x, tip_x
-
-
 def _com_path_after_seat_off(body: _Body, plan: _Plan, tl: _Timeline, k_so: int,
                              start: tuple[float, float, float]) -> np.ndarray:
     """The COM x path [m] from seat-off to standing over mid-foot, timed for the widest point-mass ZMP margin."""
     # its duration is chosen for the largest margin of the (point-mass) ZMP inside the feet
     t, dt, hz = tl.t, tl.dt, plan.hip_z
-    heel_x, tip_x = _foot_span_x(body.human)
+    heel_x, tip_x = foot_span_x(body.human)
     x1 = 0.035 * body.height_m / REFERENCE_STATURE_M
     post = np.arange(k_so, len(t))
     tp = t[post] - t[k_so - 1]   # the quintic starts where x0, v0, a0 were measured
@@ -390,59 +373,6 @@ def _centroidal(body: _Body, q: np.ndarray, dt: float) -> _Centroidal:
     return _Centroidal(com, vcom, acom, force, np.cross(com, force) + dL)
 
 
-def _share_loads(body: _Body, style: dict, tl: _Timeline, q: np.ndarray,
-                 dyn: _Centroidal) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
-    """Split the external wrench between chair and feet: ((force [N], moment about O [N m]) of each)."""
-    # before seat-off: the static share that balances the COM between the seat contact and a feet COP target
-    # (mid-foot, moving toward the forefoot as the trunk flexes; ~75-80 % on the chair when sitting still), fading
-    # to zero over the unloading window that ends at seat-off. The chair COP moves within the buttock-thigh contact
-    # (ischia to mid-thigh) to take the trunk's dynamic moment; what it cannot take goes to the feet.
-    H, seat, t, t_so = body.height_m, body.seat_m, tl.t, tl.seat_off
-    force, moment_o = dyn.force_n, dyn.moment_o_nm
-    n = len(t)
-    hx = q[:, 0]
-    x_feet = 0.06 * H / REFERENCE_STATURE_M + style["cop_forward"] * H / REFERENCE_STATURE_M * _min_jerk(
-        t, tl.rise_start, t_so)
-    x_contact = hx - 0.01
-    alpha = np.clip((x_feet - dyn.com_m[:, 0]) / (x_feet - x_contact), 0.05, 0.95)
-    alpha *= 1 - _min_jerk(t, t_so - style["unload"], t_so)
-    f_chair = alpha[:, None] * force
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x_seat = (seat * f_chair[:, 0] - x_feet * (force[:, 2] - f_chair[:, 2]) - moment_o[:, 1]) / f_chair[:, 2]
-        # the chair's COP on its plate lies seat * fx / fz behind the seat point: keep it on a plate cut short
-        cop_front = _plate_rects(body)[0][:, 0].max() - PLATE_GAP_M + seat * f_chair[:, 0] / f_chair[:, 2]
-    x_seat = np.clip(np.nan_to_num(x_seat, nan=0.0), hx - 0.12 * H / REFERENCE_STATURE_M,
-                     np.fmin(hx + 0.15 * H / REFERENCE_STATURE_M, cop_front))
-    seat_point = np.stack([x_seat, np.zeros(n), np.full(n, seat)], axis=1)
-    m_chair = np.cross(seat_point, f_chair)
-    return (f_chair, m_chair), (force - f_chair, moment_o - m_chair)
-
-
-def _measure_plates(cfg: SynthConfig, rng: np.random.Generator, body: _Body, t: np.ndarray,
-                    loads: tuple[tuple[np.ndarray, np.ndarray], ...]) -> list[PlateSeries]:
-    """The chair plate under the seat and the feet plate under the feet, on the floor, with sensor noise [N, N m]."""
-    chair_plate, feet_plate = _plate_rects(body)
-    plates = []
-    for name, corners, (f, m_o) in zip(("chair", "feet"), (chair_plate, feet_plate), loads):
-        centre = corners.mean(axis=0)
-        f_meas = f + rng.normal(0.0, cfg.force_noise_n, f.shape)
-        m_c = m_o - np.cross(centre, f) + rng.normal(0.0, cfg.moment_noise_nm, f.shape)   # noise about its centre
-        m_meas = m_c + np.cross(centre, f_meas)
-        cop, ok, tau = center_of_pressure(f_meas, m_c, centre, np.array([0.0, 0.0, 1.0]))
-        plates.append(PlateSeries(name, t, f_meas, m_meas, cop, ok, tau, corners))
-    return plates
-
-
-def _feet_cop_warnings(human: HumanModel, feet: PlateSeries) -> list[str]:
-    """A warning where the feet plate's COP leaves the feet in more than 1 % of its loaded samples."""
-    heel_x, tip_x = _foot_span_x(human)
-    feet_support = np.array([[heel_x, -0.15], [tip_x, -0.15], [tip_x, 0.15], [heel_x, 0.15]])
-    outside = ~point_in_polygon(feet.cop_m[feet.cop_valid, :2], feet_support)
-    if outside.mean() > 0.01:
-        return [f"feet COP leaves the feet in {outside.mean():.1%} of loaded samples (motion too fast?)"]
-    return []
-
-
 OCCLUDED_MARKERS = ("LASI", "RASI", "LHEE", "RHEE", "RFIN", "LWRB", "RWRB", "STRN", "LTHI", "RTIB")
 """Markers that the synthesised occlusion gaps may hide."""
 
@@ -484,29 +414,6 @@ def _quintic(t: np.ndarray, T: float, x0: float, v0: float, a0: float, x1: float
     vel = sum(i * c[i] * s ** (i - 1) for i in range(1, 6))
     acc = sum(i * (i - 1) * c[i] * s ** (i - 2) for i in range(2, 6))
     return pos, vel, acc
-
-
-def _plate_rects(body: _Body) -> tuple[np.ndarray, np.ndarray]:
-    """Corners (4, 3) [m] of the chair plate (under the seated hips) and the feet plate (under the feet). Where the
-    thighs are short for the seat the chair plate is cut short in front, ``PLATE_GAP_M`` behind the feet plate, as a
-    lab places two plates; ValueError where that would leave the seated hips less than ``MIN_SEAT_AHEAD_M`` (scaled)
-    of plate ahead of them."""
-    scale = body.height_m / REFERENCE_STATURE_M
-    hip_x = body.hip_seated_xz[0]
-    feet_plate = _rect(np.array([0.09 * scale, 0.0, 0.0]), 0.18 * scale, 0.25 * scale)
-    back, front = hip_x - 0.24 * scale, min(hip_x + 0.20 * scale, feet_plate[:, 0].min() - PLATE_GAP_M)
-    if front < hip_x + MIN_SEAT_AHEAD_M * scale:
-        raise ValueError(f"the chair plate would end {front - hip_x:+.3f} m from the seated hips, in front of them "
-                         "the feet plate; raise the seat or shorten the thighs")
-    chair_plate = _rect(np.array([(back + front) / 2, 0.0, 0.0]), (front - back) / 2, 0.25 * scale)
-    return chair_plate, feet_plate
-
-
-def _rect(centre: np.ndarray, half_x: float, half_y: float) -> np.ndarray:
-    """Corners (4, 3) [m] of a floor rectangle of the given half sizes [m] about ``centre``."""
-    c = np.asarray(centre, float)
-    return np.array([[c[0] + half_x, c[1] + half_y, 0.0], [c[0] - half_x, c[1] + half_y, 0.0],
-                     [c[0] - half_x, c[1] - half_y, 0.0], [c[0] + half_x, c[1] - half_y, 0.0]])
 
 
 def _check_limits(human: HumanModel, q: np.ndarray) -> None:
