@@ -121,11 +121,11 @@ class Driver(Node):
         self.index = {n: i for i, n in enumerate(self.names)}
         fast = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
         rate_hz = 1.0 / self.state_period
-        depth = publish_depth(rate_hz)     # a recorder held up on a loaded machine loses none
-        self.js_pub = self.create_publisher(JointState, ros_name(ROBOT_JOINT_STATES_TOPIC), robot_state_qos(rate_hz))
+        depth, state_qos = publish_depth(rate_hz), robot_state_qos(rate_hz)   # a recorder held up loses none
+        self.js_pub = self.create_publisher(JointState, ros_name(ROBOT_JOINT_STATES_TOPIC), state_qos)
         self.ft_pubs = {s: self.create_publisher(WrenchStamped, ros_name(ft_topic(s)), depth) for s in SIDES}
         self.cop_pub = self.create_publisher(PointStamped, ros_name(ROBOT_COP_TOPIC), depth)
-        self.base_pub = self.create_publisher(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC), robot_state_qos(rate_hz))
+        self.base_pub = self.create_publisher(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC), state_qos)
         self.state_encoders = {
             "joints": JointStateEncoder(self.names, BASE_FRAME),
             **{side: StampedNumbersEncoder(sole_world_aligned_frame(side), StampedNumbersEncoder.WRENCH)

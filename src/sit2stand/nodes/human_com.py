@@ -64,13 +64,14 @@ from ..human.skeleton import Subject
 from ..io.messages import mocap_arrays, plate_sample_from_cdr, reorder_markers, stamp_ns
 from ..io.stream_messages import JointStateEncoder, StampedNumbersEncoder
 from ..io.tf_message import TfEncoder
+from ..launch import Scheduling
 from ..io.topics import (FORCE_PLATE_PREFIX, HUMAN_COM_TOPIC, HUMAN_DESCRIPTION_TOPIC, HUMAN_JOINTS_TOPIC,
                          HUMAN_MARKERS_TOPIC, HUMAN_MEASURED_COP_TOPIC, HUMAN_MODEL_COP_TOPIC, HUMAN_PELVIS_POSE_TOPIC,
                          HUMAN_ROOT_FRAME, HUMAN_SCALING_TOPIC, LAB_FRAME, MARKERS_TOPIC, SUBJECT_TOPIC, TF_TOPIC,
                          bag_name, ros_name)
 from .markers import human_markers
-from .runtime import (LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, IdleDrain, NodeError, declare, enter_fifo, node_main,
-                      scheduling_text, steady_timer)
+from .runtime import (LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, IdleDrain, NodeError, declare, node_main, scheduling_text,
+                      steady_timer)
 
 SUBJECT_WAIT_FRAMES = 500        # marker frames held for /human/subject (5 s at 100 Hz; a bag latches it first)
 PENDING_PLATE_SAMPLES = 4000      # per plate, between two marker frames (4 s at 1 kHz; the estimator keeps ~2 s)
@@ -293,12 +294,11 @@ class HumanComNode(Node):
     def _enter_real_time(self) -> None:
         """Real time once the live calibration (a pause of 1-2 s that at real-time priority would starve the
         robot's loop on a small computer) is over: the estimator's frames then wait for no time-shared process."""
-        priority, self.fifo_after_calibration = self.fifo_after_calibration, 0
-        refused = enter_fifo(priority)
-        if refused:
-            self.get_logger().warning(f"calibrated; staying at {scheduling_text()}: {refused}")
-        else:
+        wanted, self.fifo_after_calibration = Scheduling("fifo", self.fifo_after_calibration), 0
+        if wanted.try_apply():
             self.get_logger().info(f"calibrated; now at {scheduling_text()}")
+        else:
+            self.get_logger().warning(f"calibrated; staying at {scheduling_text()}: {wanted} not permitted")
 
     def _publish_com(self, header, out) -> None:
         com_msg = CenterOfMass(header=_header(header.stamp, LAB_FRAME), source="skeleton_fit", valid=bool(out.valid),

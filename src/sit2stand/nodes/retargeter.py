@@ -265,9 +265,8 @@ class RetargeterNode(Node):
         if self._js_order is None or self._js_order[0] is not names:
             if not set(self.joint_names) <= set(names):
                 return None
-            self._js_order = (names, np.array([names.index(n) for n in self.joint_names]) + 7)
-        q = self._robot_q(positions)
-        return np.concatenate([q[:7], q[self._js_order[1]]]), stamp * 1e-9
+            self._js_order = (names, np.array([names.index(n) for n in self.joint_names]))
+        return self._robot_q(positions[self._js_order[1]]), stamp * 1e-9
 
     def _tick(self) -> None:
         """Input time-out, the pacing timer, and the end of the plan."""

@@ -204,16 +204,6 @@ def scheduling_text() -> str:
     return f"SCHED_OTHER nice {os.getpriority(os.PRIO_PROCESS, 0)}"
 
 
-def enter_fifo(priority: int) -> str | None:
-    """Move this thread (a node's main thread: its executor) to SCHED_FIFO ``priority``; the reason when not
-    permitted, else None."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except OSError as err:
-        return f"SCHED_FIFO priority {priority} not permitted ({err.strerror})"
-    return None
-
-
 def _make_executor(kind: str):
     """SingleThreadedExecutor, or rclpy's EventsExecutor (about 3x the message rate in one process; never publish
     from another thread while it spins: that was seen to deadlock)."""
