@@ -13,6 +13,7 @@ import math
 import os
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable
 
@@ -310,8 +311,33 @@ def node_main(factory: Callable[[], Node]) -> Callable[[list[str] | None], int]:
                     except Exception as err:  # noqa: BLE001 - report, still shut down
                         print(f"[{node.get_name()}] error while closing: {err}", file=sys.stderr, flush=True)
                         code = code or 1
-                node.destroy_node()
+                _bounded_teardown(node, code)
             rclpy.try_shutdown()
         return code
 
     return main
+
+
+# A node's results are written by close(); what follows is DDS teardown, which can block: a CI run saw a driver hang
+# over 10 s in it after its summary, and the launcher's SIGTERM turned a good run into exit -15 (Fast DDS and
+# Cyclone both have such reports: eProsima/Fast-DDS#235, ros2/rmw_cyclonedds#104)
+TEARDOWN_LIMIT_S = 5.0
+
+
+def _bounded_teardown(node: Node, code: int) -> None:
+    """Destroy ``node``; if DDS teardown (with rclpy's shutdown after it) takes over TEARDOWN_LIMIT_S, say so and
+    leave the process with ``code``, the node's own result."""
+    name = node.get_name()
+
+    def leave() -> None:
+        print(f"[{name}] DDS teardown did not finish in {TEARDOWN_LIMIT_S:g} s; leaving without it (exit {code})",
+              file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os._exit(code)
+
+    watchdog = threading.Timer(TEARDOWN_LIMIT_S, leave)
+    watchdog.daemon = True
+    watchdog.start()
+    node.destroy_node()
+    rclpy.try_shutdown()
+    watchdog.cancel()
