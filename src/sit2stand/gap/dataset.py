@@ -93,7 +93,7 @@ def load_dataset(bags: list[str | Path], model: pin.Model, rate_hz: float = 50.0
                  controller_params: dict | None = None) -> Dataset:
     """Read each bag (what follows a fall left out), label its phases and evaluate ``model`` along it; controller
     channels for all recordings when any has commands (``controller_params``: the controller's links, None: CAD)."""
-    recs, evs, labels, events, notes = [], [], [], [], []
+    recs, labels, events, notes = [], [], [], []
     for bag in bags:
         rec = read_recording(bag, model, rate_hz=rate_hz)
         down = fallen(rec)
@@ -103,25 +103,32 @@ def load_dataset(bags: list[str | Path], model: pin.Model, rate_hz: float = 50.0
         if recs and rec.joint_names != recs[0].joint_names:
             raise GapError(f"{bag}: joints differ from {recs[0].source}'s")
         lab, ev_info = phases(rec)
-        seated = np.isin(lab, ["seated", "seat-off"])
         if progress:
             progress(f"  {bag}: {len(rec)} samples ({'static postures' if rec.static else 'run'}); evaluating the "
                      "model along them")
-        ev = evaluate(model, rec, seated=seated)
-        law = control_law(rec, controller_params)
-        if law is not None:
-            ev.add_control(*law, rec.tau, rec.joint_names)
         recs.append(rec)
-        evs.append(ev)
         labels.append(lab)
         events.append(ev_info)
         notes.extend(rec.notes)
-    if any(ev.ctrl_law is not None for ev in evs):      # one channel layout: no controller rows where no commands
-        for rec, ev in zip(recs, evs):
+    ds = Dataset(recs, [], labels, events, notes=notes)
+    evaluate_all(ds, model, controller_params)
+    return ds
+
+
+def evaluate_all(ds: Dataset, model: pin.Model, controller_params: dict | None = None) -> None:
+    """(Re)evaluate ``model`` along every recording of ``ds``, with the controller channels (see load_dataset)."""
+    ds.evaluations = []
+    for rec, lab in zip(ds.recordings, ds.labels):
+        ev = evaluate(model, rec, seated=np.isin(lab, ["seated", "seat-off"]))
+        law = control_law(rec, controller_params)
+        if law is not None:
+            ev.add_control(*law, rec.tau, rec.joint_names)
+        ds.evaluations.append(ev)
+    if any(ev.ctrl_law is not None for ev in ds.evaluations):   # one channel layout: no controller rows where none
+        for rec, ev in zip(ds.recordings, ds.evaluations):
             if ev.ctrl_law is None:
                 z = np.zeros_like(rec.tau)
                 ev.add_control(z, z, np.zeros(len(rec), bool), rec.tau, rec.joint_names)
-    return Dataset(recs, evs, labels, events, notes=notes)
 
 
 def fast_part_floor(e: np.ndarray, valid: np.ndarray, t_s: np.ndarray) -> np.ndarray:

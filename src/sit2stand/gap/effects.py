@@ -27,7 +27,8 @@ JOINT_TABLES = {"viscous_friction": "viscous_friction", "coulomb_friction": "cou
 
 
 # joint spring [N m/rad] about rest_rad, rotor inertia [kg m^2] added to the armature, a link's offset from its
-# parent scaled by value, a joint axis tilted by value [rad], the soles' contact time constant [s] (MuJoCo solref)
+# parent scaled by value, a joint axis tilted by value [rad] (and value_2: see tilted_axis), the soles' contact time
+# constant [s] (MuJoCo solref)
 MODEL_KINDS = ("joint_spring", "rotor_inertia", "link_length", "joint_axis", "contact_softness")
 DAMPING_RATIO = 1.0          # the soles' contact damping ratio (MuJoCo's default), kept when the stiffness changes
 
@@ -121,11 +122,25 @@ def _alter_one(model: mujoco.MjModel, kind: str, i: int, v: float, effect: dict)
         model.qpos_spring[model.jnt_qposadr[i]] = float(effect.get("rest_rad", 0.0))
     elif kind == "rotor_inertia":
         model.dof_armature[model.jnt_dofadr[i]] += v
-    elif kind == "joint_axis":         # tilt the axis by v toward a direction perpendicular to it
-        axis = model.jnt_axis[i]
-        perp = np.cross(axis, [0.0, 0.0, 1.0] if abs(axis[2]) < 0.9 else [1.0, 0.0, 0.0])
-        perp /= np.linalg.norm(perp)
-        model.jnt_axis[i] = np.cos(v) * axis + np.sin(v) * perp
+    elif kind == "joint_axis":
+        model.jnt_axis[i] = tilted_axis(np.array(model.jnt_axis[i]), v, float(effect.get("value_2", 0.0)))
+
+
+def tilt_directions(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The two directions a joint axis is tilted toward: ``axis x z`` (``axis x x`` for a vertical axis), and
+    ``axis`` crossed with that."""
+    p1 = np.cross(axis, [0.0, 0.0, 1.0] if abs(axis[2]) < 0.9 else [1.0, 0.0, 0.0])
+    p1 /= np.linalg.norm(p1)
+    return p1, np.cross(axis, p1)
+
+
+def tilted_axis(axis: np.ndarray, t1: float, t2: float) -> np.ndarray:
+    """``axis`` tilted by ``t1`` toward the first direction and ``t2`` toward the second (unit)."""
+    p1, p2 = tilt_directions(axis)
+    t = np.hypot(t1, t2)
+    if t < 1e-12:
+        return axis.copy()
+    return np.cos(t) * axis + np.sin(t) * (t1 * p1 + t2 * p2) / t
 
 
 def _matching(model: mujoco.MjModel, obj: mujoco.mjtObj, count: int, pattern: str) -> list[int]:

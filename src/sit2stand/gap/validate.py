@@ -27,6 +27,7 @@ import pinocchio as pin
 from ..robot.model import PlantConfig
 from .dataset import Dataset, GapError
 from .effects import ft_location
+from .kinematics import KINEMATIC_KINDS, kinematic_model
 from .resimulate import plant_from_effects, simulate
 from .residuals import body_link_names, evaluate, joint_columns
 
@@ -39,6 +40,8 @@ REPLAY_UNITS = {"cop_x": "m", "feet_fz": "N", "q": "rad"}
 # joint angles) read the same, so its replay is the nominal one (an F/T bias shows in the COP and force: not here)
 SENSOR_KINDS = ("torque_bias", "torque_gain")
 REPLAY_ONLY_KINDS = ("contact_softness",)      # no inverse-dynamics signature: the measured forces carry it
+# applied to the model or the joint readings and the dynamics evaluated again (no linear signature)
+REEVALUATED_KINDS = ("extra_mass", "joint_offset") + KINEMATIC_KINDS
 
 
 def gap_size(es: list[np.ndarray], ds: Dataset, pairs: list[tuple[int, int, str]]) -> float:
@@ -82,9 +85,9 @@ def effect_theta(effect: dict) -> np.ndarray:
 
 def merged_model(nominal: pin.Model, effects: list[dict]) -> pin.Model:
     """``nominal`` with the extra masses of ``effects`` merged into their links (a negative one removed at its
-    point, the link's rotational inertia kept)."""
+    point, the link's rotational inertia kept) and its leg kinematics altered (``gap.kinematics``)."""
     links = body_link_names(nominal)
-    model = nominal.copy()
+    model = kinematic_model(nominal, effects)
     for e in effects:
         if e["kind"] != "extra_mass":
             continue
@@ -103,13 +106,13 @@ def exact_residuals(ds: Dataset, nominal: pin.Model, effects: list[dict], known:
     docstring); ``known``: the nominal model file's own joint and sensor effects (already out of ``ds``)."""
     model = merged_model(nominal, effects)
     links = body_link_names(nominal)
-    again = any(e["kind"] in ("extra_mass", "joint_offset") for e in effects)   # else the residual is linear
+    again = any(e["kind"] in REEVALUATED_KINDS for e in effects)   # else the residual is linear
     effects = [e for e in effects if e["kind"] not in REPLAY_ONLY_KINDS]
     out = []
     for r, (rec, ev, lab) in enumerate(zip(ds.recordings, ds.evaluations, ds.labels)):
         e_r = ev.e.copy()
         for eff in effects:
-            if eff["kind"] not in ("extra_mass", "joint_offset"):
+            if eff["kind"] not in REEVALUATED_KINDS:
                 e_r -= _contribution(ds, links, r, eff)
         if not again:
             out.append(e_r)

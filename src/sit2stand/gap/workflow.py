@@ -7,6 +7,8 @@ effect(s), add them to the model, and show the gap shrink.
    what no slowly varying physical effect can produce; for static postures, what is left after fitting every
    candidate at once), per phase of the motion (seated, seat-off, rising, standing; for runs without a chair,
    moving and still). A ranked table says where the model is wrong.
+   The legs' kinematics come first (:mod:`sit2stand.gap.kinematics`): link lengths and joint axes named from the
+   soles' closure (a loaded, flat foot stays put) become part of the model before the dynamics are named.
 3. **Name**: every candidate effect of the library (extra mass on each rigid group of links, viscous and Coulomb
    friction, encoder offset, torque-sensor bias and gain per joint, F/T bias per foot) is offered to a sparse
    selection (:mod:`sit2stand.gap.select`); the chosen effects come with 95 % confidence intervals. With none chosen
@@ -33,13 +35,14 @@ import yaml
 
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import PlantConfig, controller_model
-from .dataset import Dataset, GapError, fast_part_floor, load_dataset
+from .dataset import Dataset, GapError, evaluate_all, fast_part_floor, load_dataset
 from .recording import RecordingError
 from .effects import unmodeled_dict, unmodeled_from
 from .residuals import body_link_names
 from .bounds import RESIDUE
 from .candidates import UNITS, build_candidates, series_ids, stack_rows
 from .contact import fit_contact
+from .kinematics import KINEMATIC_KINDS, fit_kinematics, kinematic_model
 from .select import MIN_SHARE, Candidate, Selection, select
 from .symmetry import lopsided
 from .unexplained import SIGNIFICANT_Z, contact_note, where_and_shape
@@ -97,6 +100,7 @@ class GapResult:
     replay_gap_before: float = 0.0         # the re-simulation's gap over the replay channels that disagreed
     replay_gap_after: float = 0.0
     sims: dict = field(default_factory=dict)   # "nominal model" / "with the named effects" -> recording -> signals
+    closure: dict = field(default_factory=dict)  # the soles' closure: channels, z before / after, unexplained
 
     @property
     def shrink(self) -> float:
@@ -115,9 +119,9 @@ def _rms(e: np.ndarray, valid: np.ndarray) -> np.ndarray:
                      for c in range(e.shape[1])])
 
 
-def ranked_table(ds: Dataset) -> list[dict]:
-    """Where the model is wrong: per channel and phase, the RMS residual, its ratio to the floor, and when the
-    largest disagreement happened; sorted by the ratio."""
+def ranked_table(ds: Dataset, residuals: list[np.ndarray]) -> list[dict]:
+    """Where the model is wrong (``residuals``: per recording, (N, C)): per channel and phase, the RMS residual, its
+    ratio to the floor, and when the largest disagreement happened; sorted by the ratio."""
     rows = []
     for r, (rec, ev, lab, floor) in enumerate(zip(ds.recordings, ds.evaluations, ds.labels, ds.floors)):
         for c, ch in enumerate(ev.channels):
@@ -125,7 +129,7 @@ def ranked_table(ds: Dataset) -> list[dict]:
                 m = (lab == phase) & ev.valid[:, c]
                 if m.sum() < 3:
                     continue
-                x = ev.e[m, c]
+                x = residuals[r][m, c]
                 k = int(np.argmax(np.abs(x)))
                 rms = float(np.sqrt(np.mean(x ** 2)))
                 rows.append({"recording": r, "channel": ch, "phase": str(phase), "rms": rms,
@@ -185,8 +189,13 @@ def describe(effect: dict) -> str:
              "torque_bias": "torque-sensor bias", "torque_gain": "torque-sensor gain",
              "joint_offset": "encoder offset", "ft_bias": "force/torque sensor bias (sensor axes)",
              "actuator_delay": "actuator delay", "joint_spring": "joint spring", "rotor_inertia": "rotor inertia",
-             "contact_softness": "soles' contact time constant (MuJoCo solref; the model's 0.02 s)"}[k]
-    return f"{label} at {effect['location']}: {effect['value']:.4g} +- {effect['ci95']:.2g} {effect['unit']}"
+             "contact_softness": "soles' contact time constant (MuJoCo solref; the model's 0.02 s)",
+             "link_length": "link length (its offset from the parent joint, scaled)",
+             "joint_axis": "joint axis tilt (toward axis x z)"}[k]
+    text = f"{label} at {effect['location']}: {effect['value']:.4g} +- {effect['ci95']:.2g} {effect['unit']}"
+    if k == "joint_axis":
+        text += f", and {effect['value_2']:.4g} +- {effect['ci95_2']:.2g} rad toward the axis x (axis x z)"
+    return text
 
 
 def _after(ds: Dataset, sel: Selection, cands_unweighted) -> list[np.ndarray]:
@@ -216,31 +225,39 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
     model, source, known = load_nominal(model_path)
     if not bags:
         raise GapError("no measured bag given")
-    ds = load_dataset(bags, model, rate_hz=rate_hz, progress=say, controller_params=_controller_params(controller))
+    params = _controller_params(controller)
+    ds = load_dataset(bags, model, rate_hz=rate_hz, progress=say, controller_params=params)
     links = body_link_names(model)
     _subtract_known(ds, links, known)
     _noise_floors(ds)
+    nominal = [ev.e.copy() for ev in ds.evaluations]
+    kinematic, closure = _kinematics_first(ds, model, params, say)
+    calibrated = kinematic_model(model, kinematic)
+    if kinematic:                 # the dynamics' candidates on the calibrated legs; floors and table stay nominal
+        evaluate_all(ds, calibrated, params)
+        _subtract_known(ds, links, known)
     say("  building the candidate effects")
-    cands = build_candidates(model, ds)
+    cands = build_candidates(calibrated, ds)
     if any(r.static for r in ds.recordings):
         _static_floors(ds, cands)
-        cands = build_candidates(model, ds)
+        cands = build_candidates(calibrated, ds)
     sel, refused = _select_checked(ds, cands, links, say)
-    table = ranked_table(ds)
+    refused += closure["refused"]
+    table = ranked_table(ds, nominal)
     pairs = [(d["recording"], ds.channels.index(d["channel"]), d["phase"]) for d in table if d["z"] >= SIGNIFICANT_Z]
-    effects = effect_summary(sel)
-    effects, exact = _confirm_exact(ds, model, effects, known, refused, say)
+    effects, exact = _confirm_exact(ds, model, kinematic + effect_summary(sel), known, refused, say)
     sims = {}
     if replay and source == "cad" and any(r.commands is not None and not r.static for r in ds.recordings):
         effects, exact, sims = _confirm_replay(ds, model, effects, exact, refused, say)
     sel.effects = [s for s in sel.effects if s.candidate.key in {f"{e['kind']}@{e['location']}" for e in effects}]
     first_order = _after(ds, sel, lambda r, c: effect_columns(ds, links, r, c.kind, c.location))
-    rms_b = np.array([_rms(ev.e, ev.valid) for ev in ds.evaluations])
+    rms_b = np.array([_rms(e, ev.valid) for e, ev in zip(nominal, ds.evaluations)])
     rms_a = np.array([_rms(e, ev.valid) for e, ev in zip(exact, ds.evaluations)])
-    g0 = gap_size([ev.e for ev in ds.evaluations], ds, pairs)
+    g0 = gap_size(nominal, ds, pairs)
     res = GapResult(source, [str(b) for b in bags], ds.channels, np.array(ds.floors), rms_b, rms_a, table, sel,
                     effects, "", [], g0, gap_size(exact, ds, pairs), ds.notes, ds, exact, known,
-                    gap_after_first_order=gap_size(first_order, ds, pairs), refused=refused, sims=sims)
+                    gap_after_first_order=gap_size(first_order, ds, pairs), refused=refused, sims=sims,
+                    closure=closure)
     _replay_summary(res)
     res.unexplained = _unexplained(res)
     res.verdict = _verdict(res)
@@ -288,6 +305,8 @@ def _confirm_exact(ds: Dataset, model: pin.Model, effects: list[dict], known: li
     n_rows = sum(int(ev.valid.sum()) for ev in ds.evaluations)
     exact = exact_residuals(ds, model, effects, known)
     for e in sorted(effects, key=lambda d: d["share_of_gap"]):
+        if e["kind"] in KINEMATIC_KINDS:           # the soles' closure confirmed them, not the torques
+            continue
         rest = [d for d in effects if d is not e]
         without = exact_residuals(ds, model, rest, known) if e["kind"] in ("extra_mass", "joint_offset") else \
             [x + np.tensordot(effect_columns(ds, body_link_names(model), r, e["kind"], e["location"]),
@@ -300,6 +319,17 @@ def _confirm_exact(ds: Dataset, model: pin.Model, effects: list[dict], known: li
                                                  "model"})
             effects, exact = rest, without
     return effects, exact
+
+
+def _kinematics_first(ds: Dataset, model: pin.Model, params: dict | None, say) -> tuple[list[dict], dict]:
+    """The legs' link lengths and joint axes from the soles' closure (gap.kinematics), before the dynamics: a
+    kinematic error left in the model would be absorbed by dynamic proxies. Encoder offsets the closure sees are
+    left to the dynamics, which name them with the torques' evidence as well."""
+    found, report = fit_kinematics(ds, model, [], say)
+    kinematic = [e for e in found if e["kind"] in KINEMATIC_KINDS]
+    for e in kinematic:
+        say(f"  named from the soles' closure: {describe(e)}")
+    return kinematic, report
 
 
 def _confirm_replay(ds: Dataset, model: pin.Model, effects: list[dict], exact: list[np.ndarray],
@@ -428,6 +458,7 @@ def _unexplained(res: GapResult) -> list[dict]:
                      **where_and_shape(ds, r, ch, np.nan_to_num(x), ok, replay_floor(ch))}
                 d["shape"] = contact_note(id_quiet[r], ch) or d["shape"]
                 out.append(d)
+    out += res.closure.get("unexplained", [])
     out.sort(key=lambda d: -d["z"])
     return out
 

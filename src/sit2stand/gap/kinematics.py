@@ -1,0 +1,362 @@
+"""Kinematic calibration of the legs from the soles' closure: link length and joint axis errors.
+
+The inverse dynamics barely see a kinematic error (a 4 % longer shank moves lever arms by a centimetre), but the
+forward kinematics do. While a foot carries load it stays where it is on the floor; the measured base pose and joint
+angles, put through the nominal model, must then place its sole at the same point all along. What the sole's
+computed position does instead (``closure/<side>/<x|y|z>``: its departure from its median over the loaded samples
+of the recording, world axes, m) is what the model's leg kinematics get wrong. Its floor (``CLOSURE_FLOOR_M``) was
+measured on plants with nothing kinematic hidden: the soles' own compliance moves them by tenths of a millimetre.
+
+When the closure disagrees (some channel at ``SIGNIFICANT_Z`` floors), the leg's kinematic candidates are linearised
+by finite differences of the forward kinematics and chosen greedily (each the one that lowers the closure's squared
+residual most, while it lowers it by ``MIN_GAIN`` of what is left above the noise), then refined by Gauss-Newton on
+the true forward kinematics:
+
+* ``link_length``: a leg link's offset from its parent joint scaled by ``value`` (one leg, or ``leg_*_<k>_link``:
+  both legs by one factor, what a symmetric error is);
+* ``joint_axis``: a leg joint's axis tilted by ``value`` rad toward ``axis x z`` (``axis x x`` for a vertical axis)
+  and by ``value_2`` rad toward the axis crossed with that direction (as :func:`gap.effects.alter_model` applies it).
+
+Named only when the fit at least halves the closure's gap and stays inside ``BOUNDS``; channels it leaves above the
+floor are reported as unexplained ("kinematic"). The rest of the workflow then sees the named effects for real:
+the inverse dynamics with the altered model (:func:`kinematic_model`), the re-simulation with the altered plant.
+"""
+
+from __future__ import annotations
+
+from fnmatch import fnmatchcase
+
+import numpy as np
+import pinocchio as pin
+
+from ..robot.model import SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M
+from .dataset import Dataset
+from .effects import tilted_axis
+from .residuals import body_link_names
+from .unexplained import SIGNIFICANT_Z
+
+KINEMATIC_KINDS = ("link_length", "joint_axis")
+CLOSURE_AXES = ("x", "y", "z")
+# the closure's RMS on excitation runs with nothing kinematic hidden (seed 1): x 0.36, y 0.05, z 0.02 mm; with soles
+# 3 x softer 0.72, 0.09, 0.12 mm: floors above both, a kinematic error of a few percent gives millimetres
+CLOSURE_FLOOR_M = {"x": 0.0008, "y": 0.0003, "z": 0.0003}
+LOADED_N = 100.0             # a foot with this much vertical load stays where it is
+FLAT_MARGIN_M = 0.02         # and lies flat while its centre of pressure is this far inside the sole
+STRIDE_S = 0.04              # one sample in this interval enters the fit (the closure is smooth)
+LEG_LINKS = (2, 3, 4, 5, 6)  # leg_<side>_<k>_link: their offsets set the leg's lengths
+LEG_JOINTS = (1, 2, 3, 4, 5, 6)
+MOVING_RAD = 0.1           # a joint whose angle spans this much in the recordings shows its axis
+MIN_GAIN = 0.3               # a candidate lowers the closure's squared gap by this share of what is left
+MAX_EFFECTS = 4
+BOUNDS = {"link_length": (0.8, 1.2), "joint_axis": (-0.2, 0.2), "joint_offset": (-0.2, 0.2)}   # scale; rad; rad
+FD_STEP = 1e-4
+
+
+def closure_channels() -> list[str]:
+    """The closure's channel names, side-major."""
+    return [f"closure/{s}/{a}" for s in SIDES for a in CLOSURE_AXES]
+
+
+# -- the model with kinematic effects --------------------------------------------------------------------------------
+def kinematic_model(nominal: pin.Model, effects: list[dict]) -> pin.Model:
+    """``nominal`` (copied) with the ``link_length`` and ``joint_axis`` effects of ``effects`` applied."""
+    model = nominal.copy()
+    links = body_link_names(model)
+    for e in effects:
+        if e["kind"] == "link_length":
+            for jid in [i + 1 for i, name in enumerate(links) if fnmatchcase(name, e["location"])]:
+                p = model.jointPlacements[jid]
+                model.jointPlacements[jid] = pin.SE3(p.rotation, p.translation * float(e["value"]))
+        elif e["kind"] == "joint_axis":
+            _tilt(model, model.getJointId(e["location"]), float(e["value"]), float(e.get("value_2", 0.0)))
+    return model
+
+
+def _joint_axis(model: pin.Model, jid: int) -> np.ndarray:
+    short = model.joints[jid].shortname()
+    return {"JointModelRX": np.array([1.0, 0, 0]), "JointModelRY": np.array([0, 1.0, 0]),
+            "JointModelRZ": np.array([0, 0, 1.0])}[short]
+
+
+def _tilt(model: pin.Model, jid: int, t1: float, t2: float) -> None:
+    """Rotate joint ``jid``'s axis in place: its frame turned by R0 (axis -> tilted axis) and everything attached to it
+    turned back, so that at zero angle the links stay where they were and the motion is about the tilted axis."""
+    a = _joint_axis(model, jid)
+    b = tilted_axis(a, t1, t2)
+    r0 = _rotation_between(a, b)
+    back = pin.SE3(r0.T, np.zeros(3))
+    model.jointPlacements[jid] = model.jointPlacements[jid] * pin.SE3(r0, np.zeros(3))
+    model.inertias[jid] = back.act(model.inertias[jid])
+    for c in range(1, model.njoints):
+        if model.parents[c] == jid:
+            model.jointPlacements[c] = back * model.jointPlacements[c]
+    for f in range(model.nframes):
+        frame = model.frames[f]
+        if frame.parentJoint == jid:
+            frame.placement = back * frame.placement
+            model.frames[f] = frame
+
+
+def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rotation taking unit vector ``a`` to unit vector ``b`` about their common normal."""
+    n = np.cross(a, b)
+    s = np.linalg.norm(n)
+    if s < 1e-12:
+        return np.eye(3)
+    return pin.exp3(n / s * np.arctan2(s, float(np.dot(a, b))))
+
+
+# -- the closure -----------------------------------------------------------------------------------------------------
+class Closure:
+    """The soles' closure along every recording with the feet loaded (see the module docstring)."""
+
+    def __init__(self, ds: Dataset, model: pin.Model, offsets: dict[str, float]) -> None:
+        self.samples = []                       # (recording, index, configuration, loaded per side)
+        for r, rec in enumerate(ds.recordings):
+            if rec.static or len(rec) < 3:
+                continue
+            dt = float(np.median(np.diff(rec.t_s)))
+            stride = max(1, int(round(STRIDE_S / dt)))
+            loaded = {s: (rec.wrench[s][:, 2] > LOADED_N) & _flat_foot(rec.wrench[s]) for s in SIDES}
+            q = rec.q.copy()
+            for name, v in offsets.items():             # reading - true angle
+                q[:, rec.joint_names.index(name)] -= v
+            for k in range(0, len(rec), stride):
+                if any(loaded[s][k] for s in SIDES):
+                    self.samples.append((r, k, _pin_q(model, rec.joint_names, rec.base_pose[k], q[k]),
+                                         tuple(bool(loaded[s][k]) for s in SIDES)))
+        self.floor = np.tile([CLOSURE_FLOOR_M[a] for a in CLOSURE_AXES], len(SIDES))
+
+    def positions(self, nominal: pin.Model, effects: list[dict]) -> np.ndarray:
+        """(S, 2, 3) the soles' world positions [m] under ``nominal`` with the kinematic ``effects`` (link lengths,
+        joint axes, encoder offsets), NaN where the foot is not loaded and flat."""
+        model = kinematic_model(nominal, effects)
+        data = model.createData()
+        shift = np.zeros(model.nq)
+        for e in effects:
+            if e["kind"] == "joint_offset":                 # reading - true angle
+                shift[model.joints[model.getJointId(e["location"])].idx_q] += float(e["value"])
+        frames = [model.getFrameId(f"sole_{s}") for s in SIDES]
+        out = np.full((len(self.samples), len(SIDES), 3), np.nan)
+        for i, (_r, _k, q, loaded) in enumerate(self.samples):
+            pin.framesForwardKinematics(model, data, q - shift)
+            for j, f in enumerate(frames):
+                if loaded[j]:
+                    out[i, j] = data.oMf[f].translation
+        return out
+
+    def residual(self, nominal: pin.Model, effects: list[dict]) -> np.ndarray:
+        """(S, 6) each sole's departure from its median per recording, in floors (NaN where not used)."""
+        p = self.positions(nominal, effects)
+        rec = np.array([s[0] for s in self.samples])
+        for r in np.unique(rec):
+            m = rec == r
+            p[m] -= np.nanmedian(p[m], axis=0)
+        return p.reshape(len(self.samples), -1) / self.floor
+
+    def z(self, res: np.ndarray) -> np.ndarray:
+        """(6,) each channel's RMS in floors."""
+        return np.sqrt(np.nanmean(res ** 2, axis=0))
+
+
+def _flat_foot(wrench: np.ndarray) -> np.ndarray:
+    """(N,) whether the foot's centre of pressure is ``FLAT_MARGIN_M`` inside its sole: a foot rolling on an edge
+    turns about it, and its sole point moves although nothing is wrong (wrench: world axes, about the sole point;
+    the feet point forward)."""
+    fz = np.maximum(wrench[:, 2], 1e-9)
+    cx, cy = -wrench[:, 4] / fz, wrench[:, 3] / fz
+    return (np.abs(cx - SOLE_CENTRE_X_M) <= SOLE_HALF_SIZE_M[0] - FLAT_MARGIN_M) & \
+        (np.abs(cy) <= SOLE_HALF_SIZE_M[1] - FLAT_MARGIN_M)
+
+
+def _pin_q(model: pin.Model, names: list[str], base: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Pinocchio configuration: base x y z qw qx qy qz (MuJoCo order) and the joints by name."""
+    out = pin.neutral(model)
+    out[:3] = base[:3]
+    out[3:7] = [base[4], base[5], base[6], base[3]]
+    for name, v in zip(names, q):
+        if model.existJointName(name):
+            out[model.joints[model.getJointId(name)].idx_q] = v
+    return out
+
+
+# -- the fit -----------------------------------------------------------------------------------------------------------
+def candidates(ds: Dataset) -> list[tuple[str, str, int]]:
+    """(kind, location, number of parameters) of every kinematic candidate of the legs: each link's length (one leg,
+    both legs), and the axes of the leg joints that move in the recordings (a still joint's tilt is a constant
+    rotation that the closure's median takes out)."""
+    out = []
+    for k in LEG_LINKS:
+        out.append(("link_length", f"leg_*_{k}_link", 1))
+        out += [("link_length", f"leg_{s}_{k}_link", 1) for s in SIDES]
+    moving = set()
+    for rec in ds.recordings:
+        moving |= {n for n, r in zip(rec.joint_names, np.ptp(rec.q, axis=0)) if r >= MOVING_RAD}
+    for k in LEG_JOINTS:
+        out += [(kind, f"leg_{s}_{k}_joint", n) for s in SIDES if f"leg_{s}_{k}_joint" in moving
+                for kind, n in (("joint_axis", 2), ("joint_offset", 1))]
+    return out
+
+
+def _effects(chosen: list[tuple[str, str, int]], theta: np.ndarray) -> list[dict]:
+    """The chosen candidates with parameters ``theta`` (link: scale - 1; axis: the two tilts) as effect dicts."""
+    out, i = [], 0
+    for kind, loc, n in chosen:
+        if kind == "link_length":
+            out.append({"kind": kind, "location": loc, "value": 1.0 + float(theta[i])})
+        elif kind == "joint_offset":
+            out.append({"kind": kind, "location": loc, "value": float(theta[i])})
+        else:
+            out.append({"kind": kind, "location": loc, "value": float(theta[i]), "value_2": float(theta[i + 1])})
+        i += n
+    return out
+
+
+def _flat(res: np.ndarray) -> np.ndarray:
+    x = res.ravel()
+    return np.where(np.isfinite(x), x, 0.0)
+
+
+def _jacobian(closure: Closure, nominal: pin.Model, chosen, theta: np.ndarray, base: np.ndarray) -> np.ndarray:
+    """(rows, p) finite-difference Jacobian of the flattened closure residual at ``theta``."""
+    cols = []
+    for i in range(len(theta)):
+        t = theta.copy()
+        t[i] += FD_STEP
+        cols.append((_flat(closure.residual(nominal, _effects(chosen, t))) - base) / FD_STEP)
+    return np.column_stack(cols)
+
+
+def fit_kinematics(ds: Dataset, nominal: pin.Model, effects: list[dict], say) -> tuple[list[dict], dict]:
+    """(the named kinematic effects, a report: the closure's per-channel z before and after, what was refused)."""
+    offsets = {e["location"]: float(e["value"]) for e in effects if e["kind"] == "joint_offset"}
+    closure = Closure(ds, nominal, offsets)
+    report = {"channels": closure_channels(), "z_before": [], "z_after": [], "refused": [], "unexplained": []}
+    if not closure.samples:
+        return [], report
+    r0 = closure.residual(nominal, [])
+    report["z_before"] = report["z_after"] = closure.z(r0).tolist()
+    report["unexplained"] = _unexplained(ds, closure, r0)
+    if max(report["z_before"]) < SIGNIFICANT_Z:
+        return [], report
+    say("  the soles move while they carry load: fitting the legs' kinematics (link lengths, joint axes)")
+    y0 = _flat(r0)
+    pool = candidates(ds)
+    lin = {c: _jacobian(closure, nominal, [c], np.zeros(c[2]), y0) for c in pool}
+    chosen: list[tuple[str, str, int]] = []
+    ssr = float(y0 @ y0)
+    noise = float(np.isfinite(r0).sum())
+    while len(chosen) < MAX_EFFECTS:
+        best = None
+        for c in pool:
+            if c in chosen or _overlaps(c, chosen):
+                continue
+            X = np.hstack([lin[d] for d in chosen + [c]])
+            theta, *_ = np.linalg.lstsq(X, -y0, rcond=None)
+            if not all(_inside(e) for e in _effects(chosen + [c], theta)):
+                continue                   # a fit past the bounds is no explanation (see BOUNDS)
+            s = float(np.sum((y0 + X @ theta) ** 2))
+            if best is None or s < best[0]:
+                best = (s, c)
+        if best is None or ssr <= noise or ssr - best[0] < MIN_GAIN * (ssr - noise):
+            break
+        ssr = best[0]
+        chosen.append(best[1])
+        say(f"    {best[1][0]} @ {best[1][1]}: closure squared residual {ssr / noise:.3g} per row")
+    if not chosen:
+        return [], report
+    theta = _gauss_newton(closure, nominal, chosen, y0, np.hstack([lin[c] for c in chosen]))
+    found = _effects(chosen, theta)
+    after = closure.residual(nominal, found)
+    z0, z1 = np.array(report["z_before"]), closure.z(after)
+    gap0, gap1 = _gap(z0), _gap(z1)
+    bad = [_describe_bound(e) for e in found if not _inside(e)]
+    if bad or gap1 > 0.5 * gap0:
+        why = "; ".join(bad) if bad else f"the closure's gap only {gap0:.3g} -> {gap1:.3g}"
+        report["refused"] = [{"effect": f"{e['kind']}@{e['location']}", "why": why} for e in found]
+        say(f"  kinematic fit not named: {why}")
+        return [], report
+    cov = _covariance(closure, nominal, chosen, theta, after)
+    _add_intervals(found, cov)
+    report["z_after"] = z1.tolist()
+    report["unexplained"] = _unexplained(ds, closure, after)
+    return found, report
+
+
+def _overlaps(c, chosen) -> bool:
+    """A one-leg link length beside the same link's both-legs one (or the reverse) says the same thing twice."""
+    if c[0] != "link_length":
+        return False
+    k = c[1].split("_")[2]
+    return any(d[0] == "link_length" and d[1].split("_")[2] == k for d in chosen)
+
+
+def _gauss_newton(closure: Closure, nominal: pin.Model, chosen, y0: np.ndarray, X0: np.ndarray) -> np.ndarray:
+    """The chosen candidates' parameters on the true forward kinematics, from their linear estimate."""
+    theta, *_ = np.linalg.lstsq(X0, -y0, rcond=None)
+    for _ in range(3):
+        y = _flat(closure.residual(nominal, _effects(chosen, theta)))
+        J = _jacobian(closure, nominal, chosen, theta, y)
+        step, *_ = np.linalg.lstsq(J, -y, rcond=None)
+        theta = theta + step
+        if np.max(np.abs(step)) < 1e-6:
+            break
+    return theta
+
+
+def _covariance(closure: Closure, nominal: pin.Model, chosen, theta: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """The parameters' covariance: the residual's scale left after the fit, with the rows' smoothness counted (one
+    independent row per ``STRIDE_S`` is optimistic: the closure varies over a move, ~1 s)."""
+    y = _flat(after)
+    J = _jacobian(closure, nominal, chosen, theta, y)
+    n_eff = max(len(closure.samples) * STRIDE_S, len(theta) + 1.0)
+    s2 = float(y @ y) / max(len(y) - len(theta), 1) * len(y) / n_eff
+    return s2 * np.linalg.pinv(J.T @ J)
+
+
+def _add_intervals(found: list[dict], cov: np.ndarray) -> None:
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    i = 0
+    for e in found:
+        e.update({"ci95": 1.96 * float(se[i]), "unit": "x the model's offset" if e["kind"] == "link_length" else "rad",
+                  "share_of_gap": 0.0, "delta_bic": 0.0, "alternatives": []})
+        if e["kind"] == "joint_axis":
+            e["ci95_2"] = 1.96 * float(se[i + 1])
+        i += 2 if e["kind"] == "joint_axis" else 1
+
+
+def _gap(z: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.maximum(z ** 2 - 1.0, 0.0))))
+
+
+def _inside(e: dict) -> bool:
+    lo, hi = BOUNDS[e["kind"]]
+    return all(lo <= float(e.get(k, 1.0 if e["kind"] == "link_length" else 0.0)) <= hi for k in ("value", "value_2"))
+
+
+def _describe_bound(e: dict) -> str:
+    lo, hi = BOUNDS[e["kind"]]
+    return f"{e['kind']}@{e['location']} past its bounds [{lo}, {hi}]"
+
+
+def _unexplained(ds: Dataset, closure: Closure, res: np.ndarray) -> list[dict]:
+    """The closure channels still above ``SIGNIFICANT_Z`` floors per recording, with when."""
+    out = []
+    rec_of = np.array([s[0] for s in closure.samples])
+    for r in np.unique(rec_of):
+        m = rec_of == r
+        t = ds.recordings[r].t_s[[s[1] for s, keep in zip(closure.samples, m) if keep]]
+        z = closure.z(res[m])
+        for c, ch in enumerate(closure_channels()):
+            if not z[c] > SIGNIFICANT_Z:
+                continue
+            x = res[m, c]
+            big = np.isfinite(x) & (np.abs(x) > SIGNIFICANT_Z)
+            k = int(np.nanargmax(np.abs(x)))
+            out.append({"recording": int(r), "channel": ch, "rms": float(z[c] * closure.floor[c]),
+                        "floor": float(closure.floor[c]), "z": float(z[c]), "worst_t_s": float(t[k]),
+                        "worst": float(x[k] * closure.floor[c]),
+                        "above_s": [float(t[big][0]), float(t[big][-1])] if big.any() else None,
+                        "shape": "kinematic: the loaded sole moves under the model's forward kinematics (a foot "
+                                 "sliding, or a kinematic error the library lacks)"})
+    return out
