@@ -9,8 +9,8 @@ import pinocchio as pin
 import pytest
 
 from sit2stand.gap.effects import alter_model, tilted_axis
-from sit2stand.gap.kinematics import _pin_q, kinematic_model
-from sit2stand.robot.model import PlantConfig, controller_model
+from sit2stand.gap.kinematics import _pin_q, contact_points, kinematic_model
+from sit2stand.robot.model import SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, PlantConfig, controller_model
 from sit2stand.robot.plant import Plant
 
 EFFECTS = {
@@ -53,3 +53,17 @@ def test_a_tilt_turns_the_axis_by_its_angle_toward_the_stated_directions():
     assert np.isclose(a[0], np.sin(0.1))           # toward y x z = +x
     b = tilted_axis(y, 0.0, 0.1)
     assert np.isclose(b[2], -np.sin(0.1))          # toward y x x = -z
+
+
+def test_the_point_that_stays_put_is_the_edge_a_foot_rolls_on():
+    """Flat (COP well inside): the sole point; COP at the inner (right) edge of a left foot: that edge's middle;
+    at the toe's left corner: that corner."""
+    fz = 400.0
+    wrench = np.array([[0, 0, fz, 0.01 * fz, -0.03 * fz, 0],          # COP (0.03, 0.01): flat
+                       [0, 0, fz, -0.06 * fz, -0.02 * fz, 0],          # COP (0.02, -0.06): right edge
+                       [0, 0, fz, 0.06 * fz, -0.12 * fz, 0]])          # COP (0.12, 0.06): toe, left corner
+    points, kinds = contact_points(wrench)
+    assert np.allclose(points[0], 0.0) and kinds[0] == 0
+    assert np.allclose(points[1], [0.0, -SOLE_HALF_SIZE_M[1], 0.0])
+    assert np.allclose(points[2], [SOLE_CENTRE_X_M + SOLE_HALF_SIZE_M[0], SOLE_HALF_SIZE_M[1], 0.0])
+    assert len(set(kinds.tolist())) == 3

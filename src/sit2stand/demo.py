@@ -41,7 +41,7 @@ from .nodes.driver import FELL_EXIT_CODE
 from .data import graph_path, plant_path
 from .gap.excite import excite
 from .gap.report import cop_rms, gap_command
-from .gap.workflow import describe
+from .gap.naming import describe
 from .human.offline import calibrate_from_bag
 from .human.offline import run as human_com_offline
 from .io import messages as M

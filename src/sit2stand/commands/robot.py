@@ -92,7 +92,8 @@ def _excite(args: argparse.Namespace) -> int:
 
 def _gap(args: argparse.Namespace) -> int:
     from ..gap.report import cop_rms, gap_command
-    from ..gap.workflow import describe, progress_printer
+    from ..gap.naming import describe
+    from ..gap.workflow import progress_printer
 
     result = gap_command(args.bags, args.out, model=args.model, rate_hz=args.rate, progress=progress_printer,
                          controller=args.controller)

@@ -99,9 +99,10 @@ def draw(kind: str, seed: int) -> Hidden:
         return Hidden(kind, str(rng.choice(LOADED_JOINTS)), float(rng.uniform(0.5, 1.5)))
     if kind == "contact_softness":    # the soles 2-4 times softer (contact time constant [s], MuJoCo's default 0.02)
         return Hidden(kind, "soles", float(rng.uniform(0.04, 0.08)))
-    if kind == "link_length":         # a thigh or shank 3-6 % longer or shorter, on both legs or one
-        where = str(rng.choice(["*", "*", "left", "right"]))
-        return Hidden(kind, f"leg_{where}_{rng.choice([4, 5])}_link", float(1.0 + sign * rng.uniform(0.03, 0.06)))
+    if kind == "link_length":         # thighs or shanks 3-6 % longer or shorter on both legs, or 1-2.5 % on one
+        where = str(rng.choice(["*", "*", "left", "right"]))   # (one shank 5 % short: the robot cannot stand)
+        size = rng.uniform(0.03, 0.06) if where == "*" else rng.uniform(0.01, 0.025)
+        return Hidden(kind, f"leg_{where}_{rng.choice([4, 5])}_link", float(1.0 + sign * size))
     if kind == "joint_axis":          # a hip, knee or ankle pitch axis tilted 3-7 degrees
         return Hidden(kind, str(rng.choice(LEG_PITCH_JOINTS)), float(sign * rng.uniform(0.05, 0.12)))
     raise InputError(f"unknown effect kind {kind!r} (known: {', '.join(KINDS)})")

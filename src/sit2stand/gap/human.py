@@ -30,7 +30,8 @@ from .select import Candidate, Selection, select
 from .dataset import fast_part_floor
 from .bounds import Limits, refusal
 from .candidates import MASS_PARAMS
-from .workflow import NO_DISCREPANCY, SIGNIFICANT_Z, UNEXPLAINED, effect_summary
+from .naming import effect_summary
+from .workflow import NO_DISCREPANCY, SIGNIFICANT_Z, UNEXPLAINED
 
 
 @dataclass

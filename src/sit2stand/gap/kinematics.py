@@ -1,25 +1,27 @@
-"""Kinematic calibration of the legs from the soles' closure: link length and joint axis errors.
+"""Kinematic calibration of the legs from the soles' closure: link length, joint axis and encoder offset errors.
 
 The inverse dynamics barely see a kinematic error (a 4 % longer shank moves lever arms by a centimetre), but the
-forward kinematics do. While a foot carries load it stays where it is on the floor; the measured base pose and joint
-angles, put through the nominal model, must then place its sole at the same point all along. What the sole's
-computed position does instead (``closure/<side>/<x|y|z>``: its departure from its median over the loaded samples
-of the recording, world axes, m) is what the model's leg kinematics get wrong. Its floor (``CLOSURE_FLOOR_M``) was
-measured on plants with nothing kinematic hidden: the soles' own compliance moves them by tenths of a millimetre.
+forward kinematics do. While a foot carries load, the points of its sole on the floor stay put: the sole point when
+the foot is flat, the edge (or corner) it rolls on when its COP is near one (:func:`contact_points`). The measured
+base pose and joint angles, put through the nominal model, must then place that point at the same place all along.
+What it does instead (``closure/<side>/<x|y|z>``: its departure from its median per recording and point, world axes,
+m) is what the model's leg kinematics get wrong. Its floor (``CLOSURE_FLOOR_M``) was measured on plants with nothing
+kinematic hidden: the soles' own compliance moves them by tenths of a millimetre.
 
-When the closure disagrees (some channel at ``SIGNIFICANT_Z`` floors), the leg's kinematic candidates are linearised
-by finite differences of the forward kinematics and chosen greedily (each the one that lowers the closure's squared
-residual most, while it lowers it by ``MIN_GAIN`` of what is left above the noise), then refined by Gauss-Newton on
-the true forward kinematics:
+When the closure disagrees (some channel at ``SIGNIFICANT_Z`` floors), the legs' kinematic candidates are
+linearised by finite differences of the forward kinematics and chosen greedily (:func:`_forward`), then refined by
+Gauss-Newton on the true forward kinematics:
 
 * ``link_length``: a leg link's offset from its parent joint scaled by ``value`` (one leg, or ``leg_*_<k>_link``:
   both legs by one factor, what a symmetric error is);
-* ``joint_axis``: a leg joint's axis tilted by ``value`` rad toward ``axis x z`` (``axis x x`` for a vertical axis)
-  and by ``value_2`` rad toward the axis crossed with that direction (as :func:`gap.effects.alter_model` applies it).
+* ``joint_axis``: a moving leg joint's axis tilted by ``value`` rad toward ``axis x z`` (``axis x x`` for a vertical
+  axis) and by ``value_2`` rad toward the axis crossed with that direction (as :func:`gap.effects.alter_model`);
+* ``joint_offset``: a moving leg joint's encoder offset (reading - true angle), so that an offset is not taken for a
+  length.
 
 Named only when the fit at least halves the closure's gap and stays inside ``BOUNDS``; channels it leaves above the
-floor are reported as unexplained ("kinematic"). The rest of the workflow then sees the named effects for real:
-the inverse dynamics with the altered model (:func:`kinematic_model`), the re-simulation with the altered plant.
+floor are reported as unexplained ("kinematic"). The workflow then evaluates the dynamics with the named lengths and
+axes (:func:`kinematic_model`) and re-simulates with the altered plant.
 """
 
 from __future__ import annotations
@@ -30,16 +32,19 @@ import numpy as np
 import pinocchio as pin
 
 from ..robot.model import SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M
+from .candidates import stack_rows
 from .dataset import Dataset
 from .effects import tilted_axis
-from .residuals import body_link_names
+from .residuals import body_link_names, evaluate
+from .select import Candidate
 from .unexplained import SIGNIFICANT_Z
 
 KINEMATIC_KINDS = ("link_length", "joint_axis")
 CLOSURE_AXES = ("x", "y", "z")
-# the closure's RMS on excitation runs with nothing kinematic hidden (seed 1): x 0.36, y 0.05, z 0.02 mm; with soles
-# 3 x softer 0.72, 0.09, 0.12 mm: floors above both, a kinematic error of a few percent gives millimetres
-CLOSURE_FLOOR_M = {"x": 0.0008, "y": 0.0003, "z": 0.0003}
+# the closure's RMS on excitation runs with nothing kinematic hidden (seed 1): x 0.32, y 0.06, z 0.03 mm; with soles
+# 3 x softer 0.72, 0.09, 0.12 mm. A kinematic error of a few percent gives millimetres (a 4.5 % longer shank: x 3.9,
+# z 1.3 mm; one shank 1.6 % short: z 0.6 mm)
+CLOSURE_FLOOR_M = {"x": 0.0006, "y": 0.0002, "z": 0.00015}
 LOADED_N = 100.0             # a foot with this much vertical load stays where it is
 FLAT_MARGIN_M = 0.02         # and lies flat while its centre of pressure is this far inside the sole
 STRIDE_S = 0.04              # one sample in this interval enters the fit (the closure is smooth)
@@ -49,6 +54,9 @@ MOVING_RAD = 0.1           # a joint whose angle spans this much in the recordin
 MIN_GAIN = 0.3               # a candidate lowers the closure's squared gap by this share of what is left
 MAX_EFFECTS = 4
 BOUNDS = {"link_length": (0.8, 1.2), "joint_axis": (-0.2, 0.2), "joint_offset": (-0.2, 0.2)}   # scale; rad; rad
+# the smallest error named: a length 0.5 % off (1-2 mm on a thigh or shank), an axis 0.6 degree off, an offset of 2 mrad
+# (a tilt of 0.004 rad was fitted to a foot sliding 2 mm on a plant with a knee axis 4.6 degrees off)
+SMALLEST = {"link_length": 0.005, "joint_axis": 0.01, "joint_offset": 0.002}
 FD_STEP = 1e-4
 
 
@@ -117,14 +125,16 @@ class Closure:
                 continue
             dt = float(np.median(np.diff(rec.t_s)))
             stride = max(1, int(round(STRIDE_S / dt)))
-            loaded = {s: (rec.wrench[s][:, 2] > LOADED_N) & _flat_foot(rec.wrench[s]) for s in SIDES}
+            loaded = {s: rec.wrench[s][:, 2] > LOADED_N for s in SIDES}
+            contact = {s: contact_points(rec.wrench[s]) for s in SIDES}
             q = rec.q.copy()
             for name, v in offsets.items():             # reading - true angle
                 q[:, rec.joint_names.index(name)] -= v
             for k in range(0, len(rec), stride):
                 if any(loaded[s][k] for s in SIDES):
                     self.samples.append((r, k, _pin_q(model, rec.joint_names, rec.base_pose[k], q[k]),
-                                         tuple(bool(loaded[s][k]) for s in SIDES)))
+                                         tuple(contact[s][0][k] if loaded[s][k] else None for s in SIDES),
+                                         tuple(int(contact[s][1][k]) for s in SIDES)))
         self.floor = np.tile([CLOSURE_FLOOR_M[a] for a in CLOSURE_AXES], len(SIDES))
 
     def positions(self, nominal: pin.Model, effects: list[dict]) -> np.ndarray:
@@ -138,35 +148,44 @@ class Closure:
                 shift[model.joints[model.getJointId(e["location"])].idx_q] += float(e["value"])
         frames = [model.getFrameId(f"sole_{s}") for s in SIDES]
         out = np.full((len(self.samples), len(SIDES), 3), np.nan)
-        for i, (_r, _k, q, loaded) in enumerate(self.samples):
+        for i, (_r, _k, q, points, _kind) in enumerate(self.samples):
             pin.framesForwardKinematics(model, data, q - shift)
             for j, f in enumerate(frames):
-                if loaded[j]:
-                    out[i, j] = data.oMf[f].translation
+                if points[j] is not None:
+                    out[i, j] = data.oMf[f].act(points[j])
         return out
 
     def residual(self, nominal: pin.Model, effects: list[dict]) -> np.ndarray:
         """(S, 6) each sole's departure from its median per recording, in floors (NaN where not used)."""
         p = self.positions(nominal, effects)
         rec = np.array([s[0] for s in self.samples])
-        for r in np.unique(rec):
-            m = rec == r
-            p[m] -= np.nanmedian(p[m], axis=0)
+        for j in range(len(SIDES)):
+            point = np.array([s[4][j] for s in self.samples])
+            for r, kind in {(a, b) for a, b in zip(rec, point)}:   # one median per point of the sole
+                used = (rec == r) & (point == kind) & np.isfinite(p[:, j, 0])
+                if used.any():
+                    p[used, j] -= np.median(p[used, j], axis=0)
         return p.reshape(len(self.samples), -1) / self.floor
 
     def z(self, res: np.ndarray) -> np.ndarray:
-        """(6,) each channel's RMS in floors."""
-        return np.sqrt(np.nanmean(res ** 2, axis=0))
+        """(6,) each channel's RMS in floors (0 where no sample was used)."""
+        used = np.isfinite(res)
+        ss = np.where(used, res, 0.0) ** 2
+        return np.sqrt(ss.sum(axis=0) / np.maximum(used.sum(axis=0), 1))
 
 
-def _flat_foot(wrench: np.ndarray) -> np.ndarray:
-    """(N,) whether the foot's centre of pressure is ``FLAT_MARGIN_M`` inside its sole: a foot rolling on an edge
-    turns about it, and its sole point moves although nothing is wrong (wrench: world axes, about the sole point;
-    the feet point forward)."""
+def contact_points(wrench: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per sample, the point of the sole that stays on the floor [m, sole frame] and which one it is (0: the sole
+    point, the foot flat; else an edge or a corner): a foot whose centre of pressure is within ``FLAT_MARGIN_M`` of
+    an edge rolls about it, and only the edge's points stay put (wrench: world axes, about the sole point; the feet
+    point forward)."""
     fz = np.maximum(wrench[:, 2], 1e-9)
-    cx, cy = -wrench[:, 4] / fz, wrench[:, 3] / fz
-    return (np.abs(cx - SOLE_CENTRE_X_M) <= SOLE_HALF_SIZE_M[0] - FLAT_MARGIN_M) & \
-        (np.abs(cy) <= SOLE_HALF_SIZE_M[1] - FLAT_MARGIN_M)
+    cx, cy = -wrench[:, 4] / fz - SOLE_CENTRE_X_M, wrench[:, 3] / fz
+    hx, hy = SOLE_HALF_SIZE_M[0], SOLE_HALF_SIZE_M[1]
+    sx = np.where(np.abs(cx) > hx - FLAT_MARGIN_M, np.sign(cx), 0.0)      # on the toe (+1) or heel (-1) edge
+    sy = np.where(np.abs(cy) > hy - FLAT_MARGIN_M, np.sign(cy), 0.0)      # on the left (+1) or right (-1) edge
+    points = np.column_stack([np.where(sx != 0, SOLE_CENTRE_X_M + sx * hx, 0.0), sy * hy, np.zeros(len(cx))])
+    return points, (sx + 1) * 3 + (sy + 1) - 4
 
 
 def _pin_q(model: pin.Model, names: list[str], base: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -243,26 +262,7 @@ def fit_kinematics(ds: Dataset, nominal: pin.Model, effects: list[dict], say) ->
     y0 = _flat(r0)
     pool = candidates(ds)
     lin = {c: _jacobian(closure, nominal, [c], np.zeros(c[2]), y0) for c in pool}
-    chosen: list[tuple[str, str, int]] = []
-    ssr = float(y0 @ y0)
-    noise = float(np.isfinite(r0).sum())
-    while len(chosen) < MAX_EFFECTS:
-        best = None
-        for c in pool:
-            if c in chosen or _overlaps(c, chosen):
-                continue
-            X = np.hstack([lin[d] for d in chosen + [c]])
-            theta, *_ = np.linalg.lstsq(X, -y0, rcond=None)
-            if not all(_inside(e) for e in _effects(chosen + [c], theta)):
-                continue                   # a fit past the bounds is no explanation (see BOUNDS)
-            s = float(np.sum((y0 + X @ theta) ** 2))
-            if best is None or s < best[0]:
-                best = (s, c)
-        if best is None or ssr <= noise or ssr - best[0] < MIN_GAIN * (ssr - noise):
-            break
-        ssr = best[0]
-        chosen.append(best[1])
-        say(f"    {best[1][0]} @ {best[1][1]}: closure squared residual {ssr / noise:.3g} per row")
+    chosen = _forward(pool, lin, y0, np.isfinite(r0), say)
     if not chosen:
         return [], report
     theta = _gauss_newton(closure, nominal, chosen, y0, np.hstack([lin[c] for c in chosen]))
@@ -281,6 +281,41 @@ def fit_kinematics(ds: Dataset, nominal: pin.Model, effects: list[dict], say) ->
     report["z_after"] = z1.tolist()
     report["unexplained"] = _unexplained(ds, closure, after)
     return found, report
+
+
+def _forward(pool, lin: dict, y0: np.ndarray, used: np.ndarray, say) -> list[tuple[str, str, int]]:
+    """Greedy choice on the linearised closure: while a channel is at ``SIGNIFICANT_Z`` floors, the candidate (fitted
+    with those chosen, within its bounds) that lowers those channels' squared residual most, if by ``MIN_GAIN`` of
+    their excess over the noise; a candidate that only polishes channels already below is not taken."""
+    chosen: list[tuple[str, str, int]] = []
+    fit = np.zeros_like(y0)
+    while len(chosen) < MAX_EFFECTS:
+        res = np.where(used, (y0 + fit).reshape(used.shape), np.nan)
+        over = np.zeros_like(used)
+        over[:, np.sqrt(np.nanmean(res ** 2, axis=0)) >= SIGNIFICANT_Z] = True
+        rows = (over & used).ravel()
+        if not rows.any():
+            break
+        now = float(np.sum((y0 + fit)[rows] ** 2))
+        best = None
+        for c in pool:
+            if c in chosen or _overlaps(c, chosen):
+                continue
+            X = np.hstack([lin[d] for d in chosen + [c]])
+            theta, *_ = np.linalg.lstsq(X, -y0, rcond=None)
+            effects = _effects(chosen + [c], theta)
+            if not all(_inside(e) for e in effects) or not _matters(effects[-1]):
+                continue                   # a fit past the bounds is no explanation (BOUNDS); a tiny one no answer
+            s = float(np.sum((y0 + X @ theta)[rows] ** 2))
+            if best is None or s < best[0]:
+                best = (s, c, X @ theta)
+        if best is None or now - best[0] < MIN_GAIN * max(now - rows.sum(), 0.0):
+            break
+        chosen.append(best[1])
+        fit = best[2]
+        say(f"    {best[1][0]} @ {best[1][1]}: the disagreeing channels' squared residual {now / rows.sum():.3g} -> "
+            f"{best[0] / rows.sum():.3g} per row")
+    return chosen
 
 
 def _overlaps(c, chosen) -> bool:
@@ -325,6 +360,12 @@ def _add_intervals(found: list[dict], cov: np.ndarray) -> None:
         i += 2 if e["kind"] == "joint_axis" else 1
 
 
+def _matters(e: dict) -> bool:
+    """Whether an estimate is at least its kind's ``SMALLEST``: below, a fit only follows a foot's slip."""
+    size = abs(e["value"] - 1.0) if e["kind"] == "link_length" else float(np.hypot(e["value"], e.get("value_2", 0.0)))
+    return size >= SMALLEST[e["kind"]]
+
+
 def _gap(z: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.maximum(z ** 2 - 1.0, 0.0))))
 
@@ -359,4 +400,53 @@ def _unexplained(ds: Dataset, closure: Closure, res: np.ndarray) -> list[dict]:
                         "above_s": [float(t[big][0]), float(t[big][-1])] if big.any() else None,
                         "shape": "kinematic: the loaded sole moves under the model's forward kinematics (a foot "
                                  "sliding, or a kinematic error the library lacks)"})
+    return out
+
+
+# -- the dynamics' share -------------------------------------------------------------------------------------------
+# The closure places a tilt within a few percent; the torques are far more sensitive to it (a hip axis 2 % short of
+# its true tilt of 0.078 rad left the base's roll moment at 5.8 floors, the true one at 1). So each named parameter
+# also enters the dynamics' selection as a correction with its linear signature: chosen there, it is fitted jointly
+# with the dynamic effects (not against them) and added to the closure's value.
+CORRECTION_BOUND = {"link_length": 0.02, "joint_axis": 0.02}    # |correction|: scale; rad
+
+
+def correction_candidates(ds: Dataset, nominal: pin.Model, kinematic: list[dict]) -> list[Candidate]:
+    """One candidate per named kinematic effect: the dynamics' residual change per unit of its parameters (finite
+    differences about the closure's estimate; the controller channels do not change)."""
+    out = []
+    base = [evaluate(kinematic_model(nominal, kinematic), rec, seated=np.isin(lab, ["seated", "seat-off"]),
+                     offsets=False, signatures=False).e for rec, lab in zip(ds.recordings, ds.labels)]
+    for i, e in enumerate(kinematic):
+        names = ["value"] + (["value_2"] if e["kind"] == "joint_axis" else [])
+        cols = [np.zeros(ev.e.shape + (len(names),)) for ev in ds.evaluations]
+        for k, key in enumerate(names):
+            moved = [dict(d) for d in kinematic]
+            moved[i][key] = float(moved[i].get(key, 0.0)) + FD_STEP
+            model = kinematic_model(nominal, moved)
+            for r, (rec, lab) in enumerate(zip(ds.recordings, ds.labels)):
+                ev = evaluate(model, rec, seated=np.isin(lab, ["seated", "seat-off"]), offsets=False,
+                              signatures=False)
+                cols[r][:, :ev.e.shape[1], k] = -(ev.e - base[r]) / FD_STEP   # the residual an error leaves
+        bound = CORRECTION_BOUND[e["kind"]]
+        out.append(Candidate(e["kind"], e["location"], [f"correction of {n}" for n in names], stack_rows(ds, cols),
+                             plausible=lambda th, b=bound: None if np.all(np.abs(th) <= b) else
+                             f"a correction past {b} of the closure's estimate", columns=cols))
+    return out
+
+
+def corrected(kinematic: list[dict], chosen) -> list[dict]:
+    """The closure's kinematic effects with the dynamics' corrections (``chosen``: selected candidates of their
+    kinds) added."""
+    out = [dict(e) for e in kinematic]
+    for s in chosen:
+        e = next(d for d in out if d["kind"] == s.candidate.kind and d["location"] == s.candidate.location)
+        e["value"] += float(s.theta[0])
+        if len(s.theta) > 1:
+            e["value_2"] += float(s.theta[1])
+        se = np.sqrt(np.clip(np.diag(s.cov), 0.0, None))
+        e["ci95"] = 1.96 * float(se[0])
+        if len(se) > 1:
+            e["ci95_2"] = 1.96 * float(se[1])
+        e["refined"] = "by the dynamics"
     return out

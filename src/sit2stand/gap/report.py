@@ -24,7 +24,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from .resimulate import compare
-from .workflow import GapResult, describe, load_nominal, plain_data, run, write_augmented
+from .naming import describe
+from .workflow import GapResult, load_nominal, plain_data, run, write_augmented
 
 PHASE_COLOURS = {"seated": "#dde8f5", "seat-off": "#f5dcc8", "rising": "#f7f0c8", "standing": "#ddf2dd",
                  "moving": "#f2f2f2", "still": "#ffffff", "static": "#ffffff"}

@@ -46,6 +46,7 @@ class Candidate:
     X: np.ndarray
     members: list[str] = field(default_factory=list)
     plausible: Callable[[np.ndarray], str | None] | None = None   # why an estimate is not physical (None: it is)
+    columns: list[np.ndarray] | None = None    # per recording (N, C, p) unweighted, where no library kind gives them
 
     @property
     def key(self) -> str:

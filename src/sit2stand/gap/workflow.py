@@ -26,7 +26,7 @@ The workflow reads only the bags and the nominal model: never the plant's ``unmo
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -40,9 +40,10 @@ from .recording import RecordingError
 from .effects import unmodeled_dict, unmodeled_from
 from .residuals import body_link_names
 from .bounds import RESIDUE
-from .candidates import UNITS, build_candidates, series_ids, stack_rows
+from .candidates import build_candidates, series_ids, stack_rows
 from .contact import fit_contact
-from .kinematics import KINEMATIC_KINDS, fit_kinematics, kinematic_model
+from .kinematics import KINEMATIC_KINDS, correction_candidates, corrected, fit_kinematics, kinematic_model
+from .naming import describe, effect_summary
 from .select import MIN_SHARE, Candidate, Selection, select
 from .symmetry import lopsided
 from .unexplained import SIGNIFICANT_Z, contact_note, where_and_shape
@@ -140,64 +141,6 @@ def ranked_table(ds: Dataset, residuals: list[np.ndarray]) -> list[dict]:
     return rows
 
 
-def effect_summary(sel: Selection) -> list[dict]:
-    """The chosen effects in physical terms with 95 % intervals (1.96 standard errors; position by the delta
-    method from the mass and first moment)."""
-    out = []
-    for s in sel.effects:
-        c = s.candidate
-        d = {"kind": c.kind, "location": c.location, "share_of_gap": s.gain, "delta_bic": s.delta_bic,
-             "alternatives": s.alternatives}
-        se = np.sqrt(np.clip(np.diag(s.cov), 0, None))
-        if c.kind == "extra_mass":
-            m, mc = float(s.theta[0]), s.theta[1:]
-            pos = mc / m if abs(m) > 1e-6 else np.full(3, np.nan)
-            J = np.zeros((3, 4))           # d(mc/m) / d(m, mc)
-            J[:, 0] = -mc / m ** 2
-            J[:, 1:] = np.eye(3) / m
-            pos_se = np.sqrt(np.clip(np.diag(J @ s.cov @ J.T), 0, None))
-            d.update({"members": c.members, "mass_kg": m, "mass_ci95_kg": 1.96 * float(se[0]),
-                      "pos_m": pos.tolist(), "pos_ci95_m": (1.96 * pos_se).tolist()})
-        else:
-            v = float(s.theta[0])
-            if c.kind in ("torque_gain", "mass_scale"):   # fitted as the departure from 1
-                d.update({"value": 1.0 + v, "ci95": 1.96 * float(se[0]),
-                          "unit": "measured / true" if c.kind == "torque_gain" else UNITS[c.kind]})
-            elif c.kind == "joint_spring":    # k and the preload -k q_rest
-                k = v
-                d.update({"value": k, "ci95": 1.96 * float(se[0]), "unit": UNITS[c.kind],
-                          "rest_rad": -float(s.theta[1]) / k if abs(k) > 1e-9 else 0.0})
-            elif c.kind == "ft_bias":
-                d.update({"value": v, "ci95": 1.96 * float(se[0]),
-                          "unit": "N" if c.location.endswith(("fx", "fy", "fz")) else "N m"})
-            else:
-                d.update({"value": v, "ci95": 1.96 * float(se[0]), "unit": UNITS[c.kind]})
-        out.append(d)
-    return out
-
-
-def describe(effect: dict) -> str:
-    """One line naming an effect for a person."""
-    k = effect["kind"]
-    if k == "extra_mass":
-        p = effect["pos_m"]
-        members = [m for m in effect["members"] if m != effect["location"]]
-        group = f" (rigid in these data with {', '.join(members)})" if members else ""
-        return (f"extra mass on {effect['location']}{group}: {effect['mass_kg']:.2f} +- {effect['mass_ci95_kg']:.2f} "
-                f"kg at ({p[0]:+.3f}, {p[1]:+.3f}, {p[2]:+.3f}) m in the link frame")
-    label = {"viscous_friction": "viscous friction", "coulomb_friction": "Coulomb friction",
-             "torque_bias": "torque-sensor bias", "torque_gain": "torque-sensor gain",
-             "joint_offset": "encoder offset", "ft_bias": "force/torque sensor bias (sensor axes)",
-             "actuator_delay": "actuator delay", "joint_spring": "joint spring", "rotor_inertia": "rotor inertia",
-             "contact_softness": "soles' contact time constant (MuJoCo solref; the model's 0.02 s)",
-             "link_length": "link length (its offset from the parent joint, scaled)",
-             "joint_axis": "joint axis tilt (toward axis x z)"}[k]
-    text = f"{label} at {effect['location']}: {effect['value']:.4g} +- {effect['ci95']:.2g} {effect['unit']}"
-    if k == "joint_axis":
-        text += f", and {effect['value_2']:.4g} +- {effect['ci95_2']:.2g} rad toward the axis x (axis x z)"
-    return text
-
-
 def _after(ds: Dataset, sel: Selection, cands_unweighted) -> list[np.ndarray]:
     """Residual of the augmented model along each recording: the nominal residual minus each effect's signature
     times its estimate (exact for masses without their rotational inertia, friction, biases and gains; first order
@@ -241,16 +184,19 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
     if any(r.static for r in ds.recordings):
         _static_floors(ds, cands)
         cands = build_candidates(calibrated, ds)
+    cands += correction_candidates(ds, model, kinematic)
     sel, refused = _select_checked(ds, cands, links, say)
     refused += closure["refused"]
+    kinematic = corrected(kinematic, [s for s in sel.effects if s.candidate.kind in KINEMATIC_KINDS])
     table = ranked_table(ds, nominal)
     pairs = [(d["recording"], ds.channels.index(d["channel"]), d["phase"]) for d in table if d["z"] >= SIGNIFICANT_Z]
-    effects, exact = _confirm_exact(ds, model, kinematic + effect_summary(sel), known, refused, say)
+    dynamic = replace(sel, effects=[s for s in sel.effects if s.candidate.kind not in KINEMATIC_KINDS])
+    effects, exact = _confirm_exact(ds, model, kinematic + effect_summary(dynamic), known, refused, say)
     sims = {}
     if replay and source == "cad" and any(r.commands is not None and not r.static for r in ds.recordings):
         effects, exact, sims = _confirm_replay(ds, model, effects, exact, refused, say)
     sel.effects = [s for s in sel.effects if s.candidate.key in {f"{e['kind']}@{e['location']}" for e in effects}]
-    first_order = _after(ds, sel, lambda r, c: effect_columns(ds, links, r, c.kind, c.location))
+    first_order = _after(ds, sel, lambda r, c: _columns(ds, links, r, c))
     rms_b = np.array([_rms(e, ev.valid) for e, ev in zip(nominal, ds.evaluations)])
     rms_a = np.array([_rms(e, ev.valid) for e, ev in zip(exact, ds.evaluations)])
     g0 = gap_size(nominal, ds, pairs)
@@ -277,8 +223,8 @@ def _select_checked(ds: Dataset, cands: list[Candidate], links: list[str], say) 
         sel = select(y, pool, series_id=sid, noise_rss=float(len(y)), progress=say)
         bad = [(s.candidate.key, why) for s in sel.effects
                if s.candidate.plausible and (why := s.candidate.plausible(s.theta)) is not None]
-        bad += lopsided(ds, sel.effects, lambda r, s: np.tensordot(
-            effect_columns(ds, links, r, s.candidate.kind, s.candidate.location), s.theta, axes=(2, 0)))
+        bad += lopsided(ds, sel.effects, lambda r, s: np.tensordot(_columns(ds, links, r, s.candidate), s.theta,
+                                                                   axes=(2, 0)))
         for key, why in bad:
             say(f"  refused {key}: {why}")
             refused.append({"effect": key, "why": why})
@@ -291,6 +237,11 @@ def _select_checked(ds: Dataset, cands: list[Candidate], links: list[str], say) 
                 and not step.get("why", "").startswith(RESIDUE):
             refused.append({"effect": step["implausible"], "why": step.get("why", "implausible")})
     return sel, refused
+
+
+def _columns(ds: Dataset, links: list[str], r: int, c: Candidate) -> np.ndarray:
+    """(N, C, p) candidate ``c``'s signature along recording ``r``, physical units."""
+    return c.columns[r] if c.columns is not None else effect_columns(ds, links, r, c.kind, c.location)
 
 
 def _weighted_rss(es: list[np.ndarray], ds: Dataset) -> float:
