@@ -19,9 +19,10 @@ Gauss-Newton on the true forward kinematics:
 * ``joint_offset``: a moving leg joint's encoder offset (reading - true angle), so that an offset is not taken for a
   length.
 
-Named only when the fit at least halves the closure's gap and stays inside ``BOUNDS``; channels it leaves above the
-floor are reported as unexplained ("kinematic"). The workflow then evaluates the dynamics with the named lengths and
-axes (:func:`kinematic_model`) and re-simulates with the altered plant.
+Named when the refined fit stays inside ``BOUNDS`` and each effect is at least its kind's ``SMALLEST``; channels
+it leaves above the floor are reported as unexplained ("kinematic": a foot that slid is one). The workflow then
+evaluates the dynamics with the named lengths and axes (:func:`kinematic_model`), lets them refine the values
+(:func:`correction_candidates`) and re-simulates with the altered plant.
 """
 
 from __future__ import annotations
@@ -265,17 +266,20 @@ def fit_kinematics(ds: Dataset, nominal: pin.Model, effects: list[dict], say) ->
     chosen = _forward(pool, lin, y0, np.isfinite(r0), say)
     if not chosen:
         return [], report
-    theta = _gauss_newton(closure, nominal, chosen, y0, np.hstack([lin[c] for c in chosen]))
-    found = _effects(chosen, theta)
+    while True:                    # refined on the true kinematics; what comes out below SMALLEST is dropped
+        theta = _gauss_newton(closure, nominal, chosen, y0, np.hstack([lin[c] for c in chosen]))
+        found = _effects(chosen, theta)
+        keep = [c for c, e in zip(chosen, found) if _matters(e)]
+        if len(keep) == len(chosen) or not keep:
+            break
+        chosen = keep
     after = closure.residual(nominal, found)
-    z0, z1 = np.array(report["z_before"]), closure.z(after)
-    gap0, gap1 = _gap(z0), _gap(z1)
-    bad = [_describe_bound(e) for e in found if not _inside(e)]
-    if bad or gap1 > 0.5 * gap0:
-        why = "; ".join(bad) if bad else f"the closure's gap only {gap0:.3g} -> {gap1:.3g}"
-        report["refused"] = [{"effect": f"{e['kind']}@{e['location']}", "why": why} for e in found]
-        say(f"  kinematic fit not named: {why}")
+    bad = [_describe_bound(e) for e in found if not _inside(e) or not _matters(e)]
+    if bad:
+        report["refused"] = [{"effect": f"{e['kind']}@{e['location']}", "why": "; ".join(bad)} for e in found]
+        say(f"  kinematic fit not named: {'; '.join(bad)}")
         return [], report
+    z1 = closure.z(after)
     cov = _covariance(closure, nominal, chosen, theta, after)
     _add_intervals(found, cov)
     report["z_after"] = z1.tolist()
@@ -366,10 +370,6 @@ def _matters(e: dict) -> bool:
     return size >= SMALLEST[e["kind"]]
 
 
-def _gap(z: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.maximum(z ** 2 - 1.0, 0.0))))
-
-
 def _inside(e: dict) -> bool:
     lo, hi = BOUNDS[e["kind"]]
     return all(lo <= float(e.get(k, 1.0 if e["kind"] == "link_length" else 0.0)) <= hi for k in ("value", "value_2"))
@@ -377,6 +377,8 @@ def _inside(e: dict) -> bool:
 
 def _describe_bound(e: dict) -> str:
     lo, hi = BOUNDS[e["kind"]]
+    if not _matters(e):
+        return f"{e['kind']}@{e['location']} below the smallest error named ({SMALLEST[e['kind']]})"
     return f"{e['kind']}@{e['location']} past its bounds [{lo}, {hi}]"
 
 
@@ -435,9 +437,9 @@ def correction_candidates(ds: Dataset, nominal: pin.Model, kinematic: list[dict]
     return out
 
 
-def corrected(kinematic: list[dict], chosen) -> list[dict]:
+def corrected(kinematic: list[dict], chosen, say) -> list[dict]:
     """The closure's kinematic effects with the dynamics' corrections (``chosen``: selected candidates of their
-    kinds) added."""
+    kinds) added; one that comes out below its kind's ``SMALLEST`` is dropped."""
     out = [dict(e) for e in kinematic]
     for s in chosen:
         e = next(d for d in out if d["kind"] == s.candidate.kind and d["location"] == s.candidate.location)
@@ -449,4 +451,7 @@ def corrected(kinematic: list[dict], chosen) -> list[dict]:
         if len(se) > 1:
             e["ci95_2"] = 1.96 * float(se[1])
         e["refined"] = "by the dynamics"
+    for e in [e for e in out if not _matters(e)]:
+        say(f"  {e['kind']}@{e['location']}: below the smallest error named once the dynamics refined it")
+        out.remove(e)
     return out

@@ -187,7 +187,7 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
     cands += correction_candidates(ds, model, kinematic)
     sel, refused = _select_checked(ds, cands, links, say)
     refused += closure["refused"]
-    kinematic = corrected(kinematic, [s for s in sel.effects if s.candidate.kind in KINEMATIC_KINDS])
+    kinematic = corrected(kinematic, [s for s in sel.effects if s.candidate.kind in KINEMATIC_KINDS], say)
     table = ranked_table(ds, nominal)
     pairs = [(d["recording"], ds.channels.index(d["channel"]), d["phase"]) for d in table if d["z"] >= SIGNIFICANT_Z]
     dynamic = replace(sel, effects=[s for s in sel.effects if s.candidate.kind not in KINEMATIC_KINDS])
