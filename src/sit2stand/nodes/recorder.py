@@ -27,8 +27,12 @@ subscribe anew. Other topics are found by polling the graph. Subscriptions take 
 cleanly (summary and metadata.yaml written).
 
 Losses are counted, never silent: each subscription keeps up to 100,000 samples not yet taken (recorder_fastdds.xml),
-and a sample a publisher dropped from its queue before the recorder had it (the DDS message-lost event) is counted
-per topic, logged, stored in the bag's ``custom_data`` as ``lost_messages``, and makes the node exit 1. A latched
+and a sample a publisher dropped from its queue before the recorder had it (the DDS message-lost status) is counted
+per topic when the recorder closes, logged, stored in the bag's ``custom_data`` as ``lost_messages``, and makes the
+node exit 1. The status is read once, at close, not from the executor while messages flow: the pinned rmw_fastrtps
+(8.4.3) deadlocks when it takes that event while DDS reports a new loss (an AB-BA lock order between
+``rmw_take_event`` and ``on_sample_lost``, fixed upstream in ros2/rmw_fastrtps#890); a recorder that fell behind
+hung there, its bag unclosed, in 2 of ~8 full test runs. A latched
 state topic (depth 1: the subject, the scaling, the descriptions) keeps only its newest sample by design: a sample a
 newer one replaced is stored as ``superseded_latched_messages`` and is not an error.
 """
@@ -40,7 +44,8 @@ import re
 import time
 from pathlib import Path
 
-from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.event_handler import QoSSubscriptionEventType
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -110,6 +115,7 @@ class Recorder(Node):
         self.subs = {}
         self.unconfirmed: dict[str, tuple[str, QoSProfile]] = {}   # subscribed before a publisher was seen
         self.lost: dict[str, int] = {}
+        self.lost_status: dict[str, object] = {}     # topic -> its subscription's message-lost status (DDS)
         self.superseded: dict[str, int] = {}      # latched states replaced before the recorder took them
         self.skipped: set[str] = set()
         self.finished = False
@@ -168,6 +174,7 @@ class Recorder(Node):
             return False
         self.get_logger().info(f"subscribing to {topic} anew: its publishers offer {msgtype}, "
                                f"{'best effort' if qos.reliability == 1 else 'reliable'} or volatile")
+        self.lost_status.pop(topic, None)      # it matched no publisher: it took nothing, it lost nothing
         self.destroy_subscription(self.subs.pop(topic))
         return True
 
@@ -186,18 +193,29 @@ class Recorder(Node):
                                f"{'reliable' if qos.reliability == 1 else 'best effort'})")
 
     def _subscribe(self, topic: str, name: str, cls, qos: QoSProfile) -> None:
-        events = SubscriptionEventCallbacks(message_lost=lambda info, t=topic: self._on_lost(t, info))
-        self.subs[topic] = self.create_subscription(
-            cls, name, lambda data, t=topic: self._on_message(t, data), qos, raw=True, event_callbacks=events)
+        sub = self.create_subscription(cls, name, lambda data, t=topic: self._on_message(t, data), qos, raw=True)
+        self.subs[topic] = sub
+        with sub.handle:        # read at close only (see the module docstring), never put in the executor's wait set
+            self.lost_status[topic] = _rclpy.EventHandle(sub.handle,
+                                                         QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST)
+
+    def _take_lost(self) -> None:
+        """Each subscription's message-lost count since it was made, into ``lost`` / ``superseded``."""
+        for topic, event in self.lost_status.items():
+            with event:
+                info = event.take_event()
+            if info is not None and info.total_count:
+                self._on_lost(topic, info.total_count)
+        self.lost_status.clear()
 
     def _add_to_bag(self, topic: str, msgtype: str, qos: QoSProfile) -> None:
         self.writer.add_topic(topic, msgtype, [qos_to_bag(qos)])
 
-    def _on_lost(self, topic: str, info) -> None:
+    def _on_lost(self, topic: str, count: int) -> None:
         if topic in LATCHED_TOPICS:     # a state kept at depth 1: a newer one replaced it, by design; noted only
-            self.superseded[topic] = self.superseded.get(topic, 0) + info.total_count_change
+            self.superseded[topic] = self.superseded.get(topic, 0) + count
             return
-        self.lost[topic] = self.lost.get(topic, 0) + info.total_count_change
+        self.lost[topic] = self.lost.get(topic, 0) + count
         self.exit_code = 1
 
     def _on_message(self, topic: str, data: bytes) -> None:
@@ -219,13 +237,12 @@ class Recorder(Node):
     def _log_counts(self) -> None:
         counts = ", ".join(f"{t}: {n}" for t, n in sorted(self.writer.counts.items()))
         self.get_logger().info(f"recorded {sum(self.writer.counts.values())} messages ({counts})")
-        if self.lost:
-            self.get_logger().error(f"lost {sum(self.lost.values())} messages so far ({self._lost_text()})")
 
     def close(self) -> None:
         if self._closed:
             return
         self._closed = True
+        self._take_lost()
         for sub in self.subs.values():
             self.destroy_subscription(sub)
         if self._early:        # use_sim_time and never a /clock: kept, at log time 0, rather than lost

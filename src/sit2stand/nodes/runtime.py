@@ -308,6 +308,7 @@ def node_main(factory: Callable[[], Node]) -> Callable[[list[str] | None], int]:
                 if closer is not None:
                     try:
                         closer()
+                        code = code or int(getattr(node, "exit_code", 0))   # what closing found (a recorder's losses)
                     except Exception as err:  # noqa: BLE001 - report, still shut down
                         print(f"[{node.get_name()}] error while closing: {err}", file=sys.stderr, flush=True)
                         code = code or 1
