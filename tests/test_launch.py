@@ -249,3 +249,23 @@ def test_every_node_module_launches_as_a_sit2stand_node(tmp_path):
     for exe in sorted(modules):
         (node,) = load_graph(graph_file(tmp_path, [{"name": "n", "executable": exe}]), {}).nodes
         assert node.command[1:3] == ["-m", f"sit2stand.nodes.{exe}"]
+
+
+def test_a_node_that_said_its_result_and_died_in_teardown_is_judged_by_what_it_said(tmp_path):
+    """A node prints its result before DDS teardown (launch.NODE_RESULT); teardown may hang and the process end by a
+    signal or exit 1 (two CI runs: a good stand-up failed by the driver's exit -15). The job is judged by the result
+    said; a node that said a failure still fails it."""
+    said = tmp_path / "said.py"
+    said.write_text(textwrap.dedent(f"""\
+        #!{sys.executable}
+        import sys
+        print("[{{}}] result: exit {{}}; tearing down DDS".format(sys.argv[1], sys.argv[2]), flush=True)
+        sys.exit(1)                 # the teardown's end, not the node's result
+        """))
+    said.chmod(0o755)
+    for told, job in (("0", 0), ("2", 1)):
+        proc = run_launch(tmp_path, [{"name": "node", "executable": str(said), "arguments": ["node", told],
+                                      "on_exit": "shutdown"}])
+        out, _ = proc.communicate(timeout=30)
+        assert proc.returncode == job, out
+        assert f"node said exit {told}, then its DDS teardown ended it with 1: judged by what it said" in out

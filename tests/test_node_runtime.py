@@ -33,3 +33,16 @@ def test_a_quick_teardown_returns_to_the_caller():
     result = subprocess.run([sys.executable, "-c", quick], capture_output=True, text=True, timeout=30)
     assert result.returncode == 0, result.stderr
     assert "DDS teardown" not in result.stderr
+
+
+# a teardown that blocks in native code holding Python's lock (ctypes.PyDLL keeps it): no Python thread runs, the
+# bound's timer neither; faulthandler's native thread ends the process after printing where it hung
+GIL_HELD_TEARDOWN = BLOCKED_TEARDOWN.replace("time.sleep(60.0)", "import ctypes; ctypes.PyDLL(None).sleep(60)") \
+    .replace("runtime.TEARDOWN_LIMIT_S = 0.5", "runtime.TEARDOWN_LIMIT_S = 0.5; runtime.TEARDOWN_HARD_LIMIT_S = 1.0")
+
+
+def test_a_teardown_blocked_holding_pythons_lock_still_ends_after_saying_its_result():
+    result = subprocess.run([sys.executable, "-c", GIL_HELD_TEARDOWN], capture_output=True, text=True, timeout=30)
+    assert result.returncode == 1, result.stderr
+    assert "[stuck] result: exit 3; tearing down DDS" in result.stdout
+    assert "destroy_node" in result.stderr          # faulthandler's traceback: where it hung

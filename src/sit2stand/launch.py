@@ -337,6 +337,17 @@ def _set_parent_death_signal() -> None:
         pass
 
 
+# A node's last words before its DDS teardown (``nodes.runtime``): its result. Teardown can hang inside the middleware
+# holding Python's lock (two CI runs: a driver whose stand-up was good, killed by SIGTERM after its grace); a node
+# that said its result and then died in teardown is judged by what it said.
+NODE_RESULT = re.compile(r"^\[(?P<name>[\w.-]+)\] result: exit (?P<code>-?\d+); tearing down DDS$")
+
+
+def node_result_line(name: str, code: int) -> str:
+    """The line a node prints with its result, just before its DDS teardown (``NODE_RESULT``)."""
+    return f"[{name}] result: exit {code}; tearing down DDS"
+
+
 def _child_setup(scheduling: Scheduling | None) -> None:
     """In the child, before exec: the parent death signal, and the scheduling class if permitted (the launcher
     checks afterwards whether it took)."""
@@ -353,6 +364,7 @@ class Launcher:
         self.grace_s = grace_s
         self.out = out or sys.stdout
         self.procs: dict[str, subprocess.Popen] = {}
+        self.reported: dict[str, int] = {}       # node -> the result it said before its teardown (NODE_RESULT)
         self._stop = threading.Event()
         self._print_lock = threading.Lock()
         self._readers: list[threading.Thread] = []
@@ -370,8 +382,22 @@ class Launcher:
 
     def _pump(self, name: str, stream) -> None:
         for raw in iter(stream.readline, b""):
-            self._emit(name, raw.decode(errors="replace"))
+            line = raw.decode(errors="replace")
+            said = NODE_RESULT.match(line.strip())
+            if said:
+                self.reported[name] = int(said["code"])
+            self._emit(name, line)
         stream.close()
+
+    def _failed(self, name: str, returncode: int, sent_sigint: bool = False) -> bool:
+        """Whether a node that ended with ``returncode`` failed: by its code, or, when it said its result and then
+        died in DDS teardown (killed, or its teardown bound expired), by what it said."""
+        said = self.reported.get(name)
+        if said is not None and returncode != said:
+            self._emit("launch", f"{name} said exit {said}, then its DDS teardown ended it with {returncode}: "
+                                 f"judged by what it said")
+            return said != 0
+        return returncode not in ((0, -signal.SIGINT) if sent_sigint else (0,))
 
     def _start(self, spec: NodeSpec) -> None:
         env = dict(os.environ)
@@ -441,12 +467,13 @@ class Launcher:
             if proc is None or proc.returncode is not None or proc.poll() is None:
                 continue
             self._emit("launch", f"{spec.name} exited with code {proc.returncode}")
-            if proc.returncode != 0:
+            bad = self._failed(spec.name, proc.returncode)
+            if bad:
                 failed.append(spec.name)
-            if spec.shutdown_on_exit or (proc.returncode != 0 and not spec.continue_on_failure):
+            if spec.shutdown_on_exit or (bad and not spec.continue_on_failure):
                 self._emit("launch", f"stopping the graph ({spec.name} ended)")
                 self._stop.set()
-            elif proc.returncode != 0:
+            elif bad:
                 self._emit("launch", f"the graph goes on without {spec.name} (on_exit: continue); the job has failed")
         return failed
 
@@ -471,7 +498,7 @@ class Launcher:
             for name, proc in list(alive.items()):
                 if proc.poll() is not None:
                     self._emit("launch", f"{name} exited with code {proc.returncode}")
-                    if proc.returncode not in (0, -signal.SIGINT):
+                    if self._failed(name, proc.returncode, sent_sigint=True):
                         bad.append(name)
                     del alive[name]
                 elif escalation[name] and time.monotonic() - t0 > escalation[name][0][0]:

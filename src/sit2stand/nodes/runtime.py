@@ -7,6 +7,7 @@ console script (``replayer --ros-args -p bag:=...``), as ``python -m sit2stand.n
 
 from __future__ import annotations
 
+import faulthandler
 import importlib
 import json
 import math
@@ -32,6 +33,7 @@ from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, Qo
 
 from ..errors import Sit2StandError
 from ..io.topics import GRAPH_TOPIC, RUN_ID_ENV
+from ..launch import node_result_line
 
 
 class NodeError(Sit2StandError, RuntimeError):
@@ -319,16 +321,21 @@ def node_main(factory: Callable[[], Node]) -> Callable[[list[str] | None], int]:
     return main
 
 
-# A node's results are written by close(); what follows is DDS teardown, which can block: a CI run saw a driver hang
-# over 10 s in it after its summary, and the launcher's SIGTERM turned a good run into exit -15 (Fast DDS and
+# A node's results are written by close(); what follows is DDS teardown, which can block: two full runs saw a driver
+# hang over 10 s in it after its summary, and the launcher's SIGTERM turned a good run into exit -15 (Fast DDS and
 # Cyclone both have such reports: eProsima/Fast-DDS#235, ros2/rmw_cyclonedds#104)
 TEARDOWN_LIMIT_S = 5.0
+# a teardown blocked in the middleware holding Python's lock stops every Python thread, the bound's too: faulthandler's
+# native thread then prints where it hangs and ends the process (exit 1); the launcher judges the node by its result
+# line (launch.NODE_RESULT)
+TEARDOWN_HARD_LIMIT_S = TEARDOWN_LIMIT_S + 2.0
 
 
 def _bounded_teardown(node: Node, code: int) -> None:
-    """Destroy ``node``; if DDS teardown (with rclpy's shutdown after it) takes over TEARDOWN_LIMIT_S, say so and
-    leave the process with ``code``, the node's own result."""
+    """Say the node's result, then destroy it; if DDS teardown (with rclpy's shutdown after it) takes over
+    TEARDOWN_LIMIT_S, say so and leave the process with ``code``, the node's own result."""
     name = node.get_name()
+    print(node_result_line(name, code), flush=True)
 
     def leave() -> None:
         print(f"[{name}] DDS teardown did not finish in {TEARDOWN_LIMIT_S:g} s; leaving without it (exit {code})",
@@ -339,6 +346,8 @@ def _bounded_teardown(node: Node, code: int) -> None:
     watchdog = threading.Timer(TEARDOWN_LIMIT_S, leave)
     watchdog.daemon = True
     watchdog.start()
+    faulthandler.dump_traceback_later(TEARDOWN_HARD_LIMIT_S, exit=True)
     node.destroy_node()
     rclpy.try_shutdown()
+    faulthandler.cancel_dump_traceback_later()
     watchdog.cancel()
