@@ -15,7 +15,7 @@ import pytest
 
 from sit2stand.data import folder
 from sit2stand.io.c3d import read_c3d, write_trial_bag
-from sit2stand.launch import Scheduling
+from sit2stand.scheduling import Scheduling
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL = (ROOT / ".." / "shared" / "data" / "real").resolve()

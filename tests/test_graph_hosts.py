@@ -17,7 +17,7 @@ import pytest
 from conftest import GRAPHS, try_fifo
 from live_support import capture_origin_ns, latencies_ms, p50_p99
 from sit2stand.data import plant_path
-from sit2stand.launch import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY
+from sit2stand.scheduling import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY
 from sit2stand.io.bag import BagReader
 
 pytestmark = pytest.mark.graph

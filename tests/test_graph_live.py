@@ -12,7 +12,7 @@ from conftest import GRAPHS, NodeProcess
 from live_support import capture_origin_ns, latencies_ms, p50_p99
 from sit2stand.data import plant_path
 from sit2stand.io.bag import BagReader
-from sit2stand.launch import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY
+from sit2stand.scheduling import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY
 
 pytestmark = pytest.mark.graph
 LOSS_TOLERATED = 50

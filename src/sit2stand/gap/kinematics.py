@@ -92,7 +92,7 @@ def _tilt(model: pin.Model, jid: int, t1: float, t2: float) -> None:
     turned back, so that at zero angle the links stay where they were and the motion is about the tilted axis."""
     a = _joint_axis(model, jid)
     b = tilted_axis(a, t1, t2)
-    r0 = _rotation_between(a, b)
+    r0 = pin.Quaternion.FromTwoVectors(a, b).matrix()       # about their common normal
     back = pin.SE3(r0.T, np.zeros(3))
     model.jointPlacements[jid] = model.jointPlacements[jid] * pin.SE3(r0, np.zeros(3))
     model.inertias[jid] = back.act(model.inertias[jid])
@@ -106,21 +106,12 @@ def _tilt(model: pin.Model, jid: int, t1: float, t2: float) -> None:
             model.frames[f] = frame
 
 
-def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The rotation taking unit vector ``a`` to unit vector ``b`` about their common normal."""
-    n = np.cross(a, b)
-    s = np.linalg.norm(n)
-    if s < 1e-12:
-        return np.eye(3)
-    return pin.exp3(n / s * np.arctan2(s, float(np.dot(a, b))))
-
-
 # -- the closure -----------------------------------------------------------------------------------------------------
 class Closure:
     """The soles' closure along every recording with the feet loaded (see the module docstring)."""
 
-    def __init__(self, ds: Dataset, model: pin.Model, offsets: dict[str, float]) -> None:
-        self.samples = []                       # (recording, index, configuration, loaded per side)
+    def __init__(self, ds: Dataset, model: pin.Model) -> None:
+        self.samples = []       # (recording, index, configuration, per side: its point on the floor or None, its kind)
         for r, rec in enumerate(ds.recordings):
             if rec.static or len(rec) < 3:
                 continue
@@ -128,12 +119,9 @@ class Closure:
             stride = max(1, int(round(STRIDE_S / dt)))
             loaded = {s: rec.wrench[s][:, 2] > LOADED_N for s in SIDES}
             contact = {s: contact_points(rec.wrench[s]) for s in SIDES}
-            q = rec.q.copy()
-            for name, v in offsets.items():             # reading - true angle
-                q[:, rec.joint_names.index(name)] -= v
             for k in range(0, len(rec), stride):
                 if any(loaded[s][k] for s in SIDES):
-                    self.samples.append((r, k, _pin_q(model, rec.joint_names, rec.base_pose[k], q[k]),
+                    self.samples.append((r, k, _pin_q(model, rec.joint_names, rec.base_pose[k], rec.q[k]),
                                          tuple(contact[s][0][k] if loaded[s][k] else None for s in SIDES),
                                          tuple(int(contact[s][1][k]) for s in SIDES)))
         self.floor = np.tile([CLOSURE_FLOOR_M[a] for a in CLOSURE_AXES], len(SIDES))
@@ -247,10 +235,9 @@ def _jacobian(closure: Closure, nominal: pin.Model, chosen, theta: np.ndarray, b
     return np.column_stack(cols)
 
 
-def fit_kinematics(ds: Dataset, nominal: pin.Model, effects: list[dict], say) -> tuple[list[dict], dict]:
+def fit_kinematics(ds: Dataset, nominal: pin.Model, say) -> tuple[list[dict], dict]:
     """(the named kinematic effects, a report: the closure's per-channel z before and after, what was refused)."""
-    offsets = {e["location"]: float(e["value"]) for e in effects if e["kind"] == "joint_offset"}
-    closure = Closure(ds, nominal, offsets)
+    closure = Closure(ds, nominal)
     report = {"channels": closure_channels(), "z_before": [], "z_after": [], "refused": [], "unexplained": []}
     if not closure.samples:
         return [], report
@@ -416,6 +403,8 @@ CORRECTION_BOUND = {"link_length": 0.02, "joint_axis": 0.02}    # |correction|: 
 def correction_candidates(ds: Dataset, nominal: pin.Model, kinematic: list[dict]) -> list[Candidate]:
     """One candidate per named kinematic effect: the dynamics' residual change per unit of its parameters (finite
     differences about the closure's estimate; the controller channels do not change)."""
+    if not kinematic:
+        return []
     out = []
     base = [evaluate(kinematic_model(nominal, kinematic), rec, seated=np.isin(lab, ["seated", "seat-off"]),
                      offsets=False, signatures=False).e for rec, lab in zip(ds.recordings, ds.labels)]

@@ -174,7 +174,7 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
     _subtract_known(ds, links, known)
     _noise_floors(ds)
     nominal = [ev.e.copy() for ev in ds.evaluations]
-    kinematic, closure = _kinematics_first(ds, model, params, say)
+    kinematic, closure = _kinematics_first(ds, model, say)
     calibrated = kinematic_model(model, kinematic)
     if kinematic:                 # the dynamics' candidates on the calibrated legs; floors and table stay nominal
         evaluate_all(ds, calibrated, params)
@@ -272,11 +272,11 @@ def _confirm_exact(ds: Dataset, model: pin.Model, effects: list[dict], known: li
     return effects, exact
 
 
-def _kinematics_first(ds: Dataset, model: pin.Model, params: dict | None, say) -> tuple[list[dict], dict]:
+def _kinematics_first(ds: Dataset, model: pin.Model, say) -> tuple[list[dict], dict]:
     """The legs' link lengths and joint axes from the soles' closure (gap.kinematics), before the dynamics: a
     kinematic error left in the model would be absorbed by dynamic proxies. Encoder offsets the closure sees are
     left to the dynamics, which name them with the torques' evidence as well."""
-    found, report = fit_kinematics(ds, model, [], say)
+    found, report = fit_kinematics(ds, model, say)
     kinematic = [e for e in found if e["kind"] in KINEMATIC_KINDS]
     for e in kinematic:
         say(f"  named from the soles' closure: {describe(e)}")
