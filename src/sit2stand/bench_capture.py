@@ -38,7 +38,8 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sit2stand_msgs.msg import MocapFrame
 
 from .capture.recording import load_recording
-from .launch import Scheduling, load_graph
+from .launch import load_graph
+from .scheduling import Scheduling
 
 RATE_HZ = 200.0
 

@@ -64,7 +64,7 @@ from ..human.skeleton import Subject
 from ..io.messages import mocap_arrays, plate_sample_from_cdr, reorder_markers, stamp_ns
 from ..io.stream_messages import JointStateEncoder, StampedNumbersEncoder
 from ..io.tf_message import TfEncoder
-from ..launch import Scheduling
+from ..scheduling import Scheduling
 from ..io.topics import (FORCE_PLATE_PREFIX, HUMAN_COM_TOPIC, HUMAN_DESCRIPTION_TOPIC, HUMAN_JOINTS_TOPIC,
                          HUMAN_MARKERS_TOPIC, HUMAN_MEASURED_COP_TOPIC, HUMAN_MODEL_COP_TOPIC, HUMAN_PELVIS_POSE_TOPIC,
                          HUMAN_ROOT_FRAME, HUMAN_SCALING_TOPIC, LAB_FRAME, MARKERS_TOPIC, SUBJECT_TOPIC, TF_TOPIC,

@@ -1,0 +1,55 @@
+"""Linux scheduling classes for the graph's processes (``scheduling`` in a graph file, ``sit2stand.launch``) and the
+priorities that tests and benchmarks give the processes that stand for other machines."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+POLICIES = {"other": os.SCHED_OTHER, "fifo": os.SCHED_FIFO, "rr": os.SCHED_RR}
+CAPTURE_STAND_IN_PRIORITY = 60
+"""SCHED_FIFO priority of a capture-system stand-in (``serve-c3d``) on the machine of the live graph it feeds, in tests
+and benchmarks: a capture system runs on a computer of its own, and frames it sent late would count as the graph's
+latency."""
+OBSERVER_PRIORITY = 59
+"""SCHED_FIFO priority of a latency observer (a probe's subscriber) in tests and benchmarks, for the same reason."""
+
+
+@dataclass(frozen=True)
+class Scheduling:
+    """A process's Linux scheduling class: ``policy`` other | fifo | rr, ``priority`` 1..99 (fifo/rr), ``nice``
+    -20..19 (other)."""
+
+    policy: str = "other"
+    priority: int = 0
+    nice: int = 0
+
+    def __str__(self) -> str:
+        if self.policy == "other":
+            return f"SCHED_OTHER nice {self.nice}" if self.nice else "SCHED_OTHER"
+        return f"SCHED_{self.policy.upper()} priority {self.priority}"
+
+    def apply(self, pid: int = 0) -> None:
+        """Set it on process ``pid`` (0: this one); raises OSError (e.g. PermissionError) when not allowed."""
+        if self.policy == "other":
+            os.sched_setscheduler(pid, os.SCHED_OTHER, os.sched_param(0))
+            if self.nice:
+                os.setpriority(os.PRIO_PROCESS, pid, self.nice)
+        else:
+            os.sched_setscheduler(pid, POLICIES[self.policy], os.sched_param(self.priority))
+
+    def try_apply(self, pid: int = 0) -> bool:
+        """:meth:`apply` where permitted; whether it was."""
+        try:
+            self.apply(pid)
+        except OSError:
+            return False
+        return True
+
+    def holds_for(self, pid: int) -> bool:
+        """Whether process ``pid`` runs under this class."""
+        if os.sched_getscheduler(pid) != POLICIES[self.policy]:
+            return False
+        if self.policy == "other":     # nice 0 asks for no change (a child inherits the launcher's niceness)
+            return not self.nice or os.getpriority(os.PRIO_PROCESS, pid) == self.nice
+        return os.sched_getparam(pid).sched_priority == self.priority
