@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import GRAPHS, NodeProcess
+from conftest import GRAPHS, NodeProcess, node_env
 from sit2stand.io.bag import BagReader
 from sit2stand.io.messages import stamp_ns
 from sit2stand.retarget.report import analyse
@@ -41,8 +41,7 @@ def lost_in(bag: BagReader) -> bool:
 
 
 def test_two_stand_up_graphs_run_side_by_side_on_one_domain(tmp_path):
-    env = dict(os.environ, ROS_DOMAIN_ID=str(random.Random(os.getpid() * 13 + time.time_ns()).randint(201, 230)),
-               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
+    env = node_env(random.Random(os.getpid() * 13 + time.time_ns()).randint(201, 230))
     runs = {"natural": (tmp_path / "root", None), "elderly": (tmp_path / "robot2", "robot2")}
     procs = {bag: _launch(bag, out, env, ns) for bag, (out, ns) in runs.items()}
     logs = {bag: p.communicate(timeout=400)[0] for bag, p in procs.items()}
