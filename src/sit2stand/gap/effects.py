@@ -57,6 +57,9 @@ def unmodeled_from(effects: list[dict], mass_prefix: str = "found") -> Unmodeled
             um.ft_bias[side] = tuple(bias)
         elif k == "actuator_delay":
             um.actuator_delay_s += float(e["value"])
+        elif k == "ft_rotation":      # a plant's effect only: no workflow candidate names it
+            side = e["location"].removeprefix("ft_")
+            um.ft_rotation_rad[side] = (float(e["value"]), float(e.get("value_2", 0.0)), 0.0)
         elif k in MODEL_KINDS:
             continue                     # applied to the compiled model (alter_model)
         else:

@@ -28,7 +28,7 @@ KINDS = ("extra_mass", "viscous_friction", "coulomb_friction", "torque_bias", "t
          "joint_axis")
 # cases the workflow's library does not hold: an honest answer flags the residual as unexplained. A torso joint's
 # tilted axis: no closure sees the upper body's kinematics (the legs' are in the library: gap.kinematics)
-OUT_OF_LIBRARY = ("torso_axis",)
+OUT_OF_LIBRARY = ("torso_axis", "ft_rotation")
 # a link of every rigid group of an excitation run, and links inside groups (a hand, the head, a wrist)
 MASS_LINKS = ("base_link", "torso_2_link", "leg_left_3_link", "leg_right_3_link", "leg_left_4_link",
               "leg_right_4_link", "leg_left_5_link", "leg_right_5_link", "arm_left_1_link", "arm_right_2_link",
@@ -53,16 +53,19 @@ class Hidden:
     magnitude: float
     pos_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     outside: bool = False          # drawn outside the workflow's library (OUT_OF_LIBRARY)
+    magnitude_2: float = 0.0       # a tilt's second direction [rad] (joint axis, F/T mounting; gap.effects)
 
     def as_effect(self) -> dict:
         """In the workflow's terms (see gap.effects)."""
         if self.kind == "extra_mass":
             return {"kind": self.kind, "location": self.location, "mass_kg": self.magnitude, "pos_m": self.pos_m}
-        return {"kind": self.kind, "location": self.location, "value": self.magnitude}
+        second = {"value_2": self.magnitude_2} if self.magnitude_2 else {}
+        return {"kind": self.kind, "location": self.location, "value": self.magnitude, **second}
 
     def describe(self) -> str:
         extra = f" at {tuple(round(p, 3) for p in self.pos_m)} m" if self.kind == "extra_mass" else ""
-        return f"{self.kind} @ {self.location}: {self.magnitude:.4g}{extra}"
+        second = f", {self.magnitude_2:.4g}" if self.magnitude_2 else ""
+        return f"{self.kind} @ {self.location}: {self.magnitude:.4g}{second}{extra}"
 
 
 def draw(kind: str, seed: int) -> Hidden:
@@ -112,12 +115,17 @@ EFFORT_NM = {"head_1_joint": 8.0, "head_2_joint": 4.0}     # the small joints am
 
 
 def draw_outside(kind: str, seed: int) -> Hidden:
-    """An effect outside the workflow's library: the torso's pitch axis tilted 3-7 degrees."""
+    """An effect outside the workflow's library, 3-7 degrees in a direction drawn at random: the torso's pitch axis
+    tilted (``torso_axis``), or one foot's F/T sensor mounted turned about a horizontal axis (``ft_rotation``: it reads
+    part of the vertical load as a horizontal force, in proportion to the load)."""
+    if kind not in OUT_OF_LIBRARY:
+        raise InputError(f"unknown effect kind {kind!r} (outside the library: {', '.join(OUT_OF_LIBRARY)})")
     rng = np.random.default_rng([100 + OUT_OF_LIBRARY.index(kind), seed])
+    size, direction = rng.uniform(0.05, 0.12), rng.uniform(0.0, 2.0 * np.pi)
+    t1, t2 = float(size * np.cos(direction)), float(size * np.sin(direction))
     if kind == "torso_axis":
-        return Hidden("joint_axis", "torso_2_joint", float(rng.choice([-1, 1]) * rng.uniform(0.05, 0.12)),
-                      outside=True)
-    raise InputError(f"unknown effect kind {kind!r} (outside the library: {', '.join(OUT_OF_LIBRARY)})")
+        return Hidden("joint_axis", "torso_2_joint", t1, magnitude_2=t2, outside=True)
+    return Hidden("ft_rotation", f"ft_{rng.choice(['left', 'right'])}", t1, magnitude_2=t2, outside=True)
 
 
 def plant_with(effects: list[Hidden], seed: int = 0) -> PlantConfig:

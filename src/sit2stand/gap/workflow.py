@@ -41,6 +41,8 @@ from .effects import unmodeled_dict, unmodeled_from
 from .residuals import body_link_names
 from .bounds import RESIDUE
 from .candidates import build_candidates, series_ids, stack_rows
+from .chain import cancelling_offsets
+from .constancy import inconstant
 from .contact import fit_contact
 from .kinematics import KINEMATIC_KINDS, correction_candidates, corrected, fit_kinematics, kinematic_model
 from .naming import describe, effect_summary
@@ -185,7 +187,7 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
         _static_floors(ds, cands)
         cands = build_candidates(calibrated, ds)
     cands += correction_candidates(ds, model, kinematic)
-    sel, refused = _select_checked(ds, cands, links, say)
+    sel, refused = _select_checked(ds, cands, calibrated, say)
     refused += closure["refused"]
     kinematic = corrected(kinematic, [s for s in sel.effects if s.candidate.kind in KINEMATIC_KINDS], say)
     table = ranked_table(ds, nominal)
@@ -205,14 +207,17 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
                     gap_after_first_order=gap_size(first_order, ds, pairs), refused=refused, sims=sims,
                     closure=closure)
     _replay_summary(res)
-    res.unexplained = _unexplained(res)
+    res.unexplained = _unexplained(res, inconstant(ds, sel.effects, lambda r, s: np.tensordot(
+        _columns(ds, links, r, s.candidate), s.theta, axes=(2, 0))))
     res.verdict = _verdict(res)
     return res
 
 
-def _select_checked(ds: Dataset, cands: list[Candidate], links: list[str], say) -> tuple[Selection, list[dict]]:
-    """Selection, re-run without each chosen effect whose joint estimate is past its bounds (gap.bounds) or that is
-    lopsided where the evidence is symmetric (gap.symmetry); the refused, with why."""
+def _select_checked(ds: Dataset, cands: list[Candidate], model: pin.Model, say) -> tuple[Selection, list[dict]]:
+    """Selection, re-run without each chosen effect whose joint estimate is past its bounds (gap.bounds), that is
+    lopsided where the evidence is symmetric (gap.symmetry) or an encoder offset cancelled along its chain
+    (gap.chain); the refused, with why."""
+    links = body_link_names(model)
     y = stack_rows(ds, [ev.e[:, :, None] for ev in ds.evaluations])[:, 0]
     sid = series_ids(ds)
     exclude: set[str] = set()
@@ -225,6 +230,7 @@ def _select_checked(ds: Dataset, cands: list[Candidate], links: list[str], say) 
                if s.candidate.plausible and (why := s.candidate.plausible(s.theta)) is not None]
         bad += lopsided(ds, sel.effects, lambda r, s: np.tensordot(_columns(ds, links, r, s.candidate), s.theta,
                                                                    axes=(2, 0)))
+        bad += [(key, why) for key, why in cancelling_offsets(model, sel.effects) if key not in dict(bad)]
         for key, why in bad:
             say(f"  refused {key}: {why}")
             refused.append({"effect": key, "why": why})
@@ -387,11 +393,12 @@ def _static_floors(ds: Dataset, cands: list[Candidate]) -> None:
         i += nrow
 
 
-def _unexplained(res: GapResult) -> list[dict]:
+def _unexplained(res: GapResult, proxies: list[dict]) -> list[dict]:
     """Channels still above SIGNIFICANT_Z floors with the named effects applied for real, and the re-simulation's,
-    largest first; each with when and what its shape suggests (gap.unexplained)."""
+    each with when and what its shape suggests (gap.unexplained), and the residual ``proxies`` absorb (named
+    effects whose size changes along the run: gap.constancy); largest first."""
     ds = res.dataset
-    out = []
+    out = list(proxies)
     for r, (a, f) in enumerate(zip(res.rms_after, ds.floors)):
         for c, ch in enumerate(ds.channels):
             if np.isfinite(a[c]) and a[c] > SIGNIFICANT_Z * f[c]:

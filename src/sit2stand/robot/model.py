@@ -102,6 +102,8 @@ class Unmodeled:
     ft_torque_bias_nm: tuple[float, float, float] = (0.0, 0.0, 0.0)
     ft_bias: dict[str, tuple[float, ...]] = field(default_factory=dict)   # side -> (fx fy fz [N], tx ty tz [N m])
     actuator_delay_s: float = 0.0
+    # side -> rotation vector [rad]: the F/T sensor mounted turned by it reads the wrench in axes turned so
+    ft_rotation_rad: dict[str, tuple[float, float, float]] = field(default_factory=dict)
 
 
 @dataclass
@@ -170,7 +172,9 @@ class PlantConfig:
                 ft_bias={str(k): _six(v, f"ft_bias.{k}") for k, v in (um.get("ft_bias") or {}).items()},
                 ft_force_bias_n=tuple(map(float, um.get("ft_force_bias_n", (0, 0, 0)))),
                 ft_torque_bias_nm=tuple(map(float, um.get("ft_torque_bias_nm", (0, 0, 0)))),
-                actuator_delay_s=float(um.get("actuator_delay_s", 0.0)))
+                actuator_delay_s=float(um.get("actuator_delay_s", 0.0)),
+                ft_rotation_rad={str(k): _three(v, f"ft_rotation_rad.{k}")
+                                 for k, v in (um.get("ft_rotation_rad") or {}).items()})
         except (KeyError, TypeError, ValueError) as err:
             raise PlantConfigError(f"{path}: unmodeled section: {err!r}") from None
         return cfg
@@ -185,6 +189,14 @@ def _six(values, what: str) -> tuple[float, ...]:
     out = tuple(float(v) for v in values)
     if len(out) != 6:
         raise ValueError(f"{what}: needs 6 values (fx fy fz [N], tx ty tz [N m]), got {len(out)}")
+    return out
+
+
+def _three(values, what: str) -> tuple[float, float, float]:
+    """Three floats (a rotation vector [rad]); ValueError naming ``what`` otherwise."""
+    out = tuple(float(v) for v in values)
+    if len(out) != 3:
+        raise ValueError(f"{what}: needs 3 values (a rotation vector x y z [rad]), got {len(out)}")
     return out
 
 

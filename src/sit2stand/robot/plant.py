@@ -150,6 +150,11 @@ class Plant:
             raise InputError(f"{cfg.source or 'plant'}: ft_bias for unknown side(s) {sorted(bad)} (sides: {SIDES})")
         both = np.concatenate([um.ft_force_bias_n, um.ft_torque_bias_nm])
         self.ft_bias = {s: both + np.asarray(um.ft_bias.get(s, np.zeros(6)), float) for s in SIDES}
+        bad = set(um.ft_rotation_rad) - set(SIDES)
+        if bad:
+            raise InputError(f"{cfg.source or 'plant'}: ft_rotation_rad for unknown side(s) {sorted(bad)}")
+        # what the sensor reads, from the wrench in its modelled axes: the transpose of its mounting's turn
+        self.ft_reading = {s: pin.exp3(np.asarray(um.ft_rotation_rad.get(s, np.zeros(3)), float)).T for s in SIDES}
         self.delay_steps = int(round(um.actuator_delay_s / cfg.timestep_s))
         self._tau_queue: deque[np.ndarray] = deque()
         # the controller's model (CAD unless identified parameters are given)
@@ -340,7 +345,8 @@ class Plant:
         ft, world = {}, {}
         for side in SIDES:
             raw = self._ft_raw(side)
-            meas = raw + self.ft_bias[side] + np.concatenate(
+            R = self.ft_reading[side]
+            meas = np.concatenate([R @ raw[:3], R @ raw[3:]]) + self.ft_bias[side] + np.concatenate(
                 [self.rng.normal(0, cfg.ft_force_noise_n, 3), self.rng.normal(0, cfg.ft_torque_noise_nm, 3)])
             ft[side] = meas
             world[side] = self._ground_reaction(side, meas)
