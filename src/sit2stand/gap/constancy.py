@@ -22,6 +22,7 @@ import numpy as np
 
 from .candidates import series_ids, stack_rows
 from .dataset import Dataset
+from .kinematics import KINEMATIC_KINDS
 from .select import Selected, effective_fraction
 
 INCONSTANT_Z = 4.0           # the halves' sizes differ by this many standard errors ...
@@ -46,24 +47,28 @@ def _fit(X: np.ndarray, y: np.ndarray, series: np.ndarray) -> tuple[np.ndarray, 
     return theta, s2 * np.linalg.pinv(X.T @ X) / max(effective_fraction(res, series), 1e-3)
 
 
+def half_sizes(y: np.ndarray, Xs: list[np.ndarray], series: np.ndarray, first: np.ndarray
+               ) -> list[tuple[float, float, float]]:
+    """Per signature of ``Xs`` (rows x p each, fitted jointly), its leading parameter fitted on the rows ``first``
+    and on the others, and how many standard errors apart the two are."""
+    X = np.hstack(Xs)
+    (a, cov_a), (b, cov_b) = (_fit(X[m], y[m], series[m]) for m in (first, ~first))
+    starts = np.cumsum([0] + [x.shape[1] for x in Xs])[:-1]
+    return [(float(a[i]), float(b[i]), float(abs(a[i] - b[i]) / np.sqrt(max(cov_a[i, i] + cov_b[i, i], 1e-300))))
+            for i in starts]
+
+
 def size_changes(ds: Dataset, effects: list[Selected]) -> list[tuple[Selected, float, float, float]]:
     """(effect, size on the first half, on the second, standard errors apart) of each effect of ``effects`` whose
     leading parameter changes along the run (see the module docstring)."""
     if not effects:
         return []
     y = stack_rows(ds, [ev.e[:, :, None] for ev in ds.evaluations])[:, 0]
-    X = np.hstack([s.candidate.X for s in effects])
-    series, first = series_ids(ds), first_half_rows(ds)
-    (a, cov_a), (b, cov_b) = (_fit(X[m], y[m], series[m]) for m in (first, ~first))
-    out = []
-    i = 0
-    for s in effects:
-        se = np.sqrt(max(cov_a[i, i] + cov_b[i, i], 1e-300))
-        z = abs(a[i] - b[i]) / se
-        if z >= INCONSTANT_Z and abs(a[i] - b[i]) >= INCONSTANT_SHARE * abs(s.theta[0]):
-            out.append((s, float(a[i]), float(b[i]), float(z)))
-        i += s.candidate.X.shape[1]
-    return out
+    halves = half_sizes(y, [s.candidate.X for s in effects], series_ids(ds), first_half_rows(ds))
+    # a link length or joint axis enters the selection as a small correction to the closure's value: fitted with
+    # the rest, not judged (its share of a near-zero size means nothing; the closure confirmed it)
+    return [(s, a, b, z) for s, (a, b, z) in zip(effects, halves) if s.candidate.kind not in KINEMATIC_KINDS
+            and z >= INCONSTANT_Z and abs(a - b) >= INCONSTANT_SHARE * abs(s.theta[0])]
 
 
 def inconstant(ds: Dataset, effects: list[Selected], contribution: Callable[[int, Selected], np.ndarray]
