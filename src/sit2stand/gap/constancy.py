@@ -9,7 +9,7 @@ effect whose two sizes differ by at least ``INCONSTANT_Z`` standard errors (leas
 number of samples as in :mod:`sit2stand.gap.select`) and by ``INCONSTANT_SHARE`` of its size stays named (it is
 still the library's best account of the data) and the residual it absorbs is reported as unexplained.
 
-Measured on the benchmark's plants (one effect each; 2026-12-03): 24 in-library effects named right, halves within
+Measured on the benchmark's plants (one effect each; 2026-12-03): 19 in-library effects named right, halves within
 1.6 standard errors and 13 %; proxies for a tilted torso axis or a turned F/T sensor 4.8-41 standard errors and
 12-195 %.
 """
