@@ -41,6 +41,7 @@ from ..errors import InputError
 from ..robot.model import SIDES, SOLE_OFFSET_M
 from .recording import Recording, _joint_index
 
+CONTROLLER_PREFIX = "ctrl/"    # the controller channels: measured torque - our control law
 BASE_CHANNELS = ["base/force_x", "base/force_y", "base/force_z", "base/moment_x", "base/moment_y", "base/moment_z"]
 SEATED_JOINTS = ("leg_left_1_joint", "leg_left_2_joint", "leg_left_3_joint",
                  "leg_right_1_joint", "leg_right_2_joint", "leg_right_3_joint")
@@ -75,7 +76,7 @@ class Evaluation:
                     joint_names: list[str]) -> None:
         """Append the controller channels ``ctrl/<joint>``: measured torque - control law (see gap.control)."""
         N, n = law.shape
-        self.channels = self.channels + [f"ctrl/{j}" for j in joint_names]
+        self.channels = self.channels + [f"{CONTROLLER_PREFIX}{j}" for j in joint_names]
         self.e = np.hstack([self.e, np.where(ok[:, None], tau_meas - law, 0.0)])
         self.valid = np.hstack([self.valid, np.repeat(ok[:, None], n, axis=1)])
         self.mass_cols = np.concatenate([self.mass_cols, np.zeros((N, n) + self.mass_cols.shape[2:])], axis=1)
