@@ -111,8 +111,10 @@ def build_candidates(model: pin.Model, ds: Dataset, exclude: frozenset[str] = fr
 
 
 def _joint_candidates(model: pin.Model, links: list[str], ds: Dataset) -> list[Candidate]:
-    """The single-joint candidates: sensor faults on every joint; friction, a spring and rotor inertia on the joints
-    that moved (a spring on a still joint is a bias, its inertia shows no acceleration)."""
+    """The single-joint candidates: sensor faults on every joint; viscous friction and rotor inertia on the joints
+    that moved fast enough to show them, Coulomb friction and a spring on every joint that moved (a spring on a still
+    joint is a bias, its inertia shows no acceleration; dry friction shows in the sign of the velocity however slow:
+    a slow shoulder's, 0.11 rad/s at most, was named as a spring while no friction was offered)."""
     static = all(r.static for r in ds.recordings)
     speed = np.sqrt(np.mean(np.concatenate([r.qd for r in ds.recordings]) ** 2, axis=0))
     tau_sd = np.std(np.concatenate([ev.tau_model for ev in ds.evaluations]), axis=0)
@@ -123,9 +125,9 @@ def _joint_candidates(model: pin.Model, links: list[str], ds: Dataset) -> list[C
         if tau_sd[j] > 1.0:
             kinds.append("torque_gain")
         if not static and speed[j] > MOVING_RADPS:
-            kinds += ["viscous_friction", "coulomb_friction", "rotor_inertia"]
+            kinds += ["viscous_friction", "rotor_inertia"]
         if not static and moved[j]:
-            kinds.append("joint_spring")
+            kinds += ["coulomb_friction", "joint_spring"]
         for kind in kinds:
             X = stack_rows(ds, [joint_columns(r, ev, kind, j) for r, ev in zip(ds.recordings, ds.evaluations)])
             if np.linalg.norm(X) < 1e-6:

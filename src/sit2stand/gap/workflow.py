@@ -38,7 +38,7 @@ from ..robot.model import PlantConfig, controller_model
 from .dataset import Dataset, GapError, evaluate_all, fast_part_floor, load_dataset
 from .recording import RecordingError
 from .effects import unmodeled_dict, unmodeled_from
-from .residuals import CONTROLLER_PREFIX, body_link_names
+from .residuals import CONTROLLER_PREFIX, body_link_names, fit_coulomb_widths
 from .bounds import RESIDUE
 from .candidates import build_candidates, series_ids, stack_rows
 from .chain import cancelling_offsets
@@ -181,6 +181,7 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
     if kinematic:                 # the dynamics' candidates on the calibrated legs; floors and table stay nominal
         evaluate_all(ds, calibrated, params)
         _subtract_known(ds, links, known)
+    fit_coulomb_widths(ds.recordings, ds.evaluations)
     say("  building the candidate effects")
     cands = build_candidates(calibrated, ds)
     if any(r.static for r in ds.recordings):
