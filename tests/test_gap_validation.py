@@ -14,7 +14,7 @@ from sit2stand.gap.bounds import Limits, refusal
 from sit2stand.gap.chain import cancelling_offsets
 from sit2stand.gap.constancy import INCONSTANT_Z, half_sizes
 from sit2stand.gap.effects import alter_model, unmodeled_from
-from sit2stand.gap.residuals import joint_columns
+from sit2stand.gap.residuals import coulomb_signature, fit_coulomb_widths, joint_columns
 from sit2stand.gap.select import Candidate, Selected
 from sit2stand.gap.symmetry import lopsided, mirror, side_of
 from sit2stand.gap.unexplained import where_and_shape
@@ -214,3 +214,20 @@ def test_an_ft_sensor_mounted_turned_reads_part_of_the_load_sideways(tmp_path):
     bad.write_text("unmodeled:\n  ft_rotation_rad: {left: [0.1, 0.2]}\n")
     with pytest.raises(PlantConfigError, match="ft_rotation_rad.left: needs 3 values"):
         PlantConfig.load(bad)
+
+
+@pytest.mark.parametrize("true_v0", [0.002, 0.02])
+def test_each_joints_coulomb_transition_speed_is_fitted_from_its_residual(true_v0):
+    """A slow shoulder's dry friction changes sign within 0.002 rad/s, a loaded ankle's over 0.01-0.02; the one
+    width for all (0.03 rad/s) once made the shoulder's friction look like a spring."""
+    rng = np.random.default_rng(2)
+    rec = _fake_recording()
+    rec.qd = 0.1 * np.column_stack([np.sin(rec.t_s), np.cos(0.5 * rec.t_s)])     # slow: 0.1 rad/s at most
+    rec.static = False
+    e = np.zeros((len(rec.t_s), 8))
+    e[:, 6] = 2.5 * coulomb_signature(rec.qd[:, 0], true_v0) + rng.normal(0, 0.2, len(rec.t_s))
+    ev = SimpleNamespace(e=e, valid=np.ones_like(e, bool), n_joints=2, coulomb_v0=None, ctrl_law=None)
+    fit_coulomb_widths([rec], [ev])
+    assert ev.coulomb_v0[0] == pytest.approx(true_v0)
+    col = joint_columns(rec, ev, "coulomb_friction", 0)[:, 6, 0]
+    assert np.allclose(col, coulomb_signature(rec.qd[:, 0], true_v0))
