@@ -38,7 +38,7 @@ from ..robot.model import PlantConfig, controller_model
 from .dataset import Dataset, GapError, evaluate_all, fast_part_floor, load_dataset
 from .recording import RecordingError
 from .effects import unmodeled_dict, unmodeled_from
-from .residuals import CONTROLLER_PREFIX, body_link_names, fit_coulomb_widths
+from .residuals import COULOMB_V0_RADPS, CONTROLLER_PREFIX, body_link_names, fit_coulomb_widths
 from .bounds import RESIDUE
 from .candidates import build_candidates, series_ids, stack_rows
 from .chain import cancelling_offsets
@@ -194,7 +194,8 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
     table = ranked_table(ds, nominal)
     pairs = [(d["recording"], ds.channels.index(d["channel"]), d["phase"]) for d in table if d["z"] >= SIGNIFICANT_Z]
     dynamic = replace(sel, effects=[s for s in sel.effects if s.candidate.kind not in KINEMATIC_KINDS])
-    effects, exact = _confirm_exact(ds, model, kinematic + effect_summary(dynamic), known, refused, say)
+    effects, exact = _confirm_exact(ds, model, kinematic + _with_widths(ds, effect_summary(dynamic)), known,
+                                    refused, say)
     sims = {}
     if replay and source == "cad" and any(r.commands is not None and not r.static for r in ds.recordings):
         effects, exact, sims = _confirm_replay(ds, model, effects, exact, refused, say)
@@ -355,8 +356,23 @@ def _controller_params(controller: str | Path | None) -> dict | None:
         raise GapError(f"{controller}: not a usable controller model: {err}") from None
 
 
+def _with_widths(ds: Dataset, effects: list[dict]) -> list[dict]:
+    """``effects``, each Coulomb friction with the transition speed its signature used (``v0_radps``)."""
+    names = ds.recordings[0].joint_names
+    for e in effects:
+        if e["kind"] == "coulomb_friction":
+            e["v0_radps"] = float(ds.evaluations[0].coulomb_v0[names.index(e["location"])])
+    return effects
+
+
 def _subtract_known(ds: Dataset, links: list[str], known: list[dict]) -> None:
-    """Take the model file's own joint and sensor effects out of the residuals (they are part of the model)."""
+    """Take the model file's own joint and sensor effects out of the residuals (they are part of the model; a
+    Coulomb friction with the transition speed it was named with)."""
+    for rec, ev in zip(ds.recordings, ds.evaluations):
+        ev.coulomb_v0 = np.full(ev.n_joints, COULOMB_V0_RADPS) if ev.coulomb_v0 is None else ev.coulomb_v0
+        for eff in known:
+            if eff["kind"] == "coulomb_friction" and "v0_radps" in eff and eff["location"] in rec.joint_names:
+                ev.coulomb_v0[rec.joint_names.index(eff["location"])] = float(eff["v0_radps"])
     for r, ev in enumerate(ds.evaluations):
         for eff in known:
             ev.e -= np.tensordot(effect_columns(ds, links, r, eff["kind"], eff["location"]), effect_theta(eff),
