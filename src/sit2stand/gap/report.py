@@ -25,7 +25,8 @@ import numpy as np
 
 from .resimulate import compare
 from .naming import describe
-from .workflow import GapResult, load_nominal, plain_data, run, write_augmented
+from .augmented import plain_data, write_augmented
+from .workflow import GapResult, load_nominal, run
 
 PHASE_COLOURS = {"seated": "#dde8f5", "seat-off": "#f5dcc8", "rising": "#f7f0c8", "standing": "#ddf2dd",
                  "moving": "#f2f2f2", "still": "#ffffff", "static": "#ffffff"}

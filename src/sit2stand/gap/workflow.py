@@ -37,7 +37,6 @@ from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import PlantConfig, controller_model
 from .dataset import Dataset, GapError, evaluate_all, fast_part_floor, load_dataset
 from .recording import RecordingError
-from .effects import unmodeled_dict, unmodeled_from
 from .residuals import COULOMB_V0_RADPS, CONTROLLER_PREFIX, body_link_names, fit_coulomb_widths
 from .bounds import RESIDUE
 from .candidates import build_candidates, series_ids, stack_rows
@@ -49,8 +48,8 @@ from .naming import describe, effect_summary
 from .select import MIN_SHARE, Candidate, Selection, select
 from .symmetry import lopsided
 from .unexplained import SIGNIFICANT_Z, contact_note, where_and_shape
-from .validate import (REPLAY_ONLY_KINDS, effect_columns, effect_theta, exact_residuals, gap_size, merged_model,
-                       replay_effects, replay_floor, replay_gap, replay_residuals, replay_z)
+from .validate import (REPLAY_ONLY_KINDS, effect_columns, effect_theta, exact_residuals, gap_size, replay_effects,
+                       replay_floor, replay_gap, replay_residuals, replay_z)
 
 NO_DISCREPANCY = "no significant discrepancy"
 """The verdict when no channel is above its noise floor (robot and human side)."""
@@ -457,45 +456,9 @@ def _verdict(res: GapResult) -> str:
     return NO_DISCREPANCY if worst < SIGNIFICANT_Z else UNEXPLAINED
 
 
-# -- augmented model -------------------------------------------------------------------------------------------------
-def augmented_model(result: GapResult, nominal: pin.Model) -> dict:
-    """The augmented model file's content (see the module docstring)."""
-    effects = result.known + result.effects
-    model = merged_model(nominal, effects)
-    link_params = {model.names[j]: {"mass": float(model.inertias[j].mass),
-                                    "com": [float(v) for v in model.inertias[j].lever]}
-                   for j in range(1, model.njoints)}
-    return {"nominal": result.model_source, "bags": result.bags, "verdict": result.verdict,
-            "effects": effects, "links": link_params, "unmodeled": unmodeled_dict(unmodeled_from(effects))}
-
-
-def write_augmented(result: GapResult, nominal: pin.Model, path: str | Path) -> dict:
-    """Write :func:`augmented_model` as YAML to ``path``; the document written."""
-    doc = augmented_model(result, nominal)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    Path(path).write_text("# written by sit2stand gap: the nominal model plus the effects it named\n"
-                          + yaml.safe_dump(plain_data(doc), sort_keys=False))
-    return doc
-
-
-def plain_data(x):
-    """``x`` with NumPy scalars and arrays as plain Python numbers and lists (for JSON)."""
-    if isinstance(x, dict):
-        return {str(k): plain_data(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [plain_data(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return plain_data(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        return float(x)
-    if isinstance(x, (np.integer, int)) and not isinstance(x, bool):
-        return int(x)
-    return x
-
-
 def progress_printer(msg: str) -> None:
     """A progress callback printing to stderr."""
     print(msg, file=sys.stderr, flush=True)
 
 
-__all__ = ["GapError", "RecordingError", "run", "write_augmented", "load_nominal", "describe"]
+__all__ = ["GapError", "RecordingError", "run", "load_nominal", "describe"]
