@@ -23,7 +23,7 @@ import numpy as np
 from .candidates import series_ids, stack_rows
 from .dataset import Dataset
 from .kinematics import KINEMATIC_KINDS
-from .select import Selected, effective_fraction
+from .select import Selected, least_squares
 
 INCONSTANT_Z = 4.0           # the halves' sizes differ by this many standard errors ...
 INCONSTANT_SHARE = 0.1       # ... and by this share of the whole run's size
@@ -39,20 +39,12 @@ def first_half_rows(ds: Dataset) -> np.ndarray:
     return stack_rows(ds, masks)[:, 0] > 0
 
 
-def _fit(X: np.ndarray, y: np.ndarray, series: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Least squares of y on X: estimate and covariance (scaled by the effective share of the rows)."""
-    theta, *_ = np.linalg.lstsq(X, y, rcond=None)
-    res = y - X @ theta
-    s2 = float(res @ res) / max(len(y) - X.shape[1], 1)
-    return theta, s2 * np.linalg.pinv(X.T @ X) / max(effective_fraction(res, series), 1e-3)
-
-
 def half_sizes(y: np.ndarray, Xs: list[np.ndarray], series: np.ndarray, first: np.ndarray
                ) -> list[tuple[float, float, float]]:
     """Per signature of ``Xs`` (rows x p each, fitted jointly), its leading parameter fitted on the rows ``first``
     and on the others, and how many standard errors apart the two are."""
     X = np.hstack(Xs)
-    (a, cov_a), (b, cov_b) = (_fit(X[m], y[m], series[m]) for m in (first, ~first))
+    (a, cov_a, *_), (b, cov_b, *_) = (least_squares(X[m], y[m], series[m]) for m in (first, ~first))
     starts = np.cumsum([0] + [x.shape[1] for x in Xs])[:-1]
     return [(float(a[i]), float(b[i]), float(abs(a[i] - b[i]) / np.sqrt(max(cov_a[i, i] + cov_b[i, i], 1e-300))))
             for i in starts]

@@ -41,7 +41,7 @@ from ..errors import InputError
 from ..robot.model import SIDES, SOLE_OFFSET_M
 from .recording import Recording, _joint_index
 
-CONTROLLER_PREFIX = "ctrl/"    # the controller channels: measured torque - our control law
+CONTROLLER_PREFIX = "ctrl/"    # the controller channels: measured torque - our control law (no physics in them)
 BASE_CHANNELS = ["base/force_x", "base/force_y", "base/force_z", "base/moment_x", "base/moment_y", "base/moment_z"]
 SEATED_JOINTS = ("leg_left_1_joint", "leg_left_2_joint", "leg_left_3_joint",
                  "leg_right_1_joint", "leg_right_2_joint", "leg_right_3_joint")
@@ -251,6 +251,11 @@ def coulomb_signature(qd: np.ndarray, v0: float = COULOMB_V0_RADPS) -> np.ndarra
     friction can take any value up to the sliding one (stiction), which no signature of the velocity can follow:
     tried, the sign of the last motion fits worse (measured on the hidden-effect cases)."""
     return np.clip(qd / v0, -1.0, 1.0)
+
+
+def is_physics_channel(channel: str) -> bool:
+    """Whether a residual channel holds the robot's physics (not a controller channel, :data:`CONTROLLER_PREFIX`)."""
+    return not channel.startswith(CONTROLLER_PREFIX)
 
 
 def fit_coulomb_widths(recordings: list[Recording], evaluations: list[Evaluation]) -> None:

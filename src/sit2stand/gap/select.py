@@ -234,15 +234,19 @@ def _backward(s: _Search, bic_threshold: float) -> None:
                 break
 
 
+def least_squares(X: np.ndarray, y: np.ndarray, series_id: np.ndarray | None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Least squares of y on X: theta, its covariance (scaled by n / n_eff), residual, n_eff / n."""
+    theta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    res = y - X @ theta
+    frac = effective_fraction(res, series_id)
+    s2 = float(res @ res) / max(len(y) - X.shape[1], 1)
+    return theta, s2 * np.linalg.pinv(X.T @ X) / max(frac, 1e-3), res, frac
+
+
 def _joint_fit(s: _Search) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Least squares of y on all chosen signatures: theta, its covariance (scaled by n / n_eff), residual, n_eff / n."""
-    X = np.hstack([s.candidates[k].X for k in s.chosen])
-    theta, *_ = np.linalg.lstsq(X, s.y, rcond=None)
-    res = s.y - X @ theta
-    frac = effective_fraction(res, s.series_id)
-    s2 = float(res @ res) / max(len(s.y) - X.shape[1], 1)
-    cov = s2 * np.linalg.pinv(X.T @ X) / max(frac, 1e-3)
-    return theta, cov, res, frac
+    """:func:`least_squares` of y on all chosen signatures."""
+    return least_squares(np.hstack([s.candidates[k].X for k in s.chosen]), s.y, s.series_id)
 
 
 def _drop_indistinct(s: _Search) -> None:

@@ -37,7 +37,7 @@ from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import PlantConfig, controller_model
 from .dataset import Dataset, GapError, evaluate_all, fast_part_floor, load_dataset
 from .recording import RecordingError
-from .residuals import COULOMB_V0_RADPS, CONTROLLER_PREFIX, body_link_names, fit_coulomb_widths
+from .residuals import COULOMB_V0_RADPS, body_link_names, fit_coulomb_widths, is_physics_channel
 from .bounds import RESIDUE
 from .candidates import build_candidates, series_ids, stack_rows
 from .chain import cancelling_offsets
@@ -317,7 +317,7 @@ def _confirm_replay(ds: Dataset, model: pin.Model, effects: list[dict], exact: l
     # contact change would only hide its replay (seen: a missed rotor inertia named as softer soles). The controller
     # channels (measured torque against our own control law) do not count: no physics is in them (seen: a named
     # actuator delay left 3-4 floors on one joint's while still, and the soft soles beside it went unsearched)
-    physics = np.array([not ch.startswith(CONTROLLER_PREFIX) for ch in ds.channels])
+    physics = np.array([is_physics_channel(ch) for ch in ds.channels])
     id_quiet = not any(np.nan_to_num(_rms(e, ev.valid) / f > SIGNIFICANT_Z)[physics].any()
                        for e, ev, f in zip(exact, ds.evaluations, ds.floors))
     found, sims = fit_contact(ds, effects, sims, say) if id_quiet else (None, sims)
@@ -424,7 +424,7 @@ def _unexplained(res: GapResult, proxies: list[dict]) -> list[dict]:
                 out.append({"recording": r, "channel": ch, "rms": float(a[c]), "floor": float(f[c]),
                             "z": float(a[c] / f[c]),
                             **where_and_shape(ds, r, ch, res.after[r][:, c], ds.evaluations[r].valid[:, c], f[c])})
-    id_quiet = {r: not any(u["recording"] == r and not u["channel"].startswith(CONTROLLER_PREFIX) for u in out)
+    id_quiet = {r: not any(u["recording"] == r and is_physics_channel(u["channel"]) for u in out)
                 for r in range(len(ds.recordings))}
     sims = res.sims.get("with the named effects", {})
     for r, chans in replay_residuals(ds, sims).items():
