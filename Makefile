@@ -28,7 +28,7 @@ test-fast: setup  ## unit tests only (no node processes)
 bench: setup      ## speed figures (printed and written to bench/results/bench.json); not a test
 	@$(PY) -m sit2stand.bench --out bench/results/bench.json
 
-bench-gap: setup  ## only the model-gap hit rates (10 hidden-effect plants per kind: 13 kinds in the library, 2 outside it), merged into bench.json
+bench-gap: setup  ## only the model-gap hit rates (10 hidden-effect plants per kind: 14 kinds in the library, 2 outside it), merged into bench.json
 	@$(PY) -m sit2stand.bench --only gap --out bench/results/bench.json
 
 bench-gap-human: setup  ## only the human-side model-gap hit rates (20 digital humans per case: a mass hidden on each of 9 segment groups, a scale error, nothing), merged into bench.json

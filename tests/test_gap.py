@@ -42,6 +42,7 @@ CASES = {
     "ft_bias": [draw("ft_bias", 0)],
     "actuator_delay": [draw("actuator_delay", 0)],
     "joint_spring": [draw("joint_spring", 0)],
+    "backlash": [draw("backlash", 3)],          # an elbow's gear play, 0.0032 rad: the controller channel alone
     "none": [],
     "two": [Hidden("extra_mass", "torso_2_link", 5.0, (-0.1, 0.0, 0.1)),
             Hidden("viscous_friction", "leg_left_3_joint", 3.0)],
@@ -54,7 +55,7 @@ CASES = {
     "ft_rotation": [Hidden("ft_rotation", "ft_left", -0.05, magnitude_2=0.04, outside=True)],
 }
 OUTSIDE = ("torso_axis", "ft_rotation")
-SHORT = ("joint_spring", "link_length") + OUTSIDE   # 6 stances instead of 8: the test's time
+SHORT = ("joint_spring", "backlash", "link_length") + OUTSIDE   # 6 stances instead of 8: the test's time
 # the re-simulation (~6 s a case) where a test reads it; the benchmark replays every case
 REPLAYED = ("joint_spring", "none", "two", "link_length", "torso_axis")
 

@@ -14,7 +14,7 @@ from sit2stand.gap.bounds import Limits, refusal
 from sit2stand.gap.chain import cancelling_offsets
 from sit2stand.gap.constancy import INCONSTANT_Z, half_sizes
 from sit2stand.gap.effects import alter_model, unmodeled_from
-from sit2stand.gap.residuals import coulomb_signature, fit_coulomb_widths, joint_columns
+from sit2stand.gap.residuals import coulomb_signature, fit_backlash_widths, fit_coulomb_widths, joint_columns
 from sit2stand.gap.select import Candidate, Selected
 from sit2stand.gap.symmetry import lopsided, mirror, side_of
 from sit2stand.gap.unexplained import where_and_shape
@@ -231,3 +231,46 @@ def test_each_joints_coulomb_transition_speed_is_fitted_from_its_residual(true_v
     assert ev.coulomb_v0[0] == pytest.approx(true_v0)
     col = joint_columns(rec, ev, "coulomb_friction", 0)[:, 6, 0]
     assert np.allclose(col, coulomb_signature(rec.qd[:, 0], true_v0))
+
+
+def test_a_gears_play_is_a_dead_zone_in_the_joint_torque():
+    """Backlash of +-b: the joint gets nothing while the motor's drive (PD + feed-forward) stays within +-kp b, and
+    the drive less kp b beyond it; the other joints are untouched."""
+    cfg = PlantConfig()
+    cfg.unmodeled.backlash_rad = {"arm_left_4_joint": 0.01}
+    plant = Plant(cfg, with_chair=False)
+    j = plant.joint_names.index("arm_left_4_joint")
+    q = plant.data.qpos[plant.qadr].copy()
+    ff = np.zeros(plant.n)
+    ff[j] = 2.0
+    for u, expected in [(0.005, 0.0), (-0.009, 0.0), (0.03, 0.02), (-0.02, -0.01)]:
+        target = q.copy()
+        target[j] += u - ff[j] / plant.kp[j]          # the servo's target that asks for kp u in all
+        out = plant._dead_zone(target, ff)
+        torque = plant.kp * (out - q) + ff
+        assert torque[j] == pytest.approx(plant.kp[j] * expected, abs=1e-9)
+        others = np.arange(plant.n) != j
+        assert np.allclose(out[others], target[others])
+
+
+@pytest.mark.parametrize("true_b", [0.002, 0.008])
+def test_backlash_signature_and_its_width_are_fitted_from_the_controller_channel(true_b):
+    """The controller channel of joint 0 carries -clip(drive, +-kp b) (gap.control); the width is found on the grid
+    and the signature at that width fits the residual exactly, with b as its coefficient."""
+    rng = np.random.default_rng(5)
+    rec = _fake_recording()
+    n = len(rec.t_s)
+    kp = np.array([400.0, 1600.0])
+    drive = np.column_stack([8.0 * np.sin(2.0 * rec.t_s), 30.0 + np.zeros(n)])
+    e = np.zeros((n, 10))
+    e[:, 8] = -np.clip(drive[:, 0], -kp[0] * true_b, kp[0] * true_b) + rng.normal(0, 0.05, n)
+    ev = SimpleNamespace(e=e, valid=np.ones_like(e, bool), n_joints=2, ctrl_law=np.zeros((n, 2)),
+                         ctrl_drive=drive, ctrl_kp=kp, backlash_b0=None)
+    fit_backlash_widths([rec], [ev])
+    assert ev.backlash_b0[0] == pytest.approx(true_b)
+    col = joint_columns(rec, ev, "backlash", 0)
+    assert np.allclose(col[:, :8], 0.0) and np.allclose(col[:, 9], 0.0)     # the controller channel alone
+    b_hat = float(col[:, 8, 0] @ e[:, 8] / (col[:, 8, 0] @ col[:, 8, 0]))
+    assert b_hat == pytest.approx(true_b, rel=0.05)
+    assert refusal("backlash", "arm_left_4_joint", np.array([-0.004]), Limits()) is not None
+    assert refusal("backlash", "arm_left_4_joint", np.array([0.004]), Limits()) is None

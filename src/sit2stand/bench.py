@@ -420,7 +420,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--messages", type=int, default=40_000)
     parser.add_argument("--only", choices=["gap", "gap_human", "retarget", "human"],
                         help="run one section and merge it into the JSON file")
-    # 10 seeds x 13 kinds, 10 clean, 5 with two effects: ~25 s a case with its two replays, ~30 min on 2 cores
+    # 10 seeds x (14 kinds + 2 outside), 10 clean, 5 with two: ~25 s a case with its replays, ~40 min on 2 cores
     parser.add_argument("--gap-seeds", type=int, default=10, help="hidden-effect cases per effect kind")
     parser.add_argument("--gap-two", type=int, default=None, help="cases with two hidden effects (default: seeds / 2)")
     parser.add_argument("--gap-kinds", default=None, help="comma-separated kinds (default: all, in and outside "

@@ -12,8 +12,9 @@ physical, not what is unusual.
 * torque-sensor bias [N m]: at most half the joint's effort limit (the sensor's range); gain within
   ``TORQUE_GAIN_RANGE``;
 * F/T-sensor bias: at most ``FT_FORCE_BIAS_MAX_N`` / ``FT_TORQUE_BIAS_MAX_NM`` per axis;
-* friction, spring stiffness and rotor inertia: positive (a negative one is not the physical effect) and bounded;
-* actuator delay: from one control step to ``DELAY_MAX_S``.
+* friction, spring stiffness, rotor inertia and a gear's play: positive (a negative one is not the physical effect)
+  and bounded;
+* actuator delay: from one control step to ``DELAY_MAX_S``; a gear's play from ``BACKLASH_MIN_RAD``.
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ VISCOUS_MAX_NMS_PER_RAD = 50.0
 COULOMB_EFFORT_SHARE = 0.3
 SPRING_MAX_NM_PER_RAD = 2000.0
 ROTOR_INERTIA_MAX_KGM2 = 2.0
+BACKLASH_MAX_RAD = 0.035     # half a gear's play: 2 degrees is a broken gearbox
+BACKLASH_MIN_RAD = 2e-4      # below a harmonic drive's lost motion (about 1 arcmin): the residue of the law's fit
 DELAY_MIN_S = 0.001          # one control step of the simulated robot: below it, the residue of 50 Hz samples
 DELAY_MAX_S = 0.1
 RESIDUE = "residue: "        # a refusal for being too small to be an effect at all (not reported as refused)
@@ -69,8 +72,10 @@ def refusal(kind: str, location: str, theta: np.ndarray, limits: Limits) -> str 
         cap = FT_FORCE_BIAS_MAX_N if location.endswith(("fx", "fy", "fz")) else FT_TORQUE_BIAS_MAX_NM
         return f"F/T bias {v:.3g} beyond {cap:g}" if abs(v) > cap else None
     caps = {"viscous_friction": VISCOUS_MAX_NMS_PER_RAD, "joint_spring": SPRING_MAX_NM_PER_RAD,
-            "rotor_inertia": ROTOR_INERTIA_MAX_KGM2,
+            "rotor_inertia": ROTOR_INERTIA_MAX_KGM2, "backlash": BACKLASH_MAX_RAD,
             "coulomb_friction": COULOMB_EFFORT_SHARE * limits.effort_nm if limits.effort_nm else np.inf}
+    if kind == "backlash" and abs(v) < BACKLASH_MIN_RAD:
+        return f"{RESIDUE}play {v:.3g} rad below {BACKLASH_MIN_RAD:g} rad"
     if kind in caps:
         return None if 0.0 < v <= caps[kind] else f"{kind.replace('_', ' ')} {v:.3g} outside 0..{caps[kind]:.3g}"
     if kind == "actuator_delay":

@@ -17,7 +17,7 @@ from .select import Candidate
 MOVED_RAD = 0.1              # a joint whose range in the data is below this did not move: its links are one body
 UNITS = {"extra_mass": ("kg", "m"), "viscous_friction": "N m s/rad", "coulomb_friction": "N m",
          "torque_bias": "N m", "torque_gain": "1", "joint_offset": "rad", "actuator_delay": "s",
-         "mass_scale": "true / model", "joint_spring": "N m/rad", "rotor_inertia": "kg m^2"}
+         "mass_scale": "true / model", "joint_spring": "N m/rad", "rotor_inertia": "kg m^2", "backlash": "rad"}
 
 def moved_joints(ds: Dataset) -> np.ndarray:
     """(n,) joints whose range over the data exceeds MOVED_RAD."""
@@ -114,7 +114,8 @@ def _joint_candidates(model: pin.Model, links: list[str], ds: Dataset) -> list[C
     """The single-joint candidates: sensor faults on every joint; viscous friction and rotor inertia on the joints
     that moved fast enough to show them, Coulomb friction and a spring on every joint that moved (a spring on a still
     joint is a bias, its inertia shows no acceleration; dry friction shows in the sign of the velocity however slow:
-    a slow shoulder's, 0.11 rad/s at most, was named as a spring while no friction was offered)."""
+    a slow shoulder's, 0.11 rad/s at most, was named as a spring while no friction was offered); a gear's play on
+    the joints that moved or carry a varying load (its dead zone needs a drive to cut)."""
     static = all(r.static for r in ds.recordings)
     speed = np.sqrt(np.mean(np.concatenate([r.qd for r in ds.recordings]) ** 2, axis=0))
     tau_sd = np.std(np.concatenate([ev.tau_model for ev in ds.evaluations]), axis=0)
@@ -124,6 +125,8 @@ def _joint_candidates(model: pin.Model, links: list[str], ds: Dataset) -> list[C
         kinds = ["torque_bias", "joint_offset"]
         if tau_sd[j] > 1.0:
             kinds.append("torque_gain")
+        if not static and (moved[j] or tau_sd[j] > 1.0):
+            kinds.append("backlash")
         if not static and speed[j] > MOVING_RADPS:
             kinds += ["viscous_friction", "rotor_inertia"]
         if not static and moved[j]:

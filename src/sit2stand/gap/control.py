@@ -11,13 +11,17 @@ against it is zero whatever the physics (masses, friction) is, and shows what si
 sensor:
 
 * actuator delay d [s]: the law acts on the reference of d ago: r = -d (kp q'_ref + kd q''_ref + ff'),
-* torque-sensor bias (1) and gain (tau_act).
+* torque-sensor bias (1) and gain (tau_act),
+* a gear's play of +-b [rad] (backlash, ``robot.plant``): the joint gets only the motor's drive beyond a dead zone of
+  +-kp b, r = -clip(drive, -kp b, kp b), where drive = tau_act + kd q' is the law without the joint's damping.
 
 The simulated driver publishes the torque applied during its last physics step: the law is evaluated
 ``sensor_lag_s`` (one step) before the sample.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -26,10 +30,27 @@ from ..robot.plant import Plant, contact_feedforward, feedforward_seated, refere
 from .recording import Recording
 
 
+@dataclass
+class ControlLaw:
+    """The control law re-evaluated along a recording (N samples, n joints; see the module docstring)."""
+
+    torque: np.ndarray        # (N, n) tau_act [N m]
+    delay: np.ndarray         # (N, n) the actuator delay's signature [N m/s]
+    valid: np.ndarray         # (N,) samples with a command before them
+    drive: np.ndarray         # (N, n) tau_act + kd q' [N m]: what a gear's play takes its dead zone from
+    kp: np.ndarray            # (n,) the joint PD's stiffness [N m/rad]
+
+    @staticmethod
+    def absent(N: int, n: int) -> ControlLaw:
+        """No commands recorded: nothing valid."""
+        z = np.zeros((N, n))
+        return ControlLaw(z, z, np.zeros(N, bool), z, np.ones(n))
+
+
 def control_law(rec: Recording, controller_params: dict | None = None, sensor_lag_s: float = 0.001
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """(tau_act (N, n), delay signature (N, n), valid (N,)) of the control law along ``rec``; None without commands.
-    ``controller_params``: the controller's identified link parameters (None: CAD)."""
+                ) -> ControlLaw | None:
+    """The control law along ``rec``; None without commands. ``controller_params``: the controller's identified link
+    parameters (None: CAD)."""
     cmd = rec.commands
     if cmd is None or rec.static or len(cmd.t_s) < 2:
         return None
@@ -67,4 +88,4 @@ def control_law(rec: Recording, controller_params: dict | None = None, sensor_la
         pd_rate[k] = kp * qd_t + kd * cmd.qdd[c]
         valid[k] = True
     dff = np.gradient(ff_all, rec.t_s, axis=0) if N > 2 else np.zeros_like(ff_all)
-    return law, -(pd_rate + dff), valid
+    return ControlLaw(law, -(pd_rate + dff), valid, law + kd * rec.qd, kp)

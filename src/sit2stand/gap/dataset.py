@@ -12,7 +12,7 @@ import pinocchio as pin
 
 from ..dynamics import savgol_series
 from ..errors import Sit2StandError
-from .control import control_law
+from .control import ControlLaw, control_law
 from .recording import Recording, read_recording
 from .residuals import Evaluation, evaluate
 
@@ -122,13 +122,12 @@ def evaluate_all(ds: Dataset, model: pin.Model, controller_params: dict | None =
         ev = evaluate(model, rec, seated=np.isin(lab, ["seated", "seat-off"]))
         law = control_law(rec, controller_params)
         if law is not None:
-            ev.add_control(*law, rec.tau, rec.joint_names)
+            ev.add_control(law, rec.tau, rec.joint_names)
         ds.evaluations.append(ev)
     if any(ev.ctrl_law is not None for ev in ds.evaluations):   # one channel layout: no controller rows where none
         for rec, ev in zip(ds.recordings, ds.evaluations):
             if ev.ctrl_law is None:
-                z = np.zeros_like(rec.tau)
-                ev.add_control(z, z, np.zeros(len(rec), bool), rec.tau, rec.joint_names)
+                ev.add_control(ControlLaw.absent(*rec.tau.shape), rec.tau, rec.joint_names)
 
 
 def fast_part_floor(e: np.ndarray, valid: np.ndarray, t_s: np.ndarray) -> np.ndarray:

@@ -23,7 +23,8 @@ from ..robot.model import ExtraBodyMass, Unmodeled
 
 FT_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
 JOINT_TABLES = {"viscous_friction": "viscous_friction", "coulomb_friction": "coulomb_friction",
-                "torque_bias": "torque_bias_nm", "torque_gain": "torque_gain", "joint_offset": "joint_offset_rad"}
+                "torque_bias": "torque_bias_nm", "torque_gain": "torque_gain", "joint_offset": "joint_offset_rad",
+                "backlash": "backlash_rad"}
 
 
 # joint spring [N m/rad] about rest_rad, rotor inertia [kg m^2] added to the armature, a link's offset from its

@@ -25,7 +25,7 @@ from .workflow import run
 
 KINDS = ("extra_mass", "viscous_friction", "coulomb_friction", "torque_bias", "torque_gain", "joint_offset",
          "ft_bias", "actuator_delay", "joint_spring", "rotor_inertia", "contact_softness", "link_length",
-         "joint_axis")
+         "joint_axis", "backlash")
 # cases the workflow's library does not hold: an honest answer flags the residual as unexplained. A torso joint's
 # tilted axis: no closure sees the upper body's kinematics (the legs' are in the library: gap.kinematics)
 OUT_OF_LIBRARY = ("torso_axis", "ft_rotation")
@@ -46,7 +46,7 @@ ALL_JOINTS_FOR_BIAS = MOVING_JOINTS + ("leg_left_1_joint", "leg_right_2_joint", 
 @dataclass
 class Hidden:
     """One hidden effect: ``kind`` at ``location`` with ``magnitude`` (kg, N m s/rad, N m, measured/true gain, rad, s,
-    N or N m); a mass also has ``pos_m`` in the link frame."""
+    N or N m; a backlash: half the gear's play [rad]); a mass also has ``pos_m`` in the link frame."""
 
     kind: str
     location: str
@@ -106,6 +106,8 @@ def draw(kind: str, seed: int) -> Hidden:
         where = str(rng.choice(["*", "*", "left", "right"]))   # (one shank 5 % short: the robot cannot stand)
         size = rng.uniform(0.03, 0.06) if where == "*" else rng.uniform(0.01, 0.025)
         return Hidden(kind, f"leg_{where}_{rng.choice([4, 5])}_link", float(1.0 + sign * size))
+    if kind == "backlash":            # half a gear's play of 0.1-0.5 degrees on a joint that moves
+        return Hidden(kind, str(rng.choice(MOVING_JOINTS)), float(rng.uniform(0.002, 0.008)))
     if kind == "joint_axis":          # a hip, knee or ankle pitch axis tilted 3-7 degrees
         return Hidden(kind, str(rng.choice(LEG_PITCH_JOINTS)), float(sign * rng.uniform(0.05, 0.12)))
     raise InputError(f"unknown effect kind {kind!r} (known: {', '.join(KINDS)})")

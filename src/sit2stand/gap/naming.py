@@ -58,6 +58,7 @@ def describe(effect: dict) -> str:
              "torque_bias": "torque-sensor bias", "torque_gain": "torque-sensor gain",
              "joint_offset": "encoder offset", "ft_bias": "force/torque sensor bias (sensor axes)",
              "actuator_delay": "actuator delay", "joint_spring": "joint spring", "rotor_inertia": "rotor inertia",
+             "backlash": "backlash (half the gear's play; the joint torque's dead zone is +-kp times it)",
              "contact_softness": "soles' contact time constant (MuJoCo solref; the model's 0.02 s)",
              "link_length": "link length (its offset from the parent joint, scaled)",
              "joint_axis": "joint axis tilt (toward axis x z)"}[k]

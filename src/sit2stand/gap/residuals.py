@@ -27,7 +27,8 @@ Every candidate physical effect enters e linearly, to first order, through a **s
 Actuator delay does not show in e (the measured torque is the applied one, whenever it was commanded): it shows in
 the controller channels, ``ctrl/<joint>`` = measured torque - the control law re-evaluated from the recorded commands
 (:mod:`sit2stand.gap.control`), added when the bag has the commands; the torque sensor's bias and gain show there
-too, masses and friction do not.
+too, masses and friction do not. A gear's play (backlash, half-width b [rad]) shows there alone, as the dead zone it
+cuts from the motor's drive: -kp_j sat(drive_j / (kp_j b0_j)) on ``ctrl/<joint>`` (:func:`fit_backlash_widths`).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ import pinocchio as pin
 
 from ..errors import InputError
 from ..robot.model import SIDES, SOLE_OFFSET_M
+from .control import ControlLaw
 from .recording import Recording, _joint_index
 
 CONTROLLER_PREFIX = "ctrl/"    # the controller channels: measured torque - our control law (no physics in them)
@@ -47,6 +49,7 @@ SEATED_JOINTS = ("leg_left_1_joint", "leg_left_2_joint", "leg_left_3_joint",
                  "leg_right_1_joint", "leg_right_2_joint", "leg_right_3_joint")
 COULOMB_V0_RADPS = 0.03       # Coulomb friction's transition speed where none was fitted (fit_coulomb_widths)
 COULOMB_V0_GRID_RADPS = (0.001, 0.002, 0.005, 0.01, 0.02, 0.03)
+BACKLASH_GRID_RAD = (0.0005, 0.001, 0.002, 0.003, 0.005, 0.008, 0.012, 0.02)   # half-widths of a gear's play tried
 FD_STEP_RAD = 1e-5
 LIMIT_MARGIN_RAD = 0.01
 
@@ -68,23 +71,27 @@ class Evaluation:
     ctrl_law: np.ndarray | None = None     # (N, n) the control law's torque (gap.control), when commands were recorded
     ctrl_delay: np.ndarray | None = None   # (N, n) its actuator-delay signature
     coulomb_v0: np.ndarray | None = None   # (n,) each joint's Coulomb transition speed [rad/s] (fit_coulomb_widths)
+    ctrl_drive: np.ndarray | None = None   # (N, n) the law without the joint's damping (gap.control.ControlLaw)
+    ctrl_kp: np.ndarray | None = None      # (n,) the joint PD's stiffness [N m/rad]
+    backlash_b0: np.ndarray | None = None  # (n,) each joint's play half-width its signature uses [rad]
 
     @property
     def n_joints(self) -> int:
         """Number of actuated joints n."""
         return self.tau_model.shape[1]
 
-    def add_control(self, law: np.ndarray, delay: np.ndarray, ok: np.ndarray, tau_meas: np.ndarray,
-                    joint_names: list[str]) -> None:
+    def add_control(self, law: ControlLaw, tau_meas: np.ndarray, joint_names: list[str]) -> None:
         """Append the controller channels ``ctrl/<joint>``: measured torque - control law (see gap.control)."""
-        N, n = law.shape
+        N, n = law.torque.shape
+        ok = law.valid
         self.channels = self.channels + [f"{CONTROLLER_PREFIX}{j}" for j in joint_names]
-        self.e = np.hstack([self.e, np.where(ok[:, None], tau_meas - law, 0.0)])
+        self.e = np.hstack([self.e, np.where(ok[:, None], tau_meas - law.torque, 0.0)])
         self.valid = np.hstack([self.valid, np.repeat(ok[:, None], n, axis=1)])
         self.mass_cols = np.concatenate([self.mass_cols, np.zeros((N, n) + self.mass_cols.shape[2:])], axis=1)
         self.offset_cols = np.concatenate([self.offset_cols, np.zeros((N, n, n))], axis=1)
         self.ft_cols = {s: np.concatenate([c, np.zeros((N, n, 6))], axis=1) for s, c in self.ft_cols.items()}
-        self.ctrl_law, self.ctrl_delay = law, delay
+        self.ctrl_law, self.ctrl_delay = law.torque, law.delay
+        self.ctrl_drive, self.ctrl_kp = law.drive, law.kp
 
     @property
     def joint_channels(self) -> slice:
@@ -278,6 +285,28 @@ def fit_coulomb_widths(recordings: list[Recording], evaluations: list[Evaluation
         ev.coulomb_v0 = v0
 
 
+def backlash_signature(drive: np.ndarray, kp: float, b0_rad: float) -> np.ndarray:
+    """d r / d b of a gear's play on the controller channel: -kp sat(drive / (kp b0)) [N m/rad] (gap.control)."""
+    return -kp * np.clip(drive / (kp * b0_rad), -1.0, 1.0)
+
+
+def fit_backlash_widths(recordings: list[Recording], evaluations: list[Evaluation]) -> None:
+    """Each joint's play half-width for its signature (``Evaluation.backlash_b0``): the width of
+    ``BACKLASH_GRID_RAD`` whose signature fits the joint's own controller residual best, over all recordings (the
+    dead zone's edges sit at +-kp b: a joint whose drive never changes sign sees a constant, whatever b0)."""
+    n = evaluations[0].n_joints
+    b0 = np.full(n, BACKLASH_GRID_RAD[0])
+    with_law = [ev for ev in evaluations if ev.ctrl_drive is not None and ev.valid[:, 6 + n:].any()]
+    for j in range(n if with_law else 0):
+        c, kp = 6 + n + j, float(with_law[0].ctrl_kp[j])
+        drive, y = (np.concatenate(x) for x in zip(*[(ev.ctrl_drive[ev.valid[:, c], j], ev.e[ev.valid[:, c], c])
+                                                      for ev in with_law]))
+        rss = [_rss_one(backlash_signature(drive, kp, b), y) for b in BACKLASH_GRID_RAD]
+        b0[j] = BACKLASH_GRID_RAD[int(np.argmin(rss))]
+    for ev in evaluations:
+        ev.backlash_b0 = b0
+
+
 def _rss_one(x: np.ndarray, y: np.ndarray) -> float:
     """Residual sum of squares of y after its least-squares fit by the one column x."""
     xx = float(x @ x)
@@ -326,6 +355,10 @@ def joint_columns(rec: Recording, ev: Evaluation, kind: str, j: int) -> np.ndarr
         col[:, row, 1] = 1.0
     elif kind == "rotor_inertia":
         col[:, row, 0] = rec.qdd[:, j]
+    elif kind == "backlash":
+        if ctrl is not None:
+            b0 = BACKLASH_GRID_RAD[0] if ev.backlash_b0 is None else float(ev.backlash_b0[j])
+            col[:, ctrl, 0] = backlash_signature(ev.ctrl_drive[:, j], float(ev.ctrl_kp[j]), b0)
     else:
         raise InputError(f"unknown joint effect {kind!r}")
     return col

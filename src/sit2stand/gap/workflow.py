@@ -37,7 +37,8 @@ from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import PlantConfig, controller_model
 from .dataset import Dataset, GapError, evaluate_all, fast_part_floor, load_dataset
 from .recording import RecordingError
-from .residuals import COULOMB_V0_RADPS, body_link_names, fit_coulomb_widths, is_physics_channel
+from .residuals import (BACKLASH_GRID_RAD, COULOMB_V0_RADPS, body_link_names, fit_backlash_widths, fit_coulomb_widths,
+                        is_physics_channel)
 from .bounds import RESIDUE
 from .candidates import build_candidates, series_ids, stack_rows
 from .chain import cancelling_offsets
@@ -181,6 +182,7 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
         evaluate_all(ds, calibrated, params)
         _subtract_known(ds, links, known)
     fit_coulomb_widths(ds.recordings, ds.evaluations)
+    fit_backlash_widths(ds.recordings, ds.evaluations)
     say("  building the candidate effects")
     cands = build_candidates(calibrated, ds)
     if any(r.static for r in ds.recordings):
@@ -366,12 +368,18 @@ def _with_widths(ds: Dataset, effects: list[dict]) -> list[dict]:
 
 def _subtract_known(ds: Dataset, links: list[str], known: list[dict]) -> None:
     """Take the model file's own joint and sensor effects out of the residuals (they are part of the model; a
-    Coulomb friction with the transition speed it was named with)."""
+    Coulomb friction with the transition speed it was named with, a backlash with its own play as the width)."""
     for rec, ev in zip(ds.recordings, ds.evaluations):
         ev.coulomb_v0 = np.full(ev.n_joints, COULOMB_V0_RADPS) if ev.coulomb_v0 is None else ev.coulomb_v0
+        ev.backlash_b0 = np.full(ev.n_joints, BACKLASH_GRID_RAD[0]) if ev.backlash_b0 is None else ev.backlash_b0
         for eff in known:
-            if eff["kind"] == "coulomb_friction" and "v0_radps" in eff and eff["location"] in rec.joint_names:
-                ev.coulomb_v0[rec.joint_names.index(eff["location"])] = float(eff["v0_radps"])
+            if eff["location"] not in rec.joint_names:
+                continue
+            j = rec.joint_names.index(eff["location"])
+            if eff["kind"] == "coulomb_friction" and "v0_radps" in eff:
+                ev.coulomb_v0[j] = float(eff["v0_radps"])
+            elif eff["kind"] == "backlash":
+                ev.backlash_b0[j] = float(eff["value"])
     for r, ev in enumerate(ds.evaluations):
         for eff in known:
             ev.e -= np.tensordot(effect_columns(ds, links, r, eff["kind"], eff["location"]), effect_theta(eff),

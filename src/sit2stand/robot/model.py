@@ -102,6 +102,8 @@ class Unmodeled:
     ft_torque_bias_nm: tuple[float, float, float] = (0.0, 0.0, 0.0)
     ft_bias: dict[str, tuple[float, ...]] = field(default_factory=dict)   # side -> (fx fy fz [N], tx ty tz [N m])
     actuator_delay_s: float = 0.0
+    # joint glob -> half the gear's play [rad]: the joint PD's torque has a dead zone of that width (robot.plant)
+    backlash_rad: dict[str, float] = field(default_factory=dict)
     # side -> rotation vector [rad]: the F/T sensor mounted turned by it reads the wrench in axes turned so
     ft_rotation_rad: dict[str, tuple[float, float, float]] = field(default_factory=dict)
 
@@ -173,6 +175,7 @@ class PlantConfig:
                 ft_force_bias_n=tuple(map(float, um.get("ft_force_bias_n", (0, 0, 0)))),
                 ft_torque_bias_nm=tuple(map(float, um.get("ft_torque_bias_nm", (0, 0, 0)))),
                 actuator_delay_s=float(um.get("actuator_delay_s", 0.0)),
+                backlash_rad={k: float(v) for k, v in (um.get("backlash_rad") or {}).items()},
                 ft_rotation_rad={str(k): _three(v, f"ft_rotation_rad.{k}")
                                  for k, v in (um.get("ft_rotation_rad") or {}).items()})
         except (KeyError, TypeError, ValueError) as err:

@@ -155,6 +155,9 @@ class Plant:
             raise InputError(f"{cfg.source or 'plant'}: ft_rotation_rad for unknown side(s) {sorted(bad)}")
         # what the sensor reads, from the wrench in its modelled axes: the transpose of its mounting's turn
         self.ft_reading = {s: pin.exp3(np.asarray(um.ft_rotation_rad.get(s, np.zeros(3)), float)).T for s in SIDES}
+        self.backlash = np.zeros(self.n)       # half the gear's play [rad] (see _dead_zone)
+        for name, value in expand(um.backlash_rad, self.joint_names).items():
+            self.backlash[self.joint_names.index(name)] = value
         self.delay_steps = int(round(um.actuator_delay_s / cfg.timestep_s))
         self._tau_queue: deque[np.ndarray] = deque()
         # the controller's model (CAD unless identified parameters are given)
@@ -301,10 +304,21 @@ class Plant:
                     ctrl_pd, ctrl_ff = self._tau_queue.popleft()
                 else:
                     ctrl_pd, ctrl_ff = self.data.qpos[self.qadr].copy(), np.zeros(self.n)
+            if self.backlash.any() and not self.limp and self.feedforward != "wbc":
+                ctrl_pd = self._dead_zone(ctrl_pd, ctrl_ff)
             self.data.ctrl[self.pd_ids] = ctrl_pd
             self.data.ctrl[self.ff_ids] = ctrl_ff
             mujoco.mj_step(self.model, self.data)
         self._check_fall()
+
+    def _dead_zone(self, ctrl_pd: np.ndarray, ctrl_ff: np.ndarray) -> np.ndarray:
+        """The servo target that makes the joint PD + feed-forward pass through a gear with play: the motor (massless,
+        its encoder on the joint side) crosses the play of +-b freely, so the joint feels kp dz(u, b), where u [rad] is
+        where the motor would sit to give the law's torque (kp u = the PD + feed-forward torque) and dz takes b off
+        |u|: a torque dead zone of +-kp b. Under torque control (wbc) the motor's torque passes the play unchanged."""
+        q = self.data.qpos[self.qadr]
+        u = ctrl_pd - q + ctrl_ff / self.kp
+        return q + (u - np.clip(u, -self.backlash, self.backlash)) - ctrl_ff / self.kp
 
     def _check_fall(self) -> None:
         z = self.data.qpos[2]
