@@ -14,11 +14,11 @@ import pytest
 import yaml
 
 from sit2stand.bench_gap_human import CASES as HUMAN_CASES
-from sit2stand.bench_gap_human import GROUPS, bench_gap_human, draw_cases, gap_human_rates, score_run
+from sit2stand.bench_gap_human import GROUPS, bench_gap_human, draw_cases, gap_human_rates, run_one, score_run
 from sit2stand.gap.bounds import Limits
 from sit2stand.gap.excite import excite
 from sit2stand.gap.hidden import Hidden, draw, plant_with, run_case, score
-from sit2stand.gap.human import LIGHTER_SHARE, human_gap, segment_reach_m, segment_refusal
+from sit2stand.gap.human import LIGHTER_SHARE, WITHIN_VARIATION, human_gap, segment_reach_m, segment_refusal
 from sit2stand.gap.select import Candidate, select
 from sit2stand.human.skeleton import ExtraMass, Subject, build_human
 from sit2stand.human.demonstration_bag import write_demonstration_bag
@@ -200,15 +200,17 @@ def test_not_a_robot_bag_is_named(tmp_path):
 
 
 def test_human_side_names_a_hidden_trunk_mass(tmp_path):
-    """A digital human with 8 kg hidden on the trunk (inside the scale mass): the extra mass is named on the torso."""
-    cfg = SynthConfig(style="elderly", seed=1, extra=[ExtraMass.parse("trunk:8")])
-    bag = tmp_path / "trunk8"
+    """A digital human with 15 kg hidden on the trunk (inside the scale mass): the extra mass is named on the torso.
+    8 kg is not: the plates see it as a trunk and head heavier than the table's, within a body's own spread
+    (gap.variation)."""
+    cfg = SynthConfig(style="elderly", seed=1, extra=[ExtraMass.parse("trunk:15")])
+    bag = tmp_path / "trunk15"
     write_demonstration_bag(synthesize(cfg), bag)
     r = human_gap(bag)
     assert r.effects, r.verdict
     first = r.effects[0]
     assert first["kind"] == "extra_mass" and first["location"] == "torso", r.verdict
-    assert abs(first["mass_kg"] - 8.0) <= 0.2 * 8.0
+    assert abs(first["mass_kg"] - 15.0) <= 0.2 * 15.0
     assert r.rms_after[4] < 0.7 * r.rms_before[4]      # the sagittal moment's gap shrinks
 
 
@@ -241,6 +243,7 @@ def test_human_gap_benchmark_scores_by_kind_place_and_size():
     assert score_run(scale, [{"kind": "mass_scale", "value": 1.095}], "")["hit"]        # 0.015 of 0.08: 19 %
     assert not score_run(scale, [{"kind": "mass_scale", "value": 1.1}], "")["hit"]      # 25 %
     assert score_run(None, [], "no significant discrepancy")["hit"]
+    assert score_run(None, [], f"{WITHIN_VARIATION} (torso +6 %)")["hit"]
     unexplained = score_run(None, [], "disagreement found, but no candidate effect explains it")
     assert not unexplained["hit"] and unexplained["clean"]
     rows = [{"case": "foot", "hidden": foot, "wall_s": 1.0, **score_run(foot, [mass("toes_l", 2.3)], "")},
@@ -274,6 +277,15 @@ def test_human_gap_benchmark_runs_on_a_tiny_configuration():
     assert scale["hidden"]["kind"] == "mass_scale" and none["hidden"] is None
     assert scale["hit"], scale          # a 5-12 % scale error is named within 20 % (measured: within 1 %)
     assert 0.0 <= out["none_no_alarm_rate"] <= 1.0 and out["scale_wall_s"] > 0
+
+
+def test_a_bodys_own_segment_masses_are_not_named_a_load():
+    """A digital human carrying nothing, whose segment masses depart from de Leva's table (the synthesiser's 8 %):
+    fitted freely, the plates' residual (2 floors at most) was named a 4.1 kg load on the head; the body's own
+    variation, held to its spread (gap.variation), now explains it."""
+    row = run_one(draw_cases(8, ("none",))[0])
+    assert row["hit"] and not row["named"], row
+    assert row["z_before_max"] < 3.0, row
 
 
 def test_a_mass_on_a_body_segment_stays_within_its_reach_and_no_lighter_than_a_share_of_it():

@@ -19,6 +19,7 @@ from sit2stand.gap.select import Candidate, Selected
 from sit2stand.gap.symmetry import lopsided, mirror, side_of
 from sit2stand.gap.unexplained import where_and_shape
 from sit2stand.gap.validate import effect_theta
+from sit2stand.gap.variation import map_departures, within_spread
 from sit2stand.robot.model import PlantConfig, PlantConfigError, controller_model
 from sit2stand.robot.plant import Plant
 from sit2stand.robot.postures import standing_qpos
@@ -274,3 +275,20 @@ def test_backlash_signature_and_its_width_are_fitted_from_the_controller_channel
     assert b_hat == pytest.approx(true_b, rel=0.05)
     assert refusal("backlash", "arm_left_4_joint", np.array([-0.004]), Limits()) is not None
     assert refusal("backlash", "arm_left_4_joint", np.array([0.004]), Limits()) is None
+
+
+def test_a_bodys_own_variation_explains_departures_within_its_spread_and_not_beyond():
+    """Three segments' mass signatures (noise units) whose masses may depart 8 % from the table: departures within that
+    spread are recovered as such; a load of 60 % of the first segment's mass (7.5 sd) is past it."""
+    rng = np.random.default_rng(0)
+    n = 600
+    Xv = 20.0 * rng.normal(size=(n, 3))
+    sd = np.full(3, 0.08)
+    own = Xv @ np.array([0.05, -0.08, 0.04]) + rng.normal(size=n)
+    delta, left = map_departures(own, Xv, sd, frac=1.0)
+    assert np.allclose(delta, [0.05, -0.08, 0.04], atol=0.01) and np.std(left) < 1.1
+    assert within_spread(delta, sd)
+    delta, _ = map_departures(own + 0.6 * Xv[:, 0], Xv, sd, frac=1.0)
+    assert not within_spread(delta, sd) and delta[0] == pytest.approx(0.65, abs=0.02)
+    # the data counted at 1 % of their rows: the prior holds the departures back
+    assert abs(map_departures(own, Xv, sd, frac=1e-4)[0][0]) < 0.04

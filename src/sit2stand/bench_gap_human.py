@@ -19,7 +19,8 @@ proportions by design (segment masses sd 8 %, ``vary_subject``): each row lists 
 * A scale error: the true body (nothing extra) is 5-12 % heavier or lighter (sign at random) than the body mass in
   the bag (:attr:`SynthConfig.declared_mass_factor`); the plates weigh the truth. The right answer is the
   ``mass_scale`` effect with ``value`` = true / declared.
-* Nothing hidden: right when nothing is named and the verdict is "no significant discrepancy".
+* Nothing hidden: right when nothing is named and the verdict is "no significant discrepancy" or "no load beyond the
+  body's own proportions" (:mod:`sit2stand.gap.variation`).
 
 Scoring (:func:`score_run`): a hit names the hidden effect's kind, its place (the segment on the right side; a mass on
 a foot named on that foot's toes counts too: the synthesised toe joint never moves, so foot and toes are one rigid
@@ -39,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from .bench_standup import Case, sample_population, synthesise
-from .gap.human import human_gap
+from .gap.human import WITHIN_VARIATION, human_gap
 from .gap.workflow import NO_DISCREPANCY
 from .human.demonstration_bag import write_demonstration_bag
 from .human.skeleton import SEGMENTS, ExtraMass, Subject, build_human
@@ -167,7 +168,8 @@ def score_run(hidden: dict | None, effects: list[dict], verdict: str) -> dict:
     hidden: nothing named and no discrepancy), ``clean`` (nothing named but the hidden effect), ``wrong_side`` (the
     mass named on the right group's other side), ``spurious`` (the other effects named)."""
     if hidden is None:
-        return {"found": False, "size_error": float("nan"), "hit": not effects and verdict == NO_DISCREPANCY,
+        quiet = verdict == NO_DISCREPANCY or verdict.startswith(WITHIN_VARIATION)
+        return {"found": False, "size_error": float("nan"), "hit": not effects and quiet,
                 "clean": not effects, "wrong_side": False, "spurious": [_named(e) for e in effects]}
     match = next((k for k, e in enumerate(effects) if e["kind"] == hidden["kind"]
                   and (e["kind"] != "extra_mass" or e["location"] in _place(hidden["location"]))), None)

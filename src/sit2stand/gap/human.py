@@ -10,7 +10,9 @@ with q, v, a the marker-fitted motion (the COM estimator's calibrated skeleton, 
 W_model the external wrench the model's dynamics need (the base rows of RNEA). The candidates are an extra point mass
 on each segment (mass and first moment in the segment's joint frame: the mass columns of the joint-torque regressor)
 and a uniform mass scale (the scale mass is the total: an extra mass on one segment makes every other one lighter
-than the model says); they go through the same selection as the robot's effects (:mod:`sit2stand.gap.select`).
+than the model says); they go through the same selection as the robot's effects (:mod:`sit2stand.gap.select`),
+once the body's own departures from the table's segment masses, held to their spread, cannot explain the plates
+(:mod:`sit2stand.gap.variation`).
 """
 
 from __future__ import annotations
@@ -23,15 +25,19 @@ import pinocchio as pin
 
 from ..human.com import estimate_com
 from ..human.offline import read_trial
-from ..human.skeleton import SEGMENTS, Subject, build_human
+from ..human.skeleton import SEGMENT_MASS_SD, SEGMENTS, Subject, build_human
 from ..io.bag import BagError
 from .residuals import base_to_world
-from .select import Candidate, Selection, select
+from .select import Candidate, Selection, effective_fraction, select
 from .dataset import fast_part_floor
 from .bounds import Limits, refusal
 from .candidates import MASS_PARAMS
 from .naming import effect_summary
+from .variation import largest_departures, map_departures, within_spread
 from .workflow import NO_DISCREPANCY, SIGNIFICANT_Z, UNEXPLAINED
+
+WITHIN_VARIATION = "no load beyond the body's own proportions"
+"""The verdict's start where the body's own segment masses, within their spread, explain the plates (gap.variation)."""
 
 
 @dataclass
@@ -44,11 +50,11 @@ class HumanGap:
     selection: Selection
     effects: list[dict]
     verdict: str
+    own_variation: np.ndarray          # (S,) the body's own segment-mass departures fitted [fraction of the table's]
 
 
 def human_gap(bag: str | Path, progress=None) -> HumanGap:
     """Run the workflow on a human demonstration bag (markers + force plates + the subject's stature and mass)."""
-
     trial = read_trial(bag)
     if trial.height_m is None or trial.mass_kg is None:
         raise BagError(f"{bag}: the subject's stature and mass are not in the bag's metadata")
@@ -58,62 +64,102 @@ def human_gap(bag: str | Path, progress=None) -> HumanGap:
     res = estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,
                        Subject(trial.height_m, trial.mass_kg, trial.sex), scale_masses=False, chair_on_plate=chair,
                        trust_plate_mass=False)
-    model = res.model
-    data = model.createData()
-    human = build_human(res.subject)
-    keep = np.flatnonzero(res.supported)
-    nb = model.njoints - 1
-    e = np.zeros((len(keep), 6))
-    mass_cols = np.zeros((len(keep), 6, nb, 4))
-    own = np.zeros((len(keep), 6, 1))
-    for i, k in enumerate(keep):
-        q, v, a = res.q[k], res.v[k], res.a[k]
-        T = base_to_world(q, np.zeros(3))        # about the lab origin, as the plates give it
-        need = T @ pin.rnea(model, data, q, v, a)[:6]
-        e[i] = np.concatenate([res.force_n[k], res.moment_nm[k]]) - need
-        own[i, :, 0] = need
-        Y = pin.computeJointTorqueRegressor(model, data, q, v, a)[:6]
-        mass_cols[i] = np.tensordot(T, Y.reshape(6, nb, 10)[:, :, :4], axes=(1, 0))
-    valid = np.ones_like(e, bool)
-    floors = np.maximum(fast_part_floor(e, valid, res.t_s[keep]), 1e-3)
-    w = 1.0 / floors
-    stack = lambda X: np.concatenate([X[:, c, :] * w[c] for c in range(6)], axis=0)  # noqa: E731
-    y = stack(e[:, :, None])[:, 0]
-    sid = np.repeat(np.arange(6), len(keep))
-    total = float(sum(model.inertias[j].mass for j in range(1, model.njoints)))
+    w = _Wrenches(res)
+    columns = {seg: w.stack(w.signature("extra_mass", seg)) for seg in SEGMENTS} | {"whole body": w.stack(w.own)}
+    Xv = np.column_stack([w.stack(x[:, :, None])[:, 0] for x in w.own_variation])
+    sd = np.full(len(SEGMENTS), SEGMENT_MASS_SD)
+    delta, _ = map_departures(w.y, Xv, sd, _noise_fraction(w.y, columns, w.series))
+    cands = [Candidate("extra_mass", seg, MASS_PARAMS, columns[seg], plausible=w.bounded(seg)) for seg in SEGMENTS]
+    cands.append(Candidate("mass_scale", "whole body", ["scale - 1"], columns["whole body"]))
+    if progress:
+        progress(f"  {len(w.keep)} supported frames, {len(cands)} candidates: selecting")
+    sel = select(w.y, cands if not within_spread(delta, sd) else [], series_id=w.series, noise_rss=float(len(w.y)))
+    after = w.e.copy()
+    if not sel.effects:               # the body's own proportions, within their spread, are what is left
+        after -= sum(d * x for d, x in zip(delta, w.own_variation))
+    for s in sel.effects:
+        after -= np.tensordot(w.signature(s.candidate.kind, s.candidate.location), s.theta, axes=(2, 0))
+    effects = effect_summary(sel)
+    rms_b, rms_a = np.sqrt(np.mean(w.e ** 2, axis=0)), np.sqrt(np.mean(after ** 2, axis=0))
+    return HumanGap(str(bag), list(SEGMENTS), w.floors, rms_b, rms_a, sel, effects,
+                    _verdict(effects, rms_b / w.floors, rms_a / w.floors, delta), delta)
 
-    def within_scale_mass(seg: str) -> np.ndarray:
-        """An extra mass on ``seg`` inside the scale mass: the other segments are lighter by the same share."""
-        X = mass_cols[:, :, human.segment_joint[seg] - 1].copy()
-        X[:, :, 0] -= own[:, :, 0] / total
+
+class _Wrenches:
+    """The whole body's wrench residual along the supported frames of a COM estimate (see the module docstring),
+    its noise floors and the candidates' signatures: ``e`` (K, 6), ``y`` its rows weighted by the floors."""
+
+    def __init__(self, res) -> None:
+        self.model = model = res.model
+        data = model.createData()
+        self.human = build_human(res.subject)
+        self.keep = keep = np.flatnonzero(res.supported)
+        nb = model.njoints - 1
+        self.e = np.zeros((len(keep), 6))
+        self.mass_cols = np.zeros((len(keep), 6, nb, 4))
+        self.own = np.zeros((len(keep), 6, 1))           # the model's own wrench: a uniform mass scale's signature
+        for i, k in enumerate(keep):
+            q, v, a = res.q[k], res.v[k], res.a[k]
+            T = base_to_world(q, np.zeros(3))        # about the lab origin, as the plates give it
+            need = T @ pin.rnea(model, data, q, v, a)[:6]
+            self.e[i] = np.concatenate([res.force_n[k], res.moment_nm[k]]) - need
+            self.own[i, :, 0] = need
+            Y = pin.computeJointTorqueRegressor(model, data, q, v, a)[:6]
+            self.mass_cols[i] = np.tensordot(T, Y.reshape(6, nb, 10)[:, :, :4], axes=(1, 0))
+        self.floors = np.maximum(fast_part_floor(self.e, np.ones_like(self.e, bool), res.t_s[keep]), 1e-3)
+        self.y = self.stack(self.e[:, :, None])[:, 0]
+        self.series = np.repeat(np.arange(6), len(keep))
+        self.total_kg = float(sum(model.inertias[j].mass for j in range(1, model.njoints)))
+        # a body's own segment masses (gap.variation): per segment, its own mass at its COM, per unit of departure
+        self.own_variation = [self.signature("extra_mass", seg) @ _mass_at_com(self._inertia(seg))
+                              for seg in SEGMENTS]
+
+    def stack(self, X: np.ndarray) -> np.ndarray:
+        """(6 K, p) rows of the six channels of ``X`` (K, 6, p), each weighted by its floor."""
+        return np.concatenate([X[:, c, :] / self.floors[c] for c in range(6)], axis=0)
+
+    def _inertia(self, seg: str) -> pin.Inertia:
+        return self.model.inertias[self.human.segment_joint[seg]]
+
+    def signature(self, kind: str, seg: str) -> np.ndarray:
+        """(K, 6, p) a candidate's columns: an extra mass on ``seg`` inside the scale mass (the other segments lighter
+        by the same share), or the uniform mass scale."""
+        if kind != "extra_mass":
+            return self.own
+        X = self.mass_cols[:, :, self.human.segment_joint[seg] - 1].copy()
+        X[:, :, 0] -= self.own[:, :, 0] / self.total_kg
         return X
 
-    def bounded(seg: str):
+    def bounded(self, seg: str):
         """The extra mass's bounds on ``seg``: the robot's (gap.bounds), and on a body, within the segment's reach
         and no lighter than ``LIGHTER_SHARE`` of the segment (see :func:`segment_refusal`)."""
-        j = human.segment_joint[seg]
-        limits = Limits(link_mass_kg=float(model.inertias[j].mass))
-        reach = segment_reach_m(model, j)
+        limits = Limits(link_mass_kg=float(self._inertia(seg).mass))
+        reach = segment_reach_m(self.model, self.human.segment_joint[seg])
         return lambda theta: refusal("extra_mass", seg, theta, limits) or segment_refusal(theta, limits, reach)
 
-    cands = [Candidate("extra_mass", seg, MASS_PARAMS, stack(within_scale_mass(seg)), plausible=bounded(seg))
-             for seg in SEGMENTS]
-    cands.append(Candidate("mass_scale", "whole body", ["scale - 1"], stack(own)))
-    rms_b = np.sqrt(np.mean(e ** 2, axis=0))
-    if progress:
-        progress(f"  {len(keep)} supported frames, {len(cands)} candidates: selecting")
-    sel = select(y, cands, series_id=sid, noise_rss=float(len(y)))
-    after = e.copy()
-    for s in sel.effects:
-        X = within_scale_mass(s.candidate.location) if s.candidate.kind == "extra_mass" else own
-        after -= np.tensordot(X, s.theta, axes=(2, 0))
-    effects = effect_summary(sel)
-    rms_a = np.sqrt(np.mean(after ** 2, axis=0))
+
+def _noise_fraction(y: np.ndarray, columns: dict[str, np.ndarray], series: np.ndarray) -> float:
+    """The effective share of the rows (:func:`~sit2stand.gap.select.effective_fraction`) of what no candidate can
+    fit: the noise's, not the smooth signal's, whose autocorrelation would leave the data almost no weight."""
+    X = np.hstack(list(columns.values()))
+    theta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    return effective_fraction(y - X @ theta, series)
+
+
+def _mass_at_com(inertia: pin.Inertia) -> np.ndarray:
+    """(4,) a segment's own mass at its own COM, in the mass columns' terms (m, m c)."""
+    return float(inertia.mass) * np.concatenate([[1.0], inertia.lever])
+
+
+def _verdict(effects: list[dict], z_before: np.ndarray, z_after: np.ndarray, delta: np.ndarray) -> str:
+    """The named loads; or no discrepancy; or none beyond the body's own variation; or unexplained."""
     if effects:
-        verdict = "; ".join(_named(d) for d in effects)
-    else:
-        verdict = NO_DISCREPANCY if (rms_b / floors).max() < SIGNIFICANT_Z else UNEXPLAINED
-    return HumanGap(str(bag), list(SEGMENTS), floors, rms_b, rms_a, sel, effects, verdict)
+        return "; ".join(_named(d) for d in effects)
+    if z_before.max() < SIGNIFICANT_Z:
+        return NO_DISCREPANCY
+    if z_after.max() < SIGNIFICANT_Z:
+        return f"{WITHIN_VARIATION} ({largest_departures(delta, list(SEGMENTS))} of the table's segment masses)"
+    return UNEXPLAINED
 
 
 def _named(d: dict) -> str:

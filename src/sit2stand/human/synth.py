@@ -27,7 +27,8 @@ import pinocchio as pin
 from ..dynamics import G, plan_derivatives
 from ..io.forceplate import PlateSeries
 from .anthropometry import ankle_height_m
-from .skeleton import LENGTH_GROUPS, REFERENCE_STATURE_M, SEGMENTS, ExtraMass, HumanModel, Subject, build_human
+from .skeleton import (LENGTH_GROUPS, REFERENCE_STATURE_M, SEGMENT_MASS_SD, SEGMENTS, ExtraMass, HumanModel, Subject,
+                       build_human)
 from .synth_plates import feet_cop_warnings, foot_span_x, measure_plates, min_jerk, share_loads
 
 STYLES = {
@@ -53,7 +54,7 @@ class SynthConfig:
     seed: int = 0
     extra: list[ExtraMass] = field(default_factory=list)
     declared_mass_factor: float = 1.0       # the bag's body mass = the true one x this (a scale error; plates: truth)
-    vary_subject: bool = True               # random segment length (sd 3 %) and mass (sd 8 %) factors
+    vary_subject: bool = True               # random segment length (sd 3 %) and mass (SEGMENT_MASS_SD) factors
     sit_before_s: float = 0.8
     stand_after_s: float = 1.5
     marker_rate_hz: float = 100.0
@@ -106,7 +107,7 @@ def _random_subject(cfg: SynthConfig, rng: np.random.Generator) -> Subject:
         per_side = {}
         for seg in SEGMENTS:
             base = seg[:-2] if seg[-2:] in ("_l", "_r") else seg
-            per_side.setdefault(base, float(np.clip(rng.normal(1.0, 0.08), 0.8, 1.2)))
+            per_side.setdefault(base, float(np.clip(rng.normal(1.0, SEGMENT_MASS_SD), 0.8, 1.2)))
             masses[seg] = per_side[base] * float(np.clip(rng.normal(1.0, 0.01), 0.97, 1.03))
     body_mass = cfg.mass_kg
     return Subject(cfg.height_m, body_mass, cfg.sex, lengths, masses, list(cfg.extra))
