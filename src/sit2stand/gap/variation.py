@@ -10,9 +10,9 @@ times the table's, at the segment's centre of mass and within the scale mass, de
 maximum a posteriori estimate (a ridge; the data counted at their effective share of rows, from the autocorrelation
 of what no candidate fits: smoothed signals counted sample by sample would leave the prior no say). Where every
 departure stays within ``VARIATION_Z`` standard deviations, the body's own proportions are a sufficient explanation
-and no load is named; otherwise the loads are looked for as before. An 8 kg load on a 77 kg body's trunk is then not
-named (the plates see it as a trunk 24 % heavier and a head 13 % heavier than the table's, within their spread), which
-is the honest answer: the plates cannot tell it from a heavier upper body. A 15 kg one is named.
+and no load is named; otherwise the loads are looked for as before. An 8 kg load on a 75 kg body's trunk is then not
+named (the plates see it as a trunk 19 % and a head 10 % heavier than the table's, within their spread), which is the
+honest answer: the plates cannot tell it from a heavier upper body. A 15 kg one is named.
 """
 
 from __future__ import annotations
