@@ -68,14 +68,15 @@ def human_gap(bag: str | Path, progress=None) -> HumanGap:
     columns = {seg: w.stack(w.signature("extra_mass", seg)) for seg in SEGMENTS} | {"whole body": w.stack(w.own)}
     Xv = np.column_stack([w.stack(x[:, :, None])[:, 0] for x in w.own_variation])
     sd = np.full(len(SEGMENTS), SEGMENT_MASS_SD)
-    delta, _ = map_departures(w.y, Xv, sd, _noise_fraction(w.y, columns, w.series))
-    cands = [Candidate("extra_mass", seg, MASS_PARAMS, columns[seg], plausible=w.bounded(seg)) for seg in SEGMENTS]
-    cands.append(Candidate("mass_scale", "whole body", ["scale - 1"], columns["whole body"]))
+    delta, _ = map_departures(w.y, Xv, sd, _noise_fraction(w.y, columns, w.series), columns["whole body"])
+    cands = [Candidate("mass_scale", "whole body", ["scale - 1"], columns["whole body"])]
+    if not within_spread(delta, sd):        # else no load: the body's own proportions explain the plates
+        cands += [Candidate("extra_mass", seg, MASS_PARAMS, columns[seg], plausible=w.bounded(seg)) for seg in SEGMENTS]
     if progress:
         progress(f"  {len(w.keep)} supported frames, {len(cands)} candidates: selecting")
-    sel = select(w.y, cands if not within_spread(delta, sd) else [], series_id=w.series, noise_rss=float(len(w.y)))
+    sel = select(w.y, cands, series_id=w.series, noise_rss=float(len(w.y)))
     after = w.e.copy()
-    if not sel.effects:               # the body's own proportions, within their spread, are what is left
+    if all(s.candidate.kind == "mass_scale" for s in sel.effects):   # the body's own proportions are what is left
         after -= sum(d * x for d, x in zip(delta, w.own_variation))
     for s in sel.effects:
         after -= np.tensordot(w.signature(s.candidate.kind, s.candidate.location), s.theta, axes=(2, 0))
