@@ -88,4 +88,5 @@ def control_law(rec: Recording, controller_params: dict | None = None, sensor_la
         pd_rate[k] = kp * qd_t + kd * cmd.qdd[c]
         valid[k] = True
     dff = np.gradient(ff_all, rec.t_s, axis=0) if N > 2 else np.zeros_like(ff_all)
-    return ControlLaw(law, -(pd_rate + dff), valid, law + kd * rec.qd, kp)
+    damping = kd * (rec.qd - sensor_lag_s * rec.qdd)          # the law's own kd q' (as evaluated above)
+    return ControlLaw(law, -(pd_rate + dff), valid, law + damping, kp)

@@ -158,6 +158,7 @@ class Plant:
         self.backlash = np.zeros(self.n)       # half the gear's play [rad] (see _dead_zone)
         for name, value in expand(um.backlash_rad, self.joint_names).items():
             self.backlash[self.joint_names.index(name)] = value
+        self.has_backlash = bool(self.backlash.any())    # checked at every physics step
         self.delay_steps = int(round(um.actuator_delay_s / cfg.timestep_s))
         self._tau_queue: deque[np.ndarray] = deque()
         # the controller's model (CAD unless identified parameters are given)
@@ -304,7 +305,7 @@ class Plant:
                     ctrl_pd, ctrl_ff = self._tau_queue.popleft()
                 else:
                     ctrl_pd, ctrl_ff = self.data.qpos[self.qadr].copy(), np.zeros(self.n)
-            if self.backlash.any() and not self.limp and self.feedforward != "wbc":
+            if self.has_backlash and not self.limp and self.feedforward != "wbc":
                 ctrl_pd = self._dead_zone(ctrl_pd, ctrl_ff)
             self.data.ctrl[self.pd_ids] = ctrl_pd
             self.data.ctrl[self.ff_ids] = ctrl_ff
