@@ -13,8 +13,9 @@ from sit2stand.human.anthropometry import (DE_LEVA, anthropometric_set, ankle_he
 from sit2stand.human.calibration import StreamCalibration, calibrate_lengths
 from sit2stand.human.com import estimate_com
 from sit2stand.human.com_stream import StreamingComEstimator
-from sit2stand.human.mass_scaling import (LENGTH_FACTOR_BOUNDS, MASS_GROUPS, lengths_at_bounds, scaling_at_bounds,
-                                          solve_mass_scaling)
+from sit2stand.human.mass_scaling import (LENGTH_FACTOR_BOUNDS, MASS_GROUPS, SEGMENTS, ScalingRows, fit_mass_scaling,
+                                          group_of, lengths_at_bounds, prior_scaling, reweigh_by_residual,
+                                          scaling_at_bounds, solve_mass_scaling)
 from sit2stand.human.skeleton import PLUG_IN_GAIT, Subject, build_human
 from sit2stand.io.c3d import read_c3d
 
@@ -151,6 +152,38 @@ def test_a_mass_factor_at_its_bound_is_named():
                                                     human.total_mass, weights=np.zeros(0)))
 
 
+def smooth_noise(rng, n, rho, sd):
+    """An AR(1) series: lag-1 autocorrelation ``rho``, standard deviation ``sd``."""
+    e = np.zeros(n)
+    e[0] = rng.normal(0, sd)
+    for k in range(1, n):
+        e[k] = rho * e[k - 1] + rng.normal(0, sd * np.sqrt(1 - rho**2))
+    return e
+
+
+def test_rows_that_miss_smoothly_count_at_their_worth_against_the_prior():
+    """Rows whose error is 10x the nominal noise and smooth over frames (rho 0.9): reweighed to 1 / (10 x sqrt of
+    (1 + rho) / (1 - rho)) of their nominal weight, and the refit stays nearer the table than the nominal fit."""
+    human, rng = build_human(), np.random.default_rng(4)
+    count = {g: sum(group_of(seg) == g for seg in SEGMENTS) for g in MASS_GROUPS}
+    table = prior_scaling(human).masses
+    theta_table = np.array([table[g] / count[g] for g in MASS_GROUPS] + [0.0, 0.0])
+    frames, channels = 300, 6
+    A = rng.normal(0, 1, (frames * channels, len(theta_table))) * np.tile(np.linspace(0.5, 5, channels), frames)[:, None]
+    channel = np.tile(np.arange(channels), frames)
+    error = np.zeros(len(channel))
+    for c in range(channels):
+        error[channel == c] = smooth_noise(rng, frames, 0.9, 50.0)      # 10x the nominal 5 N
+    rows = ScalingRows(A, A @ theta_table + error, np.full(len(channel), 1 / 5.0), channel)
+    weights = reweigh_by_residual(rows, theta_table)
+    assert np.median(weights / rows.weights) == pytest.approx(1 / (10 * np.sqrt(1.9 / 0.1)), rel=0.25)
+    nominal = solve_mass_scaling(human, rows.A, rows.b, human.total_mass, weights=rows.weights)
+    refit = fit_mass_scaling(human, rows, human.total_mass)
+    departure = {name: max(abs(f - 1) for f in s.factors().values()) for name, s in (("nominal", nominal),
+                                                                                      ("refit", refit))}
+    assert refit.noise_passes == 3 and departure["refit"] < departure["nominal"] / 2, departure
+
+
 def test_a_length_factor_at_its_bound_is_named():
     hits = lengths_at_bounds({"foot": 1.575, "head": 1.1, "thigh": 0.6})
     assert [(h.group, h.side, h.bound) for h in hits] == [("foot", "upper", 1.6), ("thigh", "lower", 0.6)]
@@ -194,15 +227,16 @@ def rms_mm(a, b):
     return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))) * 1e3)
 
 
-def test_real_child_adult_table_puts_the_pelvis_at_its_bound_and_says_so(child_runs):
+def test_real_child_adult_table_stretches_the_head_and_the_plates_keep_the_masses_near_it(child_runs):
+    """Adult proportions on a child: the calibration stretches the head 1.5x. The plates' rows, counted at their worth,
+    move no mass factor far from the table (fitted as independent samples they put the pelvis at its 0.5 bound)."""
     runs, vicon, _ = child_runs
     adult = runs["adult"]
     assert adult.segment_table.startswith("segment table: de Leva")
-    assert adult.scaling.factors()["pelvis"] < 0.515
-    assert ("mass", "pelvis") in [(f.kind, f.group) for f in adult.at_bounds]
-    assert any("pelvis mass factor" in n for n in adult.notes)
     assert adult.subject.lengths["head"] > 1.45                         # adult head proportions on a child
-    assert rms_mm(adult.com_m, vicon) == pytest.approx(6.3, abs=0.5)    # the figure before this change
+    assert not [f for f in adult.at_bounds if f.kind == "mass"], adult.notes
+    assert all(0.8 < f < 1.25 for f in adult.scaling.factors().values()), adult.scaling.factors()
+    assert rms_mm(adult.com_m, vicon) < 8.0                             # measured 5.5 mm (6.3 before)
 
 
 def test_real_child_childrens_table_no_mass_factor_at_a_bound_and_the_plates_agree_better(child_runs):
@@ -236,6 +270,5 @@ def test_real_child_vicons_com_is_dempsters_adult_weighting(child_runs):
     assert w[names.index("ThoraxCOM")] / w[names.index("PelvisCOM")] == pytest.approx(0.355 / 0.142, rel=1e-3)
     child = runs["child"]
     err = child.com_m - vicon
-    assert np.mean(err[:, 2]) > 0.005                                 # higher than Vicon's adult COM
-    assert np.sqrt(np.mean(err[:, 0] ** 2)) < 0.010                   # forward: within 1 cm
-    assert rms_mm(child.com_m, vicon) < 20.0
+    assert 0.005 < np.mean(err[:, 2]) < 0.060                         # higher than Vicon's adult COM: 41 mm
+    assert np.all(np.sqrt(np.mean(err[:, :2] ** 2, axis=0)) < 0.010)  # forward and sideways: 4.9, 1.1 mm

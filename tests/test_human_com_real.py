@@ -21,10 +21,11 @@ def test_standing_com_to_cop_no_worse_than_vicon(child_summary):
 
 
 def test_close_to_vicons_com_and_the_plates_weigh_the_child(child_summary):
-    # Vicon's CentreOfMass is its adult (Dempster) segment weighting; ours uses the children's table (Jensen 1989):
-    # 6.3 mm from Vicon's with de Leva's adult table, 14.5 mm with the children's, whose model COP fits the plate
-    # better (12.2 against 14.8 mm). So this bounds the distance to a different model, not an error.
-    assert child_summary["com_rms_vs_reference_mm"] < 20.0
+    # Vicon's CentreOfMass is its adult (Dempster) segment weighting; ours uses the children's table (Jensen 1989),
+    # whose model COP fits the plate better (12.2 against 14.8 mm): 42 mm from Vicon's, nearly all of it height (a
+    # child's larger head; the plates barely see the COM's height, and no longer pull it down to Vicon's).
+    # So this bounds the distance to a different model, not an error.
+    assert child_summary["com_rms_vs_reference_mm"] < 60.0
     assert child_summary["marker_rms_mm"] < 8.0
     # the file says 14.5 kg; the plate reads ~10 % more in quiet standing, and the estimator says so
     assert 15.5 < child_summary["body_mass_used_kg"] < 16.5

@@ -210,14 +210,18 @@ def test_gait2392_on_subject01_walking_fits_and_newton_holds(subject01):
 
 
 def test_cop_matched_masses_keep_newton_on_subject01_walking(subject01):
+    """The rows counted at their worth (the fit's own residual, smooth over frames): no factor driven to a bound, and
+    Newton's law holds as well as with the table's masses (it put 7 of 10 factors at a bound when every frame counted
+    as an independent 5 N measurement: Newton 18.7, 13.2, 15.7 N)."""
     result, rms_xyz, _ = subject01["scaled"]
-    assert rms_xyz[2] < 25.0 and rms_xyz[0] < 30.0 and rms_xyz[1] < 20.0, rms_xyz   # measured 18.8, 13.2, 15.6 N
-    assert result.at_bounds, "the walking trial drives mass factors to their bounds, and the result says so"
+    _, table_xyz, _ = subject01["de_leva"]
+    assert not result.at_bounds, result.notes
+    assert all(0.8 < f < 1.25 for f in result.scaling.factors().values()), result.scaling.factors()
+    assert np.all(rms_xyz <= 1.05 * table_xyz + 0.5), (rms_xyz, table_xyz)    # measured 18.1, 10.8, 15.7 N
 
 
-@pytest.mark.xfail(strict=True, reason="COP-matched masses on walking: the GRF lines of action meet ~1.16 m up (a "
-                   "virtual pivot point above the COM); the scaling moves mass up to meet it (pelvis 2x, legs 0.5x): "
-                   "COM 1.11-1.15 m against 1.02-1.06 m with de Leva's masses")
 def test_cop_matched_masses_keep_the_walking_com_height_plausible(subject01):
+    """On walking the GRF lines of action meet ~1.16 m up (a virtual pivot point above the COM); a fit that counted
+    every frame as independent moved mass up to meet it (pelvis 2x, legs 0.5x: COM 1.11-1.15 m, a strict xfail)."""
     result, _, _ = subject01["scaled"]
     assert result.com_m[:, 2].max() < 1.10

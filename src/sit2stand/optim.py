@@ -3,7 +3,8 @@
     minimise  || W (A x - b) ||^2 + || R (x - x_prior) ||^2
     subject to  E x = e,   lb <= x <= ub
 
-Used for the human's segment-mass scaling and the robot's inertial identification. Also reports the condition
+Used for the human's segment-mass scaling and the robot's inertial identification. :func:`effective_fraction`
+counts the independent rows of a smooth, sampled residual. Also reports the condition
 number of the scaled, weighted problem, so that callers can refuse an ill-conditioned one with the number in hand.
 """
 
@@ -76,3 +77,16 @@ def constrained_lsq(A: np.ndarray, b: np.ndarray, *, weights: np.ndarray | None 
         active = int(np.sum((lb is not None) & (np.abs(x - (lb if lb is not None else x)) < tol)) +
                      np.sum((ub is not None) & (np.abs(x - (ub if ub is not None else x)) < tol)))
     return LsqResult(x, float(resid @ resid), cond, active, status)
+
+
+def effective_fraction(r: np.ndarray, series_id: np.ndarray | None) -> float:
+    """(1 - rho) / (1 + rho) from the lag-1 autocorrelation rho of ``r`` within each series (``series_id`` groups
+    the rows of one channel of one recording, in time order); 1 when rows are independent (None)."""
+    if series_id is None:
+        return 1.0
+    same = series_id[1:] == series_id[:-1]
+    a, b = r[:-1][same], r[1:][same]
+    if len(a) < 10 or np.dot(a, a) <= 0:
+        return 1.0
+    rho = float(np.clip(np.dot(a, b) / np.sqrt(np.dot(a, a) * np.dot(b, b)), 0.0, 0.98))
+    return (1 - rho) / (1 + rho)

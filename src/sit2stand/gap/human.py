@@ -28,7 +28,8 @@ from ..human.offline import read_trial
 from ..human.skeleton import SEGMENT_MASS_SD, SEGMENTS, Subject, build_human
 from ..io.bag import BagError
 from .residuals import base_to_world
-from .select import Candidate, Selection, effective_fraction, select
+from ..optim import effective_fraction
+from .select import Candidate, Selection, select
 from .dataset import fast_part_floor
 from .bounds import Limits, refusal
 from .candidates import MASS_PARAMS
@@ -140,7 +141,7 @@ class _Wrenches:
 
 
 def _noise_fraction(y: np.ndarray, columns: dict[str, np.ndarray], series: np.ndarray) -> float:
-    """The effective share of the rows (:func:`~sit2stand.gap.select.effective_fraction`) of what no candidate can
+    """The effective share of the rows (:func:`~sit2stand.optim.effective_fraction`) of what no candidate can
     fit: the noise's, not the smooth signal's, whose autocorrelation would leave the data almost no weight."""
     X = np.hstack(list(columns.values()))
     theta, *_ = np.linalg.lstsq(X, y, rcond=None)

@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..optim import effective_fraction
+
 MIN_SHARE = 0.02             # an effect must lower the sum of squares by this share of what noise leaves
 GAIN_RANK_TOL = 1e-12        # a direction of a signature below this share of its energy (left by Q) is not counted
 
@@ -76,19 +78,6 @@ class Selection:
     n_rows: int
     n_eff: float
     steps: list[dict] = field(default_factory=list)
-
-
-def effective_fraction(r: np.ndarray, series_id: np.ndarray | None) -> float:
-    """(1 - rho) / (1 + rho) from the lag-1 autocorrelation rho of ``r`` within each series (``series_id`` groups
-    the rows of one channel of one recording, in time order); 1 when rows are independent (None)."""
-    if series_id is None:
-        return 1.0
-    same = series_id[1:] == series_id[:-1]
-    a, b = r[:-1][same], r[1:][same]
-    if len(a) < 10 or np.dot(a, a) <= 0:
-        return 1.0
-    rho = float(np.clip(np.dot(a, b) / np.sqrt(np.dot(a, a) * np.dot(b, b)), 0.0, 0.98))
-    return (1 - rho) / (1 + rho)
 
 
 def _orth(X: np.ndarray) -> np.ndarray:

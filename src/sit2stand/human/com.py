@@ -30,7 +30,7 @@ from .anthropometry import anthropometric_set
 from .calibration import StreamCalibration, calibrate_lengths, calibrate_markers
 from .marker_ik import MarkerIK, TooFewMarkers, bridge_skipped, check_marker_units, fit_sequence
 from .mass_scaling import (FactorAtBound, MassScaling, apply_scaling, assemble_rows, frame_rows, lengths_at_bounds,
-                           prior_scaling, scaling_at_bounds, solve_mass_scaling)
+                           fit_mass_scaling, prior_scaling, scaling_at_bounds)
 from .skeleton import HumanModel, Subject, build_human
 from .support import SupportRule, body_mass_from_plates, plate_gaps, plate_wrench_at
 
@@ -201,8 +201,7 @@ def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.
         data = human.model.createData()
         rows = [frame_rows(human, qs[k], vs[k], as_[k], force[k], moment[k], measured_cop[k],
                            motion.subject.mass_kg, data) for k in np.flatnonzero(supported)]
-        A_rows, b_rows, w_rows = assemble_rows(rows, quasi_static_acc)
-        scaling = solve_mass_scaling(human, A_rows, b_rows, motion.subject.mass_kg, weights=w_rows)
+        scaling = fit_mass_scaling(human, assemble_rows(rows, quasi_static_acc), motion.subject.mass_kg)
         model = apply_scaling(human, scaling)
     else:
         scaling, model = prior_scaling(human), human.model

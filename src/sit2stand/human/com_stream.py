@@ -20,7 +20,7 @@ from ..vectors import cross
 from .calibration import CALIBRATION_MIN_MARKERS, StreamCalibration, calibrate_stream
 from .marker_ik import MIN_MARKERS, MarkerIK, check_marker_units
 from .mass_scaling import (FactorAtBound, FrameRows, MassScaling, apply_scaling, assemble_rows, frame_rows,
-                           lengths_at_bounds, scaling_at_bounds, solve_mass_scaling)
+                           fit_mass_scaling, lengths_at_bounds, scaling_at_bounds)
 from .skeleton import Subject, build_human
 from .support import SupportRule, plate_wrench_at
 
@@ -315,8 +315,7 @@ class StreamingComEstimator:
         """Solve the scaling from all rows so far and switch the COM model to it."""
         if len(self.rows) < self.min_frames_to_scale:
             return None
-        A, b, w = assemble_rows(self.rows)
-        self.scaling = solve_mass_scaling(self.human, A, b, self.subject.mass_kg, weights=w)
+        self.scaling = fit_mass_scaling(self.human, assemble_rows(self.rows), self.subject.mass_kg)
         self.scaled_model = apply_scaling(self.human, self.scaling)
         self.scaled_data = self.scaled_model.createData()
         return self.scaling
