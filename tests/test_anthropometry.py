@@ -169,7 +169,8 @@ def test_rows_that_miss_smoothly_count_at_their_worth_against_the_prior():
     table = prior_scaling(human).masses
     theta_table = np.array([table[g] / count[g] for g in MASS_GROUPS] + [0.0, 0.0])
     frames, channels = 300, 6
-    A = rng.normal(0, 1, (frames * channels, len(theta_table))) * np.tile(np.linspace(0.5, 5, channels), frames)[:, None]
+    scale = np.tile(np.linspace(0.5, 5, channels), frames)[:, None]
+    A = rng.normal(0, 1, (frames * channels, len(theta_table))) * scale
     channel = np.tile(np.arange(channels), frames)
     error = np.zeros(len(channel))
     for c in range(channels):

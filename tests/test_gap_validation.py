@@ -13,6 +13,7 @@ from sit2stand.gap import contact
 from sit2stand.gap.bounds import Limits, refusal
 from sit2stand.gap.chain import cancelling_offsets
 from sit2stand.gap.constancy import INCONSTANT_Z, half_sizes
+from sit2stand.gap.control import feedforward_rate
 from sit2stand.gap.effects import alter_model, unmodeled_from
 from sit2stand.gap.residuals import coulomb_signature, fit_backlash_widths, fit_coulomb_widths, joint_columns
 from sit2stand.gap.select import Candidate, Selected
@@ -292,3 +293,20 @@ def test_a_bodys_own_variation_explains_departures_within_its_spread_and_not_bey
     assert not within_spread(delta, sd) and delta[0] == pytest.approx(0.65, abs=0.02)
     # the data counted at 1 % of their rows: the prior holds the departures back
     assert abs(map_departures(own, Xv, sd, frac=1e-4)[0][0]) < 0.04
+
+
+def test_the_feed_forwards_rate_holds_over_samples_without_a_command():
+    """The first sample of a recording comes before any command: its feed-forward is unset (0). The rate is taken
+    over the commanded samples only, the uncommanded one holding its neighbour's value: a ramp of 2 N m/s reads
+    about 2 N m/s from the first commanded sample on, not the jump from 0 (which, times the delay, made a
+    still-phase residual the plant never had)."""
+    t = np.arange(200) * 0.02
+    ff = np.stack([60.0 + 2.0 * t, -5.0 + 0.0 * t], axis=1)
+    valid = np.ones(len(t), bool)
+    valid[0] = False
+    ff[0] = 0.0
+    rate = feedforward_rate(ff, t, valid)
+    np.testing.assert_allclose(rate[4:], [[2.0, 0.0]] * (len(t) - 4), atol=1e-9)
+    assert np.all(np.abs(rate[:4, 0]) < 3.0) and np.all(np.abs(rate[:4, 1]) < 1e-9)  # -0.04 to 2.2 (a jump: 3,000)
+    assert np.all(feedforward_rate(ff, t, np.zeros(len(t), bool)) == 0.0)
+

@@ -25,9 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..dynamics import savgol_series
 from ..robot.model import PlantConfig
 from ..robot.plant import Plant, contact_feedforward, feedforward_seated, reference_at
-from .recording import Recording
+from .recording import Recording, smoothing_window
 
 
 @dataclass
@@ -45,6 +46,22 @@ class ControlLaw:
         """No commands recorded: nothing valid."""
         z = np.zeros((N, n))
         return ControlLaw(z, z, np.zeros(N, bool), z, np.ones(n))
+
+
+def feedforward_rate(ff: np.ndarray, t_s: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """d ff / dt [N m/s] by the recording's own Savitzky-Golay filter (the measured torque it is compared with has
+    that bandwidth), over the samples with a command: a sample without one (the first, before any command) holds its
+    nearest valid neighbour's value. Differentiated as zeros there, the recording's first samples got a rate of
+    -2,300 N m/s, 1.5 N m of still-phase signature (x the delay) the plant never made: left in the residual once the
+    delay was subtracted, it was flagged on the hips as "one phase only, while still"."""
+    if not valid.any():
+        return np.zeros_like(ff)
+    ok = np.flatnonzero(valid)
+    held = ff[ok[np.clip(np.searchsorted(ok, np.arange(len(ff))), 0, len(ok) - 1)]]
+    window = smoothing_window(t_s)
+    if len(t_s) <= window:
+        return np.gradient(held, t_s, axis=0) if len(t_s) > 2 else np.zeros_like(ff)
+    return savgol_series(held, window, 3, 1) / float(np.median(np.diff(t_s)))
 
 
 def control_law(rec: Recording, controller_params: dict | None = None, sensor_lag_s: float = 0.001
@@ -87,6 +104,6 @@ def control_law(rec: Recording, controller_params: dict | None = None, sensor_la
         ff_all[k] = ff
         pd_rate[k] = kp * qd_t + kd * cmd.qdd[c]
         valid[k] = True
-    dff = np.gradient(ff_all, rec.t_s, axis=0) if N > 2 else np.zeros_like(ff_all)
+    dff = feedforward_rate(ff_all, rec.t_s, valid)
     damping = kd * (rec.qd - sensor_lag_s * rec.qdd)          # the law's own kd q' (as evaluated above)
     return ControlLaw(law, -(pd_rate + dff), valid, law + damping, kp)

@@ -29,6 +29,11 @@ from ..robot.model import SIDES
 STATIC_PERIOD_S = 0.2     # samples further apart than this are held postures, not a run
 
 
+SMOOTHING_WINDOW_S = 0.15
+"""Savitzky-Golay window [s] (order 3) of a run's motion, torques and wrenches, and of what is differentiated from
+them (the control law's feed-forward, :func:`sit2stand.gap.control.control_law`): one bandwidth for all."""
+
+
 class RecordingError(BagError):
     """A bag that does not hold a usable robot recording; the message names the bag, topic or field."""
 
@@ -127,7 +132,8 @@ class _Samples:
     cop: np.ndarray                     # (N, 3) [m], NaN where not recorded
 
 
-def read_recording(path: str | Path, model, rate_hz: float = 100.0, window_s: float = 0.15) -> Recording:
+def read_recording(path: str | Path, model, rate_hz: float = 100.0, window_s: float = SMOOTHING_WINDOW_S
+                   ) -> Recording:
     """Read a robot bag (see the module docstring) at most ``rate_hz``; ``model`` is the Pinocchio robot model used to
     differentiate the base motion. Raises :class:`RecordingError` naming the bag and topic on missing or bad data."""
     path = Path(path)
@@ -215,10 +221,15 @@ def _finite_samples(path: Path, s: _Samples) -> np.ndarray:
         np.all(np.isfinite(s.wrench["left"]), 1) & np.all(np.isfinite(s.wrench["right"]), 1)
 
 
+def smoothing_window(t_s: np.ndarray, window_s: float = SMOOTHING_WINDOW_S) -> int:
+    """The Savitzky-Golay window [samples, odd, at least 5] of ``window_s`` on the time base ``t_s``."""
+    return max(5, int(round(window_s / float(np.median(np.diff(t_s))))) | 1)
+
+
 def _smooth(rec: Recording, model, window_s: float) -> None:
     """Savitzky-Golay smoothing and derivatives of the run (in place)."""
     dt = float(np.median(np.diff(rec.t_s)))
-    window = max(5, int(round(window_s / dt)) | 1)
+    window = smoothing_window(rec.t_s, window_s)
     if len(rec) <= window:
         rec.notes.append(f"run too short to smooth ({len(rec)} samples)")
         return
