@@ -27,8 +27,8 @@ from ..human.com import estimate_com
 from ..human.offline import read_trial
 from ..human.skeleton import SEGMENT_MASS_SD, SEGMENTS, Subject, build_human
 from ..io.bag import BagError
-from .residuals import base_to_world
 from ..optim import effective_fraction
+from .residuals import base_to_world
 from .select import Candidate, Selection, select
 from .dataset import fast_part_floor
 from .bounds import Limits, refusal

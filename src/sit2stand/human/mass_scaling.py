@@ -30,7 +30,6 @@ AT_BOUND_TOLERANCE = 0.03
 """A factor within this fraction of a bound's value sits at that bound."""
 NOISE_PASSES = 3
 """Refits of :func:`fit_mass_scaling` on row weights from the previous fit's residual (the weights settle in 2-3)."""
-"""A factor within this fraction of a bound's value sits at that bound."""
 
 
 @dataclass
