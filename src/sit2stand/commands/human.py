@@ -91,6 +91,10 @@ def _human_com(args: argparse.Namespace) -> int:
     summary = run(args.bag, args.out, height_m=args.height, mass_kg=args.mass, sex=args.sex,
                   calibrate=not args.no_calibration, scale=not args.no_scaling, marker_set=args.marker_set,
                   calibration_frame=args.calibration_frame, static=args.static)
+    skipped = summary["frames"] - summary["frames_fitted"]
+    print(f"  fitted {summary['frames_fitted']} of {summary['frames']} frames"
+          + (f" ({skipped} left out, too few markers or no pelvis: bridged between their neighbours)" if skipped
+             else ""))
     keys = ["com_rms_vs_truth_scaled_mm", "com_rms_vs_truth_unscaled_mm", "cop_rms_unscaled_mm", "cop_rms_scaled_mm",
             "com_rms_vs_reference_mm", "standing_com_to_cop_mm", "standing_reference_com_to_cop_mm", "marker_rms_mm"]
     for key in keys:

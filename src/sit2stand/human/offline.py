@@ -275,7 +275,7 @@ def run(bag_path: Path, out_dir: Path, *, height_m: float | None = None, mass_kg
 
     def progress(k: int, n: int) -> None:
         if not quiet and (k == n or k % max(1, n // 10) == 0):
-            print(f"  fitted {k}/{n} frames", file=sys.stderr, flush=True)
+            print(f"  marker fit: frame {k} of {n}", file=sys.stderr, flush=True)
 
     if not quiet:
         print(f"{bag_path}: {len(trial.marker_names)} markers x {len(trial.marker_t_s)} frames, plates "
