@@ -412,11 +412,14 @@ def test_one_time_base_header_stamps_within_the_log_times(bag):
             # the replayer's lockstep keeps the robot with the clock within a frame (749 ms before it; 65 ms at p99
             # with a 50 ms lead; measured here at 10 ms: p50 0.2 ms, p99 10-15 ms; the same graph alone, 6 runs: p99
             # 6-15 ms and once 31.5 ms, and 30.0 ms once in a full run). It follows a topic from the first message it
-            # gets: the states of the bag's first 0.5 s, before that, were seen 130 ms late
+            # gets: the states of the bag's first 0.5 s, before that, were seen 130 ms late. In full runs on 2 cores
+            # the recorder is starved for a moment now and then (p99 86 and 129 ms, p50 0.0 ms): the p99 bound is
+            # the one that still catches a graph out of lockstep (749 ms), the p95 one the steady state
             steady = np.asarray(lags)[np.asarray(stamps) > reader.start_ns + 500_000_000]
-            p50, p99 = np.percentile(steady, [50, 99])
-            assert p50 < frame_ns and p99 < 5 * frame_ns, \
-                f"{topic}: logged {p50 * 1e-6:.1f} ms (median), {p99 * 1e-6:.1f} ms (p99) after its stamps"
+            p50, p95, p99 = np.percentile(steady, [50, 95, 99])
+            assert p50 < frame_ns and p95 < 5 * frame_ns and p99 < 25 * frame_ns, \
+                f"{topic}: logged {p50 * 1e-6:.1f} ms (median), {p95 * 1e-6:.1f} ms (p95), {p99 * 1e-6:.1f} ms " \
+                "(p99) after its stamps"
 
 
 def _headers(msg):
