@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from sit2stand.data import folder
+from sit2stand.data import folder, plant_path
 from sit2stand.io.c3d import read_c3d, write_trial_bag
 from sit2stand.scheduling import Scheduling
 
@@ -154,6 +154,20 @@ def end_processes(procs: list[subprocess.Popen], grace_s: float = 5.0) -> None:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait(10)
+
+
+@pytest.fixture(scope="session")
+def elderly_standup(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess]:
+    """One live stand-up of the graph on bags/elderly with the CAD plant (CAD parameters: the consistent case), in a
+    ROS domain of its own, its marker map written: (run folder holding ``run`` (the bag) and ``markers.yaml``, the
+    launcher's result). Shared by the graph tests that read one stand-up (its frames, its commands): each stand-up
+    costs ~35 s of the 2-core host."""
+    folder_ = tmp_path_factory.mktemp("elderly_standup")
+    env = node_env(random.Random(os.getpid() * 31 + time.time_ns()).randint(101, 200))
+    cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(GRAPHS / "standup.yaml"),
+           f"bag:={ROOT / 'bags' / 'elderly'}", f"out:={folder_ / 'run'}", f"plant:={plant_path('cad')}",
+           f"marker_map:={folder_ / 'markers.yaml'}"]
+    return folder_, subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=240)
 
 
 @pytest.fixture(scope="session")

@@ -18,13 +18,11 @@ pytestmark = pytest.mark.graph
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_the_robot_stands_up_live_from_the_shipped_elderly_demonstration(tmp_path, ros_env):
-    """The short end-to-end stand-up: CAD robot, CAD parameters (the consistent case), elderly-like rise."""
-    out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(GRAPHS / "standup.yaml"),
-           f"bag:={ROOT / 'bags' / 'elderly'}", f"out:={out}", f"plant:={plant_path('cad')}",
-           f"marker_map:={tmp_path / 'markers.yaml'}"]
-    result = subprocess.run(cmd, env=ros_env, capture_output=True, text=True, timeout=240)
+def test_the_robot_stands_up_live_from_the_shipped_elderly_demonstration(elderly_standup):
+    """The short end-to-end stand-up: CAD robot, CAD parameters (the consistent case), elderly-like rise (the run
+    shared with test_graph_tf)."""
+    folder, result = elderly_standup
+    out = folder / "run"
     log = result.stdout[-4000:] + result.stderr[-2000:]
     assert result.returncode == 0, log
     assert "[retargeter] 531 frames" in result.stdout, log
@@ -32,7 +30,7 @@ def test_the_robot_stands_up_live_from_the_shipped_elderly_demonstration(tmp_pat
     assert ("started retargeter" in result.stdout and
             ("SCHED_FIFO priority 50" in result.stdout or "was not permitted" in result.stdout)), log
     assert "scheduling SCHED_" in result.stdout, log
-    assert (tmp_path / "markers.yaml").is_file()
+    assert (folder / "markers.yaml").is_file()
     with BagReader(out) as bag:
         topics = bag.topics()
         assert topics["/robot/retarget/ik"].count == 531, "one IK pose per marker frame"

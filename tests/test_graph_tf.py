@@ -2,12 +2,7 @@
 then its /tf, /tf_static and /robot_description checked against Pinocchio, and the frame id of every stamped topic
 checked against the frame its numbers are in."""
 
-import os
-import random
 import re
-import subprocess
-import sys
-import time
 from bisect import bisect_left
 from functools import cache
 from pathlib import Path
@@ -16,8 +11,6 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from conftest import GRAPHS, node_env
-from sit2stand.data import plant_path
 from sit2stand.io.bag import BagReader
 from sit2stand.io.topics import BASE_FRAME, HUMAN_ROOT_FRAME, LAB_FRAME, WORLD_FRAME, sole_world_aligned_frame
 from sit2stand.robot.model import SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, controller_model
@@ -46,15 +39,11 @@ NO_SINGLE_FRAME = {"/human/scaling", "/ground_truth/inertial_parameters", "/huma
 
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory):
-    """One stand-up on bags/elderly with the CAD plant, in a ROS domain of its own: (bag path, launcher stdout)."""
-    out = tmp_path_factory.mktemp("tf") / "run"
-    env = node_env(random.Random(os.getpid() * 31 + time.time_ns()).randint(101, 200))
-    cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(GRAPHS / "standup.yaml"),
-           f"bag:={ROOT / 'bags' / 'elderly'}", f"out:={out}", f"plant:={plant_path('cad')}"]
-    result = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=240)
+def run(elderly_standup):
+    """The shared stand-up (conftest): bags/elderly, the CAD plant: (bag path, launcher stdout)."""
+    folder, result = elderly_standup
     assert result.returncode == 0, result.stdout[-4000:] + result.stderr[-2000:]
-    return out, result.stdout
+    return folder / "run", result.stdout
 
 
 @pytest.fixture(scope="module")
