@@ -223,22 +223,23 @@ def _ft_bias_columns(rows: _Rows, side: str, J: np.ndarray, perm: np.ndarray, T:
     """(C, 6) signature of a bias of the ``side`` F/T sensor (sensor axes, [N], [N m]) at this state, into out."""
     R = rows.data.oMf[rows.soles[side]].rotation
     lever = R @ np.array([0.0, 0.0, SOLE_OFFSET_M])     # sensor (ankle) minus sole, world axes
-    for c in range(6):
-        beta = np.zeros(6)
-        beta[c] = 1.0
-        df = -R @ beta[:3]
-        dt = -(R @ beta[3:] + np.cross(lever, R @ beta[:3]))
-        out[:, c] = _to_channels(J.T @ np.concatenate([df, dt]), perm, T)
+    # column c: the ground wrench a unit bias beta = e_c of the sensor's reading takes off the sole (world axes)
+    d_wrench = np.zeros((6, 6))
+    d_wrench[:3, :3] = -R
+    d_wrench[3:, :3] = -pin.skew(lever) @ R
+    d_wrench[3:, 3:] = -R
+    out[:] = _to_channels(J.T @ d_wrench, perm, T)
 
 
 def _offset_columns(rows: _Rows, smp: _Sample, r: np.ndarray, idx_v: np.ndarray, perm: np.ndarray, T: np.ndarray,
                     out: np.ndarray) -> None:
     """(C, n) encoder-offset signature (d e / d q_j [per rad], finite differences) of the sample, into out."""
+    de = np.empty((len(r), len(idx_v)))
     for j in range(len(idx_v)):
         qj = smp.q.copy()
         qj[idx_v[j] + 1] += FD_STEP_RAD
-        rj, _ = rows.residual(qj, smp.v, smp.a, smp.tau_full, smp.wrench)
-        out[:, j] = _to_channels(rj - r, perm, T) / FD_STEP_RAD
+        de[:, j] = rows.residual(qj, smp.v, smp.a, smp.tau_full, smp.wrench)[0] - r
+    out[:] = _to_channels(de, perm, T) / FD_STEP_RAD
     rows.residual(smp.q, smp.v, smp.a, smp.tau_full, smp.wrench)     # leave the data at the measured state
 
 
