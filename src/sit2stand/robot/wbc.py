@@ -33,7 +33,6 @@ import daqp
 import numpy as np
 import pinocchio as pin
 
-from ..vectors import cross
 from .model import SIDES, sole_corners_local
 
 INF = np.inf         # no bound
@@ -94,6 +93,14 @@ class WbcResult:
     qp_s: float                    # wall time of matrix building + solve [s]
 
 
+def skew_rows(r: np.ndarray) -> np.ndarray:
+    """(k, 3, 3) cross-product matrices [r_i]x of the rows of ``r`` (k, 3): [r_i]x w = r_i x w."""
+    S = np.zeros((len(r), 3, 3))
+    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -r[:, 2], r[:, 1], -r[:, 0]
+    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = r[:, 2], -r[:, 1], r[:, 0]
+    return S
+
+
 def friction_rows(n_points: int, mu: float) -> np.ndarray:
     """(4 n, 3 n) rows C with C f <= 0 for n 3D forces inside inscribed friction pyramids (world z normal)."""
     mu_in = mu / np.sqrt(2.0)
@@ -124,9 +131,12 @@ class WholeBodyQP:
         self.mass = float(pin.computeTotalMass(model))
         n_pts = 4 * len(self.soles) + 1
         self.C_fric = friction_rows(n_pts, self.g.friction)
-        n_eq = 6 + 6 * len(self.soles) + 3
+        self.n_eq = n_eq = 6 + 6 * len(self.soles) + 3
         self._sense = np.zeros(self.n + n_eq + self.nj + 4 * n_pts, np.int32)   # bounds, equalities, inequalities
         self._sense[self.n:self.n + n_eq] = DAQP_EQUALITY
+        # the constraint rows, filled in place each step: equalities (base, soles, seat), torques, friction
+        self._rows = np.zeros((n_eq + self.nj + 4 * n_pts, self.n))
+        self._rows[n_eq + self.nj:, self.nv:] = self.C_fric
         self._multipliers: np.ndarray | None = None     # the last solve's: its active set starts the next
         self.cold_solves = 0
         self.weights = np.full(self.nv, self.g.posture_weight)
@@ -163,11 +173,12 @@ class WholeBodyQP:
             vel = pin.getFrameVelocity(model, data, fid, pin.LOCAL).vector
             A_c.append(J6)
             b_c.append(-drift - self.g.foot_kd * vel)
-            Jw = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
             oMf = data.oMf[fid]
-            r = self.corner_local @ oMf.rotation.T                     # (4, 3) sole point -> corner, world axes
+            R = oMf.rotation
+            J_lin, J_ang = R @ J6[:3], R @ J6[3:]              # the sole's Jacobian in world axes
+            r = self.corner_local @ R.T                        # (4, 3) sole point -> corner, world axes
             # a corner's velocity: v_sole + omega x r = (J_lin - [r]x J_ang) v
-            rows_f.extend(Jw[:3] - cross(r[:, None, :], Jw[3:].T[None]).transpose(0, 2, 1))
+            rows_f.append((J_lin[None] - skew_rows(r) @ J_ang).reshape(-1, self.nv))
             corners.extend(oMf.translation + r)
         if self.seat is not None:
             Js = pin.getFrameJacobian(model, data, self.seat, pin.LOCAL_WORLD_ALIGNED)[:3]
@@ -196,12 +207,11 @@ class WholeBodyQP:
         c[:nv] -= g.com_weight * J.T @ (a_com - drift)
         return H, c
 
-    def _solve_qp(self, H, c, A, b, C, lo, hi, x_lo, x_hi) -> tuple[np.ndarray, bool]:
-        """x minimising 0.5 x'Hx + c'x with A x = b, lo <= C x <= hi, x_lo <= x <= x_hi, and whether it was solved.
-        Warm-started from the last step's multipliers (the active set changes little from one step to the next); a
-        warm start that fails is solved again from an empty active set (counted in ``cold_solves``)."""
-        rows = np.vstack([A, C])
-        upper, lower = np.concatenate([x_hi, b, hi]), np.concatenate([x_lo, b, lo])
+    def _solve_qp(self, H, c, rows, upper, lower) -> tuple[np.ndarray, bool]:
+        """x minimising 0.5 x'Hx + c'x with lower <= (x, rows x) <= upper (DAQP's form: the bounds of x first; the
+        equality rows' bounds equal), and whether it was solved. Warm-started from the last step's multipliers (the
+        active set changes little from one step to the next); a warm start that fails is solved again from an empty
+        active set (counted in ``cold_solves``)."""
         for start in (self._multipliers, None):
             if start is None and self._multipliers is not None:
                 self.cold_solves += 1
@@ -242,17 +252,15 @@ class WholeBodyQP:
             h = h - Jf[-3:].T @ np.asarray(seat_force_known_n, float)
         seat_on = self.seat is not None and seat_force_max_n > 0
         H, c = self._cost(q, v, ref)
-        A = np.zeros((6 + len(A_c), self.n))
-        b = np.zeros(len(A))
-        Jf_u = Jf * FORCE_UNIT_N
-        A[:6, :nv], A[:6, nv:], b[:6] = M[:6], -Jf_u[:, :6].T, -h[:6]
-        A[6:, :nv], b[6:] = A_c, b_c
+        e = self.n_eq
+        rows, Jf_u = self._rows, Jf * FORCE_UNIT_N
+        rows[:6, :nv], rows[:6, nv:] = M[:6], -Jf_u[:, :6].T            # the base's Newton-Euler rows
+        rows[6:e, :nv], rows[6:e, nv:] = A_c, 0.0                        # the contacts
+        b = np.concatenate([-h[:6], b_c])
         if not seat_on:     # the seat's rows say its force is zero (zero rows are degenerate equalities)
-            A[-3:], b[-3:] = 0.0, 0.0
-            A[-3:, -3:] = np.eye(3)
-        C = np.zeros((nj + len(self.C_fric), self.n))
-        C[:nj, :nv], C[:nj, nv:] = M[6:], -Jf_u[:, 6:].T
-        C[nj:, nv:] = self.C_fric
+            rows[e - 3:e], b[-3:] = 0.0, 0.0
+            rows[e - 3:e, -3:] = np.eye(3)
+        rows[e:e + nj, :nv], rows[e:e + nj, nv:] = M[6:], -Jf_u[:, 6:].T   # the joint torques
         lo = np.concatenate([-self.tau_max - h[6:], np.full(len(self.C_fric), -INF)])
         hi = np.concatenate([self.tau_max - h[6:], np.zeros(len(self.C_fric))])
         at_lo, at_hi = self._joint_stops(q, v)
@@ -263,7 +271,7 @@ class WholeBodyQP:
         x_lo[nv + 2:self.n:3] = 0.0                              # unilateral normal forces
         x_lo[-3:] = (-INF, -INF, 0.0) if seat_on else 0.0           # the seat's force: (x, y, z)
         x_hi[-3:] = (INF, INF, seat_force_max_n / FORCE_UNIT_N) if seat_on else 0.0
-        x, solved = self._solve_qp(H, c, A, b, C, lo, hi, x_lo, x_hi)
+        x, solved = self._solve_qp(H, c, rows, np.concatenate([x_hi, b, hi]), np.concatenate([x_lo, b, lo]))
         a, f = x[:nv], x[nv:] * FORCE_UNIT_N
         tau = np.clip(M[6:] @ a + h[6:] - Jf[:, 6:].T @ f, -self.tau_max, self.tau_max)   # the stops take the rest
         feet = f[:-3].reshape(-1, 3)
