@@ -45,6 +45,8 @@ def test_two_stand_up_graphs_run_side_by_side_on_one_domain(tmp_path):
     runs = {"natural": (tmp_path / "root", None), "elderly": (tmp_path / "robot2", "robot2")}
     procs = {bag: _launch(bag, out, env, ns) for bag, (out, ns) in runs.items()}
     logs = {bag: p.communicate(timeout=400)[0] for bag, p in procs.items()}
+    for bag, text in logs.items():      # whole, beside the bags (a failure's message holds the tail)
+        (tmp_path / f"{bag}.log").write_text(text)
     for bag, p in procs.items():
         # the recorders of two graphs on 2 cores may fall behind their publishers' queues: counted losses are that,
         # not a mix-up; a fall (driver exit 3) or anything else fails
