@@ -7,6 +7,7 @@ Each frame solves, by damped Gauss-Newton steps on the configuration q (Pinocchi
     subject to  c(q)[axes] = c_target[axes]                                      (COM: hard equality)
                 X_sole(q) = X_sole_target   for both feet                       (feet fixed: hard, 6-D each)
                 q_min <= q <= q_max,  |q_dot| dt <= v_max dt                      (joint and velocity limits)
+                q_j stays on its stop while gravity presses it there past its motor   (stops that hold)
 
 with one dense QP (proxsuite) per step in the tangent step dq:
 ``min 1/2 dq' H dq + g' dq  s.t.  A dq = b,  l <= dq <= u`` built from the frame, COM and sole Jacobians.
@@ -19,6 +20,15 @@ the previous frame) stays near the previous frame's. Its change dL/dt moves the 
 COM alone puts it; frame-by-frame IK otherwise lets the trunk and arms trade angle against each other from one frame
 to the next, and measured on the shipped natural rise that swung dL_y/dt by +-180 N m around seat-off (the ZMP 12-15
 cm off). ``momentum_weight`` weighs it as a ZMP shift [m] against the markers' metres.
+
+Stops that hold: a joint no foot hangs from (the torso's, the head's, the arms') carries only its own subtree, so
+the torque it needs to hold still is the gravity torque g_j(q), whatever the contacts bear. Where g_j presses the
+joint onto its mechanical stop harder than ``stop_torque_share`` of its URDF effort limit, its motor cannot lift it off
+the stop: the step may not move it off (it may still press harder). The plan then leaves it there until the rest of
+the body has turned it to where its motor can, as the robot would have to. Without it a human's trunk lean put
+TALOS's torso pitch on its 45 degree stop, where the trunk needs ~120 N m against the joint's 78 N m, and the plan
+lifted the trunk off with the hips still flexed: under joint PD the trunk lagged the plan by 0.55 rad at the end of
+the extension, and the robot tipped forward over its toes (2 of 30 population cases fell).
 
 Units SI; frames by Pinocchio frame id; positions in the world frame (REP-103).
 """
@@ -33,6 +43,24 @@ import pinocchio as pin
 import proxsuite   # at import (~0.1 s): a node imports this before its stream starts
 
 from ..kinematics import PointJacobians, positions
+
+
+STOP_TOLERANCE_RAD = 1e-3
+"""A joint this close to a limit is on its stop (the steps clip exactly to the limits)."""
+
+
+def free_subtree_dofs(model: pin.Model, frames: list[int]) -> np.ndarray:
+    """Tangent indices of the 1-DoF joints that none of ``frames`` hangs from (with the soles: torso, head, arms):
+    each holds only its own subtree, so its static torque is the gravity torque g_j(q), whatever the contacts at the
+    frames bear."""
+    support: set[int] = set()
+    for fid in frames:
+        j = model.frames[fid].parentJoint
+        while j > 0:
+            support.add(j)
+            j = model.parents[j]
+    return np.array([model.joints[j].idx_v for j in range(2, model.njoints)
+                     if j not in support and model.joints[j].nv == 1], int)
 
 
 @dataclass
@@ -79,11 +107,14 @@ class ComIk:
         posture_weight: mu, the pull toward ``q_ref`` (regularisation of what the markers do not fix); scalar or
             per tangent direction (nv; the base's six are ignored).
         damping: Levenberg-Marquardt damping on the step.
+        momentum_weight: weight of the angular momentum term (see the module docstring).
+        stop_torque_share: a joint no sole hangs from stays on its stop while gravity presses it there with more
+            than this share of its effort limit (None: not applied; see the module docstring).
     """
 
     def __init__(self, model: pin.Model, sole_frames: list[int], velocity_limit: float | np.ndarray = 5.0,
                  dt: float = 0.01, posture_weight: float | np.ndarray = 1e-3, damping: float = 1e-6,
-                 momentum_weight: float = 0.0) -> None:
+                 momentum_weight: float = 0.0, stop_torque_share: float | None = None) -> None:
         self.model = model
         self.data = model.createData()
         self.soles = list(sole_frames)
@@ -102,6 +133,8 @@ class ComIk:
         self.momentum_weight = momentum_weight
         self._weight_g = float(pin.computeTotalMass(model)) * 9.81
         self._L_prev: np.ndarray | None = None      # the previous frame's angular momentum [kg m^2/s]
+        self.stop_dofs = free_subtree_dofs(model, self.soles) if stop_torque_share is not None else np.zeros(0, int)
+        self.stop_torque_nm = (stop_torque_share or 0.0) * model.effortLimit[self.stop_dofs]
 
     def _solve_qp(self, H, g, A, b, lo, hi):
         """min 1/2 dq' H dq + g' dq s.t. A dq = b, lo <= dq <= hi (a warm QP per shape): dq, solved, dual residual."""
@@ -233,9 +266,22 @@ class ComIk:
         if f.base_pitch_min is not None:
             R = self.data.oMi[1].rotation
             lo[4] = min(0.0, f.base_pitch_min - np.arctan2(R[0, 2], R[2, 2]))
+        if len(self.stop_dofs):
+            self._hold_on_stops(q, lo, hi)
         lo[6:] = np.minimum(lo[6:], 0.0)   # a configuration just past a limit may always move back inside
         hi[6:] = np.maximum(hi[6:], 0.0)
         return lo, hi
+
+    def _hold_on_stops(self, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Step bounds (in place) keeping on its stop each joint that gravity presses there past
+        ``stop_torque_nm`` (g_j is the torque the joint must give to hold still: below -cap at the upper stop, the
+        motor cannot lift the joint off it). Gravity's pass leaves the data's placements at q."""
+        tau = pin.computeGeneralizedGravity(self.model, self.data, q)[self.stop_dofs]
+        j = self.stop_dofs - 6
+        on_hi = (q[7:][j] >= self.q_hi[j] - STOP_TOLERANCE_RAD) & (tau < -self.stop_torque_nm)
+        on_lo = (q[7:][j] <= self.q_lo[j] + STOP_TOLERANCE_RAD) & (tau > self.stop_torque_nm)
+        lo[self.stop_dofs[on_hi]] = np.maximum(lo[self.stop_dofs[on_hi]], 0.0)
+        hi[self.stop_dofs[on_lo]] = np.minimum(hi[self.stop_dofs[on_lo]], 0.0)
 
     def _integrate(self, q: np.ndarray, dq: np.ndarray, q_prev: np.ndarray | None) -> np.ndarray:
         """q (+) dq, clipped exactly to the joint limits and the speed limits from ``q_prev``."""

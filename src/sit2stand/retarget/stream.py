@@ -143,6 +143,8 @@ class RetargetConfig:
     velocity_limit_rad_s: float = 4.0
     marker_set: str | None = None         # a packaged set's name or a YAML file; None: chosen from the names
     momentum_weight: float = 0.0          # the IK's angular momentum term (a ZMP shift [m] against marker metres)
+    stop_torque_share: float | None = 1.0  # a trunk, head or arm joint stays on its stop while gravity presses it
+    #                                        there past this share of its effort limit (ik.ComIk; None: off)
     chair_off_force_n: float = 30.0       # human left the seat when the chair plate reads less
     pelvis_rise_m: float = 0.02           # ... or, without a chair plate, when the pelvis markers rose this much
     y_ramp_s: float = 0.5
@@ -230,7 +232,8 @@ class Retargeter:
                 mu[jt.idx_v:jt.idx_v + jt.nv] = w
                 self.held_to_seated[jt.idx_q:jt.idx_q + jt.nq] = True
         self.ik = ComIk(self.model, self.robot.sole_frames, self.cfg.velocity_limit_rad_s, posture_weight=mu,
-                        damping=self.cfg.damping, momentum_weight=self.cfg.momentum_weight)
+                        damping=self.cfg.damping, momentum_weight=self.cfg.momentum_weight,
+                        stop_torque_share=self.cfg.stop_torque_share)
         self.ik.eps_abs = self.cfg.qp_tolerance
         self.names = list(names)
         self.weights = np.array([0.0 if n not in self.marker_frames else
