@@ -1,9 +1,9 @@
-"""The hot paths' cross product against numpy's."""
+"""The hot paths' cross products against numpy's."""
 
 import numpy as np
 import pytest
 
-from sit2stand.vectors import cross
+from sit2stand.vectors import cross, skew_rows
 
 
 @pytest.mark.parametrize("shape_a, shape_b", [((3,), (3,)), ((7, 3), (3,)), ((3,), (7, 3)), ((7, 3), (7, 3)),
@@ -16,3 +16,9 @@ def test_cross_equals_numpys_for_single_vectors_and_stacks(shape_a, shape_b):
 
 def test_cross_takes_lists():
     np.testing.assert_array_equal(cross([1.0, 0.0, 0.0], [0.0, 1.0, 0.0]), [0.0, 0.0, 1.0])
+
+
+def test_skew_rows_are_the_cross_product_matrices_of_the_rows():
+    rng = np.random.default_rng(5)
+    r, w = rng.normal(size=(4, 3)), rng.normal(size=(3, 9))
+    np.testing.assert_allclose(skew_rows(r) @ w, np.cross(r[:, None, :], w.T[None]).transpose(0, 2, 1), atol=1e-15)

@@ -33,6 +33,7 @@ import daqp
 import numpy as np
 import pinocchio as pin
 
+from ..vectors import skew_rows
 from .model import SIDES, sole_corners_local
 
 INF = np.inf         # no bound
@@ -91,14 +92,6 @@ class WbcResult:
     com: np.ndarray                # (3,) COM of the state [m]
     solved: bool
     qp_s: float                    # wall time of matrix building + solve [s]
-
-
-def skew_rows(r: np.ndarray) -> np.ndarray:
-    """(k, 3, 3) cross-product matrices [r_i]x of the rows of ``r`` (k, 3): [r_i]x w = r_i x w."""
-    S = np.zeros((len(r), 3, 3))
-    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -r[:, 2], r[:, 1], -r[:, 0]
-    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = r[:, 2], -r[:, 1], r[:, 0]
-    return S
 
 
 def friction_rows(n_points: int, mu: float) -> np.ndarray:
