@@ -162,12 +162,12 @@ def elderly_standup(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess
     ROS domain of its own, its marker map written: (run folder holding ``run`` (the bag) and ``markers.yaml``, the
     launcher's result). Shared by the graph tests that read one stand-up (its frames, its commands): each stand-up
     costs ~35 s of the 2-core host."""
-    folder_ = tmp_path_factory.mktemp("elderly_standup")
+    run_dir = tmp_path_factory.mktemp("elderly_standup")
     env = node_env(random.Random(os.getpid() * 31 + time.time_ns()).randint(101, 200))
     cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(GRAPHS / "standup.yaml"),
-           f"bag:={ROOT / 'bags' / 'elderly'}", f"out:={folder_ / 'run'}", f"plant:={plant_path('cad')}",
-           f"marker_map:={folder_ / 'markers.yaml'}"]
-    return folder_, subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=240)
+           f"bag:={ROOT / 'bags' / 'elderly'}", f"out:={run_dir / 'run'}", f"plant:={plant_path('cad')}",
+           f"marker_map:={run_dir / 'markers.yaml'}"]
+    return run_dir, subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=240)
 
 
 @pytest.fixture(scope="session")

@@ -53,12 +53,7 @@ def free_subtree_dofs(model: pin.Model, frames: list[int]) -> np.ndarray:
     """Tangent indices of the 1-DoF joints that none of ``frames`` hangs from (with the soles: torso, head, arms):
     each holds only its own subtree, so its static torque is the gravity torque g_j(q), whatever the contacts at the
     frames bear."""
-    support: set[int] = set()
-    for fid in frames:
-        j = model.frames[fid].parentJoint
-        while j > 0:
-            support.add(j)
-            j = model.parents[j]
+    support = {j for fid in frames for j in model.supports[model.frames[fid].parentJoint]}   # the frames' ancestors
     return np.array([model.joints[j].idx_v for j in range(2, model.njoints)
                      if j not in support and model.joints[j].nv == 1], int)
 
