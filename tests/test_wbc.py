@@ -95,6 +95,33 @@ def test_torque_limits_bind(plant):
     assert np.all(np.abs(res.tau) <= model.effortLimit[6:] + 1e-6)
 
 
+def test_the_qps_torques_are_the_robots_inverse_dynamics_with_the_forces_it_found(plant):
+    """Moving, standing: the base's rows balance and the joints' torques are RNEA's with the corner forces applied
+    where the soles' Jacobians (world axes, from Pinocchio's own) put them: the QP's M, h and force Jacobian hold."""
+    model = plant.ctrl
+    data = model.createData()
+    q = _standing(plant)
+    rng = np.random.default_rng(3)
+    v = 0.3 * rng.standard_normal(model.nv)
+    qp = WholeBodyQP(model, plant.seat_frame)
+    res = qp.solve(q, v, _at_rest(model, q))
+    assert res.solved
+    pin.computeJointJacobians(model, data, q)
+    pin.framesForwardKinematics(model, data, q)
+    applied = np.zeros(model.nv)
+    for k, side in enumerate(("left", "right")):
+        fid = model.getFrameId(f"sole_{side}")
+        J = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+        for corner, force in zip(res.corners[4 * k:4 * k + 4], res.feet_forces[4 * k:4 * k + 4]):
+            r = corner - data.oMf[fid].translation
+            J_point = J[:3] - np.cross(r, J[3:].T).T        # v + omega x r
+            applied += J_point.T @ force
+    generalised = pin.rnea(model, data, q, v, res.a) - applied
+    np.testing.assert_allclose(generalised[:6], 0.0, atol=1e-6)
+    inside = np.abs(res.tau) < qp.tau_max - 1e-6
+    np.testing.assert_allclose(res.tau[inside], generalised[6:][inside], atol=1e-6)
+
+
 def test_feet_anchored_reference_keeps_the_sole_still(plant):
     model, data = plant.ctrl, plant.ctrl.createData()
     q = plant.pin_configuration(plant.q_seated)

@@ -140,49 +140,56 @@ class WholeBodyQP:
         fw = np.full(self.n_f, self.g.force_weight)
         fw[-1] += self.g.seat_force_weight
         self._H0 = np.diag(np.concatenate([self.weights, fw * FORCE_UNIT_N**2]))
-        self._lower = np.tril_indices(self.nv, -1)
+        # a corner's velocity in its sole's axes from the sole's 6D one (LOCAL: v, omega): v + omega x r = K_i (v,
+        # omega), K_i = [I, -[r_i]x]; constant, as the corners are fixed on the sole
+        self._corner_map = np.concatenate([np.broadcast_to(np.eye(3), (4, 3, 3)), -skew_rows(self.corner_local)],
+                                          axis=2)
+        # what each step fills in place: the force Jacobian, the contact rows, the corners, the bounds
+        self._Jf = np.zeros((self.n_f, self.nv))
+        self._A_c = np.zeros((n_eq - 6, self.nv))
+        self._b_c = np.zeros(n_eq - 6)
+        self._corners = np.zeros((4 * len(self.soles), 3))
+        self._x_lo, self._x_hi = np.full(self.n, -INF), np.full(self.n, INF)
+        self._x_lo[self.nv + 2:self.n:3] = 0.0                       # unilateral normal forces
+        self._lo = np.full(self.nj + len(self.C_fric), -INF)          # torques, then friction (C f <= 0)
+        self._hi = np.zeros(self.nj + len(self.C_fric))
+        self._eye3 = np.eye(3)
 
     # -- matrices ---------------------------------------------------------------------------------------------
     def _kinematics(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """M (symmetric) and h = C v + g at (q, v); fills data with Jacobians and zero-acceleration drifts."""
+        """M and h = C v + g at (q, v); fills data with Jacobians and zero-acceleration drifts."""
         model, data = self.model, self.data
         pin.computeAllTerms(model, data, q, v)
-        M = data.M.copy()                     # Pinocchio fills the upper triangle
-        M[self._lower] = M.T[self._lower]
+        M = data.M.copy()                     # whole: Pinocchio 4's computeAllTerms fills both triangles
         h = data.nle.copy()
         self._jcom = data.Jcom.copy()
         pin.centerOfMass(model, data, q, v, np.zeros(self.nv))     # FK with a = 0: the drifts
         pin.updateFramePlacements(model, data)
         return M, h
 
-    def _contacts(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Force Jacobian Jf (n_f, nv) (the corner and seat points' linear Jacobians, stacked), the contact rows
-        (A_c, b_c) of the soles and the seat (A_c a = b_c), and the corners' positions (8, 3)."""
+    def _contacts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Force Jacobian Jf (n_f, nv) (the corner and seat points' linear Jacobians in world axes, stacked), the
+        contact rows (A_c, b_c) of the soles and the seat (A_c a = b_c), and the corners' positions (8, 3): arrays
+        the QP owns, filled in place."""
         model, data = self.model, self.data
-        rows_f, A_c, b_c, corners = [], [], [], []
-        for fid in self.soles:
+        Jf, A_c, b_c, corners = self._Jf, self._A_c, self._b_c, self._corners
+        for k, fid in enumerate(self.soles):
             J6 = pin.getFrameJacobian(model, data, fid, pin.LOCAL)
             drift = pin.getFrameAcceleration(model, data, fid, pin.LOCAL).vector
             vel = pin.getFrameVelocity(model, data, fid, pin.LOCAL).vector
-            A_c.append(J6)
-            b_c.append(-drift - self.g.foot_kd * vel)
+            A_c[6 * k:6 * k + 6] = J6
+            b_c[6 * k:6 * k + 6] = -drift - self.g.foot_kd * vel
             oMf = data.oMf[fid]
             R = oMf.rotation
-            J_lin, J_ang = R @ J6[:3], R @ J6[3:]              # the sole's Jacobian in world axes
-            r = self.corner_local @ R.T                        # (4, 3) sole point -> corner, world axes
-            # a corner's velocity: v_sole + omega x r = (J_lin - [r]x J_ang) v
-            rows_f.append((J_lin[None] - skew_rows(r) @ J_ang).reshape(-1, self.nv))
-            corners.extend(oMf.translation + r)
+            # the corners' velocities in world axes: R K_i J6 v
+            np.matmul((R @ self._corner_map).reshape(12, 6), J6, out=Jf[12 * k:12 * k + 12])
+            corners[4 * k:4 * k + 4] = oMf.translation + self.corner_local @ R.T
+        s = 6 * len(self.soles)
         if self.seat is not None:
             Js = pin.getFrameJacobian(model, data, self.seat, pin.LOCAL_WORLD_ALIGNED)[:3]
-            rows_f.append(Js)
-            A_c.append(Js)
-            b_c.append(-pin.getFrameClassicalAcceleration(model, data, self.seat, pin.LOCAL_WORLD_ALIGNED).linear)
-        else:
-            rows_f.append(np.zeros((3, self.nv)))
-            A_c.append(np.zeros((3, self.nv)))
-            b_c.append(np.zeros(3))
-        return np.vstack(rows_f), np.vstack(A_c), np.concatenate(b_c), np.array(corners)
+            Jf[-3:], A_c[s:] = Js, Js
+            b_c[s:] = -pin.getFrameClassicalAcceleration(model, data, self.seat, pin.LOCAL_WORLD_ALIGNED).linear
+        return Jf, A_c, b_c, corners
 
     def _cost(self, q: np.ndarray, v: np.ndarray, ref: Reference) -> tuple[np.ndarray, np.ndarray]:
         """H, g of the weighted tasks over x = (a, f)."""
@@ -196,7 +203,7 @@ class WholeBodyQP:
         com, vcom, drift = self.data.com[0], self.data.vcom[0], self.data.acom[0]
         a_com = ref.com_a + g.com_kp * (ref.com - com) + g.com_kd * (ref.com_v - vcom)
         J = self._jcom
-        H[:nv, :nv] += g.com_weight * J.T @ J
+        H[:nv, :nv] += (g.com_weight * J).T @ J
         c[:nv] -= g.com_weight * J.T @ (a_com - drift)
         return H, c
 
@@ -217,19 +224,14 @@ class WholeBodyQP:
         self._multipliers = None
         return x, False
 
-    def _joint_stops(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Joints on (or reaching within ``limit_horizon_s``) their lower and upper mechanical stops."""
+    def _joint_limits(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The joint accelerations that keep each joint inside its limits ``limit_horizon_s`` ahead (lower, upper),
+        and the joints on (or reaching within that horizon) their lower and upper mechanical stops."""
         eps, H = self.g.limit_contact_rad, self.g.limit_horizon_s
         q_ahead = q[7:] + v[6:] * H
-        return q_ahead <= self.q_lo + eps, q_ahead >= self.q_hi - eps
-
-    def _acceleration_bounds(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Joint accelerations that keep each joint inside its limits ``limit_horizon_s`` ahead."""
-        H = self.g.limit_horizon_s
-        qj, vj = q[7:], v[6:]
-        a_hi = 2.0 * (self.q_hi - qj - vj * H) / H**2
-        a_lo = 2.0 * (self.q_lo - qj - vj * H) / H**2
-        return a_lo, np.maximum(a_hi, a_lo)
+        a_hi = 2.0 / H**2 * (self.q_hi - q_ahead)
+        a_lo = 2.0 / H**2 * (self.q_lo - q_ahead)
+        return a_lo, np.maximum(a_hi, a_lo), q_ahead <= self.q_lo + eps, q_ahead >= self.q_hi - eps
 
     # -- solve ------------------------------------------------------------------------------------------------
     def solve(self, q: np.ndarray, v: np.ndarray, ref: Reference, seat_force_max_n: float = 0.0,
@@ -240,7 +242,7 @@ class WholeBodyQP:
         t0 = time.perf_counter()
         nv, nj = self.nv, self.nj
         M, h = self._kinematics(q, v)
-        Jf, A_c, b_c, corners = self._contacts(v)
+        Jf, A_c, b_c, corners = self._contacts()
         if seat_force_known_n is not None and self.seat is not None:
             h = h - Jf[-3:].T @ np.asarray(seat_force_known_n, float)
         seat_on = self.seat is not None and seat_force_max_n > 0
@@ -252,25 +254,25 @@ class WholeBodyQP:
         b = np.concatenate([-h[:6], b_c])
         if not seat_on:     # the seat's rows say its force is zero (zero rows are degenerate equalities)
             rows[e - 3:e], b[-3:] = 0.0, 0.0
-            rows[e - 3:e, -3:] = np.eye(3)
+            rows[e - 3:e, -3:] = self._eye3
         rows[e:e + nj, :nv], rows[e:e + nj, nv:] = M[6:], -Jf_u[:, 6:].T   # the joint torques
-        lo = np.concatenate([-self.tau_max - h[6:], np.full(len(self.C_fric), -INF)])
-        hi = np.concatenate([self.tau_max - h[6:], np.zeros(len(self.C_fric))])
-        at_lo, at_hi = self._joint_stops(q, v)
+        lo, hi = self._lo, self._hi
+        np.subtract(-self.tau_max, h[6:], out=lo[:nj])
+        np.subtract(self.tau_max, h[6:], out=hi[:nj])
+        x_lo, x_hi = self._x_lo, self._x_hi
+        x_lo[6:nv], x_hi[6:nv], at_lo, at_hi = self._joint_limits(q, v)
         lo[:nj][at_hi] = -INF                  # the stop at the upper limit pushes down: any demand below
         hi[:nj][at_lo] = INF
-        x_lo, x_hi = np.full(self.n, -INF), np.full(self.n, INF)
-        x_lo[6:nv], x_hi[6:nv] = self._acceleration_bounds(q, v)
-        x_lo[nv + 2:self.n:3] = 0.0                              # unilateral normal forces
         x_lo[-3:] = (-INF, -INF, 0.0) if seat_on else 0.0           # the seat's force: (x, y, z)
         x_hi[-3:] = (INF, INF, seat_force_max_n / FORCE_UNIT_N) if seat_on else 0.0
         x, solved = self._solve_qp(H, c, rows, np.concatenate([x_hi, b, hi]), np.concatenate([x_lo, b, lo]))
         a, f = x[:nv], x[nv:] * FORCE_UNIT_N
-        tau = np.clip(M[6:] @ a + h[6:] - Jf[:, 6:].T @ f, -self.tau_max, self.tau_max)   # the stops take the rest
+        tau = M[6:] @ a + h[6:] - Jf[:, 6:].T @ f
+        np.minimum(np.maximum(tau, -self.tau_max, out=tau), self.tau_max, out=tau)    # the stops take the rest
         feet = f[:-3].reshape(-1, 3)
         fz = feet[:, 2].sum()
         cop = (feet[:, 2] @ corners) / fz if fz > 1.0 else np.full(3, np.nan)
-        return WbcResult(a, tau, feet, f[-3:].copy(), cop, corners, self.data.com[0].copy(), solved,
+        return WbcResult(a, tau, feet, f[-3:].copy(), cop, corners.copy(), self.data.com[0].copy(), solved,
                          time.perf_counter() - t0)
 
 
