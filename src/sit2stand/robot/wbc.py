@@ -17,7 +17,8 @@ the pelvis. Constraints:
 
 Cost (weighted least squares): COM acceleration toward a_com* = a_ref + kp (c_ref - c) + kd (v_ref - v); every
 tangent coordinate (base orientation and joints; the base's translation is left to the COM) toward
-a* = a_ref + kp (q_ref - q) + kd (v_ref - v); the seat's force (the feet carry what they can); all forces (a small
+a* = a_ref + kp (q_ref - q) + kd (v_ref - v) (the base orientation weighed less while the seat carries weight:
+the seat holds the pelvis too); the seat's force (the feet carry what they can); all forces (a small
 regularisation). The same QP is the plan's dynamics filter (:mod:`sit2stand.retarget.dynamic`: integrated on the
 model itself) and the simulated robot's controller (:class:`sit2stand.robot.plant.Plant`, ``controller="wbc"``).
 
@@ -48,13 +49,19 @@ DAQP_EQUALITY = 5
 class WbcGains:
     """Task gains and weights of the whole-body QP (SI units)."""
 
-    com_kp: float = 200.0          # [1/s^2]: at 100 (kd 20), 26 of 29 benchmark rises stood, at 200 28 of 29
-    com_kd: float = 28.3           # [1/s]: critically damped, 2 sqrt(kp)
+    com_kp: float = 300.0          # [1/s^2]: at 100 (kd 20), 26 of 29 benchmark rises stood, at 200 28 of 29; with
+    #                                the seated base weight below, 300 tracks the 30 bodies' COM at p90 0.7 cm (200:
+    #                                1.1 cm), 400 felled a fast rise of a heavy body (the trunk past its torque)
+    com_kd: float = 34.6           # [1/s]: critically damped, 2 sqrt(kp)
     posture_kp: float = 200.0      # joints and base orientation [1/s^2]
     posture_kd: float = 28.0       # [1/s]
     com_weight: float = 100.0
     posture_weight: float = 1.0
     base_orientation_weight: float = 30.0
+    base_orientation_weight_seated: float = 10.0   # while the seat carries weight: the seat holds the pelvis too,
+    #                                which the QP (no seat contact, a known force) does not know; at 30 the QP turned
+    #                                the torso's yaw joint as a reaction wheel to right the base (0.8 rad off its plan
+    #                                on a fast rise); at 3 one fast rise fell at seat-off
     seat_force_weight: float = 1e-6     # per N^2 of the seat's normal force: the feet carry what they can
     force_weight: float = 1e-7          # per N^2
     foot_kd: float = 20.0          # contact stabilisation: a sole's residual velocity damped out [1/s]
@@ -140,6 +147,9 @@ class WholeBodyQP:
         fw = np.full(self.n_f, self.g.force_weight)
         fw[-1] += self.g.seat_force_weight
         self._H0 = np.diag(np.concatenate([self.weights, fw * FORCE_UNIT_N**2]))
+        self.weights_seated = self.weights.copy()
+        self.weights_seated[3:6] = self.g.base_orientation_weight_seated
+        self._H0_seated = np.diag(np.concatenate([self.weights_seated, fw * FORCE_UNIT_N**2]))
         # a corner's velocity in its sole's axes from the sole's 6D one (LOCAL: v, omega): v + omega x r = K_i (v,
         # omega), K_i = [I, -[r_i]x]; constant, as the corners are fixed on the sole
         self._corner_map = np.concatenate([np.broadcast_to(np.eye(3), (4, 3, 3)), -skew_rows(self.corner_local)],
@@ -191,14 +201,14 @@ class WholeBodyQP:
             b_c[s:] = -pin.getFrameClassicalAcceleration(model, data, self.seat, pin.LOCAL_WORLD_ALIGNED).linear
         return Jf, A_c, b_c, corners
 
-    def _cost(self, q: np.ndarray, v: np.ndarray, ref: Reference) -> tuple[np.ndarray, np.ndarray]:
-        """H, g of the weighted tasks over x = (a, f)."""
+    def _cost(self, q: np.ndarray, v: np.ndarray, ref: Reference, seated: bool) -> tuple[np.ndarray, np.ndarray]:
+        """H, g of the weighted tasks over x = (a, f); ``seated``: the seat carries weight."""
         g, nv = self.g, self.nv
-        H = self._H0.copy()          # posture weights, force regularisation
+        H = (self._H0_seated if seated else self._H0).copy()     # posture weights, force regularisation
         c = np.zeros(self.n)
         # posture (base orientation and joints): a = a*
         a_post = ref.a + g.posture_kp * pin.difference(self.model, q, ref.q) + g.posture_kd * (ref.v - v)
-        c[:nv] -= self.weights * a_post
+        c[:nv] -= (self.weights_seated if seated else self.weights) * a_post
         # COM: Jcom a + drift = a_com*
         com, vcom, drift = self.data.com[0], self.data.vcom[0], self.data.acom[0]
         a_com = ref.com_a + g.com_kp * (ref.com - com) + g.com_kd * (ref.com_v - vcom)
@@ -246,7 +256,7 @@ class WholeBodyQP:
         if seat_force_known_n is not None and self.seat is not None:
             h = h - Jf[-3:].T @ np.asarray(seat_force_known_n, float)
         seat_on = self.seat is not None and seat_force_max_n > 0
-        H, c = self._cost(q, v, ref)
+        H, c = self._cost(q, v, ref, seat_on or seat_force_known_n is not None)
         e = self.n_eq
         rows, Jf_u = self._rows, Jf * FORCE_UNIT_N
         rows[:6, :nv], rows[:6, nv:] = M[:6], -Jf_u[:, :6].T            # the base's Newton-Euler rows
