@@ -80,3 +80,16 @@ def test_a_body_the_synthesiser_refuses_is_left_out_of_the_robots_rates():
     assert agg["success_rate"] == 1.0 and agg["by_style"]["fast"] == "0/0"
     assert "NOSYN" in B.case_line({**rows[1], "case": {**rows[1]["case"], "height_m": 1.6, "mass_kg": 54.0,
                                                        "sex": "female", "seat_height_m": 0.39, "rise_s": 1.1}})
+
+
+def test_the_torque_controllers_qp_times_are_reported_only_where_it_ran():
+    def row(i, qp):
+        return {"case": {"index": i, "style": "natural", "seed": i}, "stood_up": True, "time_scale": 1.2,
+                "duration_ratio": 1.2, "wall_s": 9.0, "synth_seed": i, **qp}
+    timed = [row(0, {"controller_qp_ms_p99": 0.8, "controller_qp_cpu_ms_p99": 0.7}),
+             row(1, {"controller_qp_ms_p99": 1.3, "controller_qp_cpu_ms_p99": 0.9})]
+    agg = B.aggregate(timed)
+    assert agg["share_qp_p99_le_1_ms"] == pytest.approx(0.5) and agg["controller_qp_ms_p99"]["max"] == 1.3
+    assert "QP p99 per step" in B.summary_text(agg) and "at <= 1 ms: 50 %" in B.summary_text(agg)
+    joint_pd = B.aggregate([row(0, {})])
+    assert joint_pd["share_qp_p99_le_1_ms"] is None and "QP" not in B.summary_text(joint_pd)

@@ -8,8 +8,8 @@ followed along its velocity between commands) into a whole-body reference with t
 soles only: a robot has no force sensor under its pelvis, so while it sits the seat's force is estimated as the weight
 the feet's force sensors do not carry, and enters the dynamics as a known external force (a rigid seat contact in the
 QP would let it assume a seat force the real chair, which cannot pull, does not give). The controller's model has only
-the identified (or CAD) parameters, never the plant's hidden effects. The latest QPs' wall times are kept
-(``qp_times_s``).
+the identified (or CAD) parameters, never the plant's hidden effects. The latest QPs' wall and CPU times are kept
+(``qp_times_s``, ``qp_cpu_times_s``).
 """
 
 from __future__ import annotations
@@ -53,15 +53,18 @@ class WholeBodyController:
         self.standing_s = 0.0          # how long the feet have carried the whole weight [s]
         self.measured_share = 0.0      # 0: the reference sole flat, 1: as measured at the start
         self.qp_times_s: deque[float] = deque(maxlen=QP_TIMES_KEPT)
+        self.qp_cpu_times_s: deque[float] = deque(maxlen=QP_TIMES_KEPT)
         self.last = None
 
     def qp_figures(self) -> dict[str, float]:
-        """The QP's wall time per control step over the kept steps, p50 and p99 [ms], their count, and the QPs whose
-        warm start failed (solved again from an empty active set); empty before the first step."""
+        """The QP's wall time per control step over the kept steps, p50 and p99 [ms], its CPU time (the thread's: a
+        shared host's steal left out), their count, and the QPs whose warm start failed (solved again from an empty
+        active set); empty before the first step."""
         if not self.qp_times_s:
             return {}
-        ms = np.array(self.qp_times_s) * 1e3
+        ms, cpu = np.array(self.qp_times_s) * 1e3, np.array(self.qp_cpu_times_s) * 1e3
         return {"qp_ms_p50": float(np.percentile(ms, 50)), "qp_ms_p99": float(np.percentile(ms, 99)),
+                "qp_cpu_ms_p50": float(np.percentile(cpu, 50)), "qp_cpu_ms_p99": float(np.percentile(cpu, 99)),
                 "qp_steps": len(ms), "qp_cold_solves": self.qp.cold_solves}
 
     def anchor(self, q: np.ndarray) -> None:
@@ -99,5 +102,6 @@ class WholeBodyController:
         seat = np.array([0.0, 0.0, seat_load_n]) if seat_load_n > 0 else None
         res = self.qp.solve(q, v, ref, 0.0, seat)
         self.qp_times_s.append(res.qp_s)
+        self.qp_cpu_times_s.append(res.qp_cpu_s)
         self.last = res
         return res.tau

@@ -99,6 +99,7 @@ class WbcResult:
     com: np.ndarray                # (3,) COM of the state [m]
     solved: bool
     qp_s: float                    # wall time of matrix building + solve [s]
+    qp_cpu_s: float                # this thread's CPU time for the same [s] (apart from a shared host's steal)
 
 
 def friction_rows(n_points: int, mu: float) -> np.ndarray:
@@ -249,7 +250,7 @@ class WholeBodyQP:
         """One QP at the state (q, v) for ``ref``; the seat point is a contact while ``seat_force_max_n`` > 0.
         ``seat_force_known_n``: a measured (estimated) force of the seat on the pelvis [N, world axes], taken as a
         known external force instead (what a robot without a sensor under its pelvis does)."""
-        t0 = time.perf_counter()
+        t0, cpu0 = time.perf_counter(), time.thread_time()
         nv, nj = self.nv, self.nj
         M, h = self._kinematics(q, v)
         Jf, A_c, b_c, corners = self._contacts()
@@ -283,7 +284,7 @@ class WholeBodyQP:
         fz = feet[:, 2].sum()
         cop = (feet[:, 2] @ corners) / fz if fz > 1.0 else np.full(3, np.nan)
         return WbcResult(a, tau, feet, f[-3:].copy(), cop, corners.copy(), self.data.com[0].copy(), solved,
-                         time.perf_counter() - t0)
+                         time.perf_counter() - t0, time.thread_time() - cpu0)
 
 
 def feet_anchored_reference(model: pin.Model, data: pin.Data, q: np.ndarray, v_joints: np.ndarray,
