@@ -3,13 +3,17 @@ from another process."""
 
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 import rclpy
 from conftest import GRAPHS
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
 
 from sit2stand.io.bag import BagReader
+from sit2stand.nodes.runtime import ROBOT_STATE_READER_QOS
 from sit2stand.robot.model import PlantConfig
 from sit2stand.robot.postures import collect_postures
 from sit2stand_msgs.srv import IdentifyCom
@@ -72,3 +76,31 @@ def test_identification_service_called_from_another_process(tmp_path, ros_env, r
     finally:
         rclpy.shutdown(context=context)
     assert server.stop() == 0
+
+
+def test_under_a_held_clock_the_driver_still_gives_its_seated_state(ros_env, run_node):
+    """A driver that joins a replayer's /clock while it is held (the stand-up graph's lockstep waits at 2 s for the
+    retargeter's first command, and the retargeter for a robot state) publishes its state at that time at once:
+    waiting for the clock to move first, nothing would ever move."""
+    driver = run_node("sit2stand.nodes.driver", "--ros-args", "-p", "use_sim_time:=true")
+    assert driver.wait_for_output("seated", 90), driver.output
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = rclpy.create_node("held_clock", context=context)
+        clock_pub = node.create_publisher(Clock, "/clock", 10)
+        states = []
+        node.create_subscription(JointState, "/robot/joint_states", states.append, ROBOT_STATE_READER_QOS)
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        held = Clock()
+        held.clock.sec = 2
+        deadline = time.monotonic() + 30.0
+        while not states and time.monotonic() < deadline:
+            clock_pub.publish(held)                      # the same time, again and again: the clock is held
+            executor.spin_once(timeout_sec=0.1)
+        assert states, driver.output
+        assert (states[0].header.stamp.sec, states[0].header.stamp.nanosec) == (2, 0)
+        assert len(states[0].position) == 32
+    finally:
+        rclpy.shutdown(context=context)

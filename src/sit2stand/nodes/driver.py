@@ -25,8 +25,8 @@ axes about the sole point, frame ``sole_<side>_world_aligned``), ``/robot/cop`` 
 ``/robot/base_pose`` (geometry_msgs/PoseStamped, what a state estimator would give), ``/robot/status``
 (diagnostic_msgs/DiagnosticStatus, 10 Hz), and ``/clock`` when ``publish_clock`` is true (then every stamp is
 simulated time). Under ``use_sim_time`` (a replayer's /clock drives the graph) the simulation follows that clock
-instead of the wall clock: it waits seated, publishing nothing, until the first /clock, then steps to each /clock
-time, and each state sample is stamped with the /clock time it simulates. Every name is relative (``__ns`` moves
+instead of the wall clock: it waits seated, publishing nothing, until the first /clock, publishes its state at
+that time at once (a clock held there still sees a robot), then steps to each /clock time, and each state sample is stamped with the /clock time it simulates. Every name is relative (``__ns`` moves
 them). For RViz, Foxglove and tf2 (what robot_state_publisher does on a full ROS install; see
 :mod:`sit2stand.robot.description`): ``/tf`` (tf2_msgs/TFMessage: ``world`` -> ``base_link`` and every moving joint's
 link, from the measured joint state and base pose, at ``tf_rate_hz`` with that state sample's stamp), and, transient
@@ -269,6 +269,9 @@ class Driver(Node):
             if self._clock0_ns is None:
                 self._clock0_ns, self._sim0 = now_ns, plant.t_s
                 self._publish_latched()
+                # the seated state at once, at the clock's time: a clock held for the first command (the replayer's
+                # lockstep) would otherwise hold this driver's first state too, and the retargeter waits for it
+                self._publish_state()
             target = self._sim0 + (now_ns - self._clock0_ns) * 1e-9
         elif self.rtf > 0:
             target = self._sim0 + (time.monotonic() - self._wall0) * self.rtf

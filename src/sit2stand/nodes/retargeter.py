@@ -140,6 +140,9 @@ class RetargeterNode(Node):
         self.robot_js: bytes | None = None        # the latest robot state, serialized, and when each came
         self.robot_base: bytes | None = None
         self.robot_rx = (0.0, 0.0)
+        # under a replayer's /clock a state is alive while its stamp keeps up with the clock: a clock held in
+        # lockstep (waiting for this node's first command) stops the states too, however long it holds
+        self._states_on_sim_time = bool(self.get_parameter("use_sim_time").value)
         self._js_order: tuple[list[str], np.ndarray] | None = None
         self._js_reader = JointStateReader()
         # the commands' messages laid out once, when the joints are known (the per-command path: 100 Hz, real time)
@@ -254,8 +257,9 @@ class RetargeterNode(Node):
 
     def _measured_q(self) -> tuple[np.ndarray, float] | None:
         """The robot's measured configuration in the model's order and its stamp [s]; None if received longer than
-        ROBOT_STATE_MAX_AGE_S ago or stamped longer than ROBOT_STATE_MAX_DELAY_S ago."""
-        if self.robot_js is None or self.robot_base is None or \
+        ROBOT_STATE_MAX_AGE_S ago (on wall time: not under use_sim_time) or stamped longer than
+        ROBOT_STATE_MAX_DELAY_S before the ROS clock's now."""
+        if self.robot_js is None or self.robot_base is None or not self._states_on_sim_time and \
                 time.monotonic() - min(self.robot_rx) > ROBOT_STATE_MAX_AGE_S:
             return None
         stamp, positions = self._js_reader.read(self.robot_js)
