@@ -27,7 +27,8 @@ axes about the sole point, frame ``sole_<side>_world_aligned``), ``/robot/cop`` 
 simulated time). Under ``use_sim_time`` (a replayer's /clock drives the graph) the simulation follows that clock
 instead of the wall clock: it waits seated, publishing nothing, until the first /clock, publishes its state at
 that time at once (a clock held there still sees a robot), then steps to each /clock time, and each state sample
-is stamped with the /clock time it simulates. Every name is relative (``__ns`` moves them). For RViz, Foxglove and tf2 (what robot_state_publisher does on a full ROS install; see
+is stamped with the /clock time it simulates. Every name is relative (``__ns`` moves them). For RViz, Foxglove
+and tf2 (what robot_state_publisher does on a full ROS install; see
 :mod:`sit2stand.robot.description`): ``/tf`` (tf2_msgs/TFMessage: ``world`` -> ``base_link`` and every moving joint's
 link, from the measured joint state and base pose, at ``tf_rate_hz`` with that state sample's stamp), and, transient
 local, once: ``/tf_static`` (fixed joints, the soles, ``lab`` -> ``world``) and ``/robot_description``
