@@ -7,8 +7,9 @@ import pytest
 from sit2stand.data import plant_path
 from sit2stand.retarget.player import Command
 from sit2stand.retarget.stream import robot_model
-from sit2stand.retarget.pacing import (ChairForceTrack, CommandPacer, HumanComTrack, LatencyLog, LiveConfig,
-                                       LiveRetargeting, MarkerFrame, percentile_text, summary_line)
+from sit2stand.retarget.pacing import (ROBOT_STATE_MAX_AGE_S, ROBOT_STATE_MAX_DELAY_S, ChairForceTrack, CommandPacer,
+                                       HumanComTrack, LatencyLog, LiveConfig, LiveRetargeting, MarkerFrame,
+                                       percentile_text, robot_state_current, summary_line)
 
 
 def test_a_frame_uses_its_own_com_estimate():
@@ -157,3 +158,15 @@ def test_under_torque_control_a_robot_behind_the_plan_slows_it_from_its_measured
     live.pull_and_send(5.02)
     assert live.player.lags[-1] == pytest.approx(0.05, abs=1e-9), "the next command is pulled with that lag"
     assert live.stabiliser is None and "whole-body torque controller" in live.figures()["com_feedback"]
+
+
+def test_a_robot_state_held_with_the_replayers_clock_stays_current():
+    """On a wall clock a state received long ago is a robot gone; under use_sim_time the clock held in lockstep
+    holds the robot with it, and only the stamp counts (a held clock once waited for a command that waited for a
+    newer state). A state stamped too long before the clock is stale on either clock."""
+    old, fresh = 5.0, 0.5 * ROBOT_STATE_MAX_AGE_S
+    assert robot_state_current(fresh, 0.05, sim_time=False)
+    assert not robot_state_current(old, 0.05, sim_time=False)
+    assert robot_state_current(old, 0.05, sim_time=True)
+    for sim_time in (False, True):
+        assert not robot_state_current(fresh, 2 * ROBOT_STATE_MAX_DELAY_S, sim_time)

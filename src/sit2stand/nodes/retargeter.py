@@ -53,7 +53,7 @@ from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBO
                          ROBOT_COM_FEEDBACK_TOPIC, ROBOT_JOINT_COMMAND_TOPIC, ROBOT_JOINT_STATES_TOPIC,
                          ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC, ROBOT_RETARGET_IK_TOPIC, VIZ_MARKERS_TOPIC,
                          WORLD_FRAME, ros_name)
-from ..retarget.pacing import LiveConfig, LiveRetargeting, MarkerFrame, summary_line
+from ..retarget.pacing import LiveConfig, LiveRetargeting, MarkerFrame, robot_state_current, summary_line
 from ..retarget.player import (DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S,
                                SEAT_OFF_DWELL_S, Command)
 from ..retarget.stabiliser import StabiliserConfig
@@ -63,14 +63,6 @@ from .markers import plan_markers
 from .runtime import (PUBLISH_DEPTH, ROBOT_STATE_READER_QOS, IdleDrain, NodeError, declare, node_main,
                       qos_matching_publishers, scheduling_text, steady_timer)
 
-ROBOT_STATE_MAX_AGE_S = 0.1
-ROBOT_STATE_MAX_DELAY_S = 0.2
-"""A robot state received within ``ROBOT_STATE_MAX_AGE_S`` (the robot is alive) and stamped within this of now is
-used by the COM feedback, compared with the plan of its own stamp; one from a simulation lagging more is not (the
-last shift is kept instead). Replayed graphs in lockstep: states p99 80 ms old. A simulated robot starved on 2 cores
-ran up to 5 s behind real time while the live stream ran; at 1 s allowed, the feedback closed its loop on states
-0.7 s old as the robot caught up (a sway period is ~2 s), overcorrected the standing robot and felled it (3 live
-runs in 2 full test runs, 2026-12-02)."""
 
 
 def _live_config(node: Node) -> LiveConfig:
@@ -140,9 +132,7 @@ class RetargeterNode(Node):
         self.robot_js: bytes | None = None        # the latest robot state, serialized, and when each came
         self.robot_base: bytes | None = None
         self.robot_rx = (0.0, 0.0)
-        # under a replayer's /clock a state is alive while its stamp keeps up with the clock: a clock held in
-        # lockstep (waiting for this node's first command) stops the states too, however long it holds
-        self._states_on_sim_time = bool(self.get_parameter("use_sim_time").value)
+        self.sim_time = bool(self.get_parameter("use_sim_time").value)
         self._js_order: tuple[list[str], np.ndarray] | None = None
         self._js_reader = JointStateReader()
         # the commands' messages laid out once, when the joints are known (the per-command path: 100 Hz, real time)
@@ -257,14 +247,14 @@ class RetargeterNode(Node):
 
     def _measured_q(self) -> tuple[np.ndarray, float] | None:
         """The robot's measured configuration in the model's order and its stamp [s]; None if received longer than
-        ROBOT_STATE_MAX_AGE_S ago (on wall time: not under use_sim_time) or stamped longer than
-        ROBOT_STATE_MAX_DELAY_S before the ROS clock's now."""
-        if self.robot_js is None or self.robot_base is None or not self._states_on_sim_time and \
-                time.monotonic() - min(self.robot_rx) > ROBOT_STATE_MAX_AGE_S:
+        ROBOT_STATE_MAX_AGE_S ago (on a wall clock) or stamped longer than ROBOT_STATE_MAX_DELAY_S ago
+        (:func:`~sit2stand.retarget.pacing.robot_state_current`)."""
+        if self.robot_js is None or self.robot_base is None:
             return None
         stamp, positions = self._js_reader.read(self.robot_js)
-        if self.get_clock().now().nanoseconds - stamp > ROBOT_STATE_MAX_DELAY_S * 1e9:
-            return None          # received now, but a simulation held up sent it long ago
+        stamped_ago_s = (self.get_clock().now().nanoseconds - stamp) * 1e-9
+        if not robot_state_current(time.monotonic() - min(self.robot_rx), stamped_ago_s, self.sim_time):
+            return None
         names = self._js_reader.names
         if self._js_order is None or self._js_order[0] is not names:
             if not set(self.joint_names) <= set(names):
