@@ -102,7 +102,10 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     ``seat_off_dwell_s``: the player's wait at the robot's seat-off. ``controller``: the simulated robot's
     (``inverse_dynamics``: joint PD with that feed-forward; ``wbc``: whole-body torque control). The marker map is
     made on a seated frame (:func:`~sit2stand.retarget.calibration.map_frame`; ``calibration_frame``: that one);
-    a ``static`` trial calibrates the human skeleton when the human COM is estimated here."""
+    a ``static`` trial calibrates the human skeleton when the human COM is estimated here. ``plant``: None is a
+    plant without unmodeled effects (:meth:`~sit2stand.robot.model.PlantConfig.load`), not the command's default
+    (the packaged ``default`` plant, 26 kg hidden); parameters identified on one and simulated on the other are a
+    model error of 26 kg."""
     out.mkdir(parents=True, exist_ok=True)
     trial = read_trial(bag)
     config = config or RetargetConfig()
