@@ -64,7 +64,6 @@ from .runtime import (PUBLISH_DEPTH, ROBOT_STATE_READER_QOS, IdleDrain, NodeErro
                       qos_matching_publishers, scheduling_text, steady_timer)
 
 
-
 def _live_config(node: Node) -> LiveConfig:
     """The node's parameters, declared."""
     gains = StabiliserConfig()
