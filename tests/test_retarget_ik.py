@@ -112,3 +112,34 @@ def test_a_trunk_that_gravity_presses_on_its_stop_past_its_cap_stays_there(scene
     ik = ComIk(model, soles, stop_torque_share=share)
     r = ik.solve(on_stop, markers, com, sole_targets, com_axes=(0, 1), max_iterations=1)
     assert (r.q[j.idx_q] > stop - 1e-6) == stays, r.q[j.idx_q]
+
+
+@pytest.mark.parametrize("share", [0.5, 0.9, None])
+def test_a_trunk_lifting_off_its_stop_accelerates_within_its_motors_room_above_gravity(scene, share):
+    """The CAD trunk resting on its stop (gravity ~19 N m of the motor's 78) with the markers of a raised trunk: with
+    ``lift_torque_share`` each frame's speed off the stop grows by at most (share x 78 N m - |g|) / I dt, I the
+    trunk's inertia about the joint, from rest, and the trunk does lift; without it the first frame already leaves
+    at the speed limit."""
+    model, q_stand, soles, sole_targets = scene
+    j = model.joints[model.getJointId("torso_2_joint")]
+    on_stop = q_stand.copy()
+    on_stop[j.idx_q] = model.upperPositionLimit[j.idx_q]
+    raised = q_stand.copy()
+    raised[j.idx_q] = 0.2
+    markers = frame_markers(model, raised, np.random.default_rng(0), noise=0.0)
+    com = pin.centerOfMass(model, model.createData(), on_stop)
+    dt, v_max = 0.01, 5.0
+    ik = ComIk(model, soles, velocity_limit=v_max, dt=dt, stop_torque_share=1.0, lift_torque_share=share)
+    data = model.createData()
+    q, speed = on_stop, 0.0
+    for _ in range(5):
+        tau = pin.computeGeneralizedGravity(model, data, q)[j.idx_v]
+        accel = ((share or 0.0) * model.effortLimit[j.idx_v] - abs(tau)) / pin.crba(model, data, q)[j.idx_v, j.idx_v]
+        r = ik.solve(q, markers, com, sole_targets, com_axes=(0, 1), q_prev=q, max_iterations=10)
+        new_speed = (q[j.idx_q] - r.q[j.idx_q]) / dt          # off the upper stop: the joint angle decreases
+        if share is None:
+            assert new_speed > 0.9 * v_max, new_speed
+            return
+        assert 0.0 < new_speed <= 1.01 * (speed + accel * dt), (new_speed, speed, accel)
+        q, speed = r.q, new_speed
+    assert speed > 3 * accel * dt       # it keeps accelerating as far as its room allows

@@ -66,7 +66,8 @@ STOP_REACH_RAD = 0.1
 """A joint this close to a position limit, its static torque pressing it into that stop, is left out of the torque
 criterion, as one whose static torque alone is past its limit: the stop carries the load once the joint rests on
 it, a joint landing on it lands a little early (the plan takes it there next), and one lifting off it has all but
-nothing of its limit left above gravity, so slowing the plan cannot give it room. Measured on the elderly rise: the
+nothing of its limit left above gravity, so slowing the plan cannot give it room (the IK paces a trunk lifting off:
+``ik.LIFT_TORQUE_SHARE``). Measured on the elderly rise: the
 torso pitch, leaning onto its stop with 77 of its 78 N m static, held the plan at the cap for 0.1 s of human time
 (time scale 1.18, now 1.07; the population's 30 bodies unchanged, 28 of 29 standing either way)."""
 RETIMING = ("local", "uniform")

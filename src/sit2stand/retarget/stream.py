@@ -42,7 +42,7 @@ from ..robot.plant import seat_top_height, seated_configuration
 from ..human.marker_sets import choose_marker_set
 from .calibration import MarkerMap, calibrate_markers, left_leg_points, marker_roles
 from .feasibility import support_polygon
-from .ik import ComIk, IkResult
+from .ik import LIFT_TORQUE_SHARE, ComIk, IkResult
 from .player import Command, PlanPlayer
 
 SEATED_COM_BEHIND_ANKLE_THIGHS = 0.6
@@ -145,6 +145,8 @@ class RetargetConfig:
     momentum_weight: float = 0.0          # the IK's angular momentum term (a ZMP shift [m] against marker metres)
     stop_torque_share: float | None = 1.0  # a trunk, head or arm joint stays on its stop while gravity presses it
     #                                        there past this share of its effort limit (ik.ComIk; None: off)
+    lift_torque_share: float | None = LIFT_TORQUE_SHARE   # ... and accelerates against gravity with at most this
+    #                                        share of its limit (ik.ComIk; None: unbounded)
     chair_off_force_n: float = 30.0       # human left the seat when the chair plate reads less
     pelvis_rise_m: float = 0.02           # ... or, without a chair plate, when the pelvis markers rose this much
     y_ramp_s: float = 0.5
@@ -233,7 +235,8 @@ class Retargeter:
                 self.held_to_seated[jt.idx_q:jt.idx_q + jt.nq] = True
         self.ik = ComIk(self.model, self.robot.sole_frames, self.cfg.velocity_limit_rad_s, posture_weight=mu,
                         damping=self.cfg.damping, momentum_weight=self.cfg.momentum_weight,
-                        stop_torque_share=self.cfg.stop_torque_share)
+                        stop_torque_share=self.cfg.stop_torque_share,
+                        lift_torque_share=self.cfg.lift_torque_share)
         self.ik.eps_abs = self.cfg.qp_tolerance
         self.names = list(names)
         self.weights = np.array([0.0 if n not in self.marker_frames else
