@@ -8,7 +8,7 @@ import pytest
 
 from sit2stand.human.offline import read_trial
 from sit2stand.retarget.feasibility import plan_dynamics, plan_zmp, support_margin, zmp_at_scale
-from sit2stand.retarget.player import MAX_TIME_SCALE_RATE, PlanPlayer
+from sit2stand.retarget.player import LIFT_OFF_SPEED_RAD_S, MAX_TIME_SCALE_RATE, PlanPlayer
 from sit2stand.retarget.stream import Retargeter, retarget_sequence, robot_setup
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -202,16 +202,21 @@ def test_a_recording_that_starts_seated_gets_no_lead_in(retargeted, elderly):
     assert rt.lead_in(0.0, 0.01, trial.positions[0], trial.valid[0], com_h[0]) == []
 
 
-def test_a_joint_pressed_on_its_stop_is_left_out_of_the_torque_criterion(retargeted):
+def test_a_joint_resting_on_its_stop_is_left_out_of_the_torque_criterion_and_one_lifting_off_counts(retargeted):
     """The torso pitch near its upper stop (0.785 rad) with its static torque pressing into it: the stop carries the
-    load, so the joint does not hold the plan; far from the stop, or pulled off it by its static torque, it counts."""
+    load, so the joint does not hold the plan; far from the stop, pulled off it by its static torque, or lifted off it
+    by the plan (moving away faster than LIFT_OFF_SPEED_RAD_S), it counts."""
     robot, _, frames, _, player = retargeted
     model = player.model
     jid = model.getJointId("torso_2_joint")
     iq, iv = model.joints[jid].idx_q, model.joints[jid].idx_v - 6
     q = frames[0].q.copy()
-    static = np.zeros(model.nv - 6)
-    for q_torso, static_torso, pressed in ((0.75, -70.0, True), (0.5, -70.0, False), (0.75, 70.0, False),
-                                           (-0.2, 30.0, True), (-0.2, -30.0, False)):
-        q[iq], static[iv] = q_torso, static_torso
-        assert player._pressed_on_stop(q, static)[iv] == pressed, (q_torso, static_torso)
+    static, v = np.zeros(model.nv - 6), np.zeros(model.nv - 6)
+    slow, fast = 0.5 * LIFT_OFF_SPEED_RAD_S, 2 * LIFT_OFF_SPEED_RAD_S
+    for q_torso, static_torso, v_torso, resting in (
+            (0.75, -70.0, 0.0, True), (0.5, -70.0, 0.0, False), (0.75, 70.0, 0.0, False),
+            (-0.2, 30.0, 0.0, True), (-0.2, -30.0, 0.0, False),
+            (0.75, -70.0, -slow, True), (0.75, -70.0, -fast, False), (0.75, -70.0, fast, True),
+            (-0.2, 30.0, slow, True), (-0.2, 30.0, fast, False)):
+        q[iq], static[iv], v[iv] = q_torso, static_torso, v_torso
+        assert player._resting_on_stop(q, v, static)[iv] == resting, (q_torso, static_torso, v_torso)

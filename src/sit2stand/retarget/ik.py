@@ -33,11 +33,11 @@ the extension, and the robot tipped forward over its toes (2 of 30 population ca
 
 Trunk lift-off: a trunk joint (the torso pitch) may accelerate against gravity only as fast as its motor's room
 above gravity allows, (``lift_torque_share`` x effort limit - |g_j|) / M_jj (M_jj the joint-space inertia's
-diagonal), from its speed into the previous frame. Without it the plan lifted the CAD plant's trunk off its 45
-degree stop, with ~1 N m of room, at up to the speed limit, the trunk lagged, and the natural rise fell. Only the
-pitch: bounding the arms too (they are overloaded by the plan's pace at the human's timing anyway) doubled the
-population's COM tracking p90 to 1.6 cm, and bounding the torso yaw perturbed a fast rise enough that the whole-body
-controller lost it.
+diagonal; the parent's motion left out), from its speed into the previous frame. Without it the plan lifted the
+trunk off its 45 degree stop at up to the speed limit the moment the stop rule released it, where the motor has next
+to nothing above gravity: a step the player could only stretch to its cap. Only the pitch: bounding the arms too
+(they are overloaded by the plan's pace at the human's timing anyway) doubled the population's COM tracking p90 to
+1.6 cm, and bounding the torso yaw perturbed a fast rise enough that the whole-body controller lost it.
 
 Units SI; frames by Pinocchio frame id; positions in the world frame (REP-103).
 """
@@ -57,9 +57,11 @@ from ..robot.model import UPPER_LIMB_PREFIXES
 
 STOP_TOLERANCE_RAD = 1e-3
 """A joint this close to a limit is on its stop (the steps clip exactly to the limits)."""
-LIFT_TORQUE_SHARE = 0.9
-"""The share of its effort limit a trunk joint's plan may spend accelerating against gravity (the rest is the joint
-controller's room for feedback): see ``lift_torque_share``."""
+LIFT_TORQUE_SHARE = 1.0
+"""The share of its effort limit a trunk joint's plan may spend lifting the trunk against gravity: see
+``lift_torque_share``. The whole limit: at 0.9 the plan held the leaned trunk back so long that a real child's fast
+rise (CAD parameters) fell backwards, or, with the player's lift-off rule, tracked 5 cm; the player stretches the time
+where the motor needs more (``player.LIFT_OFF_SPEED_RAD_S``)."""
 
 
 def free_subtree_dofs(model: pin.Model, frames: list[int]) -> np.ndarray:
