@@ -1,12 +1,15 @@
 """sit2stand.retarget.pacing: COM by stamp, command pacing and latency accounting of the live retargeter."""
 
+import dataclasses
+
 import numpy as np
 import pinocchio as pin
 import pytest
 
 from sit2stand.data import plant_path
 from sit2stand.retarget.player import Command
-from sit2stand.retarget.stream import robot_model
+from sit2stand.retarget.stabiliser import ComStabiliser, StabiliserConfig
+from sit2stand.retarget.stream import robot_model, robot_setup
 from sit2stand.retarget.pacing import (ROBOT_STATE_MAX_AGE_S, ROBOT_STATE_MAX_DELAY_S, ChairForceTrack, CommandPacer,
                                        HumanComTrack, LatencyLog, LiveConfig, LiveRetargeting, MarkerFrame,
                                        percentile_text, robot_state_current, summary_line)
@@ -109,18 +112,25 @@ class _PlayedPlan:
     done = finished = True
 
 
+@dataclasses.dataclass
+class _HeldPose:
+    """The plan's last pose, at rest, on the chair (no COM feedback to apply)."""
+    com: tuple = (0.0, 0.0, 0.8)
+    on_feet: bool = False
+
+
 def test_after_the_plan_the_last_pose_is_re_sent_once_per_period_of_the_robots_clock():
     robot_now, sent = [10.0], []
     live = LiveRetargeting(LiveConfig(), send=lambda cmd, offset: sent.append(cmd) or 0.0, measured_q=lambda: None,
                            robot_clock=lambda: robot_now[0])
     live.player = _PlayedPlan()
-    live._last_sent = ("last pose, at rest", None)
+    live._held = _HeldPose()
     live._last_frame_robot_s = 10.0          # the last marker frame
     live.pacer.sent(10.0)
     for _ in range(3):                       # a graph held in lockstep: wall time passes, the robot's clock does not
         assert not live.tick() and not sent, "markers and commands both wait with the robot's clock"
     robot_now[0] = 10.016
-    assert not live.tick() and sent == ["last pose, at rest"], "the pose is held; markers not yet taken as stopped"
+    assert not live.tick() and sent == [live._held], "the pose is held; markers not yet taken as stopped"
     robot_now[0] = 10.032
     assert live.tick() is True and len(sent) == 2, "three periods of the robot's clock without markers: done"
 
@@ -170,3 +180,29 @@ def test_a_robot_state_held_with_the_replayers_clock_stays_current():
     assert robot_state_current(old, 0.05, sim_time=True)
     for sim_time in (False, True):
         assert not robot_state_current(fresh, 2 * ROBOT_STATE_MAX_DELAY_S, sim_time)
+
+
+def test_after_the_plan_the_held_pose_stays_under_the_com_feedback():
+    """A robot left standing keeps its balance: once the plan is played, each re-sent pose is corrected for the
+    robot's measured COM again (a shift frozen at the plan's end once left a real child's rise rocking heel to toe)."""
+    robot = robot_setup()
+    model, q = robot.model, robot.q_seated
+    com = pin.centerOfMass(model, model.createData(), q).copy()
+    robot_now, sent, measured = [10.0], [], [(q, 10.0)]
+    live = LiveRetargeting(LiveConfig(), send=lambda cmd, offset: sent.append((cmd.q, offset)) or 0.0,
+                           measured_q=lambda: measured[0], robot_clock=lambda: robot_now[0])
+    live.model, live.model_data = model, model.createData()
+    live.stabiliser = ComStabiliser(model, robot.sole_frames, robot.sole_targets, StabiliserConfig(ramp_s=0.0))
+    live.player = _PlayedPlan()
+    live._held = Command(1.0, q, np.zeros(model.nv), np.zeros(model.nv), 1.0, com + [0.01, 0.0, 0.0], com, np.inf,
+                         True)
+    live._last_frame_robot_s = robot_now[0]
+    live.pacer.sent(robot_now[0])
+    robot_now[0] += 0.016
+    live.tick()
+    measured[0] = (q, robot_now[0])
+    robot_now[0] += 0.016
+    live.tick()
+    (q1, off1), (q2, off2) = sent
+    assert off1[0] > 0.005 and off2[0] > off1[0], "the robot 1 cm behind: a forward shift, growing (integral)"
+    assert np.abs(pin.difference(model, q, q2)).max() > 1e-4, "the held pose itself is moved"

@@ -247,6 +247,10 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
         if not player.done:
             c = player.pull(lag_m=lag)
             cmds.append(c)
+        else:           # the last pose held at rest, its COM feedback still on, as the retargeter holds it
+            held += 1
+            c = dataclasses.replace(cmds[-1], v=np.zeros_like(cmds[-1].v), a=np.zeros_like(cmds[-1].a))
+        if not held or stabiliser is not None:
             q = c.q
             if stabiliser is not None:
                 fix = stabiliser.correct(c.q, c.com, plant.pin_configuration(plant.data.qpos), c.on_feet, dt)
@@ -256,8 +260,6 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
                 measured = pin.centerOfMass(plant.ctrl, plant.ctrl_data, plant.pin_configuration(plant.data.qpos))
                 lag = com_lag_m(c.com - measured)
             plant.command(q[7:], c.v[6:], c.a[6:], feedforward=controller)
-        else:           # the last command held, as the driver does when the retargeter stops
-            held += 1
         plant.step(steps)
         demand = np.abs(plant.data.actuator_force[plant.pd_ids] + plant.data.actuator_force[plant.ff_ids])
         torque.append(demand / plant.effort)

@@ -243,7 +243,7 @@ class LiveRetargeting:
         self._planned_com: deque[tuple[float, np.ndarray]] = deque(maxlen=PLANNED_COM_KEPT)   # (robot time, COM)
         self.last_frame_s = 0.0       # time.monotonic of the last frame processed
         self._last_frame_robot_s: float | None = None      # the robot's clock then [s]
-        self._last_sent: tuple[Command, np.ndarray | None] | None = None
+        self._held: Command | None = None       # the plan's last command, at rest: held once it is played
 
     def start(self, robot: RobotSetup, frame: MarkerFrame, com_m: np.ndarray):
         """Calibrate on ``frame`` (the human seated) over the robot's start posture; returns the marker map.
@@ -317,6 +317,13 @@ class LiveRetargeting:
         if cmd is None:
             return None
         self._last_command_s = robot_now_s
+        # held after the plan: the same pose, at rest, still corrected by the COM feedback
+        self._held = dataclasses.replace(cmd, v=np.zeros_like(cmd.v), a=np.zeros_like(cmd.a))
+        return self._correct_and_send(robot_now_s, cmd)
+
+    def _correct_and_send(self, robot_now_s: float, cmd: Command) -> float:
+        """Send ``cmd``, a command of the plan, corrected by the COM feedback for the robot's measured state; returns
+        when it went (wall time)."""
         self._planned_com.append((robot_now_s, cmd.com))
         offset = None
         if self.stabiliser is not None:
@@ -332,8 +339,6 @@ class LiveRetargeting:
             self.feedback_max_m = max(self.feedback_max_m, float(np.abs(offset).max()))
         elif cmd.on_feet:       # no COM feedback: the plan still waits for a robot behind it, from its measured state
             self.lag_m = self._measured_lag_m(cmd.com)
-        # held after the plan: the same pose, at rest
-        self._last_sent = (dataclasses.replace(cmd, v=np.zeros_like(cmd.v), a=np.zeros_like(cmd.a)), offset)
         return self.send(cmd, offset)
 
     def _measured_lag_m(self, plan_com: np.ndarray) -> float:
@@ -356,7 +361,8 @@ class LiveRetargeting:
     def tick(self) -> bool:
         """The timer: keep commands at the mocap rate when frames are late; after the markers stop (three periods
         of the robot's clock without one: on a graph held in lockstep, wall time says nothing), close the plan and
-        play the rest; once played, hold its last pose (re-sent at the same rate, as a controller streams).
+        play the rest; once played, hold its last pose (re-sent at the same rate, as a controller streams, still
+        corrected by the COM feedback: a robot left standing keeps its balance).
         Returns True once the whole plan has been played."""
         if self.player is None:
             return False
@@ -364,8 +370,8 @@ class LiveRetargeting:
         if self.pacer.late(robot_now):
             if not self.player.done and self.pull_and_send(robot_now) is not None:
                 self.pacer.sent(robot_now)      # after a jump of the clock: from now on, no burst to catch up
-            elif self.player.done and self._last_sent is not None:
-                self.send(*self._last_sent)
+            elif self.player.done and self._held is not None:
+                self._correct_and_send(robot_now, self._held)
                 self.pacer.sent(robot_now)
         stopped_s = robot_now - (self._last_frame_robot_s if self._last_frame_robot_s is not None else robot_now)
         if self.frames or stopped_s < 3.0 * self.pacer.period_s:
