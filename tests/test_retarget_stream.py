@@ -6,6 +6,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from sit2stand.errors import InputError
 from sit2stand.human.offline import read_trial
 from sit2stand.retarget.feasibility import plan_dynamics, plan_zmp, support_margin, zmp_at_scale
 from sit2stand.retarget.player import LIFT_OFF_SPEED_RAD_S, MAX_TIME_SCALE_RATE, PlanPlayer
@@ -173,6 +174,34 @@ def test_a_calibration_frame_without_the_needed_markers_is_refused_by_name(elder
     rt = Retargeter(robot_setup())
     with pytest.raises(RuntimeError, match="calibrate"):
         rt.step(0.0, trial.positions[0], trial.valid[0], com_h[0])
+
+
+def test_a_capture_at_200_hz_gives_the_plan_of_100_hz_in_time(retargeted, elderly):
+    """The IK's limits are per frame: told the capture's frame period, a 200 Hz stream of the same rise (the
+    shipped 100 Hz one interpolated) gives the same joint paths in time and keeps the 4 rad/s joint-speed limit.
+    At 100 Hz's period it moved twice as fast (0.43 rad apart, 8 rad/s, when written)."""
+    trial, com_h, fz = elderly
+    robot, _, frames, *_ = retargeted
+    t100 = trial.marker_t_s
+    t200 = np.arange(t100[0], t100[-1], 0.005)
+
+    def up(a):
+        a = np.asarray(a, float).reshape(len(t100), -1)
+        return np.stack([np.interp(t200, t100, a[:, i]) for i in range(a.shape[1])], axis=1)
+
+    positions, valid = up(trial.positions).reshape(len(t200), -1, 3), up(trial.valid) > 1 - 1e-9
+    rt = Retargeter(robot)
+    rt.calibrate(trial.marker_names, positions[0], valid[0], up(com_h)[0], frame_period_s=0.005)
+    player = PlanPlayer(robot.model, 0.005, robot.support_xy, margin_m=0.06)
+    fast, _ = retarget_sequence(rt, player, t200, positions, valid, up(com_h), up(fz)[:, 0], pull=False)
+    q200 = np.array([f.q[7:] for f in fast])
+    q100 = np.array([f.q[7:] for f in frames])
+    assert np.abs(np.diff(q200, axis=0)).max() / 0.005 <= rt.cfg.velocity_limit_rad_s + 1e-6
+    at_100 = np.stack([np.interp(t100, t200, q200[:, j]) for j in range(q200.shape[1])], axis=1)
+    assert np.abs(at_100 - q100).max() < 0.1
+    with pytest.raises(InputError, match="frame period"):
+        Retargeter(robot).calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0],
+                                    frame_period_s=0.0)
 
 
 def test_a_recording_that_starts_after_seat_off_is_led_in_from_the_robots_seat(elderly):

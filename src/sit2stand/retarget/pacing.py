@@ -252,7 +252,8 @@ class LiveRetargeting:
             InputError: the frame cannot be overlaid on the robot (a missing marker, not seated).
         """
         self.retargeter = Retargeter(robot, RetargetConfig(marker_set=self.cfg.marker_set or None))
-        marker_map = self.retargeter.calibrate(frame.names, frame.positions_m, frame.valid, com_m)
+        marker_map = self.retargeter.calibrate(frame.names, frame.positions_m, frame.valid, com_m,
+                                               frame_period_s=1.0 / self.cfg.rate_hz)
         c = self.cfg
         self.player = PlanPlayer(robot.model, 1.0 / c.rate_hz, robot.support_xy, margin_m=c.margin_m,
                                  lookahead_s=c.lookahead_s, smooth_frames=c.smooth_frames,

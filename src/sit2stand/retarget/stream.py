@@ -53,6 +53,8 @@ LEAD_IN_COM_SPEED_MPS = 0.2
 """Mean forward COM speed [m/s] of the lead-in that a recording starting mid-rise gets (the shipped natural rise
 moves its COM 0.26 m in ~1.3 s)."""
 MIN_LEAD_IN_S = 0.5
+MAX_FRAME_PERIOD_S = 0.05
+"""The longest capture frame period retargeted [s] (20 Hz): slower captures alias a rise's ~1 s motion."""
 
 
 @dataclass
@@ -200,8 +202,11 @@ class Retargeter:
 
     # -- calibration -------------------------------------------------------------------------------------------
     def calibrate(self, names: list[str], positions_m: np.ndarray, valid: np.ndarray, human_com_m: np.ndarray,
-                  marker_map: MarkerMap | None = None) -> MarkerMap:
+                  marker_map: MarkerMap | None = None, frame_period_s: float = 0.01) -> MarkerMap:
         """Fix the markers to the robot (or use ``marker_map``) from one seated frame; note the human's references.
+
+        ``frame_period_s``: the capture's frame period [s], the time one frame stands for. The IK's joint-speed
+        limit and trunk lift-off bound are per frame, so they need it; the player plays each pose for the same time.
 
         The marker set (``cfg.marker_set``, else chosen from ``names``) says which markers are the pelvis, the left
         knee, ankle and heel, and each marker's body part (:func:`~sit2stand.retarget.calibration.marker_roles`).
@@ -209,6 +214,9 @@ class Retargeter:
         Raises:
             ValueError: a marker the calibration needs (pelvis, left knee, ankle, heel) is missing in the frame.
         """
+        if not (np.isfinite(frame_period_s) and 0.0 < frame_period_s <= MAX_FRAME_PERIOD_S):
+            raise InputError(f"frame period {frame_period_s!r} s: the capture rate must be above "
+                             f"{1.0 / MAX_FRAME_PERIOD_S:.0f} Hz")
         markers = choose_marker_set(names, self.cfg.marker_set)
         roles = marker_roles(markers)
         pelvis, pel, knee, ankle, heel = left_leg_points(roles, names, positions_m, valid, markers)
@@ -236,7 +244,7 @@ class Retargeter:
         self.ik = ComIk(self.model, self.robot.sole_frames, self.cfg.velocity_limit_rad_s, posture_weight=mu,
                         damping=self.cfg.damping, momentum_weight=self.cfg.momentum_weight,
                         stop_torque_share=self.cfg.stop_torque_share,
-                        lift_torque_share=self.cfg.lift_torque_share)
+                        lift_torque_share=self.cfg.lift_torque_share, dt=frame_period_s)
         self.ik.eps_abs = self.cfg.qp_tolerance
         self.names = list(names)
         self.weights = np.array([0.0 if n not in self.marker_frames else
