@@ -86,3 +86,20 @@ def test_the_node_on_opensims_gait2392_markers_with_the_subject_from_the_bag(tmp
     assert "subject from /human/subject: 1.8 m, 72.6 kg" in out
     assert "marker set gait2392: 41 of the stream's 41 markers" in out
     assert "[human_com] 151 frames, 0 skipped" in out, out
+
+
+def test_a_capture_at_another_rate_than_the_nodes_stops_it_saying_which(tmp_path, run_node):
+    """The same 60 Hz trial with the node left at its 100 Hz: its filters would run 1.7x too fast; it stops within
+    its first frames, naming the topic, both rates and the parameter to set."""
+    bag = tmp_path / "walk"
+    trc, mot = real_file("subject01_walk1.trc"), real_file("subject01_walk1_grf.mot")
+    assert main(["import-trc", str(trc), "--grf", str(mot), "--mass", "72.6", "--height", "1.8", "--out", str(bag)]) \
+        == 0
+    node = run_node("sit2stand.nodes.human_com", "--ros-args", "-p", "marker_set:=gait2392", "-p",
+                    "chair_on_plate:=false", "-p", "calibration_frames:=20", "-p", "viz_rate_hz:=0.0")
+    assert node.wait_for_output("waiting for", 20)
+    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={bag}", "-p", "wait_for_subscribers:=1")
+    assert node.wait(60) == 2, node.output
+    assert "/mocap/markers: frames stamped every 16.67 ms (60.0 Hz), but rate_hz is 100 Hz" in node.output, node.output
+    assert "rate_hz:=60" in node.output
+    play.stop()

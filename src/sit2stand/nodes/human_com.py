@@ -61,6 +61,7 @@ from ..human.com_stream import StreamingComEstimator
 from ..human.marker_ik import MarkerUnitsError, TooFewMarkers
 from ..human.marker_sets import MarkerSetError, choose_marker_set
 from ..human.skeleton import Subject
+from ..io.frame_rate import FrameRateCheck
 from ..io.messages import mocap_arrays, plate_sample_from_cdr, reorder_markers, stamp_ns
 from ..io.stream_messages import JointStateEncoder, StampedNumbersEncoder
 from ..io.tf_message import TfEncoder
@@ -97,6 +98,7 @@ class HumanComNode(Node):
         if self.subject is None:
             self.create_subscription(SubjectMsg, ros_name(SUBJECT_TOPIC), self._on_subject, LATCHED_QOS)
         self.rate_hz = declare(self, "rate_hz", 100.0, "marker rate [Hz]")
+        self.rate_check = FrameRateCheck(MARKERS_TOPIC, self.rate_hz)
         self.window = declare(self, "window", 31, "Savitzky-Golay window [frames]")
         self.calibration_frames = declare(self, "calibration_frames", 50, "frames used to calibrate the model")
         self.rescale_every = declare(self, "rescale_every", 250, "re-solve the masses every N frames with plates")
@@ -261,6 +263,9 @@ class HumanComNode(Node):
             self._check_stream(list(msg.marker_names))
         pos, valid = reorder_markers(*mocap_arrays(msg), self.names)
         t_s = stamp_ns(msg.header) * 1e-9
+        if (wrong_rate := self.rate_check.add(t_s)) is not None:
+            self._fail(wrong_rate)
+            return
         self._flush_plates()
         for name in self.estimator.drop_silent_plates():
             self.get_logger().warning(f"no samples on {FORCE_PLATE_PREFIX}{name} while other plates stream: going on "

@@ -46,6 +46,7 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from ..data import plant_path
+from ..io.frame_rate import FrameRateCheck
 from ..io.messages import plate_sample_from_cdr, stamp_ns
 from ..io.stream_messages import (CenterOfMassEncoder, JointStateEncoder, JointStateReader, JointTrajectoryEncoder,
                                   StampedNumbersEncoder, pose_from_cdr)
@@ -109,6 +110,7 @@ class RetargeterNode(Node):
         self.input_timeout_s = declare(self, "input_timeout_s", 20.0, "marker frames may wait this long for a COM")
         self.live = LiveRetargeting(_live_config(self), self._publish, self._measured_q,
                                     lambda: self.get_clock().now().nanoseconds * 1e-9)
+        self.rate_check = FrameRateCheck(MARKERS_TOPIC, self.live.cfg.rate_hz)
         if self.live.cfg.controller not in CONTROLLERS:
             raise NodeError(f"retargeter: controller {self.live.cfg.controller!r} is not one of "
                             f"{', '.join(CONTROLLERS)}")
@@ -196,8 +198,11 @@ class RetargeterNode(Node):
 
     def _on_markers(self, msg: MocapFrame) -> None:
         pos = np.array([[p.x, p.y, p.z] for p in msg.positions], float).reshape(-1, 3)
-        self.live.frames.append(MarkerFrame(stamp_ns(msg.header) * 1e-9, list(msg.marker_names), pos,
-                                            np.asarray(msg.valid, bool), time.perf_counter(), msg.header))
+        t_s = stamp_ns(msg.header) * 1e-9
+        if (wrong_rate := self.rate_check.add(t_s)) is not None:
+            raise NodeError(wrong_rate)
+        self.live.frames.append(MarkerFrame(t_s, list(msg.marker_names), pos, np.asarray(msg.valid, bool),
+                                            time.perf_counter(), msg.header))
         self._process()
 
     # -- processing --------------------------------------------------------------------------------------------
