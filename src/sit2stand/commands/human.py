@@ -59,7 +59,7 @@ def _synth_human(args: argparse.Namespace) -> int:
 
     cfg = SynthConfig(style=args.style, height_m=args.height, mass_kg=args.mass, sex=args.sex,
                       seat_height_m=args.seat_height, duration_s=args.duration, seed=args.seed,
-                      extra=[ExtraMass.parse(e) for e in args.extra_mass])
+                      extra=[ExtraMass.parse(e) for e in args.extra_mass], marker_rate_hz=args.marker_rate)
     demo = synthesize(cfg)
     for warning in demo.warnings:
         print(f"warning: {warning}", file=sys.stderr)
@@ -195,6 +195,8 @@ def add_synth_human(sub) -> None:
     p.add_argument("--seat-height", type=float, help="seat height [m] (default 0.26 x stature)")
     p.add_argument("--duration", type=float, help="rise duration [s] (default: natural 1.6, elderly 3.0)")
     p.add_argument("--seed", type=int, default=0, help="subject proportions, noise and occlusions")
+    p.add_argument("--marker-rate", type=float, default=100.0,
+                   help="capture rate [Hz] (default 100; divides the plates' 1000 Hz)")
     p.add_argument("--extra-mass", action="append", default=[], metavar="SEGMENT:KG[:x,y,z]",
                    help="hidden rigid mass on a segment, offset from its COM in segment axes (repeatable)")
     p.add_argument("--out", type=Path, required=True)

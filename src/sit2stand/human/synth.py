@@ -25,6 +25,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..dynamics import G, plan_derivatives
+from ..errors import InputError
 from ..io.forceplate import PlateSeries
 from .anthropometry import ankle_height_m
 from .skeleton import (LENGTH_GROUPS, REFERENCE_STATURE_M, SEGMENT_MASS_SD, SEGMENTS, ExtraMass, HumanModel, Subject,
@@ -67,13 +68,17 @@ class SynthConfig:
 
     def __post_init__(self) -> None:
         if self.style not in STYLES:
-            raise ValueError(f"style must be one of {', '.join(STYLES)}, not {self.style!r}")
+            raise InputError(f"style must be one of {', '.join(STYLES)}, not {self.style!r}")
         if self.duration_s is not None and not 0.8 <= self.duration_s <= 8.0:
-            raise ValueError(f"rise duration {self.duration_s:g} s is outside 0.8..8 s")
+            raise InputError(f"rise duration {self.duration_s:g} s is outside 0.8..8 s")
         if self.seat_height_m is not None and not 0.18 * self.height_m <= self.seat_height_m <= 0.36 * self.height_m:
-            raise ValueError(f"seat height {self.seat_height_m:g} m is outside 18-36 % of the stature")
+            raise InputError(f"seat height {self.seat_height_m:g} m is outside 18-36 % of the stature")
         if not 0.5 <= self.declared_mass_factor <= 1.5:
-            raise ValueError(f"declared mass factor {self.declared_mass_factor:g} is outside 0.5..1.5")
+            raise InputError(f"declared mass factor {self.declared_mass_factor:g} is outside 0.5..1.5")
+        ratio = self.plate_rate_hz / self.marker_rate_hz if self.marker_rate_hz > 0 else 0.0
+        if not (ratio >= 1 and abs(ratio - round(ratio)) < 1e-9):
+            raise InputError(f"marker rate {self.marker_rate_hz:g} Hz must divide the plate rate "
+                             f"{self.plate_rate_hz:g} Hz (e.g. 50, 100, 125, 200, 250, 500)")
 
 
 @dataclass
