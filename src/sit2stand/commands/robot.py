@@ -141,7 +141,7 @@ def add_retarget(sub) -> None:
                    help="the simulated robot's controller: joint PD + inverse-dynamics feed-forward (default), or "
                         "experimental whole-body torque control (QP at 500 Hz)")
     p.add_argument("--seat-off-dwell", type=float, default=None,
-                   help="the player's wait at the robot's seat-off [s] (default 0.5)")
+                   help="the player's wait at the robot's seat-off [s] (default: retarget.player.SEAT_OFF_DWELL_S, 0)")
     p.add_argument("--retiming", choices=("local", "uniform"), default="local",
                    help="local: slower only where a frame needs it (default); uniform: one growing factor")
     p.add_argument("--marker-set", help="marker set: plug_in_gait, plug_in_gait_lower, gait2392 or a YAML file "

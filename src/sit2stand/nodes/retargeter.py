@@ -18,7 +18,7 @@ the robot trails the plan, which slows the plan). Publishes:
   ``~/status`` (diagnostic_msgs/DiagnosticStatus: infeasible frames, time scale, latency p50/p99).
 
 Parameters: ``plant``, ``controller_params`` (identified YAML; empty: CAD), ``margin_m``, ``lookahead_s``,
-``smooth_frames``, ``max_joint_speed``, ``retiming`` (local | uniform), ``seat_off_dwell_s``, ``time_scale`` (0:
+``smooth_s``, ``max_joint_speed``, ``retiming`` (local | uniform), ``seat_off_dwell_s``, ``time_scale`` (0:
 adaptive; else fixed), ``max_time_scale`` (the adaptive one's cap), ``rate_hz``, ``com_wait_s``, ``wait_for_robot``,
 ``marker_map`` (YAML to write the calibration to), ``hold_s`` (hold the last pose this long after the plan ends,
 in ROS time, then exit; 0: never),
@@ -56,7 +56,7 @@ from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBO
                          WORLD_FRAME, ros_name)
 from ..retarget.pacing import LiveConfig, LiveRetargeting, MarkerFrame, robot_state_current, summary_line
 from ..retarget.player import (DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S,
-                               SEAT_OFF_DWELL_S, Command)
+                               SEAT_OFF_DWELL_S, SMOOTH_S, Command)
 from ..retarget.stabiliser import StabiliserConfig
 from ..retarget.stream import robot_model, robot_setup
 from ..robot.plant import CONTROLLERS
@@ -73,7 +73,7 @@ def _live_config(node: Node) -> LiveConfig:
         rate_hz=declare(node, "rate_hz", 100.0, "marker rate [Hz]"),
         margin_m=declare(node, "margin_m", DEFAULT_MARGIN_M, "ZMP margin inside the feet [m]"),
         lookahead_s=declare(node, "lookahead_s", LOOKAHEAD_S, "look-ahead of the retiming [s]"),
-        smooth_frames=declare(node, "smooth_frames", 21, "Savitzky-Golay window of the plan [frames]"),
+        smooth_s=declare(node, "smooth_s", SMOOTH_S, "Savitzky-Golay window of the plan [s]"),
         max_joint_speed=declare(node, "max_joint_speed", DEFAULT_MAX_JOINT_SPEED,
                                 "joint speed limit of the retimed plan [rad/s]"),
         retiming=declare(node, "retiming", "local", "local: slower only where a frame needs it; uniform: one factor"),

@@ -31,7 +31,7 @@ import pinocchio as pin
 
 from ..io.messages import reorder_markers
 from .player import (DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S, SEAT_OFF_DWELL_S,
-                     Command, PlanPlayer)
+                     SMOOTH_S, Command, PlanPlayer)
 from .stabiliser import ComStabiliser, StabiliserConfig, com_feedback_applies, com_lag_m
 from .stream import RetargetConfig, Retargeter, RobotSetup
 
@@ -196,7 +196,7 @@ class LiveConfig:
     rate_hz: float = 100.0
     margin_m: float = DEFAULT_MARGIN_M
     lookahead_s: float = LOOKAHEAD_S
-    smooth_frames: int = 21
+    smooth_s: float = SMOOTH_S
     max_joint_speed: float = DEFAULT_MAX_JOINT_SPEED
     retiming: str = "local"
     seat_off_dwell_s: float = SEAT_OFF_DWELL_S
@@ -256,7 +256,7 @@ class LiveRetargeting:
                                                frame_period_s=1.0 / self.cfg.rate_hz)
         c = self.cfg
         self.player = PlanPlayer(robot.model, 1.0 / c.rate_hz, robot.support_xy, margin_m=c.margin_m,
-                                 lookahead_s=c.lookahead_s, smooth_frames=c.smooth_frames,
+                                 lookahead_s=c.lookahead_s, smooth_s=c.smooth_s,
                                  fixed_time_scale=c.fixed_time_scale, max_time_scale=c.max_time_scale,
                                  max_joint_speed=c.max_joint_speed, retiming=c.retiming,
                                  seat_off_dwell_s=c.seat_off_dwell_s)

@@ -1,6 +1,6 @@
 """The plan player: the dynamic-feasibility stage between the per-frame IK and the robot's joint commands.
 
-It smooths the poses (Savitzky-Golay on the tangent coordinates, ``smooth_frames`` wide), computes each pose's ZMP
+It smooths the poses (Savitzky-Golay on the tangent coordinates, ``smooth_s`` wide), computes each pose's ZMP
 from the centroidal dynamics, and plays the plan back ``time_scale`` times slower, where ``time_scale`` is a local
 factor. Each frame has its own smallest factor (:meth:`PlanPlayer.frame_scale`): its ZMP ``margin_m`` inside the
 feet wherever the robot is off the chair, its joint speeds under ``max_joint_speed`` and its inverse-dynamics torques
@@ -55,6 +55,10 @@ LOOKAHEAD_S = 0.5
 """How far ahead of the playback point the player knows the plan [s]: enough for the local time scale to ramp from
 1 to ``DEFAULT_MAX_TIME_SCALE`` at ``MAX_TIME_SCALE_RATE`` before the frame that needs it (0.15 s); live, the
 commands lag the human by this much more."""
+SMOOTH_S = 0.2
+"""The plan's Savitzky-Golay window [s] (21 frames at 100 Hz). In seconds, not frames: a 200 Hz capture of the same
+rise smoothed over 21 frames (0.1 s) carried twice the marker noise into its accelerations, and the ZMP criterion
+read it as a need to slow down (elderly rise: time scale 1.10 at 100 Hz, 1.17 at 200 Hz)."""
 DEFAULT_MARGIN_M = 0.04
 """The ZMP's margin inside the feet [m]: what joint PD with an inverse-dynamics feed-forward was measured to need
 (../shared/notes/robot-talos.md); the uniform player used 6 cm."""
@@ -106,7 +110,7 @@ class PlanPlayer:
     (the model's URDF effort limits)."""
 
     def __init__(self, model: pin.Model, dt: float, polygon_xy: np.ndarray, *, margin_m: float = DEFAULT_MARGIN_M,
-                 lookahead_s: float = LOOKAHEAD_S, smooth_frames: int = 21,
+                 lookahead_s: float = LOOKAHEAD_S, smooth_s: float = SMOOTH_S,
                  max_time_scale: float = DEFAULT_MAX_TIME_SCALE, max_time_scale_rate: float = MAX_TIME_SCALE_RATE,
                  fixed_time_scale: float | None = None,
                  max_joint_speed: float = DEFAULT_MAX_JOINT_SPEED, seat_off_dwell_s: float = SEAT_OFF_DWELL_S,
@@ -118,7 +122,7 @@ class PlanPlayer:
         self.polygon = polygon_xy
         self.margin_m = margin_m
         self.lookahead = max(0, int(round(lookahead_s / dt)))
-        self.half = max(0, smooth_frames // 2)
+        self.half = max(0, int(round(smooth_s / dt / 2)))       # frames either side
         self.max_time_scale = max_time_scale
         self.max_time_scale_rate = max_time_scale_rate
         self.fixed_time_scale = fixed_time_scale
