@@ -121,6 +121,26 @@ def test_streaming_estimator_matches_the_truth_after_calibration():
     assert err.mean() < 0.015                       # the live estimate; offline does better (see above)
 
 
+def test_the_streamed_com_velocity_is_as_good_at_200_hz_as_at_100_hz():
+    """The smoothing window is a time (WINDOW_S), not a frame count: at 200 Hz the same body's COM velocity is
+    as close to the truth as at 100 Hz (when written: 0.018 and 0.017 m/s RMS; over 31 frames at 200 Hz, 0.031)."""
+    errors = []
+    for rate in (100.0, 200.0):
+        demo = synthesize(SynthConfig(style="natural", seed=3, marker_rate_hz=rate))
+        step = int(round(demo.config.plate_rate_hz / rate))
+        est = StreamingComEstimator(Subject(1.75, demo.human.total_mass), demo.marker_names, rate_hz=rate)
+        vel = []
+        for i, t in enumerate(demo.marker_t_s):
+            sl = slice(i * step, (i + 1) * step)
+            for p in demo.plates:
+                est.add_plate_samples(p.name, demo.t_s[sl], p.force_n[sl], p.moment_origin_nm[sl])
+            vel.append(est.update(t, demo.markers_m[i], demo.marker_valid[i]).com_vel)
+        after = slice(int(rate), None)         # after the calibration's first second
+        truth = demo.com_vel[::step][: len(vel)]
+        errors.append(float(np.sqrt(np.mean(np.sum((np.array(vel) - truth)[after] ** 2, axis=1)))))
+    assert errors[1] < 0.024 and errors[1] < 1.4 * errors[0], errors
+
+
 def test_a_calibration_made_beforehand_gives_the_same_stream_without_the_pause(tmp_path):
     """A static-trial calibration (the first 50 frames, saved and loaded back) makes the estimator calibrated from
     its first frame; once the smoothing window has refilled, its COM is the live-calibrated one's."""

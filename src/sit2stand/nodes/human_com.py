@@ -22,8 +22,8 @@ frame's (bag time when replayed: run it with ``use_sim_time`` under the replayer
 Parameters: ``height_m``, ``mass_kg``, ``sex`` (the subject; with no stature or mass given, the subject comes from
 ``/human/subject``, latched, as a bag carries it, and marker frames wait for it), ``marker_set`` (a packaged set's
 name or a YAML file, as ``sit2stand human-com --marker-set``; empty: the packaged set that covers most of the stream's
-marker names), ``rate_hz`` (marker rate, 100), ``window`` (31
-frames), ``calibration_frames`` (50: length and marker calibration from the first frames, a pause of ~1 s, several
+marker names), ``rate_hz`` (marker rate, 100), ``window_s`` (0.3
+s), ``calibration_frames`` (50: length and marker calibration from the first frames, a pause of ~1 s, several
 under load, that the stream then runs behind), ``calibration_file`` (a calibration made beforehand from a static
 trial, ``sit2stand human-calibrate``: no pause), ``rescale_every`` (100),
 ``chair_on_plate`` (true: every frame with the whole weight on plates is used; false: only after seat-off),
@@ -57,7 +57,7 @@ from visualization_msgs.msg import MarkerArray
 
 from ..human.calibration import StreamCalibration
 from ..human.description import SkeletonFrames, human_urdf
-from ..human.com_stream import StreamingComEstimator
+from ..human.com_stream import WINDOW_S, StreamingComEstimator
 from ..human.marker_ik import MarkerUnitsError, TooFewMarkers
 from ..human.marker_sets import MarkerSetError, choose_marker_set
 from ..human.skeleton import Subject
@@ -99,7 +99,7 @@ class HumanComNode(Node):
             self.create_subscription(SubjectMsg, ros_name(SUBJECT_TOPIC), self._on_subject, LATCHED_QOS)
         self.rate_hz = declare(self, "rate_hz", 100.0, "marker rate [Hz]")
         self.rate_check = FrameRateCheck(MARKERS_TOPIC, self.rate_hz)
-        self.window = declare(self, "window", 31, "Savitzky-Golay window [frames]")
+        self.window_s = declare(self, "window_s", WINDOW_S, "Savitzky-Golay window [s]")
         self.calibration_frames = declare(self, "calibration_frames", 50, "frames used to calibrate the model")
         self.rescale_every = declare(self, "rescale_every", 250, "re-solve the masses every N frames with plates")
         self.chair_on_plate = declare(self, "chair_on_plate", True, "the chair stands on a force plate")
@@ -220,7 +220,7 @@ class HumanComNode(Node):
             markers = choose_marker_set(names, self.marker_set or None)
             self.subject = dataclasses.replace(self.subject, marker_set=markers)
             self.estimator = StreamingComEstimator(
-                self.subject, names, rate_hz=self.rate_hz, window=self.window,
+                self.subject, names, rate_hz=self.rate_hz, window_s=self.window_s,
                 calibration_frames=self.calibration_frames, rescale_every=self.rescale_every,
                 chair_on_plate=self.chair_on_plate, calibration=self.calibration, defer_rescale=True)
         except (TooFewMarkers, MarkerSetError) as err:
