@@ -9,7 +9,7 @@ import pinocchio as pin
 import pytest
 
 from sit2stand.data import plant_path
-from sit2stand.retarget.offline import run
+from sit2stand.retarget.offline import physics_steps_due, run
 from sit2stand.retarget.stabiliser import ComStabiliser, StabiliserConfig
 from sit2stand.retarget.stream import robot_setup
 
@@ -134,3 +134,14 @@ def test_after_a_long_gap_without_robot_states_the_loop_fades_in_again_from_the_
     for _ in range(60):
         late = stab.correct(q, planned, q, on_feet=True, dt_s=0.01).offset_m
     assert late[0] == pytest.approx(min(cfg.max_offset_m, 0.025 + stab.integral[0]), abs=1e-6)
+
+
+def test_the_offline_simulation_keeps_the_commands_clock_at_any_capture_rate():
+    """One second of 120 Hz commands takes 1000 physics steps of 1 ms (8 a frame would make 960: the plan 4 % fast);
+    at 100 Hz, 10 a frame."""
+    for rate, per_frame in ((120.0, None), (100.0, 10)):
+        taken, steps = 0, []
+        for k in range(1, int(rate) + 1):
+            steps.append(physics_steps_due(k, 1.0 / rate, 0.001, taken))
+            taken += steps[-1]
+        assert taken == 1000 and (per_frame is None or set(steps) == {per_frame}), (rate, set(steps))

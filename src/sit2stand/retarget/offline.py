@@ -231,6 +231,13 @@ def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float)
                     ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, WORLD_FRAME), point=M.point(*c.zmp)))
 
 
+def physics_steps_due(commands: int, dt: float, timestep_s: float, taken: int) -> int:
+    """Physics steps to take after the ``commands``-th command (period ``dt`` [s]) when ``taken`` have been: the
+    simulation kept on the commands' clock. A 120 Hz frame is 8.33 steps of 1 ms; 8 a frame would play the plan
+    4 % fast."""
+    return max(1, int(round(commands * dt / timestep_s)) - taken)
+
+
 def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3.0,
               stabiliser: ComStabiliser | None = None, controller: str = "inverse_dynamics") -> tuple[list, dict]:
     """Drive the plant with the player's commands (PD + inverse-dynamics feed-forward), pulled one per frame period
@@ -240,7 +247,7 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
     with the controller's model (3), COM feedback offset (x, y) [m]. ``stabiliser``: a
     :class:`~sit2stand.retarget.stabiliser.ComStabiliser` correcting each command for the plant's measured state
     (None: the commands as planned)."""
-    steps = max(1, int(round(dt / plant.cfg.timestep_s)))
+    ticks = taken = 0
     rows, cmds, torque = [], [], []
     offset, lag = np.zeros(2), 0.0
     held = 0
@@ -261,7 +268,10 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
                 measured = pin.centerOfMass(plant.ctrl, plant.ctrl_data, plant.pin_configuration(plant.data.qpos))
                 lag = com_lag_m(c.com - measured)
             plant.command(q[7:], c.v[6:], c.a[6:], feedforward=controller)
+        ticks += 1
+        steps = physics_steps_due(ticks, dt, plant.cfg.timestep_s, taken)
         plant.step(steps)
+        taken += steps
         demand = np.abs(plant.data.actuator_force[plant.pd_ids] + plant.data.actuator_force[plant.ff_ids])
         torque.append(demand / plant.effort)
         s = plant.sensors()
