@@ -84,6 +84,12 @@ def smooth_motion(model: pin.Model, qs: np.ndarray, dt: float, window: int = 31,
     return q_s, v, a
 
 
+def savgol_frames(window_s: float, dt: float, minimum: int = 5) -> int:
+    """An odd Savitzky-Golay window [frames] spanning ``window_s`` [s] of frames ``dt`` [s] apart (at least
+    ``minimum``, above the filters' order 4)."""
+    return max(minimum, 2 * int(round(window_s / dt / 2)) + 1)
+
+
 def savgol_series(x: np.ndarray, window: int, order: int, deriv: int) -> np.ndarray:
     """Savitzky-Golay along axis 0 with the polynomial fitted to the nearest window at the edges."""
     return savgol_filter(x, window, order, deriv=deriv, axis=0, mode="interp")

@@ -14,10 +14,11 @@ import numpy as np
 import pinocchio as pin
 from scipy.signal import savgol_coeffs   # at import time: the first frame must not pay for it
 
-from ..dynamics import G, model_cop
+from ..dynamics import G, model_cop, savgol_frames
 from ..io.forceplate import PlateSeries, center_of_pressure
 from ..vectors import cross
 from .calibration import CALIBRATION_MIN_MARKERS, StreamCalibration, calibrate_stream
+from .com import WINDOW_S
 from .marker_ik import MIN_MARKERS, MarkerIK, check_marker_units
 from .mass_scaling import (FactorAtBound, FrameRows, MassScaling, apply_scaling, assemble_rows, frame_rows,
                            fit_mass_scaling, lengths_at_bounds, scaling_at_bounds)
@@ -27,10 +28,6 @@ from .support import SupportRule, plate_wrench_at
 STREAM_FIT_STEPS = 3
 """Gauss-Newton steps per streamed frame, warm-started from the last two fits. More moved the COM by < 0.01 mm on
 both shipped demonstrations while costing ~0.3 ms each (the first fit gets 40)."""
-WINDOW_S = 0.3
-"""The Savitzky-Golay window [s] of the COM's derivatives and the scaling's centred fits (31 frames at 100 Hz). In
-seconds: over 31 frames of a 200 Hz capture (0.15 s) the COM velocity's error doubled (0.031 against 0.017 m/s RMS
-on a digital human) and the mass factors strayed (pelvis 1.43 against 1.23)."""
 PLATE_HISTORY_S = 2.0
 """Plate samples kept behind the newest marker frame [s]."""
 
@@ -102,7 +99,7 @@ class StreamingComEstimator:
         self.subject = subject
         self.marker_names = list(marker_names)
         self.dt = 1.0 / rate_hz
-        self.window = 2 * max(1, int(round(window_s * rate_hz / 2))) + 1      # frames, odd
+        self.window = savgol_frames(window_s, self.dt)
         self.calibration_frames = calibration_frames
         self.rescale_every = rescale_every
         self.chair_on_plate = chair_on_plate
