@@ -90,6 +90,15 @@ def test_retarget_plays_rise_and_stand_of_a_trial_that_ends_seated(tmp_path, up_
     assert summary["frames"] < 2 * 391 - 100, "the sit-down frames are left out"
 
 
+def test_retarget_into_a_finished_run_is_refused_before_it_touches_its_files(tmp_path, up_and_down, capsys):
+    out = tmp_path / "rt"
+    (out / "retarget").mkdir(parents=True)
+    (out / "marker_map.yaml").write_text("the finished run's map\n")
+    assert sit2stand(["retarget", str(up_and_down), "--out", str(out)]) == 2
+    assert "rt/retarget: exists already" in capsys.readouterr().err
+    assert (out / "marker_map.yaml").read_text() == "the finished run's map\n" and not (out / "summary.json").exists()
+
+
 def test_retarget_whole_stands_up_and_sits_back_down_at_the_humans_timing(tmp_path, up_and_down):
     """--whole: the plan is seated again from the human's touch-down (the chair takes the load: no ZMP criterion
     that would hold a COM behind the heels at the cap), and the robot sits back down on the chair."""

@@ -41,6 +41,13 @@ class BagError(Sit2StandError, RuntimeError):
     """A bag that cannot be read or written; the message names the bag (and topic) and what is wrong."""
 
 
+def refuse_existing_bag(path: Path) -> None:
+    """Raise :class:`BagError` if ``path`` exists: bags are never overwritten (a tool that writes other files beside
+    its bag calls this first, so that a refused run leaves a finished one's files as they were)."""
+    if path.exists():
+        raise BagError(f"{path}: exists already; bags are never overwritten (remove it or pick another)")
+
+
 def reliable_qos(depth: int = 1000, transient_local: bool = False) -> Qos:
     """A rosbag2 ``offered_qos_profiles`` entry: reliable, keep-last ``depth``, volatile (or transient-local)."""
     never = QosTime(sec=0x7FFFFFFF, nsec=0xFFFFFFFF)
@@ -109,8 +116,7 @@ class BagWriter:
 
     def __init__(self, path: str | Path, *, custom_data: dict[str, str] | None = None, compress: bool = True) -> None:
         self.path = Path(path)
-        if self.path.exists():
-            raise BagError(f"{self.path}: exists already; bags are never overwritten (remove it or pick another)")
+        refuse_existing_bag(self.path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.store = typestore()
         self._writer = RosbagsWriter(self.path, version=9, storage_plugin=StoragePlugin.MCAP)

@@ -25,7 +25,7 @@ from ..human.marker_sets import choose_marker_set
 from ..human.offline import Trial, calibrate_subject, read_trial
 from ..human.skeleton import Subject
 from ..io import messages as M
-from ..io.bag import BagReader, BagWriter
+from ..io.bag import BagReader, BagWriter, refuse_existing_bag
 from ..io.messages import stamp_ns
 from ..io.topics import (HUMAN_COM_TOPIC, ROBOT_JOINT_COMMAND_TOPIC, ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC,
                          WORLD_FRAME)
@@ -106,6 +106,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     plant without unmodeled effects (:meth:`~sit2stand.robot.model.PlantConfig.load`), not the command's default
     (the packaged ``default`` plant, 26 kg hidden); parameters identified on one and simulated on the other are a
     model error of 26 kg."""
+    refuse_existing_bag(out / "retarget")
     out.mkdir(parents=True, exist_ok=True)
     trial = read_trial(bag)
     config = config or RetargetConfig()
