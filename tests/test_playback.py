@@ -4,7 +4,7 @@ import pytest
 
 from sit2stand.errors import InputError
 from sit2stand.io.playback import (ENDED_SILENCE_S, FIRST_MESSAGE_TIMEOUT_S, ClockTicks, Lockstep, PlaybackClock,
-                                   check_rate, parse_wait_for, played_fraction)
+                                   check_rate, lockstep_lead_ns, parse_wait_for, played_fraction)
 
 
 class FakeTime:
@@ -156,3 +156,10 @@ def test_a_replay_that_ends_its_graph_waits_until_the_followed_streams_reach_its
     stalled = Lockstep(["/human/com"], lead_ns=50 * MS, timeout_s=3.0, bag_span_ns=SPAN, first_ns=-1)
     stalled.note("/human/com", 1000 * MS, wall_s=1.0)
     assert not stalled.caught_up(wall_s=3.9) and stalled.caught_up(wall_s=4.1), "a dead node is not waited for"
+
+
+def test_the_lockstep_lead_is_at_least_one_marker_frame_of_the_bag():
+    assert lockstep_lead_ns(0.01, 100.0) == 10_000_000       # the shipped bags: as set
+    assert lockstep_lead_ns(0.01, 200.0) == 10_000_000
+    assert lockstep_lead_ns(0.01, 60.0) == 16_833_333         # one 60 Hz frame and 1 %: the next frame comes due
+    assert lockstep_lead_ns(0.01, 0.0) == 10_000_000          # no markers in the bag

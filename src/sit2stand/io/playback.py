@@ -105,6 +105,14 @@ FIRST_MESSAGE_TIMEOUT_S = 60.0
 """Longest wait [s, wall] for a followed topic's first message (a node that never starts publishing)."""
 
 
+def lockstep_lead_ns(lead_s: float, frame_rate_hz: float) -> int:
+    """How far /clock may lead the followed topics [ns]: ``lead_s``, or, where the bag's marker frames are further
+    apart, one frame of them and 1 %: the next frame must come due (a 60 Hz bag under a 10 ms lead waited out the
+    stall timeout at every frame). ``frame_rate_hz`` 0: no marker frames."""
+    period_s = 1.0 / frame_rate_hz if frame_rate_hz > 0 else 0.0
+    return int(round(1e9 * (lead_s if period_s <= 1.001 * lead_s else 1.01 * period_s)))
+
+
 class Lockstep:
     """The replay's clock held to what the graph has done (the simulator-owns-the-clock rule of Gazebo's lockstep):
     /clock may lead the newest header stamp of each followed topic (the simulated robot's states, the retargeter's

@@ -23,7 +23,9 @@ Parameters:
                                  most lockstep_lead_s: the graph's time then waits for a node that falls behind (the
                                  simulated robot, the estimator) instead of running away from it; see
                                  :class:`sit2stand.io.playback.Lockstep` for when a topic is followed.
-    lockstep_lead_s (float, 0.01) one mocap frame: the recorded stamps then agree with their log times within a frame
+    lockstep_lead_s (float, 0.01) one mocap frame (at least the bag's own marker period, +1 %, where that is longer:
+                                 :func:`sit2stand.io.playback.lockstep_lead_ns`): the recorded stamps then agree with
+                                 their log times within a frame
                                  (the stand-up graph, elderly: robot states p99 10 ms, against 65 ms at 0.05, for a
                                  graph ~30 % slower on 2 cores).
     lockstep_timeout_s (float, 10) wall seconds a followed topic may hold the clock without a newer message (a node
@@ -66,7 +68,8 @@ from ..io.topics import (CLOCK_TOPIC, FORCE_PLATE_PREFIX, GRAPH_TOPIC, MARKERS_T
                          ros_name)
 from ..io.bag import BagError, BagReader
 from ..io.messages import cdr_header_stamp_ns
-from ..io.playback import ClockTicks, Lockstep, PlaybackClock, check_rate, parse_wait_for, played_fraction
+from ..io.playback import (ClockTicks, Lockstep, PlaybackClock, check_rate, lockstep_lead_ns, parse_wait_for,
+                           played_fraction)
 from .runtime import LATCHED_QOS, NodeError, declare, message_class, node_main, publish_depth, qos_from_bag
 
 # Reliable writers heartbeat every 5 ms instead of Fast DDS's 3 s, so acknowledgements (and with them the unpaced
@@ -172,7 +175,12 @@ class Replayer(Node):
         if unknown:
             raise NodeError(f"parameter lockstep: no known type for {', '.join(unknown)} (one of "
                             f"{', '.join(sorted(TOPIC_TYPES))})")
-        lockstep = Lockstep(topics, int(lead_s * 1e9), timeout_s, (self.reader.start_ns, self.reader.end_ns),
+        markers, span_ns = self.reader.topics().get(MARKERS_TOPIC), self.reader.end_ns - self.reader.start_ns
+        # the bag's index may not time each topic: then the markers' count over the bag's span
+        rate_hz = 0.0 if markers is None else markers.rate_hz or \
+            ((markers.count - 1) / (span_ns * 1e-9) if markers.count > 1 and span_ns > 0 else 0.0)
+        lead_ns = lockstep_lead_ns(lead_s, rate_hz)
+        lockstep = Lockstep(topics, lead_ns, timeout_s, (self.reader.start_ns, self.reader.end_ns),
                             int(first_s * 1e9) if first_s >= 0 else -1)
         self._held_by: set[str] = set()
         self._released: set[str] = set()
@@ -180,7 +188,7 @@ class Replayer(Node):
         for topic in topics:
             self.create_subscription(message_class(TOPIC_TYPES[topic]), ros_name(topic),
                                      lambda data, t=topic: self._on_followed(t, data), publish_depth(500.0), raw=True)
-        self.get_logger().info(f"lockstep: /clock leads {', '.join(topics)} by at most {lead_s * 1e3:g} ms")
+        self.get_logger().info(f"lockstep: /clock leads {', '.join(topics)} by at most {lead_ns * 1e-6:g} ms")
         return lockstep
 
     def _on_followed(self, topic: str, data: bytes) -> None:
