@@ -1,7 +1,9 @@
 """A stream's frame rate told from its stamps (io.frame_rate)."""
 
 import numpy as np
+import pytest
 
+from sit2stand.errors import InputError
 from sit2stand.io.frame_rate import PERIODS_NEEDED, FrameRateCheck
 
 
@@ -30,3 +32,9 @@ def test_a_stream_at_another_rate_is_named_once_with_what_to_set():
 def test_a_rate_within_the_tolerance_passes():
     assert verdicts(FrameRateCheck("/mocap/markers", 100.0), np.arange(30) / 98.0) == []
     assert verdicts(FrameRateCheck("/mocap/markers", 100.0), np.arange(30) / 90.0) != []
+
+
+def test_a_rate_no_capture_has_is_refused_naming_the_parameter():
+    for bad in (0.0, -100.0, 10.0, float("nan")):
+        with pytest.raises(InputError, match="rate_hz .*at least 20 Hz"):
+            FrameRateCheck("/mocap/markers", bad)

@@ -111,3 +111,11 @@ def test_an_unknown_on_board_controller_stops_the_driver_and_the_retargeter_nami
     for node in (driver, retargeter):
         assert node.wait(60) == 2, node.output
         assert "controller 'torque'" in node.output and "wbc" in node.output, node.output
+
+
+def test_a_marker_rate_no_capture_has_stops_the_estimator_and_the_retargeter_naming_it(run_node):
+    nodes = [run_node(f"sit2stand.nodes.{name}", "--ros-args", "-p", "rate_hz:=0.0") for name in ("human_com",
+                                                                                                  "retargeter")]
+    for node in nodes:
+        assert node.wait(60) == 2, node.output
+        assert "rate_hz 0.0: a capture rate of at least 20 Hz" in node.output, node.output

@@ -83,7 +83,8 @@ def test_bag_hides_the_extra_mass_except_on_ground_truth_topics(tmp_path):
 
 @pytest.mark.parametrize("kwargs, match", [({"style": "sprint"}, "style"), ({"duration_s": 0.2}, "duration"),
                                            ({"seat_height_m": 1.0}, "seat height"),
-                                           ({"marker_rate_hz": 120.0}, "marker rate 120 Hz must divide")])
+                                           ({"marker_rate_hz": 120.0}, "120 Hz must be at least 20 Hz and divide"),
+                                           ({"marker_rate_hz": 8.0}, "marker rate 8 Hz must be at least 20 Hz")])
 def test_bad_configurations_are_named(kwargs, match):
     with pytest.raises(ValueError, match=match):
         SynthConfig(**kwargs)

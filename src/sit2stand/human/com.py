@@ -190,7 +190,10 @@ def estimate_com(marker_t_s: np.ndarray, marker_names: list[str], positions: np.
         calibration: a skeleton calibration made beforehand (on chosen frames or a static trial,
             :func:`~sit2stand.human.offline.calibrate_subject`) instead of the one on the whole trial.
     """
-    dt = float(np.median(np.diff(marker_t_s)))
+    dt = float(np.median(np.diff(marker_t_s))) if len(marker_t_s) > 1 else 0.0
+    if not dt > 0:
+        raise TooFewMarkers(f"{len(marker_t_s)} marker frames, {dt:g} s apart: a trial needs frames at increasing "
+                            "times")
     window = savgol_frames(window_s, dt)
     motion = _fit_motion(marker_t_s, marker_names, positions, valid, subject, calibrate, window, progress,
                          calibration)

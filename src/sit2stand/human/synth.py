@@ -10,9 +10,9 @@ Kinematics (sagittal, feet flat and fixed, hips on the seat until seat-off) give
 accelerations by differentiation; whole-body inverse dynamics of the skeleton (Pinocchio, centroidal momentum rate)
 give the total external wrench  F = m (a_com - g),  M_O = c x F + dL_G/dt  (about the lab origin), shared between the
 chair and the feet: before seat-off the chair takes the static share that puts the feet COP at mid-foot, fading to
-zero over the unloading window that ends at seat-off. Markers: forward kinematics at 100 Hz, with a per-trial
-placement error, measurement noise and occlusion gaps. Plates: 1000 Hz with noise, COP from the wrench
-(:mod:`sit2stand.human.synth_plates`).
+zero over the unloading window that ends at seat-off. Markers: forward kinematics at 100 Hz (``marker_rate_hz``),
+with a per-trial placement error, measurement noise and occlusion gaps. Plates: 1000 Hz with noise, COP from the
+wrench (:mod:`sit2stand.human.synth_plates`).
 
 Lab frame: REP-103, origin on the floor midway between the ankles; the chair is behind (x < 0).
 """
@@ -26,6 +26,7 @@ import pinocchio as pin
 
 from ..dynamics import G, plan_derivatives
 from ..errors import InputError
+from ..io.frame_rate import MIN_RATE_HZ
 from ..io.forceplate import PlateSeries
 from .anthropometry import ankle_height_m
 from .skeleton import (LENGTH_GROUPS, REFERENCE_STATURE_M, SEGMENT_MASS_SD, SEGMENTS, ExtraMass, HumanModel, Subject,
@@ -75,10 +76,10 @@ class SynthConfig:
             raise InputError(f"seat height {self.seat_height_m:g} m is outside 18-36 % of the stature")
         if not 0.5 <= self.declared_mass_factor <= 1.5:
             raise InputError(f"declared mass factor {self.declared_mass_factor:g} is outside 0.5..1.5")
-        ratio = self.plate_rate_hz / self.marker_rate_hz if self.marker_rate_hz > 0 else 0.0
+        ratio = self.plate_rate_hz / self.marker_rate_hz if self.marker_rate_hz >= MIN_RATE_HZ else 0.0
         if not (ratio >= 1 and abs(ratio - round(ratio)) < 1e-9):
-            raise InputError(f"marker rate {self.marker_rate_hz:g} Hz must divide the plate rate "
-                             f"{self.plate_rate_hz:g} Hz (e.g. 50, 100, 125, 200, 250, 500)")
+            raise InputError(f"marker rate {self.marker_rate_hz:g} Hz must be at least {MIN_RATE_HZ:g} Hz "
+                             f"and divide the plate rate {self.plate_rate_hz:g} Hz (e.g. 50, 100, 125, 200, 250, 500)")
 
 
 @dataclass
@@ -379,6 +380,8 @@ def _centroidal(body: _Body, q: np.ndarray, dt: float) -> _Centroidal:
     return _Centroidal(com, vcom, acom, force, np.cross(com, force) + dL)
 
 
+OCCLUSION_S = (0.08, 0.40)
+"""Occlusion gap lengths [s], drawn uniformly (8-39 frames at 100 Hz)."""
 OCCLUDED_MARKERS = ("LASI", "RASI", "LHEE", "RHEE", "RFIN", "LWRB", "RWRB", "STRN", "LTHI", "RTIB")
 """Markers that the synthesised occlusion gaps may hide."""
 
@@ -400,7 +403,7 @@ def _markers(cfg: SynthConfig, rng: np.random.Generator, body: _Body,
     valid = np.ones(mk.shape[:2], bool)
     for _ in range(cfg.occlusion_gaps):
         j = names.index(OCCLUDED_MARKERS[rng.integers(len(OCCLUDED_MARKERS))])
-        length = int(rng.integers(8, 40))
+        length = int(rng.integers(*(round(s * cfg.marker_rate_hz) for s in OCCLUSION_S)))
         start = int(rng.integers(0, len(idx) - length))
         valid[start:start + length, j] = False
     mk[~valid] = np.nan

@@ -3,15 +3,20 @@
 The human COM estimator's filters and the retargeter's per-frame limits (joint speed, the trunk's lift-off, the
 plan's time step) take their time step from the node's ``rate_hz`` parameter. A capture at another rate would
 silently run them at the wrong speed: a 200 Hz stream under ``rate_hz`` 100 is retargeted at twice the joint-speed
-limit. The stamps tell, within the first few frames, while the human is still seated.
+limit. The stamps tell within the first frames (0.09 s at 100 Hz): in a recording that starts seated, before the
+human moves; in one that starts mid-rise, a few commands of the retargeter's lead-in from the seat may have gone.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
+
 RATE_TOLERANCE = 0.05
 """The stamps' rate may differ from the configured one by this share (clock jitter, a capture's own rounding)."""
+MIN_RATE_HZ = 20.0
+"""The slowest capture the nodes take [Hz] (a sit-to-stand's ~1 s motion aliases below)."""
 PERIODS_NEEDED = 8
 """Frame periods seen before the verdict (the median of them: a dropped or repeated frame does not decide it)."""
 
@@ -20,6 +25,8 @@ class FrameRateCheck:
     """Checks the stamps [s] of the frames on ``topic`` against ``rate_hz`` [Hz] (see the module docstring)."""
 
     def __init__(self, topic: str, rate_hz: float, parameter: str = "rate_hz") -> None:
+        if not (np.isfinite(rate_hz) and rate_hz >= MIN_RATE_HZ):
+            raise InputError(f"{parameter} {rate_hz!r}: a capture rate of at least {MIN_RATE_HZ:g} Hz")
         self.topic, self.rate_hz, self.parameter = topic, float(rate_hz), parameter
         self._stamps: list[float] = []
         self.measured_hz: float | None = None       # once told

@@ -25,7 +25,7 @@ name or a YAML file, as ``sit2stand human-com --marker-set``; empty: the package
 marker names), ``rate_hz`` (marker rate, 100), ``window_s`` (0.3
 s), ``calibration_frames`` (50: length and marker calibration from the first frames, a pause of ~1 s, several
 under load, that the stream then runs behind), ``calibration_file`` (a calibration made beforehand from a static
-trial, ``sit2stand human-calibrate``: no pause), ``rescale_every`` (100),
+trial, ``sit2stand human-calibrate``: no pause), ``rescale_every`` (250),
 ``chair_on_plate`` (true: every frame with the whole weight on plates is used; false: only after seat-off),
 ``plates`` (names of the plates to expect, e.g. [chair, feet]: frames count only when all have data; default:
 the plates that appear), ``viz_rate_hz`` (50; 0: no /tf nor markers), ``shed_behind_s`` (0: off; live, e.g.
@@ -61,7 +61,6 @@ from ..human.com_stream import WINDOW_S, StreamingComEstimator
 from ..human.marker_ik import MarkerUnitsError, TooFewMarkers
 from ..human.marker_sets import MarkerSetError, choose_marker_set
 from ..human.skeleton import Subject
-from ..io.frame_rate import FrameRateCheck
 from ..io.messages import mocap_arrays, plate_sample_from_cdr, reorder_markers, stamp_ns
 from ..io.stream_messages import JointStateEncoder, StampedNumbersEncoder
 from ..io.tf_message import TfEncoder
@@ -71,8 +70,8 @@ from ..io.topics import (FORCE_PLATE_PREFIX, HUMAN_COM_TOPIC, HUMAN_DESCRIPTION_
                          HUMAN_ROOT_FRAME, HUMAN_SCALING_TOPIC, LAB_FRAME, MARKERS_TOPIC, SUBJECT_TOPIC, TF_TOPIC,
                          bag_name, ros_name)
 from .markers import human_markers
-from .runtime import (LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, IdleDrain, NodeError, declare, node_main, scheduling_text,
-                      steady_timer)
+from .runtime import (LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, IdleDrain, NodeError, declare, marker_rate_check,
+                      node_main, scheduling_text, steady_timer)
 
 SUBJECT_WAIT_FRAMES = 500        # marker frames held for /human/subject (5 s at 100 Hz; a bag latches it first)
 PENDING_PLATE_SAMPLES = 4000      # per plate, between two marker frames (4 s at 1 kHz; the estimator keeps ~2 s)
@@ -98,7 +97,7 @@ class HumanComNode(Node):
         if self.subject is None:
             self.create_subscription(SubjectMsg, ros_name(SUBJECT_TOPIC), self._on_subject, LATCHED_QOS)
         self.rate_hz = declare(self, "rate_hz", 100.0, "marker rate [Hz]")
-        self.rate_check = FrameRateCheck(MARKERS_TOPIC, self.rate_hz)
+        self.rate_check = marker_rate_check(self.rate_hz)
         self.window_s = declare(self, "window_s", WINDOW_S, "Savitzky-Golay window [s]")
         self.calibration_frames = declare(self, "calibration_frames", 50, "frames used to calibrate the model")
         self.rescale_every = declare(self, "rescale_every", 250, "re-solve the masses every N frames with plates")

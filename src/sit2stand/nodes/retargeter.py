@@ -46,7 +46,6 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from ..data import plant_path
-from ..io.frame_rate import FrameRateCheck
 from ..io.messages import plate_sample_from_cdr, stamp_ns
 from ..io.stream_messages import (CenterOfMassEncoder, JointStateEncoder, JointStateReader, JointTrajectoryEncoder,
                                   StampedNumbersEncoder, pose_from_cdr)
@@ -61,8 +60,8 @@ from ..retarget.stabiliser import StabiliserConfig
 from ..retarget.stream import robot_model, robot_setup
 from ..robot.plant import CONTROLLERS
 from .markers import plan_markers
-from .runtime import (PUBLISH_DEPTH, ROBOT_STATE_READER_QOS, IdleDrain, NodeError, declare, node_main,
-                      qos_matching_publishers, scheduling_text, steady_timer)
+from .runtime import (PUBLISH_DEPTH, ROBOT_STATE_READER_QOS, IdleDrain, NodeError, declare, marker_rate_check,
+                      node_main, qos_matching_publishers, scheduling_text, steady_timer)
 
 
 def _live_config(node: Node) -> LiveConfig:
@@ -108,9 +107,10 @@ class RetargeterNode(Node):
         self.hold_s = declare(self, "hold_s", 3.0, "after the plan ends, hold its last pose this long [s] of ROS "
                                                    "time, then exit (0: never)")
         self.input_timeout_s = declare(self, "input_timeout_s", 20.0, "marker frames may wait this long for a COM")
-        self.live = LiveRetargeting(_live_config(self), self._publish, self._measured_q,
+        cfg = _live_config(self)
+        self.rate_check = marker_rate_check(cfg.rate_hz)
+        self.live = LiveRetargeting(cfg, self._publish, self._measured_q,
                                     lambda: self.get_clock().now().nanoseconds * 1e-9)
-        self.rate_check = FrameRateCheck(MARKERS_TOPIC, self.live.cfg.rate_hz)
         if self.live.cfg.controller not in CONTROLLERS:
             raise NodeError(f"retargeter: controller {self.live.cfg.controller!r} is not one of "
                             f"{', '.join(CONTROLLERS)}")

@@ -31,8 +31,9 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 
-from ..errors import Sit2StandError
-from ..io.topics import GRAPH_TOPIC, RUN_ID_ENV
+from ..errors import InputError, Sit2StandError
+from ..io.frame_rate import FrameRateCheck
+from ..io.topics import GRAPH_TOPIC, MARKERS_TOPIC, RUN_ID_ENV
 from ..launch import node_result_line
 
 
@@ -256,6 +257,15 @@ class GraphGuard:
             self._warned.add(other.get("run"))
             self.node.get_logger().warning(f"a second {self.name} (run {other.get('run')}) appeared on ROS_DOMAIN_ID "
                                            f"{domain}; it was told to stop")
+
+
+def marker_rate_check(rate_hz: float) -> FrameRateCheck:
+    """The check of the markers' stamps against a node's ``rate_hz`` parameter; a rate no capture has stops the node
+    at start."""
+    try:
+        return FrameRateCheck(MARKERS_TOPIC, rate_hz)
+    except InputError as err:
+        raise NodeError(str(err)) from None
 
 
 def node_main(factory: Callable[[], Node]) -> Callable[[list[str] | None], int]:

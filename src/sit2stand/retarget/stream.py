@@ -35,6 +35,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import InputError
+from ..io.frame_rate import MIN_RATE_HZ
 from ..robot.identify import read_link_parameters
 from ..robot.model import (SIDES, UPPER_LIMB_PREFIXES, PlantConfig, add_seat_frame, build_spec, controller_model,
                            sole_corners_world)
@@ -53,8 +54,8 @@ LEAD_IN_COM_SPEED_MPS = 0.2
 """Mean forward COM speed [m/s] of the lead-in that a recording starting mid-rise gets (the shipped natural rise
 moves its COM 0.26 m in ~1.3 s)."""
 MIN_LEAD_IN_S = 0.5
-MAX_FRAME_PERIOD_S = 0.05
-"""The longest capture frame period retargeted [s] (20 Hz): slower captures alias a rise's ~1 s motion."""
+MAX_FRAME_PERIOD_S = 1.0 / MIN_RATE_HZ
+"""The longest capture frame period retargeted [s]."""
 
 
 @dataclass
@@ -215,8 +216,7 @@ class Retargeter:
             ValueError: a marker the calibration needs (pelvis, left knee, ankle, heel) is missing in the frame.
         """
         if not (np.isfinite(frame_period_s) and 0.0 < frame_period_s <= MAX_FRAME_PERIOD_S):
-            raise InputError(f"frame period {frame_period_s!r} s: the capture rate must be above "
-                             f"{1.0 / MAX_FRAME_PERIOD_S:.0f} Hz")
+            raise InputError(f"frame period {frame_period_s!r} s: the capture rate must be at least {MIN_RATE_HZ:g} Hz")
         markers = choose_marker_set(names, self.cfg.marker_set)
         roles = marker_roles(markers)
         pelvis, pel, knee, ankle, heel = left_leg_points(roles, names, positions_m, valid, markers)
