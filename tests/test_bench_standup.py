@@ -1,5 +1,7 @@
 """sit2stand.bench_standup: the population is drawn in range, reproducibly, and aggregated right (nothing simulated)."""
 
+import dataclasses
+
 import pytest
 
 from sit2stand import bench_standup as B
@@ -93,3 +95,9 @@ def test_the_torque_controllers_qp_times_are_reported_only_where_it_ran():
     assert "QP p99 per step" in B.summary_text(agg) and "at <= 1 ms: 50 %" in B.summary_text(agg)
     joint_pd = B.aggregate([row(0, {})])
     assert joint_pd["share_qp_p99_le_1_ms"] is None and "QP" not in B.summary_text(joint_pd)
+
+
+def test_a_population_captured_at_another_rate_is_the_same_people():
+    slow, fast = B.sample_population(6, seed=0), B.sample_population(6, seed=0, marker_rate_hz=200.0)
+    assert [dataclasses.replace(c, marker_rate_hz=100.0) for c in fast] == slow
+    assert all(c.config().marker_rate_hz == 200.0 for c in fast)

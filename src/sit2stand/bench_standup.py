@@ -1,7 +1,7 @@
 """Benchmark (not a test): a population of digital humans stood up by the simulated TALOS (issue 15, item 4).
 
-    python -m sit2stand.bench_standup [--cases 30] [--seed 0] [--jobs 1] [--only-style S] [--out DIR]
-                                                                                            (make bench-standup)
+    python -m sit2stand.bench_standup [--cases 30] [--seed 0] [--jobs 1] [--only-style S] [--marker-rate 100]
+                                      [--controller inverse_dynamics|wbc] [--out DIR]       (make bench-standup)
 
 Each case is a demonstration of :mod:`sit2stand.human.synth`: stature uniform in 1.5-1.95 m, body mass uniform in
 50-110 kg within a BMI of 17-38 (no implausible body: 50 kg at 1.95 m is a BMI of 13, 110 kg at 1.5 m one of 49),
@@ -76,20 +76,24 @@ class Case:
     seat_height_m: float
     rise_s: float
     seed: int
+    marker_rate_hz: float = 100.0       # the capture's
 
     def config(self):
         """The synthesiser's configuration of this case."""
         return SynthConfig(style=SYNTH_STYLE[self.style], height_m=self.height_m, mass_kg=self.mass_kg, sex=self.sex,
-                           seat_height_m=self.seat_height_m, duration_s=self.rise_s, seed=self.seed)
+                           seat_height_m=self.seat_height_m, duration_s=self.rise_s, seed=self.seed,
+                           marker_rate_hz=self.marker_rate_hz)
 
     @property
     def name(self) -> str:
         return f"{self.index:02d}_{self.style}"
 
 
-def sample_population(n: int, seed: int = 0, styles: tuple[str, ...] = STYLES) -> list[Case]:
-    """``n`` cases drawn from one RNG seeded with ``seed``; styles in turn. The bodies do not depend on ``styles``
-    (every draw is made for every case), so ``--only-style`` runs the same people in another style."""
+def sample_population(n: int, seed: int = 0, styles: tuple[str, ...] = STYLES,
+                      marker_rate_hz: float = 100.0) -> list[Case]:
+    """``n`` cases drawn from one RNG seeded with ``seed``; styles in turn, captured at ``marker_rate_hz``. The bodies
+    do not depend on ``styles`` nor on the rate (every draw is made for every case), so ``--only-style`` and
+    ``--marker-rate`` run the same people in another style or captured otherwise."""
     if n < 1:
         raise ValueError(f"the population needs at least 1 case, not {n}")
     unknown = [s for s in styles if s not in STYLES]
@@ -106,7 +110,8 @@ def sample_population(n: int, seed: int = 0, styles: tuple[str, ...] = STYLES) -
         u_rise, case_seed = float(rng.random()), int(rng.integers(0, 2**31 - 1))
         style = styles[i % len(styles)]
         rise = RISE_S[style][0] + u_rise * (RISE_S[style][1] - RISE_S[style][0])
-        cases.append(Case(i, style, round(height, 3), round(mass, 1), sex, round(seat, 3), round(rise, 2), case_seed))
+        cases.append(Case(i, style, round(height, 3), round(mass, 1), sex, round(seat, 3), round(rise, 2), case_seed,
+                          marker_rate_hz))
     return cases
 
 
@@ -290,18 +295,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--controller", choices=CONTROLLERS, default="inverse_dynamics",
                         help="the simulated robot's: joint PD with an inverse-dynamics feed-forward, or whole-body "
                         "torque control (wbc)")
+    parser.add_argument("--marker-rate", type=float, default=100.0,
+                        help="the digital humans' capture rate [Hz] (default 100; divides the plates' 1000 Hz)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
-    cases = sample_population(args.cases, args.seed, (args.only_style,) if args.only_style else STYLES)
+    cases = sample_population(args.cases, args.seed, (args.only_style,) if args.only_style else STYLES,
+                              args.marker_rate)
     params, source = resolve_params(args)
-    print(f"bench-standup: {len(cases)} digital humans (seed {args.seed}), default plant, parameters {source}, "
-          f"controller {args.controller}", flush=True)
+    print(f"bench-standup: {len(cases)} digital humans (seed {args.seed}, captured at {args.marker_rate:g} Hz), "
+          f"default plant, parameters {source}, controller {args.controller}", flush=True)
     t0 = time.monotonic()
     rows = run_population(cases, args.out, params, args.jobs, args.controller)
     agg = aggregate(rows)
     print("\n" + summary_text(agg))
     args.out.mkdir(parents=True, exist_ok=True)
-    doc = {"seed": args.seed, "parameters": source, "plant": "default", "controller": args.controller,
+    doc = {"seed": args.seed, "marker_rate_hz": args.marker_rate, "parameters": source, "plant": "default",
+           "controller": args.controller,
            "jobs": args.jobs, "wall_s": round(time.monotonic() - t0, 1), "aggregate": agg, "cases": rows}
     (args.out / "bench_standup.json").write_text(json.dumps(doc, indent=2) + "\n")
     print(f"wrote {args.out / 'bench_standup.json'}")
