@@ -57,7 +57,8 @@ from visualization_msgs.msg import MarkerArray
 
 from ..human.calibration import StreamCalibration
 from ..human.description import SkeletonFrames, human_urdf
-from ..human.com_stream import WINDOW_S, StreamingComEstimator
+from ..human.com import WINDOW_S
+from ..human.com_stream import StreamingComEstimator
 from ..human.marker_ik import MarkerUnitsError, TooFewMarkers
 from ..human.marker_sets import MarkerSetError, choose_marker_set
 from ..human.skeleton import Subject

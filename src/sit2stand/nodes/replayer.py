@@ -175,10 +175,10 @@ class Replayer(Node):
         if unknown:
             raise NodeError(f"parameter lockstep: no known type for {', '.join(unknown)} (one of "
                             f"{', '.join(sorted(TOPIC_TYPES))})")
+        # the markers' rate: their count over the bag's span (the index does not time each topic)
         markers, span_ns = self.reader.topics().get(MARKERS_TOPIC), self.reader.end_ns - self.reader.start_ns
-        # the bag's index may not time each topic: then the markers' count over the bag's span
-        rate_hz = 0.0 if markers is None else markers.rate_hz or \
-            ((markers.count - 1) / (span_ns * 1e-9) if markers.count > 1 and span_ns > 0 else 0.0)
+        rate_hz = (markers.count - 1) / (span_ns * 1e-9) if markers is not None and markers.count > 1 and span_ns > 0 \
+            else 0.0
         lead_ns = lockstep_lead_ns(lead_s, rate_hz)
         lockstep = Lockstep(topics, lead_ns, timeout_s, (self.reader.start_ns, self.reader.end_ns),
                             int(first_s * 1e9) if first_s >= 0 else -1)

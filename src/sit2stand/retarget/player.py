@@ -23,7 +23,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.signal import savgol_coeffs   # at import: a live node's first frames must not pay for it
 
-from ..dynamics import model_cop
+from ..dynamics import model_cop, savgol_frames
 from ..errors import InputError
 from ..robot.model import UPPER_LIMB_PREFIXES
 from ..robot.plant import contact_joint_torques
@@ -124,7 +124,7 @@ class PlanPlayer:
         self.polygon = polygon_xy
         self.margin_m = margin_m
         self.lookahead = max(0, int(round(lookahead_s / dt)))
-        self.half = max(0, int(round(smooth_s / dt / 2)))       # frames either side
+        self.half = savgol_frames(smooth_s, dt, minimum=1) // 2       # frames either side
         self.max_time_scale = max_time_scale
         self.max_time_scale_rate = max_time_scale_rate
         self.fixed_time_scale = fixed_time_scale

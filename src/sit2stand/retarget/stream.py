@@ -54,8 +54,6 @@ LEAD_IN_COM_SPEED_MPS = 0.2
 """Mean forward COM speed [m/s] of the lead-in that a recording starting mid-rise gets (the shipped natural rise
 moves its COM 0.26 m in ~1.3 s)."""
 MIN_LEAD_IN_S = 0.5
-MAX_FRAME_PERIOD_S = 1.0 / MIN_RATE_HZ
-"""The longest capture frame period retargeted [s]."""
 
 
 @dataclass
@@ -215,7 +213,7 @@ class Retargeter:
         Raises:
             ValueError: a marker the calibration needs (pelvis, left knee, ankle, heel) is missing in the frame.
         """
-        if not (np.isfinite(frame_period_s) and 0.0 < frame_period_s <= MAX_FRAME_PERIOD_S):
+        if not (np.isfinite(frame_period_s) and 0.0 < frame_period_s * MIN_RATE_HZ <= 1.0):
             raise InputError(f"frame period {frame_period_s!r} s: the capture rate must be at least {MIN_RATE_HZ:g} Hz")
         markers = choose_marker_set(names, self.cfg.marker_set)
         roles = marker_roles(markers)
