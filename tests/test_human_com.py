@@ -127,16 +127,10 @@ def test_the_streamed_com_velocity_is_as_good_at_200_hz_as_at_100_hz():
     errors = []
     for rate in (100.0, 200.0):
         demo = synthesize(SynthConfig(style="natural", seed=3, marker_rate_hz=rate))
-        step = int(round(demo.config.plate_rate_hz / rate))
-        est = StreamingComEstimator(Subject(1.75, demo.human.total_mass), demo.marker_names, rate_hz=rate)
-        vel = []
-        for i, t in enumerate(demo.marker_t_s):
-            sl = slice(i * step, (i + 1) * step)
-            for p in demo.plates:
-                est.add_plate_samples(p.name, demo.t_s[sl], p.force_n[sl], p.moment_origin_nm[sl])
-            vel.append(est.update(t, demo.markers_m[i], demo.marker_valid[i]).com_vel)
+        _, outputs = stream(demo, rescale_every=100)
+        vel = [o.com_vel for o in outputs]
         after = slice(int(rate), None)         # after the calibration's first second
-        truth = demo.com_vel[::step][: len(vel)]
+        truth = demo.com_vel[::int(round(demo.config.plate_rate_hz / rate))][: len(vel)]
         errors.append(float(np.sqrt(np.mean(np.sum((np.array(vel) - truth)[after] ** 2, axis=1)))))
     assert errors[1] < 0.024 and errors[1] < 1.4 * errors[0], errors
 
@@ -190,18 +184,28 @@ def test_a_deferred_rescale_gives_the_same_stream():
     assert np.allclose(np.array(a), np.array(b), atol=1e-12, equal_nan=True)
 
 
-def stream_com(demo, gap=slice(0, 0), rescale_every=50):
-    """The streamed COM of ``demo`` with every marker NaN and invalid over the frames ``gap``."""
+def stream(demo, gap=slice(0, 0), rescale_every=50):
+    """``demo`` streamed at its marker rate, with every marker NaN and invalid over the frames ``gap``: the
+    estimator and each frame's output."""
     markers, valid = demo.markers_m.copy(), demo.marker_valid.copy()
     markers[gap], valid[gap] = np.nan, False
-    est = StreamingComEstimator(Subject(1.75, demo.human.total_mass), demo.marker_names, rescale_every=rescale_every)
-    coms = []
+    rate = demo.config.marker_rate_hz
+    step = int(round(demo.config.plate_rate_hz / rate))
+    est = StreamingComEstimator(Subject(1.75, demo.human.total_mass), demo.marker_names, rate_hz=rate,
+                                rescale_every=rescale_every)
+    outputs = []
     for i, t in enumerate(demo.marker_t_s):
-        sl = slice(i * 10, (i + 1) * 10)
+        sl = slice(i * step, (i + 1) * step)
         for p in demo.plates:
             est.add_plate_samples(p.name, demo.t_s[sl], p.force_n[sl], p.moment_origin_nm[sl])
-        coms.append(est.update(t, markers[i], valid[i]).com_m)
-    return est, np.array(coms)
+        outputs.append(est.update(t, markers[i], valid[i]))
+    return est, outputs
+
+
+def stream_com(demo, gap=slice(0, 0), rescale_every=50):
+    """The streamed COM of ``demo`` (see :func:`stream`)."""
+    est, outputs = stream(demo, gap, rescale_every)
+    return est, np.array([o.com_m for o in outputs])
 
 
 def test_a_marker_dropout_does_not_corrupt_the_mass_scaling_that_follows():
