@@ -84,6 +84,25 @@ def test_speed_limits_bound_the_motion_from_the_previous_frame(scene):
     assert np.max(np.abs(r.q[7:] - start[7:])) <= 2.0 * 0.01 + 1e-9
 
 
+def test_the_base_stays_above_its_lowest_height_where_the_markers_pull_it_lower(scene):
+    """Markers of the pose with its pelvis 4 cm lower (the knees bent further) take the unbounded base down; with
+    ``base_z_min`` 1 cm under the start the base stops there, the COM and the feet still exact."""
+    model, q_stand, soles, sole_targets = scene
+    j = [model.joints[model.getJointId(f"leg_{s}_{i}_joint")].idx_q for s in ("left", "right") for i in (3, 4, 5)]
+    low = q_stand.copy()
+    low[j] += np.tile([-0.15, 0.3, -0.15], 2)
+    low[2] -= 0.04
+    markers = frame_markers(model, low, np.random.default_rng(0), noise=0.0)
+    com = pin.centerOfMass(model, model.createData(), q_stand)
+    z_min = q_stand[2] - 0.01
+    free = ComIk(model, soles).solve(q_stand, markers, com, sole_targets, com_axes=(0,), max_iterations=20)
+    bounded = ComIk(model, soles).solve(q_stand, markers, com, sole_targets, com_axes=(0,), max_iterations=20,
+                                        base_z_min=z_min)
+    assert free.q[2] < z_min - 0.005, free.q[2] - q_stand[2]
+    assert bounded.q[2] >= z_min - 1e-5 and bounded.feasible and bounded.sole_error < 1e-6
+    assert bounded.q[2] < z_min + 0.002          # the markers still pull it down to the bound
+
+
 def test_free_subtree_joints_are_the_trunk_head_and_arms(scene):
     model, _, soles, _ = scene
     free = set(free_subtree_dofs(model, soles))

@@ -83,6 +83,19 @@ def test_every_frame_is_finite_within_limits_and_the_com_equality_holds_where_fe
     assert qs[-1, 2] > qs[0, 2] + 0.2
 
 
+def test_after_the_robots_seat_off_its_hips_rise_clear_of_the_seat(retargeted):
+    """From the robot's seat-off the pelvis stays at least the growing clearance above its seated height, and is
+    the whole ``seat_clearance_m`` above it from ``seat_clearance_s`` on: hips the plan has taken off the seat are
+    off it."""
+    _, rt, frames, *_ = retargeted
+    z0 = frames[0].q[2]
+    so = next(i for i, f in enumerate(frames) if not f.seated)
+    after = frames[so:]
+    assert all(f.q[2] >= z0 + rt._seat_clearance(f.t_s) - 1e-4 for f in after)
+    late = [f for f in after if f.t_s >= frames[so].t_s + rt.cfg.seat_clearance_s]
+    assert late and min(f.q[2] for f in late) >= z0 + rt.cfg.seat_clearance_m - 1e-4
+
+
 def _played(robot, frames, **options):
     """The IK poses of ``frames`` through a fresh player: (commands, player)."""
     player = PlanPlayer(robot.model, 0.01, robot.support_xy, margin_m=0.06, **options)

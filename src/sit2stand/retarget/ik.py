@@ -9,9 +9,11 @@ Each frame solves, by damped Gauss-Newton steps on the configuration q (Pinocchi
                 q_min <= q <= q_max,  |q_dot| dt <= v_max dt                      (joint and velocity limits)
                 q_j stays on its stop while gravity presses it there past its motor   (stops that hold)
                 q_j accelerates against gravity within its motor's room               (trunk lift-off)
+                z_base(q) >= z_min                                                    (hips clear of the seat)
 
 with one dense QP (proxsuite) per step in the tangent step dq:
-``min 1/2 dq' H dq + g' dq  s.t.  A dq = b,  l <= dq <= u`` built from the frame, COM and sole Jacobians.
+``min 1/2 dq' H dq + g' dq  s.t.  A dq = b,  C dq >= d,  l <= dq <= u`` built from the frame, COM and sole
+Jacobians.
 Iterations are warm-started from the previous frame's solution. If the COM target cannot be met with the feet
 fixed and within limits, the COM is made a heavily weighted soft task instead, and the frame is flagged infeasible;
 the returned q always respects the joint limits and is finite.
@@ -114,6 +116,7 @@ class _Frame:
     base_xz: np.ndarray | None
     base_weight: float | None
     base_pitch_min: float | None
+    base_z_min: float | None = None              # the base's lowest world z [m] (hips off the seat)
     lift_speed_prev: np.ndarray | None = None    # the trunk joints' speeds into the previous frame [rad/s]
 
 
@@ -162,18 +165,21 @@ class ComIk:
             lift_torque_share * model.effortLimit[self.lift_dofs]
         self._last_solve: tuple[np.ndarray, np.ndarray] | None = None    # (q_prev, solution) of the last frame
 
-    def _solve_qp(self, H, g, A, b, lo, hi):
-        """min 1/2 dq' H dq + g' dq s.t. A dq = b, lo <= dq <= hi (a warm QP per shape): dq, solved, dual residual."""
-        key = (A.shape[0], len(lo))
+    def _solve_qp(self, H, g, A, b, lo, hi, C=None, d=None):
+        """min 1/2 dq' H dq + g' dq s.t. A dq = b, C dq >= d, lo <= dq <= hi (a warm QP per shape): dq, solved,
+        dual residual."""
+        n_in = 0 if C is None else C.shape[0]
+        u = None if C is None else np.full(n_in, 1e20)
+        key = (A.shape[0], n_in, len(lo))
         qp = self._qp.get(key)
         if qp is None:
-            qp = self._proxsuite.proxqp.dense.QP(self.nv, A.shape[0], 0, True)
+            qp = self._proxsuite.proxqp.dense.QP(self.nv, A.shape[0], n_in, True)
             qp.settings.eps_abs = self.eps_abs
             qp.settings.verbose = False
-            qp.init(H, g, A, b, None, None, None, lo, hi)
+            qp.init(H, g, A, b, C, d, u, lo, hi)
             self._qp[key] = qp
         else:
-            qp.update(H, g, A, b, None, None, None, lo, hi)
+            qp.update(H, g, A, b, C, d, u, lo, hi)
         qp.solve()
         status = str(qp.results.info.status)
         return qp.results.x.copy(), "SOLVED" in status and "INACCURATE" not in status, float(qp.results.info.dua_res)
@@ -182,16 +188,17 @@ class ComIk:
               sole_targets: list[pin.SE3], q_ref: np.ndarray | None = None, com_axes: tuple[int, ...] = (0, 1, 2),
               q_prev: np.ndarray | None = None, max_iterations: int = 10, tol: float = 1e-7,
               base_xz: np.ndarray | None = None, base_weight: float | None = None,
-              base_pitch_min: float | None = None) -> IkResult:
+              base_pitch_min: float | None = None, base_z_min: float | None = None) -> IkResult:
         """Solve one frame from ``q0``. ``markers``: (frame id, target position [m], weight) triples.
         ``q_prev``: the previous frame's configuration; the joint speed limits bound the motion from it (none for
         the first frame). ``base_xz``: hold the floating base's world x and z at these values [m] (e.g. the hips on
         a seat): two more equality rows, or, with ``base_weight``, a soft task of that weight. ``base_pitch_min``
-        [rad]: the base may not pitch back beyond this (a pelvis on a seat cannot roll back about its hips)."""
+        [rad]: the base may not pitch back beyond this (a pelvis on a seat cannot roll back about its hips).
+        ``base_z_min`` [m]: the base's world z stays at or above this (hips that have left a seat stay off it)."""
         t0 = time.perf_counter()
         frame = _Frame([int(m[0]) for m in markers], np.array([m[1] for m in markers], float).reshape(-1, 3),
                        np.array([m[2] for m in markers], float), com_target, list(com_axes), sole_targets,
-                       q0 if q_ref is None else q_ref, q_prev, base_xz, base_weight, base_pitch_min)
+                       q0 if q_ref is None else q_ref, q_prev, base_xz, base_weight, base_pitch_min, base_z_min)
         frame.lift_speed_prev = self._lift_speed_prev(q_prev)
         q = q0.copy()
         feasible, dua = True, 0.0
@@ -223,13 +230,14 @@ class ComIk:
         A = np.vstack([A_feet, Jc[f.axes]])
         b = np.concatenate([b_feet, (f.com_target - com)[f.axes]])
         lo, hi = self._bounds(q, f)
-        dq, ok, dua = self._solve_qp(H, g, A, b, lo, hi)
+        C, d = self._base_height_row(q, f)
+        dq, ok, dua = self._solve_qp(H, g, A, b, lo, hi, C, d)
         if ok:
             return dq, True, dua
         # COM infeasible with the feet fixed and the limits: COM as a heavily weighted soft task
         Hs = H + 1e4 * Jc[f.axes].T @ Jc[f.axes]
         gs = g - 1e4 * Jc[f.axes].T @ (f.com_target - com)[f.axes]
-        dq, ok, dua = self._solve_qp(Hs, gs, A_feet, b_feet, lo, hi)
+        dq, ok, dua = self._solve_qp(Hs, gs, A_feet, b_feet, lo, hi, C, d)
         if not ok:     # not even the feet: everything soft; the box alone is always feasible (0 is inside)
             Hs += 1e6 * A_feet.T @ A_feet
             gs -= 1e6 * A_feet.T @ b_feet
@@ -280,6 +288,15 @@ class ComIk:
                 H += f.base_weight * rb.T @ rb
                 g -= f.base_weight * rb.T @ eb
         return np.vstack(rows), np.concatenate(rhs)
+
+    def _base_height_row(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The inequality C dq >= d keeping the base's world z at or above ``base_z_min`` (None, None without it):
+        the base's linear velocity is in its own frame, so the world z row is R[2]."""
+        if f.base_z_min is None:
+            return None, None
+        C = np.zeros((1, self.nv))
+        C[0, :3] = self.data.oMi[1].rotation[2]
+        return C, np.array([f.base_z_min - q[2]])
 
     def _bounds(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, np.ndarray]:
         """Step bounds from the joint limits, the speed limits from the previous frame and the base pitch [rad]."""

@@ -17,7 +17,12 @@
    Before the robot's seat-off (both: the human has left the seat, by the chair plate or the pelvis rising, and the
    robot's target has reached its seat-off knot) the hips stay on the seat (pelvis x and z held: hard) and only the
    COM's x is constrained: with the hips on the seat COM height and COM x are one degree of freedom. After it, COM x and
-   y are hard; y ramps to the midline between the feet over ``y_ramp_s``. The COM height is left to the markers.
+   y are hard; y ramps to the midline between the feet over ``y_ramp_s``. The COM height is left to the markers,
+   above one floor: the pelvis rises ``seat_clearance_m`` clear of its seated height over ``seat_clearance_s`` and
+   stays at least that high (hard) until the human sits back down. The markers alone kept a fast rise's hips at the
+   seat's height for 0.5 s after the plan's seat-off, then 4 mm into it: the simulated robot's hips bounced on the
+   seat (0-750 N) while the plan had it on its feet, and at a 200 Hz capture it fell. Over the seat's front edge a
+   thigh rises about a quarter as much as the pelvis (it turns about the knee): 1 cm of pelvis still bounced.
 3. **IK** (:class:`sit2stand.retarget.ik.ComIk`): markers soft (weights by body part), COM and feet hard, joint and
    speed limits; warm-started from the previous frame.
 
@@ -152,6 +157,10 @@ class RetargetConfig:
     pelvis_rise_m: float = 0.02           # ... or, without a chair plate, when the pelvis markers rose this much
     y_ramp_s: float = 0.5
     hip_release_s: float = 0.4            # the hips' hold on the seat fades out over this after seat-off
+    seat_clearance_m: float = 0.02        # after the robot's seat-off its pelvis stays at least this far above its
+    seat_clearance_s: float = 0.3         # seated height, reached along a smoothstep over this [s]: hips that have
+    #                                       left the seat in the plan must leave it on the robot (a fast rise's
+    #                                       markers kept them at the seat's height, then 4 mm into it, for 0.5 s)
     iterations: int = 2                   # Gauss-Newton steps per frame (warm-started from the previous frame)
     qp_tolerance: float = 1e-6            # proxsuite eps_abs of each step's QP
     damping: float = 0.1                  # Levenberg-Marquardt damping of each Gauss-Newton step: with less, the
@@ -358,19 +367,27 @@ class Retargeter:
                    for i in range(len(self.names)) if ok[i] and self.weights[i] > 0 and marker_weight > 0]
         # hips on the seat: pelvis x and z held (hard); after seat-off the hold fades out as a soft task, so that
         # the pose does not jump to where the human's pelvis already is
-        hold, weight = self.base_seated, None
+        hold, weight, z_min = self.base_seated, None, None
         if not self.seated:
             fade = (t_s - self._t_off) / max(cfg.hip_release_s, 1e-9)
             weight = 1e4 * (1.0 - min(1.0, fade)) ** 2 if fade < 1.0 else None
-            hold = self.base_seated if weight is not None else None
+            lift = 0.0 if self.sat_down else self._seat_clearance(t_s)
+            z_min = None if self.sat_down else self.base_seated[2] + lift
+            hold = self.base_seated + [0.0, 0.0, lift] if weight is not None else None
         q_ref = np.where(self.held_to_seated, robot.q_seated, self.q)
         res = self.ik.solve(self.q, markers, target, robot.sole_targets, q_ref=q_ref, com_axes=axes,
                             q_prev=self.q, max_iterations=cfg.iterations, tol=cfg.tolerance, base_xz=hold,
-                            base_weight=weight, base_pitch_min=self.pitch_seated if self.seated else None)
+                            base_weight=weight, base_pitch_min=self.pitch_seated if self.seated else None,
+                            base_z_min=z_min)
         self.q = res.q
         pin.centerOfMass(self.model, self.data, self.q)
         return RetargetFrame(t_s, res.q, target, axes, self.data.com[0].copy(), self.seated or self.sat_down,
                              self.human_seat_off, res, markers)
+
+    def _seat_clearance(self, t_s: float) -> float:
+        """How far above its seated height the pelvis must be at ``t_s`` [s], after the robot's seat-off [m]."""
+        ramp = min(1.0, max(0.0, (t_s - self._t_off) / max(self.cfg.seat_clearance_s, 1e-9)))
+        return self.cfg.seat_clearance_m * ramp * ramp * (3 - 2 * ramp)
 
     def _human_touched_down(self, pelvis_m: np.ndarray, chair_force_n: float | None) -> bool:
         """After the rise, has the human sat back down? The chair plate loaded again (over twice the seat-off
