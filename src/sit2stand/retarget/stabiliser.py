@@ -8,13 +8,16 @@ is sent, is therefore moved so that its COM moves by
     delta = kp e + kd de/dt + ki integral(e dt)     e = planned COM - measured COM   (x and y, world frame, [m])
 
 with both feet where the plan has them: the same QP as the retargeting IK (:class:`sit2stand.retarget.ik.ComIk`)
-with no markers, the COM shifted by ``delta`` as its hard equality, the feet hard, the joint limits, and a posture
-pull to the command itself (arms and head held). This is the COM-admittance outer loop of position-controlled
-humanoid stabilisers (e.g. Kajita et al., "Biped walking stabilization based on linear inverted pendulum tracking",
-IROS 2010), here on the COM position and velocity only: the driver's joint PD and inverse-dynamics feed-forward
-stay as they are. ``de/dt`` is low-passed (``velocity_filter_s``). Without it the loop has too little phase margin:
-a standing TALOS under joint PD sways with a ~2 s period, and an integral gain of 1/s alone made that sway grow
-until the robot fell (offline re-simulation of the natural demonstration).
+with no markers, the COM shifted by ``delta`` as its hard equality, the feet hard, the joint limits, the pelvis no
+lower than the command's, and a posture pull to the command itself (arms and head held). The pelvis bound: a shift
+made by bending the knees lowered the hips the plan had just lifted off the seat, and under joint PD the shipped
+natural rise then swayed back 7 cm after seat-off (COM tracking 2.15 cm; 1.33 cm with the bound). This is the
+COM-admittance outer loop of position-controlled humanoid stabilisers (e.g. Kajita et al., "Biped walking
+stabilization based on linear inverted pendulum tracking", IROS 2010), here on the COM position and velocity only:
+the driver's joint PD and inverse-dynamics feed-forward stay as they are. ``de/dt`` is low-passed
+(``velocity_filter_s``). Without it the loop has too little phase margin: a standing TALOS under joint PD sways with
+a ~2 s period, and an integral gain of 1/s alone made that sway grow until the robot fell (offline re-simulation of
+the natural demonstration).
 
 The loop runs only while the plan has the robot on its feet (from the plan's seat-off, while the hips unload),
 fading in over ``ramp_s``; ``delta`` is bounded by ``max_offset_m`` per axis and the integral by the same
@@ -162,5 +165,5 @@ class ComStabiliser:
         target = self.measured_com(q_command)       # the command's own COM, shifted
         target[:2] += self.offset
         res = self.ik.solve(q_command, [], target, self.sole_targets, q_ref=q_command, com_axes=(0, 1),
-                            max_iterations=cfg.iterations, tol=1e-9)
+                            max_iterations=cfg.iterations, tol=1e-9, base_z_min=q_command[2])
         return Correction(res.q, self.offset.copy(), err, True)
