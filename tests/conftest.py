@@ -161,12 +161,13 @@ def elderly_standup(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess
     """One live stand-up of the graph on bags/elderly with the CAD plant (CAD parameters: the consistent case), in a
     ROS domain of its own, its marker map written: (run folder holding ``run`` (the bag) and ``markers.yaml``, the
     launcher's result). Shared by the graph tests that read one stand-up (its frames, its commands): each stand-up
-    costs ~35 s of the 2-core host."""
+    costs ~35 s of the 2-core host. Joint PD with the retargeter's COM feedback (not the graph's default torque
+    control, which test_graph_retarget runs on its own): the feedback's topic and shifts are checked on it."""
     run_dir = tmp_path_factory.mktemp("elderly_standup")
     env = node_env(random.Random(os.getpid() * 31 + time.time_ns()).randint(101, 200))
     cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(GRAPHS / "standup.yaml"),
            f"bag:={ROOT / 'bags' / 'elderly'}", f"out:={run_dir / 'run'}", f"plant:={plant_path('cad')}",
-           f"marker_map:={run_dir / 'markers.yaml'}"]
+           f"marker_map:={run_dir / 'markers.yaml'}", "controller:=inverse_dynamics"]
     return run_dir, subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=240)
 
 

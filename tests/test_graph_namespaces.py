@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _launch(bag: str, out: Path, env: dict, namespace: str | None) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(GRAPHS / "standup.yaml"), f"bag:={ROOT / 'bags' / bag}",
-           f"out:={out}", "rt_policy:=other", *FIRST_ROUND_PLAYER]
+           f"out:={out}", "rt_policy:=other", "controller:=inverse_dynamics", *FIRST_ROUND_PLAYER]
     cmd += ["--namespace", namespace] if namespace else []
     return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 

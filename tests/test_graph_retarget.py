@@ -63,9 +63,9 @@ def test_the_robot_stands_up_live_from_the_shipped_elderly_demonstration(elderly
 
 
 def test_under_whole_body_torque_control_the_robot_stands_up_live_near_the_humans_timing(tmp_path, ros_env):
-    """controller:=wbc: the driver runs the whole-body QP as the robot's on-board controller (the retargeter's COM
-    feedback off) and reports its QP time; the elderly rise plays within 1.5x the human's duration (1.04 when
-    written; joint PD with COM feedback: ~1.1)."""
+    """controller:=wbc (the graph's default, said here): the driver runs the whole-body QP as the robot's on-board
+    controller (the retargeter's COM feedback off) and reports its QP time; the elderly rise plays within 1.5x the
+    human's duration (1.04 when written; joint PD with COM feedback: ~1.1)."""
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(GRAPHS / "standup.yaml"),
            f"bag:={ROOT / 'bags' / 'elderly'}", f"out:={out}", f"plant:={plant_path('cad')}", "controller:=wbc"]

@@ -107,7 +107,7 @@ def test_closed_on_the_plant_the_feedback_brings_the_robot_com_onto_the_plan(tmp
     runs = {}
     for feedback in (False, True):
         s = run(ROOT / "bags" / "elderly", tmp_path / str(feedback), plant=plant_path("cad"),
-                simulate=True, com_feedback=feedback)
+                simulate=True, com_feedback=feedback, controller="inverse_dynamics")
         assert s["stood_up"], f"feedback {feedback}: {s['fall']}"
         assert json.loads((tmp_path / str(feedback) / "summary.json").read_text())["com_feedback"] is feedback
         runs[feedback] = s

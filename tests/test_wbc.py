@@ -7,13 +7,14 @@ import pinocchio as pin
 import pytest
 
 from sit2stand.commands.robot import CONTROLLER_CHOICES
+from sit2stand.commands.robot import DEFAULT_CONTROLLER as CLI_DEFAULT_CONTROLLER
 from sit2stand.data import plant_path
 from sit2stand.dynamics import G, model_cop
 from sit2stand.retarget.dynamic import DynamicsFilter
 from sit2stand.retarget.feasibility import support_margin, support_polygon
 from sit2stand.retarget.offline import run
 from sit2stand.robot.model import PlantConfig, add_seat_frame, controller_model
-from sit2stand.robot.plant import CONTROLLERS, Plant
+from sit2stand.robot.plant import CONTROLLERS, DEFAULT_CONTROLLER, Plant
 from sit2stand.robot.torque_control import ANCHOR_BLEND_S, STANDING_SETTLE_S, WholeBodyController
 from sit2stand.robot.model import sole_corners_local
 from sit2stand.robot.wbc import Reference, WbcGains, WholeBodyQP, feet_anchored_reference
@@ -231,5 +232,5 @@ def test_the_robot_stands_up_at_the_humans_timing_under_whole_body_torque_contro
     assert summary["controller_qp_cold_solves"] <= 0.01 * 5 * summary["commands"], summary["controller_qp_cold_solves"]
 
 
-def test_the_clis_controller_choices_are_the_stand_ups():
-    assert CONTROLLER_CHOICES == CONTROLLERS
+def test_the_clis_controller_choices_and_default_are_the_stand_ups():
+    assert CONTROLLER_CHOICES == CONTROLLERS and CLI_DEFAULT_CONTROLLER == DEFAULT_CONTROLLER

@@ -1,7 +1,7 @@
 """Benchmark (not a test): a population of digital humans stood up by the simulated TALOS (issue 15, item 4).
 
     python -m sit2stand.bench_standup [--cases 30] [--seed 0] [--jobs 1] [--only-style S] [--marker-rate 100]
-                                      [--controller inverse_dynamics|wbc] [--out DIR]       (make bench-standup)
+                                      [--controller wbc|inverse_dynamics] [--out DIR]       (make bench-standup)
 
 Each case is a demonstration of :mod:`sit2stand.human.synth`: stature uniform in 1.5-1.95 m, body mass uniform in
 50-110 kg within a BMI of 17-38 (no implausible body: 50 kg at 1.95 m is a BMI of 13, 110 kg at 1.5 m one of 49),
@@ -13,12 +13,12 @@ a body is redrawn with the next seeds, same stature, mass, seat and style, and m
 
 Each demonstration is written to a temporary bag and run through :func:`sit2stand.retarget.offline.run` on the
 default plant with the identified parameters, its other options at their defaults (what ``sit2stand retarget BAG
---params P --simulate`` does). Per case: stood up, ``time_scale`` and ``duration_ratio`` (robot / human duration)
-from the summary, COM tracking RMS (robot's true COM against the plan), the plan's forward COM deviation from the
-mapped human COM (the retargeter's COM target, compared at the human time each command plays), the peak joint
-torque the controller asks for (PD + feed-forward) over the URDF effort limit, the share of commands with some
-joint clamped at its limit, the share of off-chair commands whose own ZMP leaves the feet, all from ``run``'s
-summary, and wall time.
+--params P --simulate`` does: whole-body torque control unless ``--controller inverse_dynamics``). Per case: stood
+up, ``time_scale`` and ``duration_ratio`` (robot / human duration) from the summary, COM tracking RMS (robot's true
+COM against the plan), the plan's forward COM deviation from the mapped human COM (the retargeter's COM target,
+compared at the human time each command plays), the peak joint torque the controller asks for (PD + feed-forward;
+the QP's torques) over the URDF effort limit, the share of commands with some joint clamped at its limit, the share
+of off-chair commands whose own ZMP leaves the feet, all from ``run``'s summary, and wall time.
 
 Writes ``DIR/bench_standup.json`` (cases and aggregate) and each case's retarget folder under ``DIR/cases/``.
 """
@@ -44,7 +44,7 @@ from .demo import robot_identification
 from .human.demonstration_bag import write_demonstration_bag
 from .human.synth import SynthConfig, synthesize
 from .retarget import offline
-from .robot.plant import CONTROLLERS
+from .robot.plant import CONTROLLERS, DEFAULT_CONTROLLER
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_PARAMS = ROOT / "runs" / "demo" / "robot" / "identified_full.yaml"
@@ -127,7 +127,7 @@ def synthesise(case: Case, attempts: int = SYNTH_ATTEMPTS):
     raise ValueError(f"no demonstration in {attempts} seeds from {case.seed}: {last}")
 
 
-def run_case(case: Case, out: Path, params: Path | None, controller: str = "inverse_dynamics") -> dict:
+def run_case(case: Case, out: Path, params: Path | None, controller: str = DEFAULT_CONTROLLER) -> dict:
     """Synthesise, bag, retarget and simulate one case; its figures (an ``error`` where a stage raised, and
     ``stage: synthesis`` where the synthesiser refused every seed: no robot run to judge)."""
     t0 = time.monotonic()
@@ -266,7 +266,7 @@ def resolve_params(args: argparse.Namespace) -> tuple[Path | None, str]:
 
 
 def run_population(cases: list[Case], out: Path, params: Path | None, jobs: int,
-                   controller: str = "inverse_dynamics") -> list[dict]:
+                   controller: str = DEFAULT_CONTROLLER) -> list[dict]:
     """Every case, ``jobs`` at a time; one line per case as it finishes; rows in case order."""
     rows = []
     print(TABLE_HEAD, flush=True)
@@ -292,9 +292,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only-style", choices=STYLES, help="every case in this style")
     parser.add_argument("--params", type=Path, help="identified parameters (default: make demo's)")
     parser.add_argument("--cad", action="store_true", help="plan and control with the CAD model")
-    parser.add_argument("--controller", choices=CONTROLLERS, default="inverse_dynamics",
-                        help="the simulated robot's: joint PD with an inverse-dynamics feed-forward, or whole-body "
-                        "torque control (wbc)")
+    parser.add_argument("--controller", choices=CONTROLLERS, default=DEFAULT_CONTROLLER,
+                        help="the simulated robot's: whole-body torque control (wbc, default), or joint PD with an "
+                        "inverse-dynamics feed-forward (inverse_dynamics)")
     parser.add_argument("--marker-rate", type=float, default=100.0,
                         help="the digital humans' capture rate [Hz] (default 100; divides the plates' 1000 Hz)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)

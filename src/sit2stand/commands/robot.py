@@ -15,6 +15,8 @@ from .graph import ros_params
 CONTROLLER_CHOICES = ("inverse_dynamics", "wbc")
 """``robot.plant.CONTROLLERS``, spelled here because the CLI builds its parsers without importing the robot
 stack (a test keeps the two equal)."""
+DEFAULT_CONTROLLER = "wbc"
+"""``robot.plant.DEFAULT_CONTROLLER``, spelled here for the same reason (the same test keeps them equal)."""
 
 
 def _retarget(args: argparse.Namespace) -> int:
@@ -137,9 +139,9 @@ def add_retarget(sub) -> None:
     p.add_argument("--dynamic", action="store_true",
                    help="experimental: pass the commands through the dynamics filter (whole-body QP: feet COP inside "
                         "the soles, torque limits), stretching time only where it cannot follow")
-    p.add_argument("--controller", choices=CONTROLLER_CHOICES, default="inverse_dynamics",
-                   help="the simulated robot's controller: joint PD + inverse-dynamics feed-forward (default), or "
-                        "experimental whole-body torque control (QP at 500 Hz)")
+    p.add_argument("--controller", choices=CONTROLLER_CHOICES, default=DEFAULT_CONTROLLER,
+                   help="the simulated robot's controller: whole-body torque control (a QP at 500 Hz; default) or "
+                        "joint PD + inverse-dynamics feed-forward (inverse_dynamics)")
     p.add_argument("--seat-off-dwell", type=float, default=None,
                    help="the player's wait at the robot's seat-off [s] (default: retarget.player.SEAT_OFF_DWELL_S, 0)")
     p.add_argument("--retiming", choices=("local", "uniform"), default="local",

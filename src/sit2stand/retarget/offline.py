@@ -32,7 +32,7 @@ from ..io.topics import (HUMAN_COM_TOPIC, ROBOT_JOINT_COMMAND_TOPIC, ROBOT_PLANN
 from ..io.typestore import typestore
 from ..robot.identify import read_link_parameters
 from ..robot.model import PlantConfig
-from ..robot.plant import Plant
+from ..robot.plant import DEFAULT_CONTROLLER, Plant
 from ..robot.wbc import WbcGains
 from .dynamic import DynamicsFilter
 from .phases import Phases, find_phases
@@ -88,7 +88,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         human_com_bag: Path | None = None, margin_m: float = DEFAULT_MARGIN_M, time_scale: float | None = None,
         max_time_scale: float = DEFAULT_MAX_TIME_SCALE, simulate: bool = False, config: RetargetConfig | None = None,
         com_feedback: bool = True, stabiliser: StabiliserConfig | None = None, whole: bool = False,
-        dynamic: bool = False, controller: str = "inverse_dynamics", seat_off_dwell_s: float = SEAT_OFF_DWELL_S,
+        dynamic: bool = False, controller: str = DEFAULT_CONTROLLER, seat_off_dwell_s: float = SEAT_OFF_DWELL_S,
         gains: WbcGains | None = None, calibration_frame: int | None = None, static: Path | None = None,
         retiming: str = "local") -> dict:
     """Retarget ``bag`` into ``out`` (see the module docstring); returns the summary. ``com_feedback``: the
@@ -100,12 +100,12 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     (:mod:`sit2stand.retarget.phases`). ``dynamic``: the commands go through the dynamics filter
     (:mod:`sit2stand.retarget.dynamic`, QP gains ``gains``), which stretches time only where it cannot follow;
     ``seat_off_dwell_s``: the player's wait at the robot's seat-off. ``controller``: the simulated robot's
-    (``inverse_dynamics``: joint PD with that feed-forward; ``wbc``: whole-body torque control). The marker map is
-    made on a seated frame (:func:`~sit2stand.retarget.calibration.map_frame`; ``calibration_frame``: that one);
-    a ``static`` trial calibrates the human skeleton when the human COM is estimated here. ``plant``: None is a
-    plant without unmodeled effects (:meth:`~sit2stand.robot.model.PlantConfig.load`), not the command's default
-    (the packaged ``default`` plant, 26 kg hidden); parameters identified on one and simulated on the other are a
-    model error of 26 kg."""
+    (``wbc``: whole-body torque control, the default; ``inverse_dynamics``: joint PD with that feed-forward). The
+    marker map is made on a seated frame (:func:`~sit2stand.retarget.calibration.map_frame`;
+    ``calibration_frame``: that one); a ``static`` trial calibrates the human skeleton when the human COM is
+    estimated here. ``plant``: None is a plant without unmodeled effects
+    (:meth:`~sit2stand.robot.model.PlantConfig.load`), not the command's default (the packaged ``default`` plant,
+    26 kg hidden); parameters identified on one and simulated on the other are a model error of 26 kg."""
     refuse_existing_bag(out / "retarget")
     out.mkdir(parents=True, exist_ok=True)
     trial = read_trial(bag)
