@@ -86,6 +86,22 @@ def test_an_error_shifts_the_commanded_com_by_the_gains_with_the_feet_fixed(stan
     assert dq[arms].max() < 0.1 * dq[legs].max(), "the shift is made with the legs, not by swinging the arms"
 
 
+def test_a_backward_shift_keeps_the_pelvis_no_lower_than_the_commands(standing):
+    """A 3 cm backward COM shift from the standing pose, made freely by the same QP, bends the knees and lowers the
+    pelvis ~2 mm; the stabiliser's shift keeps it at the command's height (the hips the plan lifted off a seat stay
+    off it) and still moves the COM the whole 3 cm."""
+    robot, q = standing
+    model = robot.model
+    cfg = StabiliserConfig(kp=1.0, ki=0.0, kd=0.0, ramp_s=0.0, iterations=3)
+    stab = ComStabiliser(model, robot.sole_frames, robot.sole_targets, cfg)
+    planned = _com(model, q) - [0.03, 0.0, 0.0]
+    free = stab.ik.solve(q, [], planned, robot.sole_targets, q_ref=q, com_axes=(0, 1), max_iterations=3, tol=1e-9)
+    assert free.q[2] < q[2] - 1e-3, "the unbounded shift lowers the pelvis"
+    fix = stab.correct(q, planned, q, on_feet=True, dt_s=0.01)
+    assert fix.q[2] >= q[2] - 1e-5
+    assert np.allclose(_com(model, fix.q)[:2], planned[:2], atol=1e-4)
+
+
 def test_the_shift_and_its_integral_are_bounded(standing):
     robot, q = standing
     cfg = StabiliserConfig(ramp_s=0.0)

@@ -5,10 +5,11 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
+import yaml
 
 from sit2stand.commands.robot import CONTROLLER_CHOICES
 from sit2stand.commands.robot import DEFAULT_CONTROLLER as CLI_DEFAULT_CONTROLLER
-from sit2stand.data import plant_path
+from sit2stand.data import graph_path, plant_path
 from sit2stand.dynamics import G, model_cop
 from sit2stand.retarget.dynamic import DynamicsFilter
 from sit2stand.retarget.feasibility import support_margin, support_polygon
@@ -232,5 +233,7 @@ def test_the_robot_stands_up_at_the_humans_timing_under_whole_body_torque_contro
     assert summary["controller_qp_cold_solves"] <= 0.01 * 5 * summary["commands"], summary["controller_qp_cold_solves"]
 
 
-def test_the_clis_controller_choices_and_default_are_the_stand_ups():
+def test_the_clis_and_the_graphs_controller_choices_and_default_are_the_stand_ups():
     assert CONTROLLER_CHOICES == CONTROLLERS and CLI_DEFAULT_CONTROLLER == DEFAULT_CONTROLLER
+    for graph in ("standup", "live"):
+        assert yaml.safe_load(graph_path(graph).read_text())["arguments"]["controller"] == DEFAULT_CONTROLLER, graph

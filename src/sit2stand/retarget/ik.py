@@ -152,7 +152,7 @@ class ComIk:
         self.q_lo = model.lowerPositionLimit[7:].copy()
         self.q_hi = model.upperPositionLimit[7:].copy()
         self._proxsuite = proxsuite
-        self._qp: dict[tuple[int, int], object] = {}
+        self._qp: dict[tuple[int, int, int], object] = {}
         self.eps_abs = 1e-9
         self.points = PointJacobians(model)
         self.momentum_weight = momentum_weight
@@ -238,10 +238,11 @@ class ComIk:
         Hs = H + 1e4 * Jc[f.axes].T @ Jc[f.axes]
         gs = g - 1e4 * Jc[f.axes].T @ (f.com_target - com)[f.axes]
         dq, ok, dua = self._solve_qp(Hs, gs, A_feet, b_feet, lo, hi, C, d)
-        if not ok:     # not even the feet: everything soft; the box alone is always feasible (0 is inside)
+        if not ok:     # not even the feet: everything soft; the box and the floor are always feasible (0 is inside
+            #            the joints' box, and the floor's row has only the unbounded base translation)
             Hs += 1e6 * A_feet.T @ A_feet
             gs -= 1e6 * A_feet.T @ b_feet
-            dq, ok, dua = self._solve_qp(Hs, gs, np.zeros((0, self.nv)), np.zeros(0), lo, hi)
+            dq, ok, dua = self._solve_qp(Hs, gs, np.zeros((0, self.nv)), np.zeros(0), lo, hi, C, d)
             if not ok:
                 dq = np.zeros(self.nv)
         return dq, False, dua

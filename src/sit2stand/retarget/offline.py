@@ -240,7 +240,7 @@ def physics_steps_due(commands: int, dt: float, timestep_s: float, taken: int) -
 
 
 def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3.0,
-              stabiliser: ComStabiliser | None = None, controller: str = "inverse_dynamics") -> tuple[list, dict]:
+              stabiliser: ComStabiliser | None = None, *, controller: str) -> tuple[list, dict]:
     """Drive the plant with the player's commands (PD + inverse-dynamics feed-forward), pulled one per frame period
     with the robot's lag behind the plan (the COM feedback's error), then hold the last one. Returns (commands,
     figures). Writes ``simulation.npy``: t, true COM (3), planned COM (3), COP (3), pelvis z, pelvis x, planned

@@ -19,10 +19,10 @@
    COM's x is constrained: with the hips on the seat COM height and COM x are one degree of freedom. After it, COM x and
    y are hard; y ramps to the midline between the feet over ``y_ramp_s``. The COM height is left to the markers,
    above one floor: the pelvis rises ``seat_clearance_m`` clear of its seated height over ``seat_clearance_s`` and
-   stays at least that high (hard) until the human sits back down. The markers alone kept a fast rise's hips at the
-   seat's height for 0.5 s after the plan's seat-off, then 4 mm into it: the simulated robot's hips bounced on the
-   seat (0-750 N) while the plan had it on its feet, and at a 200 Hz capture it fell. Over the seat's front edge a
-   thigh rises about a quarter as much as the pelvis (it turns about the knee): 1 cm of pelvis still bounced.
+   stays at least that high (hard) until the human sits back down: the markers alone can keep the hips at the
+   seat's height, or dip them into it, after the plan has the robot on its feet, and the robot's hips then bounce on
+   the seat. 2 cm because over the seat's front edge a thigh rises only about a quarter as much as the pelvis (it
+   turns about the knee). Measured in docs/results.md (session 20).
 3. **IK** (:class:`sit2stand.retarget.ik.ComIk`): markers soft (weights by body part), COM and feet hard, joint and
    speed limits; warm-started from the previous frame.
 
@@ -158,9 +158,8 @@ class RetargetConfig:
     y_ramp_s: float = 0.5
     hip_release_s: float = 0.4            # the hips' hold on the seat fades out over this after seat-off
     seat_clearance_m: float = 0.02        # after the robot's seat-off its pelvis stays at least this far above its
-    seat_clearance_s: float = 0.3         # seated height, reached along a smoothstep over this [s]: hips that have
-    #                                       left the seat in the plan must leave it on the robot (a fast rise's
-    #                                       markers kept them at the seat's height, then 4 mm into it, for 0.5 s)
+    #                                       seated height: hips the plan has taken off the seat must be off it
+    seat_clearance_s: float = 0.3         # ... reached along a smoothstep over this [s of human time]
     iterations: int = 2                   # Gauss-Newton steps per frame (warm-started from the previous frame)
     qp_tolerance: float = 1e-6            # proxsuite eps_abs of each step's QP
     damping: float = 0.1                  # Levenberg-Marquardt damping of each Gauss-Newton step: with less, the
@@ -371,7 +370,7 @@ class Retargeter:
         if not self.seated:
             fade = (t_s - self._t_off) / max(cfg.hip_release_s, 1e-9)
             weight = 1e4 * (1.0 - min(1.0, fade)) ** 2 if fade < 1.0 else None
-            lift = 0.0 if self.sat_down else self._seat_clearance(t_s)
+            lift = 0.0 if self.sat_down else self.seat_clearance(t_s)
             z_min = None if self.sat_down else self.base_seated[2] + lift
             hold = self.base_seated + [0.0, 0.0, lift] if weight is not None else None
         q_ref = np.where(self.held_to_seated, robot.q_seated, self.q)
@@ -384,8 +383,9 @@ class Retargeter:
         return RetargetFrame(t_s, res.q, target, axes, self.data.com[0].copy(), self.seated or self.sat_down,
                              self.human_seat_off, res, markers)
 
-    def _seat_clearance(self, t_s: float) -> float:
-        """How far above its seated height the pelvis must be at ``t_s`` [s], after the robot's seat-off [m]."""
+    def seat_clearance(self, t_s: float) -> float:
+        """How far above its seated height the pelvis must be at ``t_s`` [s] after the robot's seat-off [m]
+        (``seat_clearance_m`` along a smoothstep over ``seat_clearance_s``)."""
         ramp = min(1.0, max(0.0, (t_s - self._t_off) / max(self.cfg.seat_clearance_s, 1e-9)))
         return self.cfg.seat_clearance_m * ramp * ramp * (3 - 2 * ramp)
 

@@ -38,11 +38,11 @@ with an inverse-dynamics feed-forward along the plan, or whole-body torque contr
 (:mod:`sit2stand.robot.torque_control`)."""
 DEFAULT_CONTROLLER = "wbc"
 """The controller a stand-up is simulated with unless told otherwise (``sit2stand retarget --simulate``,
-``make bench-standup``, the stand-up graph): whole-body torque control. Once the plan lifts the hips clear of the seat
-at its seat-off (``RetargetConfig.seat_clearance_m``), joint PD, which had leaned on the seat it still touched, tracked
-the 30-body population at 1.19 / 1.60 / 2.06 cm (median / p90 / max), its torque demand 4-7x the limits; torque
-control at 0.45 / 0.71 / 0.84 cm within them (docs/results.md, session 20). The driver node's own default stays joint
-PD (the identification and replay graphs pose the robot with it)."""
+``make bench-standup``, the stand-up and live graphs): whole-body torque control. With the plan's hips lifted clear of
+the seat at its seat-off (``RetargetConfig.seat_clearance_m``), joint PD, which had leaned on the seat it still
+touched, tracks the population about twice as far from the plan and asks several times its torque limits
+(docs/results.md, session 20). The driver and retargeter nodes' own defaults stay joint PD: the identification and
+replay graphs pose the robot with it."""
 WBC_RATE_HZ = 500.0          # the whole-body torque controller's rate (tsid's TALOS examples run at 1 kHz)
 EXTRAPOLATE_MAX_S = 0.05      # a reference is followed along its velocity for at most this long after its message
 
