@@ -11,10 +11,9 @@ with both feet where the plan has them: the same QP as the retargeting IK (:clas
 with no markers, the COM shifted by ``delta`` as its hard equality, the feet hard, the joint limits, the pelvis no
 lower than the command's, and a posture pull to the command itself (arms and head held). The pelvis bound: a shift
 made by bending the knees would lower the hips the plan has just lifted off the seat (docs/results.md, session 20).
-This is the
-COM-admittance outer loop of position-controlled humanoid stabilisers (e.g. Kajita et al., "Biped walking
-stabilization based on linear inverted pendulum tracking", IROS 2010), here on the COM position and velocity only:
-the driver's joint PD and inverse-dynamics feed-forward stay as they are. ``de/dt`` is low-passed
+This is the COM-admittance outer loop of position-controlled humanoid stabilisers (e.g. Kajita et al., "Biped
+walking stabilization based on linear inverted pendulum tracking", IROS 2010), here on the COM position and velocity
+only: the driver's joint PD and inverse-dynamics feed-forward stay as they are. ``de/dt`` is low-passed
 (``velocity_filter_s``). Without it the loop has too little phase margin: a standing TALOS under joint PD sways with
 a ~2 s period, and an integral gain of 1/s alone made that sway grow until the robot fell (offline re-simulation of
 the natural demonstration).

@@ -131,6 +131,12 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
                       float(np.linalg.norm(knee - hip) + np.linalg.norm(ankle - knee)), label)
 
 
+def smoothstep(u: float) -> float:
+    """3u^2 - 2u^3 of ``u`` clipped to [0, 1]: a ramp from 0 to 1 that starts and ends at rest."""
+    u = min(1.0, max(0.0, u))
+    return u * u * (3 - 2 * u)
+
+
 @dataclass
 class RetargetConfig:
     """Retargeting settings (SI units)."""
@@ -308,7 +314,7 @@ class Retargeter:
             x = x0 + (x1 - x0) * (3 * u**2 - 2 * u**3) + human_com_vx_mps * duration * (u**3 - u**2)
             com = np.array([x, human_com_m[1], human_com_m[2]])
             frames.append(self.step(t0_s - (n - k) * dt, positions_m, valid, com, None,
-                                    marker_weight=u * u * (3 - 2 * u)))
+                                    marker_weight=smoothstep(u)))
             if on_frame is not None:
                 on_frame(frames[-1])
         return frames
@@ -354,9 +360,7 @@ class Retargeter:
             axes = (0,)
         else:
             axes = (0, 1)
-            ramp = min(1.0, (t_s - self._t_off) / max(cfg.y_ramp_s, 1e-9))
-            ramp = ramp * ramp * (3 - 2 * ramp)          # smoothstep
-            target[1] = self._y_off + ramp * (mid_y - self._y_off)
+            target[1] = self._y_off + self._since_seat_off(t_s, cfg.y_ramp_s) * (mid_y - self._y_off)
         # markers: the calibration's similarity (pelvis on pelvis, scaled), fixed for the whole demonstration
         tgt = self.robot_pelvis0 + self.scale * (positions_m - self.human_pelvis0)
         if not self.seated:
@@ -386,8 +390,11 @@ class Retargeter:
     def seat_clearance(self, t_s: float) -> float:
         """How far above its seated height the pelvis must be at ``t_s`` [s] after the robot's seat-off [m]
         (``seat_clearance_m`` along a smoothstep over ``seat_clearance_s``)."""
-        ramp = min(1.0, max(0.0, (t_s - self._t_off) / max(self.cfg.seat_clearance_s, 1e-9)))
-        return self.cfg.seat_clearance_m * ramp * ramp * (3 - 2 * ramp)
+        return self.cfg.seat_clearance_m * self._since_seat_off(t_s, self.cfg.seat_clearance_s)
+
+    def _since_seat_off(self, t_s: float, duration_s: float) -> float:
+        """A 0 -> 1 smoothstep over ``duration_s`` [s] from the robot's seat-off."""
+        return smoothstep((t_s - self._t_off) / max(duration_s, 1e-9))
 
     def _human_touched_down(self, pelvis_m: np.ndarray, chair_force_n: float | None) -> bool:
         """After the rise, has the human sat back down? The chair plate loaded again (over twice the seat-off
