@@ -19,6 +19,7 @@ from live_support import capture_origin_ns, latencies_ms, p50_p99
 from sit2stand.data import plant_path
 from sit2stand.scheduling import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY
 from sit2stand.io.bag import BagReader
+from sit2stand.retarget.pacing import READY_LINE
 
 pytestmark = pytest.mark.graph
 ROOT = Path(__file__).resolve().parents[1]
@@ -105,8 +106,8 @@ def test_the_live_stand_up_runs_with_capture_control_and_robot_on_three_hosts(tm
     }
     try:
         assert _wait_for(tmp_path / "robot.log", "TALOS seated", 120), (tmp_path / "robot.log").read_text()
-        assert _wait_for(tmp_path / "control.log", "/human/com publisher found", 90), \
-            (tmp_path / "control.log").read_text()[-3000:]
+        for line in ("/human/com publisher found", READY_LINE):
+            assert _wait_for(tmp_path / "control.log", line, 90), (tmp_path / "control.log").read_text()[-3000:]
         server = _start(lab["capture"], ["sit2stand.cli", "serve-c3d", str(ROOT / "bags" / "elderly"),
                                          "--host", HOSTS["capture"], "--port", str(PORT)], env, tmp_path / "serve.log",
                         fifo_priority=CAPTURE_STAND_IN_PRIORITY)

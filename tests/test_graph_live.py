@@ -12,6 +12,7 @@ from conftest import GRAPHS, NodeProcess
 from live_support import capture_origin_ns, latencies_ms, p50_p99
 from sit2stand.data import plant_path
 from sit2stand.io.bag import BagReader
+from sit2stand.retarget.pacing import READY_LINE
 from sit2stand.scheduling import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY
 
 pytestmark = pytest.mark.graph
@@ -43,6 +44,7 @@ def test_the_robot_stands_up_from_a_live_qtm_stream_of_the_shipped_elderly_demon
     try:
         assert graph.wait_for_output("TALOS seated", 120), graph.output[-3000:]
         assert graph.wait_for_output("/human/com publisher found", 60), graph.output[-3000:]
+        assert graph.wait_for_output(READY_LINE, 60), graph.output[-3000:]
         assert probe.wait_for_output("probe ready", 30), probe.output
         # the capture system runs on its own PC in a lab; here it shares 2 cores with the graph it feeds, and its
         # frames sent late would count as the graph's latency: it runs in real time, above the graph, where permitted

@@ -46,6 +46,7 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from ..data import plant_path
+from ..human.marker_sets import load_marker_set, rank_marker_sets
 from ..io.messages import plate_sample_from_cdr, stamp_ns
 from ..io.stream_messages import (CenterOfMassEncoder, JointStateEncoder, JointStateReader, JointTrajectoryEncoder,
                                   StampedNumbersEncoder, pose_from_cdr)
@@ -53,7 +54,8 @@ from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBO
                          ROBOT_COM_FEEDBACK_TOPIC, ROBOT_JOINT_COMMAND_TOPIC, ROBOT_JOINT_STATES_TOPIC,
                          ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC, ROBOT_RETARGET_IK_TOPIC, VIZ_MARKERS_TOPIC,
                          WORLD_FRAME, ros_name)
-from ..retarget.pacing import LiveConfig, LiveRetargeting, MarkerFrame, robot_state_current, summary_line
+from ..retarget.pacing import (READY_LINE, LiveConfig, LiveRetargeting, MarkerFrame, robot_state_current,
+                               summary_line)
 from ..retarget.player import (DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S,
                                SEAT_OFF_DWELL_S, SMOOTH_S, Command)
 from ..retarget.stabiliser import StabiliserConfig
@@ -119,6 +121,13 @@ class RetargeterNode(Node):
         except (ValueError, OSError) as err:
             raise NodeError(f"retargeter: plant {self.plant_file}, controller_params "
                             f"{self.params_file or '(CAD)'}: {err}") from None
+        # the marker sets now too: read at the first frame, they held it and the 10 after it up by ~0.1 s
+        try:
+            rank_marker_sets([])
+            if cfg.marker_set:
+                load_marker_set(cfg.marker_set)
+        except ValueError as err:
+            raise NodeError(f"retargeter: marker_set: {err}") from None
         self._subscribe()
         self.cmd_pub = self.create_publisher(JointTrajectory, ros_name(ROBOT_JOINT_COMMAND_TOPIC), PUBLISH_DEPTH)
         self.com_pub = self.create_publisher(CenterOfMass, ros_name(ROBOT_PLANNED_COM_TOPIC), PUBLISH_DEPTH)
@@ -170,10 +179,22 @@ class RetargeterNode(Node):
 
     # -- inputs ------------------------------------------------------------------------------------------------
     def _on_joint_states(self, data: bytes) -> None:
+        first = self.robot_js is None
         self.robot_js, self.robot_rx = data, (time.monotonic(), self.robot_rx[1])
+        if first:
+            self._note_robot_state()
 
     def _on_base_pose(self, data: bytes) -> None:
+        first = self.robot_base is None
         self.robot_base, self.robot_rx = data, (self.robot_rx[0], time.monotonic())
+        if first:
+            self._note_robot_state()
+
+    def _note_robot_state(self) -> None:
+        """Say once that the robot's state is here: the live graph is then ready for the capture to start (a frame
+        before it waits, and its latency counts it)."""
+        if self.robot_js is not None and self.robot_base is not None and self.wait_for_robot:
+            self.get_logger().info(f"{READY_LINE} (the robot's state after {time.monotonic() - self._t_init:.2f} s)")
 
     def _on_chair(self, data: bytes) -> None:
         # 1 kHz, in the real-time process: read the stamp and Fz from the CDR bytes instead of building messages
@@ -224,6 +245,8 @@ class RetargeterNode(Node):
                 return False
             _, positions = self._js_reader.read(self.robot_js)
             q_start, joint_names = self._robot_q(positions), list(self._js_reader.names)
+        waited = f"; the first frames waited {time.monotonic() - self._robot_wait:.2f} s for the robot's state " \
+                 "(they count in the latency)" if self._robot_wait else ""
         try:
             robot = robot_setup(q_start=q_start, start_joint_names=joint_names, prebuilt=self.robot_model)
             marker_map = self.live.start(robot, frame, com)
@@ -236,8 +259,6 @@ class RetargeterNode(Node):
                                                  + self.joint_names, WORLD_FRAME, ("position",))
         if self.map_out:
             marker_map.save(self.map_out)
-        waited = f"; the first frames waited {time.monotonic() - self._robot_wait:.2f} s for the robot's state " \
-                 "(they count in the latency)" if self._robot_wait else ""
         lead = f"; the recording starts after the human's seat-off: a lead-in of {self.live.lead_in_frames} " \
                "frames from the robot's seat" if self.live.lead_in_frames else ""
         self.get_logger().info(f"calibrated on the first frame: {len(marker_map.links)} markers fixed to the robot; "

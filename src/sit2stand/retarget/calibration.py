@@ -197,10 +197,13 @@ def map_frame(t_s: np.ndarray, positions_m: np.ndarray, valid: np.ndarray, seate
                                       f"({window.reason})")
 
 
-def _point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+def _point_segment_distances(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distances [m] from point ``p`` (3,) to the segments from ``a`` to ``b`` (N, 3)."""
     ab = b - a
-    t = 0.0 if ab @ ab < 1e-12 else float(np.clip((p - a) @ ab / (ab @ ab), 0.0, 1.0))
-    return float(np.linalg.norm(p - (a + t * ab)))
+    length2 = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.where(length2 < 1e-12, 1.0, length2), 0.0, 1.0)
+    t[length2 < 1e-12] = 0.0
+    return np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
 
 
 def marker_group(name: str) -> str:
@@ -259,20 +262,27 @@ def calibrate_markers(model: pin.Model, q_robot: np.ndarray, names: list[str], p
     scale = robot_thigh_m / human_thigh_m
     robot_pelvis = data.oMi[1].translation
     bones = _bones(model, data)
+    joint = np.array([b[0] for b in bones])
+    start, end = np.array([b[1] for b in bones]), np.array([b[2] for b in bones])
+    link = np.array([model.names[b[0]] for b in bones])
+    depth = np.array([_depth(model, b[0]) for b in bones])
+    sided = {side: np.char.find(link, side) >= 0 for side in ("left", "right")}
     links, offsets = {}, {}
     for i, name in enumerate(names):
         if not valid[i] or not np.all(np.isfinite(positions_m[i])):
             continue
         p = robot_pelvis + scale * (positions_m[i] - human_pelvis)
         side = roles.sides.get(name)
-        candidates = [b for b in bones if side is None or ("left" not in model.names[b[0]] and "right" not in
-                                                          model.names[b[0]]) or side in model.names[b[0]]]
+        candidates = np.ones(len(bones), bool) if side is None else \
+            ~(sided["left"] | sided["right"]) | sided[side]
         if allowed_links is not None:
-            allowed = set(allowed_links(model, name, roles))
-            candidates = [b for b in candidates if model.names[b[0]] in allowed] or candidates
-        # nearest bone; within 5 mm, the more distal link (a heel marker belongs to the foot, not the shank's end)
-        j = min(candidates, key=lambda b: (round(_point_segment_distance(p, b[1], b[2]) / 0.005),
-                                           -_depth(model, b[0])))[0]
+            allowed = candidates & np.isin(link, list(allowed_links(model, name, roles)))
+            candidates = allowed if allowed.any() else candidates
+        # nearest bone; within 5 mm, the more distal link (a heel marker belongs to the foot, not the shank's end);
+        # the first in the model's order among equals
+        index = np.flatnonzero(candidates)
+        near = np.round(_point_segment_distances(p, start[index], end[index]) / 0.005)
+        j = int(joint[index[np.lexsort((-depth[index], near))[0]]])
         links[name] = model.names[j]
         offsets[name] = data.oMi[j].actInv(p)
     return MarkerMap(links, offsets, scale)

@@ -55,6 +55,9 @@ def robot_state_current(received_ago_s: float, stamped_ago_s: float, sim_time: b
     return stamped_ago_s <= ROBOT_STATE_MAX_DELAY_S and (sim_time or received_ago_s <= ROBOT_STATE_MAX_AGE_S)
 
 
+READY_LINE = "ready for the capture"
+"""What the retargeter node logs once it has the robot's state: a marker frame that comes before it waits for it (the
+calibration overlays the first frame on the robot's measured posture), and that wait counts in its latency."""
 STAMP_TOLERANCE_S = 1e-6
 """Two stamps this close are the same frame's."""
 MAX_CATCH_UP_PERIODS = 5.0
