@@ -293,8 +293,9 @@ class HumanComNode(Node):
             self._enter_real_time()
         if self.estimator.rescale_pending:     # after the frame is out: the re-solve does not delay its COM
             self.estimator.rescale_pending = False
+            t0 = time.perf_counter()
             if self.estimator.rescale() is not None:
-                self._publish_scaling(msg.header)
+                self._publish_scaling(msg.header, time.perf_counter() - t0)
 
     def _enter_real_time(self) -> None:
         """Real time once the live calibration (a pause of 1-2 s that at real-time priority would starve the
@@ -349,7 +350,7 @@ class HumanComNode(Node):
         self.viz_pub.publish(human_markers(header.stamp, markers_m, self.last_com, cop_stamp, out.measured_cop_m,
                                            out.model_cop_m))
 
-    def _publish_scaling(self, header) -> None:
+    def _publish_scaling(self, header, solve_s: float | None = None) -> None:
         sc = self.estimator.scaling
         if sc is not None:
             names = [f"{g}.mass" for g in sc.masses] + ["torso.com_shift_x", "torso.com_shift_y"]
@@ -358,7 +359,8 @@ class HumanComNode(Node):
                                                         names=names,
                                                         values=[float(v) for v in values],
                                                         std_devs=[float("nan")] * len(values)))
-            self.get_logger().info("scaling: " + ", ".join(f"{g} x{f:.2f}" for g, f in sc.factors().items()))
+            took = f" (solved in {solve_s * 1e3:.0f} ms)" if solve_s is not None else ""
+            self.get_logger().info("scaling: " + ", ".join(f"{g} x{f:.2f}" for g, f in sc.factors().items()) + took)
 
     def _stats(self) -> dict[str, str]:
         c = np.array(self.costs[-2000:]) * 1e3

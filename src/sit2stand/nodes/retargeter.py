@@ -238,7 +238,7 @@ class RetargeterNode(Node):
 
     def _start(self, frame: MarkerFrame, com: np.ndarray) -> bool:
         """Calibrate on the first ready frame, over the robot's measured posture (False: wait for it)."""
-        q_start, joint_names = None, None
+        q_start, joint_names, began = None, None, time.perf_counter()
         if self.wait_for_robot:
             if self.robot_js is None or self.robot_base is None:
                 self._robot_wait = self._robot_wait or time.monotonic()
@@ -261,7 +261,8 @@ class RetargeterNode(Node):
             marker_map.save(self.map_out)
         lead = f"; the recording starts after the human's seat-off: a lead-in of {self.live.lead_in_frames} " \
                "frames from the robot's seat" if self.live.lead_in_frames else ""
-        self.get_logger().info(f"calibrated on the first frame: {len(marker_map.links)} markers fixed to the robot; "
+        self.get_logger().info(f"calibrated on the first frame in {(time.perf_counter() - began) * 1e3:.0f} ms: "
+                               f"{len(marker_map.links)} markers fixed to the robot; "
                                f"leg-length scale {self.live.retargeter.scale:.3f}{waited}{lead}")
         return True
 
