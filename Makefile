@@ -7,7 +7,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export RCUTILS_COLORIZED_OUTPUT ?= 0
 SOAK_MIN ?= 2
 
-.PHONY: setup demo test test-fast lint bench bench-gap bench-gap-human bench-retarget bench-human bench-capture bench-standup bench-faults lock clean
+.PHONY: setup demo test test-fast lint bench bench-gap bench-gap-human bench-retarget bench-human bench-capture bench-live bench-standup bench-faults lock clean
 
 setup:            ## create .venv (pinned wheels, ROS 2 Jazzy), build msgs/, install src/ (idempotent)
 	@ros_ws/bootstrap.sh
@@ -42,6 +42,9 @@ bench-human: setup  ## the human COM on the real lab recordings of ../shared/dat
 
 bench-capture: setup  ## the mocap bridge 10 min at 200 Hz against serve-c3d: frames lost, memory growth, latency; merged into bench.json
 	@$(PY) -m sit2stand.bench_capture --out bench/results/bench.json
+
+bench-live: setup     ## the live stand-up (serve-c3d -> bridge -> estimator -> retargeter -> robot) 5 times: capture -> markers / COM / joint command p50, p99; bench/results/live.json
+	@$(PY) -m sit2stand.bench_live --out bench/results/live.json
 
 bench-standup: setup  ## 30 digital humans (stature, mass, seat, natural/elderly/fast) retargeted and simulated: success, time scale, COM, torque; bench/results/standup/
 	@$(PY) -m sit2stand.bench_standup --out bench/results/standup $(BENCH_STANDUP_ARGS)

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from conftest import GRAPHS, try_fifo
-from live_support import capture_origin_ns, latencies_ms, p50_p99
+from sit2stand.capture.latency import capture_origin_ns, latencies_ms, p50_p99
 from sit2stand.data import plant_path
 from sit2stand.scheduling import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY
 from sit2stand.io.bag import BagReader
@@ -23,7 +23,6 @@ from sit2stand.retarget.pacing import READY_LINE
 
 pytestmark = pytest.mark.graph
 ROOT = Path(__file__).resolve().parents[1]
-HERE = Path(__file__).resolve().parent
 HOSTS = {"capture": "10.77.0.1", "control": "10.77.0.2", "robot": "10.77.0.3"}
 PORT = 22223
 
@@ -88,7 +87,7 @@ def test_the_live_stand_up_runs_with_capture_control_and_robot_on_three_hosts(tm
     # UDP only: the namespaces share /dev/shm, and Fast DDS would otherwise pass samples through shared memory,
     # past the virtual network (separate machines have no shared memory to take)
     env = {**ros_env, "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_STATIC_PEERS": ";".join(HOSTS.values()),
-           "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4", "PYTHONPATH": str(HERE)}
+           "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
     out, probe_out = tmp_path / "run", tmp_path / "latency.json"
     graph = str(GRAPHS / "live.yaml")
     common = [f"plant:={plant_path('cad')}", f"calibration:={calibration}"]
@@ -101,7 +100,8 @@ def test_the_live_stand_up_runs_with_capture_control_and_robot_on_three_hosts(tm
         "capture": _start(lab["capture"], ["sit2stand.cli", "launch", graph,
                                            f"capture_host:={HOSTS['capture']}", f"capture_port:={PORT}", "--host",
                                            "capture", "--timeout", "200"], env, tmp_path / "capture.log"),
-        "probe": _start(lab["robot"], ["latency_probe", str(probe_out), "/mocap/markers", "/robot/retarget/ik"],
+        "probe": _start(lab["robot"], ["sit2stand.nodes.latency_probe", str(probe_out), "/mocap/markers",
+                                       "/robot/retarget/ik"],
                         env, tmp_path / "probe.log", fifo_priority=OBSERVER_PRIORITY),
     }
     try:

@@ -1,0 +1,213 @@
+"""`make bench-live`: the live stand-up's latency over several runs on one machine (issue 19's figures; not a test).
+
+    python -m sit2stand.bench_live [--runs 5] [--out bench/results/live.json]
+
+Each run is :func:`run_live`: the live graph (``live.yaml``: mocap_bridge -> human_com -> retargeter -> driver ->
+recorder; CAD plant; the skeleton calibrated beforehand with ``human-calibrate``, so the estimator runs in real time
+from its first frame) is started alone; once the retargeter is ready for the capture, a latency probe
+(:mod:`sit2stand.nodes.latency_probe`) and ``serve-c3d bags/elderly`` (QTM's protocol, 100 Hz, 531 frames) start,
+both in real time above the graph where permitted (a capture PC and an observer are machines of their own; late
+on a shared one, their lateness would count as the graph's). Latencies are from each frame's capture time (serve-c3d's
+clock origin + frame / rate) to DDS's reception at the probe (:mod:`sit2stand.capture.latency`) of the frame's
+``/mocap/markers``, its ``/human/com`` and its IK pose on ``/robot/retarget/ik``, published right after the frame's
+joint command. Targets (issue 19): capture -> markers p99 2 ms, capture -> joint command p99 10 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .capture.latency import capture_origin_ns, latencies_ms, p50_p99
+from .data import folder, plant_path
+from .io.bag import BagReader
+from .io.topics import HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_RETARGET_IK_TOPIC
+from .retarget.pacing import READY_LINE
+from .scheduling import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY, Scheduling
+
+ROOT = Path(__file__).resolve().parents[2]
+RATE_HZ = 100.0
+MARKERS_P99_TARGET_MS = 2.0
+COMMAND_P99_TARGET_MS = 10.0
+TOPICS = (MARKERS_TOPIC, HUMAN_COM_TOPIC, ROBOT_RETARGET_IK_TOPIC)
+
+
+class LiveRunError(RuntimeError):
+    """A live run that did not get as far as its figures; the message ends with the logs' tails."""
+
+
+@dataclass
+class LiveRun:
+    """One live stand-up: latencies [ms] per topic (one per frame), the graph's exit code and log, and the pelvis
+    height [m] at the recording's start and end."""
+
+    latencies_ms: dict[str, np.ndarray]
+    exit_code: int
+    log: str
+    pelvis_z_m: tuple[float, float] = (float("nan"), float("nan"))
+    logs: dict[str, Path] = field(default_factory=dict)
+
+    @property
+    def stood_up(self) -> bool:
+        """The pelvis went from seated (below 0.65 m) to standing (above 0.85 m) and the driver saw no fall."""
+        z0, z1 = self.pelvis_z_m
+        return "FALLEN" not in self.log and z0 < 0.65 and z1 > 0.85
+
+    def figures(self) -> dict[str, float]:
+        out = {"stood_up": float(self.stood_up), "frames": float(len(self.latencies_ms[MARKERS_TOPIC]))}
+        for topic, key in zip(TOPICS, ("markers", "human_com", "command")):
+            values = self.latencies_ms[topic]
+            out[f"capture_to_{key}_p50_ms"] = float(np.percentile(values, 50))
+            out[f"capture_to_{key}_p99_ms"] = float(np.percentile(values, 99))
+        return out
+
+
+def _start(args: list[str], env: dict[str, str], log: Path, fifo_priority: int | None = None) -> subprocess.Popen:
+    """``python -m args`` with its output in ``log``; in real time at ``fifo_priority`` where permitted."""
+    with open(log, "wb") as f:
+        return subprocess.Popen([sys.executable, "-m", *args], env=env, stdout=f, stderr=subprocess.STDOUT,
+                                stdin=subprocess.DEVNULL, preexec_fn=None if fifo_priority is None else
+                                lambda: Scheduling("fifo", fifo_priority).try_apply(0))
+
+
+def _wait_for(log: Path, text: str, proc: subprocess.Popen, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if text in log.read_text(errors="replace"):
+            return True
+        if proc.poll() is not None:
+            return text in log.read_text(errors="replace")
+        time.sleep(0.05)
+    return False
+
+
+def _tails(logs: dict[str, Path]) -> str:
+    return "".join(f"\n--- {name} ---\n{path.read_text(errors='replace')[-3000:]}" for name, path in logs.items()
+                   if path.exists())
+
+
+def run_live(work: Path, env: dict[str, str], calibration: Path, demonstration: Path | None = None,
+             plant: str | Path | None = None, graph_args: tuple[str, ...] = ()) -> LiveRun:
+    """One live stand-up (see the module docstring) in ``work`` (its logs, probe record and bag); ``calibration``:
+    the skeleton's (``human-calibrate``); ``demonstration``: what serve-c3d serves (default the shipped elderly
+    rise); ``plant``: default the CAD plant; ``graph_args``: more of the graph's ``name:=value`` arguments.
+
+    Raises:
+        LiveRunError: a process did not start, hung or failed before the figures (the logs' tails attached).
+    """
+    demonstration = demonstration or ROOT / "bags" / "elderly"
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    logs = {name: work / f"{name}.log" for name in ("launch", "probe", "serve")}
+    record = work / "latency.json"
+    graph = _start(["sit2stand.cli", "launch", str(folder("graphs") / "live.yaml"), f"out:={work / 'run'}",
+                    f"plant:={plant or plant_path('cad')}", f"capture_port:={port}", f"calibration:={calibration}",
+                    "estimator_policy:=fifo", *graph_args, "--timeout", "200"], env, logs["launch"])
+    probe = server = None
+    try:
+        for line in ("TALOS seated", f"{HUMAN_COM_TOPIC} publisher found", READY_LINE):
+            if not _wait_for(logs["launch"], line, graph, 120):
+                raise LiveRunError(f"the live graph did not log {line!r}{_tails(logs)}")
+        probe = _start(["sit2stand.nodes.latency_probe", str(record), *TOPICS], env, logs["probe"], OBSERVER_PRIORITY)
+        if not _wait_for(logs["probe"], "probe ready", probe, 30):
+            raise LiveRunError(f"the latency probe did not start{_tails(logs)}")
+        server = _start(["sit2stand.cli", "serve-c3d", str(demonstration), "--port", str(port), "--host",
+                         "127.0.0.1"], env, logs["serve"], CAPTURE_STAND_IN_PRIORITY)
+        server.wait(120)
+        code = graph.wait(240)
+    except subprocess.TimeoutExpired:
+        raise LiveRunError(f"a process of the live run hung{_tails(logs)}") from None
+    finally:
+        if probe is not None and probe.poll() is None:
+            probe.send_signal(signal.SIGINT)
+            probe.wait(30)
+        for p in (graph, server):
+            if p is not None and p.poll() is None:
+                p.kill()
+                p.wait(10)
+    log = logs["launch"].read_text(errors="replace")
+    try:
+        origin = capture_origin_ns(logs["serve"].read_text(errors="replace"))
+        lat = {t: latencies_ms(record, t, origin, RATE_HZ) for t in TOPICS}
+    except (OSError, ValueError, KeyError, IndexError) as err:
+        raise LiveRunError(f"no latency figures ({err}){_tails(logs)}") from None
+    z = (float("nan"), float("nan"))
+    if (work / "run").exists():
+        with BagReader(work / "run") as bag:
+            heights = [m.pose.position.z for _, m in bag.read(ROBOT_BASE_POSE_TOPIC)]
+        z = (heights[0], heights[-1]) if heights else z
+    return LiveRun(lat, code, log, z, logs)
+
+
+def bench_env() -> dict[str, str]:
+    """This process's environment on a ROS domain of the benchmark's own, discovery on this machine only."""
+    return dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "92"),
+                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", FASTDDS_BUILTIN_TRANSPORTS="UDPv4",
+                PYTHONUNBUFFERED="1")
+
+
+def summary(runs: list[dict[str, float]]) -> dict[str, float]:
+    """The runs' figures pooled: each p99's median and worst, how many runs met the targets, and the ratios."""
+    out: dict[str, float] = {"runs": float(len(runs)), "stood_up": float(sum(r["stood_up"] for r in runs))}
+    for key in ("markers", "human_com", "command"):
+        p99 = np.array([r[f"capture_to_{key}_p99_ms"] for r in runs])
+        out[f"capture_to_{key}_p50_ms_median"] = float(np.median([r[f"capture_to_{key}_p50_ms"] for r in runs]))
+        out[f"capture_to_{key}_p99_ms_median"] = float(np.median(p99))
+        out[f"capture_to_{key}_p99_ms_max"] = float(p99.max())
+    marker_p99 = np.array([r["capture_to_markers_p99_ms"] for r in runs])
+    command_p99 = np.array([r["capture_to_command_p99_ms"] for r in runs])
+    out["runs_markers_p99_within_target"] = float((marker_p99 <= MARKERS_P99_TARGET_MS).sum())
+    out["runs_command_p99_within_target"] = float((command_p99 <= COMMAND_P99_TARGET_MS).sum())
+    out["command_p99_median_vs_10ms_target"] = float(np.median(command_p99)) / COMMAND_P99_TARGET_MS
+    out["markers_p99_median_vs_2ms_target"] = float(np.median(marker_p99)) / MARKERS_P99_TARGET_MS
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="sit2stand.bench_live", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--runs", type=int, default=5)
+    parser.add_argument("--out", type=Path, default=Path("bench/results/live.json"))
+    args = parser.parse_args(argv)
+    env = bench_env()
+    runs: list[dict[str, float]] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        calibration = Path(tmp) / "calibration.yaml"
+        subprocess.run([sys.executable, "-m", "sit2stand.cli", "human-calibrate", str(ROOT / "bags" / "elderly"),
+                        "--out", str(calibration)], check=True, env=env, capture_output=True, timeout=300)
+        print(f"bench-live: {args.runs} live stand-ups of bags/elderly over QTM's protocol, CAD plant", flush=True)
+        for i in range(args.runs):
+            work = Path(tmp) / f"run{i}"
+            work.mkdir()
+            try:
+                run = run_live(work, env, calibration)
+            except LiveRunError as err:
+                print(f"run {i}: failed: {err}", flush=True)
+                continue
+            runs.append(run.figures())
+            print(f"run {i}: {'stood' if run.stood_up else 'DID NOT STAND'}; " + "; ".join(
+                f"capture -> {t} {p50_p99(run.latencies_ms[t])}" for t in TOPICS), flush=True)
+    if not runs:
+        print("bench-live: no run got as far as its figures", file=sys.stderr)
+        return 1
+    result = {"runs": runs, "summary": summary(runs)}
+    print(json.dumps(result["summary"], indent=2))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=2))
+    print(f"written to {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

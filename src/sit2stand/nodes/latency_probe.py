@@ -1,0 +1,60 @@
+"""An observer for latency measurements (tests and benchmarks), not part of a graph: records, per message of the
+given topics, its header stamp and when DDS received it (the sample's ``received_timestamp``, CLOCK_REALTIME: the
+clock serve-c3d prints its capture origin on; not when this process's executor got round to the callback), and
+writes them as JSON (``{topic: [[stamp_ns, received_ns], ...]}``) at SIGINT or SIGTERM.
+
+    python -m sit2stand.nodes.latency_probe OUT.json /mocap/markers /human/com /robot/retarget/ik
+
+It prints "probe ready" once subscribed. :mod:`sit2stand.capture.latency` turns the record into latencies.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import sys
+
+import rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from sit2stand_msgs.msg import CenterOfMass, MocapFrame
+
+from ..io.topics import HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_RETARGET_IK_TOPIC
+
+READY = "probe ready"
+TYPES = {MARKERS_TOPIC: MocapFrame, HUMAN_COM_TOPIC: CenterOfMass, ROBOT_RETARGET_IK_TOPIC: JointState}
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else argv
+    if len(args) < 2 or any(t not in TYPES for t in args[1:]):
+        print(f"usage: latency_probe OUT.json TOPIC... (topics: {', '.join(TYPES)})", file=sys.stderr)
+        return 2
+    out, topics = args[0], args[1:]
+    rclpy.init()
+    node = rclpy.create_node("latency_probe")
+    seen: dict[str, list[tuple[int, int]]] = {t: [] for t in topics}
+
+    def on(topic):
+        def cb(msg, info):
+            seen[topic].append((msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec,
+                                info["received_timestamp"]))
+        return cb
+
+    for t in topics:
+        node.create_subscription(TYPES[t], t, on(t), QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+    stop = []
+    signal.signal(signal.SIGINT, lambda *_: stop.append(1))
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
+    print(READY, flush=True)
+    while not stop:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    with open(out, "w") as f:
+        json.dump(seen, f)
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
