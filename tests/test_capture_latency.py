@@ -33,7 +33,7 @@ def test_each_frame_is_timed_from_its_own_capture_time_found_by_its_stamp(tmp_pa
 def test_the_benchmark_counts_the_runs_that_met_each_target():
     run = {"stood_up": 1.0, "capture_to_markers_p50_ms": 0.8, "capture_to_human_com_p50_ms": 3.0,
            "capture_to_command_p50_ms": 4.0, "capture_to_markers_p99_ms": 1.2, "capture_to_human_com_p99_ms": 6.0,
-           "capture_to_command_p99_ms": 7.0}
+           "capture_to_command_p99_ms": 7.0, "com_tracking_rms_cm": 0.8}
     late = {**run, "stood_up": 0.0, "capture_to_markers_p99_ms": 2.5, "capture_to_command_p99_ms": 19.0}
     s = summary([run, run, late])
     assert s["runs"] == 3 and s["stood_up"] == 2

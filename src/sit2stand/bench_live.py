@@ -31,9 +31,9 @@ import numpy as np
 
 from .capture.latency import capture_origin_ns, latencies_ms, p50_p99
 from .data import folder, plant_path
-from .io.bag import BagReader
-from .io.topics import HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_RETARGET_IK_TOPIC
+from .io.topics import HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_RETARGET_IK_TOPIC
 from .retarget.pacing import READY_LINE
+from .retarget.report import analyse
 from .scheduling import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY, Scheduling
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -49,23 +49,23 @@ class LiveRunError(RuntimeError):
 
 @dataclass
 class LiveRun:
-    """One live stand-up: latencies [ms] per topic (one per frame), the graph's exit code and log, and the pelvis
-    height [m] at the recording's start and end."""
+    """One live stand-up: latencies [ms] per topic (one per frame), the graph's exit code and log, and the recording's
+    analysis (:func:`sit2stand.retarget.report.analyse`: stood up, fallen, pelvis heights, COM tracking)."""
 
     latencies_ms: dict[str, np.ndarray]
     exit_code: int
     log: str
-    pelvis_z_m: tuple[float, float] = (float("nan"), float("nan"))
+    report: dict = field(default_factory=dict)
     logs: dict[str, Path] = field(default_factory=dict)
 
     @property
     def stood_up(self) -> bool:
-        """The pelvis went from seated (below 0.65 m) to standing (above 0.85 m) and the driver saw no fall."""
-        z0, z1 = self.pelvis_z_m
-        return "FALLEN" not in self.log and z0 < 0.65 and z1 > 0.85
+        """Stood up by the recording (the stand-up graph's verdict) and no fall seen by the driver."""
+        return bool(self.report.get("stood_up")) and "FALLEN" not in self.log
 
     def figures(self) -> dict[str, float]:
-        out = {"stood_up": float(self.stood_up), "frames": float(len(self.latencies_ms[MARKERS_TOPIC]))}
+        out = {"stood_up": float(self.stood_up), "frames": float(len(self.latencies_ms[MARKERS_TOPIC])),
+               "com_tracking_rms_cm": float(self.report.get("com_tracking_rms_m", np.nan)) * 100}
         for topic, key in zip(TOPICS, ("markers", "human_com", "command")):
             values = self.latencies_ms[topic]
             out[f"capture_to_{key}_p50_ms"] = float(np.percentile(values, 50))
@@ -143,12 +143,11 @@ def run_live(work: Path, env: dict[str, str], calibration: Path, demonstration: 
         lat = {t: latencies_ms(record, t, origin, RATE_HZ) for t in TOPICS}
     except (OSError, ValueError, KeyError, IndexError) as err:
         raise LiveRunError(f"no latency figures ({err}){_tails(logs)}") from None
-    z = (float("nan"), float("nan"))
-    if (work / "run").exists():
-        with BagReader(work / "run") as bag:
-            heights = [m.pose.position.z for _, m in bag.read(ROBOT_BASE_POSE_TOPIC)]
-        z = (heights[0], heights[-1]) if heights else z
-    return LiveRun(lat, code, log, z, logs)
+    try:
+        report = analyse(work / "run", demonstration.stem, None, Path(plant or plant_path("cad"))).summary
+    except (OSError, ValueError, IndexError) as err:
+        raise LiveRunError(f"the run's recording cannot be analysed ({err}){_tails(logs)}") from None
+    return LiveRun(lat, code, log, report, logs)
 
 
 def bench_env() -> dict[str, str]:
@@ -166,6 +165,9 @@ def summary(runs: list[dict[str, float]]) -> dict[str, float]:
         out[f"capture_to_{key}_p50_ms_median"] = float(np.median([r[f"capture_to_{key}_p50_ms"] for r in runs]))
         out[f"capture_to_{key}_p99_ms_median"] = float(np.median(p99))
         out[f"capture_to_{key}_p99_ms_max"] = float(p99.max())
+    tracking = np.array([r["com_tracking_rms_cm"] for r in runs])
+    out["com_tracking_rms_cm_median"] = float(np.median(tracking))
+    out["com_tracking_rms_cm_max"] = float(tracking.max())
     marker_p99 = np.array([r["capture_to_markers_p99_ms"] for r in runs])
     command_p99 = np.array([r["capture_to_command_p99_ms"] for r in runs])
     out["runs_markers_p99_within_target"] = float((marker_p99 <= MARKERS_P99_TARGET_MS).sum())
@@ -196,7 +198,8 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"run {i}: failed: {err}", flush=True)
                 continue
             runs.append(run.figures())
-            print(f"run {i}: {'stood' if run.stood_up else 'DID NOT STAND'}; " + "; ".join(
+            print(f"run {i}: {'stood' if run.stood_up else 'DID NOT STAND'}; COM tracking "
+                  f"{run.report.get('com_tracking_rms_m', np.nan) * 100:.2f} cm; " + "; ".join(
                 f"capture -> {t} {p50_p99(run.latencies_ms[t])}" for t in TOPICS), flush=True)
     if not runs:
         print("bench-live: no run got as far as its figures", file=sys.stderr)
