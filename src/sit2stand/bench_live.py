@@ -1,6 +1,6 @@
 """`make bench-live`: the live stand-up's latency over several runs on one machine (issue 19's figures; not a test).
 
-    python -m sit2stand.bench_live [--runs 5] [--out bench/results/live.json]
+    python -m sit2stand.bench_live [--runs 5] [--protocol qtm|natnet] [--out bench/results/live.json]
 
 Each run is :func:`run_live`: the live graph (``live.yaml``: mocap_bridge -> human_com -> retargeter -> driver ->
 recorder; CAD plant; the skeleton calibrated beforehand with ``human-calibrate``, so the estimator runs in real time
@@ -98,23 +98,25 @@ def _tails(logs: dict[str, Path]) -> str:
 
 
 def run_live(work: Path, env: dict[str, str], calibration: Path, demonstration: Path | None = None,
-             plant: str | Path | None = None, graph_args: tuple[str, ...] = ()) -> LiveRun:
+             plant: str | Path | None = None, graph_args: tuple[str, ...] = (), protocol: str = "qtm") -> LiveRun:
     """One live stand-up (see the module docstring) in ``work`` (its logs, probe record and bag); ``calibration``:
     the skeleton's (``human-calibrate``); ``demonstration``: what serve-c3d serves (default the shipped elderly
-    rise); ``plant``: default the CAD plant; ``graph_args``: more of the graph's ``name:=value`` arguments.
+    rise); ``plant``: default the CAD plant; ``graph_args``: more of the graph's ``name:=value`` arguments;
+    ``protocol``: serve-c3d's and the bridge's (qtm, or natnet: markers only, served y up).
 
     Raises:
         LiveRunError: a process did not start, hung or failed before the figures (the logs' tails attached).
     """
     demonstration = demonstration or ROOT / "bags" / "elderly"
-    with socket.socket() as s:
+    with socket.socket(type=socket.SOCK_STREAM if protocol == "qtm" else socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     logs = {name: work / f"{name}.log" for name in ("launch", "probe", "serve")}
     record = work / "latency.json"
     graph = _start(["sit2stand.cli", "launch", str(folder("graphs") / "live.yaml"), f"out:={work / 'run'}",
-                    f"plant:={plant or plant_path('cad')}", f"capture_port:={port}", f"calibration:={calibration}",
-                    "estimator_policy:=fifo", *graph_args, "--timeout", "200"], env, logs["launch"])
+                    f"plant:={plant or plant_path('cad')}", f"protocol:={protocol}", f"capture_port:={port}",
+                    f"calibration:={calibration}", "estimator_policy:=fifo", *graph_args, "--timeout", "200"],
+                   env, logs["launch"])
     probe = server = None
     try:
         for line in ("TALOS seated", f"{HUMAN_COM_TOPIC} publisher found", READY_LINE):
@@ -123,8 +125,8 @@ def run_live(work: Path, env: dict[str, str], calibration: Path, demonstration: 
         probe = _start(["sit2stand.nodes.latency_probe", str(record), *TOPICS], env, logs["probe"], OBSERVER_PRIORITY)
         if not _wait_for(logs["probe"], "probe ready", probe, 30):
             raise LiveRunError(f"the latency probe did not start{_tails(logs)}")
-        server = _start(["sit2stand.cli", "serve-c3d", str(demonstration), "--port", str(port), "--host",
-                         "127.0.0.1"], env, logs["serve"], CAPTURE_STAND_IN_PRIORITY)
+        server = _start(["sit2stand.cli", "serve-c3d", str(demonstration), "--protocol", protocol, "--port",
+                         str(port), "--host", "127.0.0.1"], env, logs["serve"], CAPTURE_STAND_IN_PRIORITY)
         server.wait(120)
         code = graph.wait(240)
     except subprocess.TimeoutExpired:
@@ -181,6 +183,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sit2stand.bench_live", description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--out", type=Path, default=Path("bench/results/live.json"))
+    parser.add_argument("--protocol", default="qtm", choices=["qtm", "natnet"],
+                        help="natnet: markers only, served y up (the estimator without plates)")
     args = parser.parse_args(argv)
     env = bench_env()
     runs: list[dict[str, float]] = []
@@ -188,12 +192,13 @@ def main(argv: list[str] | None = None) -> int:
         calibration = Path(tmp) / "calibration.yaml"
         subprocess.run([sys.executable, "-m", "sit2stand.cli", "human-calibrate", str(ROOT / "bags" / "elderly"),
                         "--out", str(calibration)], check=True, env=env, capture_output=True, timeout=300)
-        print(f"bench-live: {args.runs} live stand-ups of bags/elderly over QTM's protocol, CAD plant", flush=True)
+        print(f"bench-live: {args.runs} live stand-ups of bags/elderly over {args.protocol}, CAD plant", flush=True)
         for i in range(args.runs):
             work = Path(tmp) / f"run{i}"
             work.mkdir()
             try:
-                run = run_live(work, env, calibration)
+                run = run_live(work, env, calibration, protocol=args.protocol,
+                               graph_args=("up:=+Y", "plates:=[]") if args.protocol == "natnet" else ())
             except LiveRunError as err:
                 print(f"run {i}: failed: {err}", flush=True)
                 continue
