@@ -12,7 +12,7 @@ from sit2stand.retarget.stabiliser import ComStabiliser, StabiliserConfig
 from sit2stand.retarget.stream import robot_model, robot_setup
 from sit2stand.retarget.pacing import (ROBOT_STATE_MAX_AGE_S, ROBOT_STATE_MAX_DELAY_S, ChairForceTrack, CommandPacer,
                                        HumanComTrack, LatencyLog, LiveConfig, LiveRetargeting, MarkerFrame,
-                                       percentile_text, robot_state_current, summary_line)
+                                       percentile_text, plan_stride, robot_state_current, summary_line)
 
 
 def test_a_frame_uses_its_own_com_estimate():
@@ -206,3 +206,18 @@ def test_after_the_plan_the_held_pose_stays_under_the_com_feedback():
     (q1, off1), (q2, off2) = sent
     assert off1[0] > 0.005 and off2[0] > off1[0], "the robot 1 cm behind: a forward shift, growing (integral)"
     assert np.abs(pin.difference(model, q, q2)).max() > 1e-4, "the held pose itself is moved"
+
+
+def test_a_faster_capture_is_planned_on_every_nth_frame_by_its_stamps():
+    """200 Hz planned at 100 Hz: every other frame, chosen by stamp (a frame lost on the way does not shift the
+    stride); the plan's period is the stride's time; 250 Hz at 100 Hz: every 2nd (125 Hz); 0: every frame."""
+    assert (plan_stride(200.0, 100.0), plan_stride(250.0, 100.0), plan_stride(120.0, 100.0)) == (2, 2, 1)
+    assert plan_stride(200.0, 0.0) == 1 and plan_stride(50.0, 100.0) == 1
+    live = LiveRetargeting(LiveConfig(rate_hz=200.0, max_plan_rate_hz=100.0), send=lambda cmd, offset: 0.0,
+                           measured_q=lambda: None)
+    assert live.plan_period_s == pytest.approx(0.01) and live.pacer.period_s == pytest.approx(0.01)
+    for k in (0, 1, 2, 3, 5, 6, 8):          # frames 4 and 7 lost
+        live.add_frame(MarkerFrame(10.0 + k * 0.005, ["LASI"], np.zeros((1, 3)), np.ones(1, bool), 0.0))
+    assert [round((f.t_s - 10.0) / 0.005) for f in live.frames] == [0, 2, 6, 8]
+    assert live.between_plan_frames == 3
+    assert "frames (and 3 between the plan's)" in summary_line(live.figures())

@@ -19,7 +19,8 @@ the robot trails the plan, which slows the plan). Publishes:
 
 Parameters: ``plant``, ``controller_params`` (identified YAML; empty: CAD), ``margin_m``, ``lookahead_s``,
 ``smooth_s``, ``max_joint_speed``, ``retiming`` (local | uniform), ``seat_off_dwell_s``, ``time_scale`` (0:
-adaptive; else fixed), ``max_time_scale`` (the adaptive one's cap), ``rate_hz``, ``com_wait_s``, ``wait_for_robot``,
+adaptive; else fixed), ``max_time_scale`` (the adaptive one's cap), ``rate_hz``, ``max_plan_rate_hz`` (plan on
+every n-th frame of a faster capture; 0: every frame), ``com_wait_s``, ``wait_for_robot``,
 ``marker_map`` (YAML to write the calibration to), ``hold_s`` (hold the last pose this long after the plan ends,
 in ROS time, then exit; 0: never),
 ``input_timeout_s`` (marker frames waiting this long for a human COM end the node with an error), ``controller``
@@ -72,6 +73,8 @@ def _live_config(node: Node) -> LiveConfig:
     scale = declare(node, "time_scale", 0.0, "0: adaptive retiming; else a fixed time scale")
     return LiveConfig(
         rate_hz=declare(node, "rate_hz", 100.0, "marker rate [Hz]"),
+        max_plan_rate_hz=declare(node, "max_plan_rate_hz", 0.0, "plan on every n-th frame, n the nearest whole "
+                                 "number to rate_hz / this (0: every frame)"),
         margin_m=declare(node, "margin_m", DEFAULT_MARGIN_M, "ZMP margin inside the feet [m]"),
         lookahead_s=declare(node, "lookahead_s", LOOKAHEAD_S, "look-ahead of the retiming [s]"),
         smooth_s=declare(node, "smooth_s", SMOOTH_S, "Savitzky-Golay window of the plan [s]"),
@@ -222,7 +225,7 @@ class RetargeterNode(Node):
         t_s = stamp_ns(msg.header) * 1e-9
         if (wrong_rate := self.rate_check.add(t_s)) is not None:
             raise NodeError(wrong_rate)
-        self.live.frames.append(MarkerFrame(t_s, list(msg.marker_names), pos, np.asarray(msg.valid, bool),
+        self.live.add_frame(MarkerFrame(t_s, list(msg.marker_names), pos, np.asarray(msg.valid, bool),
                                             time.perf_counter(), msg.header))
         self._process()
 

@@ -58,6 +58,12 @@ def robot_state_current(received_ago_s: float, stamped_ago_s: float, sim_time: b
 READY_LINE = "ready for the capture"
 """What the retargeter node logs once it has the robot's state: a marker frame that comes before it waits for it (the
 calibration overlays the first frame on the robot's measured posture), and that wait counts in its latency."""
+def plan_stride(rate_hz: float, max_plan_rate_hz: float) -> int:
+    """Every how many capture frames the live retargeter plans one: the nearest whole number of frames to
+    ``rate_hz / max_plan_rate_hz``, at least 1 (``max_plan_rate_hz`` 0: every frame)."""
+    return max(1, round(rate_hz / max_plan_rate_hz)) if max_plan_rate_hz > 0 else 1
+
+
 STAMP_TOLERANCE_S = 1e-6
 """Two stamps this close are the same frame's."""
 MAX_CATCH_UP_PERIODS = 5.0
@@ -197,6 +203,9 @@ class LiveConfig:
     """The live retargeting's settings (the node's parameters)."""
 
     rate_hz: float = 100.0
+    # plan on every n-th frame, n = round(rate_hz / max_plan_rate_hz) (0: every frame): a 200 Hz capture planned at
+    # 100 Hz halves the retargeter's work; on 2 cores beside the estimator and the robot's loop it ran out of time
+    max_plan_rate_hz: float = 0.0
     margin_m: float = DEFAULT_MARGIN_M
     lookahead_s: float = LOOKAHEAD_S
     smooth_s: float = SMOOTH_S
@@ -229,10 +238,13 @@ class LiveRetargeting:
                  robot_clock: Callable[[], float] = time.monotonic) -> None:
         self.cfg = cfg
         self.send, self.measured_q, self.robot_clock = send, measured_q, robot_clock
+        self.stride = plan_stride(cfg.rate_hz, cfg.max_plan_rate_hz)
+        self.plan_period_s = self.stride / cfg.rate_hz     # the time one planned frame stands for [s]
+        self._first_stamp_s: float | None = None
         self.frames: deque[MarkerFrame] = deque()
         self.coms = HumanComTrack(cfg.com_wait_s)
         self.chair = ChairForceTrack()
-        self.pacer = CommandPacer(cfg.rate_hz)
+        self.pacer = CommandPacer(1.0 / self.plan_period_s)
         self.latency = LatencyLog()
         self.retargeter: Retargeter | None = None
         self.player: PlanPlayer | None = None
@@ -240,6 +252,7 @@ class LiveRetargeting:
         self.model = self.model_data = None       # the robot model (the plan's COM parameters), once started
         self.names: list[str] = []
         self.infeasible = self.skipped = self.processed = self.state_stale = self.lead_in_frames = 0
+        self.between_plan_frames = 0      # frames off the plan's stride, not retargeted
         self.feedback_max_m = 0.0
         self.lag_m = 0.0              # the robot's COM behind the plan's at the last command [m]
         self._last_command_s: float | None = None     # the robot's clock at the last command [s]
@@ -256,21 +269,31 @@ class LiveRetargeting:
         """
         self.retargeter = Retargeter(robot, RetargetConfig(marker_set=self.cfg.marker_set or None))
         marker_map = self.retargeter.calibrate(frame.names, frame.positions_m, frame.valid, com_m,
-                                               frame_period_s=1.0 / self.cfg.rate_hz)
+                                               frame_period_s=self.plan_period_s)
         c = self.cfg
-        self.player = PlanPlayer(robot.model, 1.0 / c.rate_hz, robot.support_xy, margin_m=c.margin_m,
+        self.player = PlanPlayer(robot.model, self.plan_period_s, robot.support_xy, margin_m=c.margin_m,
                                  lookahead_s=c.lookahead_s, smooth_s=c.smooth_s,
                                  fixed_time_scale=c.fixed_time_scale, max_time_scale=c.max_time_scale,
                                  max_joint_speed=c.max_joint_speed, retiming=c.retiming,
                                  seat_off_dwell_s=c.seat_off_dwell_s)
         vx = float(self.coms.velocity_at(frame.t_s)[0])
-        self.lead_in_frames = len(self.retargeter.lead_in(frame.t_s, 1.0 / c.rate_hz, frame.positions_m,
+        self.lead_in_frames = len(self.retargeter.lead_in(frame.t_s, self.plan_period_s, frame.positions_m,
                                                           frame.valid, com_m, vx, on_frame=self._push))
         if com_feedback_applies(c.com_feedback, c.controller):
             self.stabiliser = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, c.stabiliser)
         self.model, self.model_data = robot.model, robot.model.createData()
         self.names = frame.names
         return marker_map
+
+    def add_frame(self, frame: MarkerFrame) -> None:
+        """Queue a received frame if it is on the plan's stride (by its stamp: frames lost on the way do not shift
+        it); the others are counted and left."""
+        if self._first_stamp_s is None:
+            self._first_stamp_s = frame.t_s
+        if round((frame.t_s - self._first_stamp_s) * self.cfg.rate_hz) % self.stride:
+            self.between_plan_frames += 1
+            return
+        self.frames.append(frame)
 
     def _push(self, pose) -> None:
         """A lead-in pose into the plan, as a frame's would go."""
@@ -336,7 +359,7 @@ class LiveRetargeting:
             if measured is not None:
                 q_measured, plan_com = measured[0], self._planned_com_at(measured[1], cmd.com)
             self.state_stale += q_measured is None and cmd.on_feet
-            fix = self.stabiliser.correct(cmd.q, plan_com, q_measured, cmd.on_feet, 1.0 / self.cfg.rate_hz)
+            fix = self.stabiliser.correct(cmd.q, plan_com, q_measured, cmd.on_feet, self.plan_period_s)
             cmd = dataclasses.replace(cmd, q=fix.q)
             offset = fix.offset_m
             self.lag_m = fix.lag_m if q_measured is not None else 0.0
@@ -391,7 +414,8 @@ class LiveRetargeting:
         feedback = f"off{torque_control}" if self.stabiliser is None else (
             f"largest shift {self.feedback_max_m * 100:.1f} cm; {self.state_stale} on-feet commands without a "
             "recent robot state")
-        return {"frames": str(self.processed), "infeasible_frames": str(self.infeasible),
+        return {"frames": str(self.processed), "between_plan_frames": str(self.between_plan_frames),
+                "infeasible_frames": str(self.infeasible),
                 "skipped_frames": str(self.skipped),
                 # the robot's duration over the human's, as sit2stand retarget's summary has it
                 "time_scale": f"{self.player.duration_ratio:.2f}" if self.player else "nan",
@@ -400,7 +424,10 @@ class LiveRetargeting:
 
 def summary_line(f: dict[str, str]) -> str:
     """One line of a run's :meth:`LiveRetargeting.figures` (the node prints it when it stops)."""
-    return (f"{f['frames']} frames, {f['infeasible_frames']} infeasible, {f['skipped_frames']} without a human COM; "
+    between = f" (and {f['between_plan_frames']} between the plan's)" if f.get("between_plan_frames", "0") != "0" \
+        else ""
+    return (f"{f['frames']} frames{between}, {f['infeasible_frames']} infeasible, {f['skipped_frames']} without a "
+            f"human COM; "
             f"time scale {f['time_scale']}; IK p50 {f['ik_p50_ms']} ms p99 {f['ik_p99_ms']} ms; marker->command "
             f"latency p50 {f['latency_p50_ms']} ms p99 {f['latency_p99_ms']} ms (waiting for the human COM "
             f"included); COM->command p50 {f['own_latency_p50_ms']} ms p99 {f['own_latency_p99_ms']} ms; "
