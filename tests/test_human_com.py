@@ -127,7 +127,7 @@ def test_the_streamed_com_velocity_is_as_good_at_200_hz_as_at_100_hz():
     errors = []
     for rate in (100.0, 200.0):
         demo = synthesize(SynthConfig(style="natural", seed=3, marker_rate_hz=rate))
-        _, outputs = stream(demo, rescale_every=100)
+        _, outputs = stream(demo, rescale_every_s=1.0)
         vel = [o.com_vel for o in outputs]
         after = slice(int(rate), None)         # after the calibration's first second
         truth = demo.com_vel[::int(round(demo.config.plate_rate_hz / rate))][: len(vel)]
@@ -184,7 +184,7 @@ def test_a_deferred_rescale_gives_the_same_stream():
     assert np.allclose(np.array(a), np.array(b), atol=1e-12, equal_nan=True)
 
 
-def stream(demo, gap=slice(0, 0), rescale_every=50):
+def stream(demo, gap=slice(0, 0), rescale_every_s=0.5):
     """``demo`` streamed at its marker rate, with every marker NaN and invalid over the frames ``gap``: the
     estimator and each frame's output."""
     markers, valid = demo.markers_m.copy(), demo.marker_valid.copy()
@@ -192,7 +192,7 @@ def stream(demo, gap=slice(0, 0), rescale_every=50):
     rate = demo.config.marker_rate_hz
     step = int(round(demo.config.plate_rate_hz / rate))
     est = StreamingComEstimator(Subject(1.75, demo.human.total_mass), demo.marker_names, rate_hz=rate,
-                                rescale_every=rescale_every)
+                                rescale_every_s=rescale_every_s)
     outputs = []
     for i, t in enumerate(demo.marker_t_s):
         sl = slice(i * step, (i + 1) * step)
@@ -202,9 +202,9 @@ def stream(demo, gap=slice(0, 0), rescale_every=50):
     return est, outputs
 
 
-def stream_com(demo, gap=slice(0, 0), rescale_every=50):
+def stream_com(demo, gap=slice(0, 0), rescale_every_s=0.5):
     """The streamed COM of ``demo`` (see :func:`stream`)."""
-    est, outputs = stream(demo, gap, rescale_every)
+    est, outputs = stream(demo, gap, rescale_every_s)
     return est, np.array([o.com_m for o in outputs])
 
 

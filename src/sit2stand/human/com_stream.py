@@ -28,6 +28,13 @@ from .support import SupportRule, plate_wrench_at
 STREAM_FIT_STEPS = 3
 """Gauss-Newton steps per streamed frame, warm-started from the last two fits. More moved the COM by < 0.01 mm on
 both shipped demonstrations while costing ~0.3 ms each (the first fit gets 40)."""
+FIRST_RESCALE_S = 1.0
+"""The first mass scaling is solved once this much time [s] of supported frames has given its rows (a frame count
+of 100 at 100 Hz: at 200 Hz, 100 frames, half a second of a seated subject, scaled the natural rise's trunk so that
+its COM was up to 40 mm off the truth, 12 mm at 100 Hz), then every ``rescale_every_s``; none before
+``MIN_SCALE_S``."""
+MIN_SCALE_S = 0.3
+RESCALE_EVERY_S = 1.0
 PLATE_HISTORY_S = 2.0
 """Plate samples kept behind the newest marker frame [s]."""
 
@@ -93,18 +100,18 @@ class StreamingComEstimator:
     """
 
     def __init__(self, subject: Subject, marker_names: list[str], *, rate_hz: float = 100.0, window_s: float = WINDOW_S,
-                 calibration_frames: int = 50, rescale_every: int = 100, chair_on_plate: bool = True,
-                 min_frames_to_scale: int = 30, first_rescale: int = 100,
+                 calibration_frames: int = 50, rescale_every_s: float = RESCALE_EVERY_S, chair_on_plate: bool = True,
                  calibration: StreamCalibration | None = None, defer_rescale: bool = False) -> None:
         self.subject = subject
         self.marker_names = list(marker_names)
         self.dt = 1.0 / rate_hz
         self.window = savgol_frames(window_s, self.dt)
         self.calibration_frames = calibration_frames
-        self.rescale_every = rescale_every
+        # the scaling's schedule in rows (one per supported frame), from times: the same seconds at any rate
+        self.rescale_every = max(1, round(rescale_every_s * rate_hz))
         self.chair_on_plate = chair_on_plate
-        self.min_frames_to_scale = min_frames_to_scale
-        self.first_rescale = first_rescale
+        self.min_frames_to_scale = max(1, round(MIN_SCALE_S * rate_hz))
+        self.first_rescale = max(self.min_frames_to_scale, round(FIRST_RESCALE_S * rate_hz))
         self.human = build_human(subject)
         self.ik = MarkerIK(self.human, self.marker_names)   # raises TooFewMarkers early
         self.model = self.human.model

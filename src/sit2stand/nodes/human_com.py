@@ -10,7 +10,7 @@ Subscribes ``/mocap/markers`` (sit2stand_msgs/MocapFrame) and every ``/force_pla
 * ``/human/model_cop`` and ``/human/measured_cop`` (geometry_msgs/PointStamped, lab), half a window (~150 ms)
   behind, stamped with the frame they belong to;
 * ``/human/scaling`` (sit2stand_msgs/InertialParameters, transient local): the segment masses it chose, each
-  time it re-solves them (every ``rescale_every`` frames with plate data);
+  time it re-solves them (every ``rescale_every_s`` of frames with plate data);
 * for RViz and Foxglove, at ``viz_rate_hz`` (50) of marker time: ``/tf`` (lab -> pelvis -> every segment, see
   :mod:`sit2stand.human.description`) and ``/viz/human`` (visualization_msgs/MarkerArray: the frame's markers, the
   COM, both COPs; :func:`sit2stand.nodes.markers.human_markers`); ``/human/robot_description`` (std_msgs/String,
@@ -25,7 +25,7 @@ name or a YAML file, as ``sit2stand human-com --marker-set``; empty: the package
 marker names), ``rate_hz`` (marker rate, 100), ``window_s`` (0.3
 s), ``calibration_frames`` (50: length and marker calibration from the first frames, a pause of ~1 s, several
 under load, that the stream then runs behind), ``calibration_file`` (a calibration made beforehand from a static
-trial, ``sit2stand human-calibrate``: no pause), ``rescale_every`` (250),
+trial, ``sit2stand human-calibrate``: no pause), ``rescale_every_s`` (2.5 s),
 ``chair_on_plate`` (true: every frame with the whole weight on plates is used; false: only after seat-off),
 ``plates`` (names of the plates to expect, e.g. [chair, feet]: frames count only when all have data; default:
 the plates that appear), ``viz_rate_hz`` (50; 0: no /tf nor markers), ``shed_behind_s`` (0: off; live, e.g.
@@ -101,7 +101,8 @@ class HumanComNode(Node):
         self.rate_check = marker_rate_check(self.rate_hz)
         self.window_s = declare(self, "window_s", WINDOW_S, "Savitzky-Golay window [s]")
         self.calibration_frames = declare(self, "calibration_frames", 50, "frames used to calibrate the model")
-        self.rescale_every = declare(self, "rescale_every", 250, "re-solve the masses every N frames with plates")
+        self.rescale_every_s = declare(self, "rescale_every_s", 2.5, "re-solve the masses every this much time [s] "
+                                       "of frames with plates")
         self.chair_on_plate = declare(self, "chair_on_plate", True, "the chair stands on a force plate")
         self.expected_plates = declare(self, "plates", [], "plate names to expect (default: whatever appears)")
         self.fifo_after_calibration = declare(self, "fifo_after_calibration", 0, "once calibrated, run at this "
@@ -221,7 +222,7 @@ class HumanComNode(Node):
             self.subject = dataclasses.replace(self.subject, marker_set=markers)
             self.estimator = StreamingComEstimator(
                 self.subject, names, rate_hz=self.rate_hz, window_s=self.window_s,
-                calibration_frames=self.calibration_frames, rescale_every=self.rescale_every,
+                calibration_frames=self.calibration_frames, rescale_every_s=self.rescale_every_s,
                 chair_on_plate=self.chair_on_plate, calibration=self.calibration, defer_rescale=True)
         except (TooFewMarkers, MarkerSetError) as err:
             self._fail(f"{MARKERS_TOPIC}: {err}")
