@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from sit2stand.bench_live import TOPICS, LiveRunError, run_live
+from sit2stand.bench_live import PROTOCOL_ARGS, TOPICS, LiveRunError, run_live
 from sit2stand.capture.latency import p50_p99
 from sit2stand.io.topics import MARKERS_TOPIC
 
@@ -21,18 +21,13 @@ known gap; the recorder reports them and exits 1, as it must)."""
 ROOT = Path(__file__).resolve().parents[1]
 
 
-# NatNet serves markers only, y up (Motive's default): the bridge is told so, the estimator has no plates (its
-# seat-off and the retargeter's from the pelvis markers, no mass scaling)
-PROTOCOLS = {"qtm": (), "natnet": ("up:=+Y", "plates:=[]")}
-
-
-@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("protocol", PROTOCOL_ARGS)
 def test_the_robot_stands_up_from_a_live_stream_of_the_shipped_elderly_demonstration(tmp_path, ros_env, protocol):
     calibration = tmp_path / "calibration.yaml"
     subprocess.run([sys.executable, "-m", "sit2stand.cli", "human-calibrate", str(ROOT / "bags" / "elderly"),
                     "--out", str(calibration)], check=True, env=ros_env, capture_output=True, timeout=120)
     try:
-        run = run_live(tmp_path, ros_env, calibration, graph_args=PROTOCOLS[protocol], protocol=protocol)
+        run = run_live(tmp_path, ros_env, calibration, graph_args=PROTOCOL_ARGS[protocol], protocol=protocol)
     except LiveRunError as err:
         pytest.fail(str(err))
     log = run.log

@@ -1,6 +1,7 @@
 """sit2stand.retarget.calibration: human markers land on the right robot links; the COM maps by proportions."""
 
 import numpy as np
+import pinocchio as pin
 import pytest
 import yaml
 
@@ -113,3 +114,23 @@ def test_the_marker_map_frame_is_a_seated_one():
     with pytest.raises(ValueError, match=r"--calibration-frame 200: the human is no longer seated there \(the rise "
                                          r"starts at frame 60\)"):
         map_frame(t, pos, valid, 60, given=200)
+
+
+def test_a_marker_on_a_joint_between_two_links_goes_to_the_distal_one_even_when_its_links_are_not_found():
+    """The nearest bone within 5 mm, the more distal link among those: a knee marker exactly at the robot's knee is
+    as near the thigh (which ends there) as the shank (which starts there) and goes to the shank. Links a marker
+    may not have (an ``allowed_links`` naming none of the robot's) fall back to every bone of its side."""
+    robot = robot_setup()
+    model, q = robot.model, robot.q_seated
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    pelvis, knee = data.oMi[1].translation, data.oMi[model.getJointId("leg_left_4_joint")].translation
+    names = ["LASI", "RASI", "LPSI", "RPSI", "LKNE"]
+    # the pelvis markers' mean on the robot's pelvis, and both thighs of one length: a marker lands where it is put
+    positions = np.array([pelvis + [0.1, 0.1, 0.0], pelvis + [0.1, -0.1, 0.0], pelvis + [-0.1, 0.1, 0.0],
+                          pelvis + [-0.1, -0.1, 0.0], knee])
+    valid = np.ones(5, bool)
+    assert calibrate_markers(model, q, names, positions, valid, 0.4, 0.4).links["LKNE"] == "leg_left_4_joint"
+    nowhere = calibrate_markers(model, q, names, positions, valid, 0.4, 0.4, allowed_links=lambda *_: ("none",))
+    assert nowhere.links["LKNE"] == "leg_left_4_joint"
+    assert nowhere.links["LASI"] != nowhere.links["LKNE"]

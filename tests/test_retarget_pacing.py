@@ -213,11 +213,13 @@ def test_a_faster_capture_is_planned_on_every_nth_frame_by_its_stamps():
     stride); the plan's period is the stride's time; 250 Hz at 100 Hz: every 2nd (125 Hz); 0: every frame."""
     assert (plan_stride(200.0, 100.0), plan_stride(250.0, 100.0), plan_stride(120.0, 100.0)) == (2, 2, 1)
     assert plan_stride(200.0, 0.0) == 1 and plan_stride(50.0, 100.0) == 1
-    live = LiveRetargeting(LiveConfig(rate_hz=200.0, max_plan_rate_hz=100.0), send=lambda cmd, offset: 0.0,
+    live = LiveRetargeting(LiveConfig(rate_hz=200.0, plan_rate_hz=100.0), send=lambda cmd, offset: 0.0,
                            measured_q=lambda: None)
     assert live.plan_period_s == pytest.approx(0.01) and live.pacer.period_s == pytest.approx(0.01)
     for k in (0, 1, 2, 3, 5, 6, 8):          # frames 4 and 7 lost
         live.add_frame(MarkerFrame(10.0 + k * 0.005, ["LASI"], np.zeros((1, 3)), np.ones(1, bool), 0.0))
     assert [round((f.t_s - 10.0) / 0.005) for f in live.frames] == [0, 2, 6, 8]
     assert live.between_plan_frames == 3
-    assert "frames (and 3 between the plan's)" in summary_line(live.figures())
+    assert "frames planned (3 between them left out)" in summary_line(live.figures())
+    with pytest.raises(ValueError, match="plan_rate_hz"):
+        plan_stride(200.0, -1.0)

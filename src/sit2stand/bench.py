@@ -127,7 +127,7 @@ def bench_human_com(bag: Path) -> dict[str, float]:
 
     trial = read_trial(bag)
     subject = Subject(trial.height_m, trial.mass_kg, trial.sex)
-    est = StreamingComEstimator(subject, trial.marker_names, rescale_every_s=2.5)
+    est = StreamingComEstimator(subject, trial.marker_names)
     plates = trial.plates
     idx = [0] * len(plates)
     costs = []

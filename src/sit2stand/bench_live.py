@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .capture.latency import capture_origin_ns, latencies_ms, p50_p99
+from .capture.latency import PROBE_READY, capture_origin_ns, latencies_ms, p50_p99
 from .data import folder, plant_path
 from .io.topics import HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_RETARGET_IK_TOPIC
 from .retarget.pacing import READY_LINE
@@ -37,7 +37,9 @@ from .retarget.report import analyse
 from .scheduling import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY, Scheduling
 
 ROOT = Path(__file__).resolve().parents[2]
-RATE_HZ = 100.0
+PROTOCOL_ARGS = {"qtm": (), "natnet": ("up:=+Y", "plates:=[]")}
+"""The live graph's arguments for each protocol: NatNet serves markers only, y up (Motive's default), so the bridge
+is told so and the estimator expects no plates (its seat-off and the retargeter's from the pelvis markers)."""
 MARKERS_P99_TARGET_MS = 2.0
 COMMAND_P99_TARGET_MS = 10.0
 TOPICS = (MARKERS_TOPIC, HUMAN_COM_TOPIC, ROBOT_RETARGET_IK_TOPIC)
@@ -92,64 +94,107 @@ def _wait_for(log: Path, text: str, proc: subprocess.Popen, timeout_s: float) ->
     return False
 
 
+def _wait(proc: subprocess.Popen, name: str, timeout_s: float, logs: dict[str, Path]) -> int:
+    """``proc``'s exit code; LiveRunError naming it when it runs past ``timeout_s``."""
+    try:
+        return proc.wait(timeout_s)
+    except subprocess.TimeoutExpired:
+        raise LiveRunError(f"{name} still running after {timeout_s:g} s{_tails(logs)}") from None
+
+
+def _stop(proc: subprocess.Popen | None, sig: int = signal.SIGKILL) -> None:
+    """Send ``sig`` to a process still running and reap it (killed if it does not go within 30 s)."""
+    if proc is None or proc.poll() is not None:
+        return
+    proc.send_signal(sig)
+    try:
+        proc.wait(30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(10)
+
+
 def _tails(logs: dict[str, Path]) -> str:
     return "".join(f"\n--- {name} ---\n{path.read_text(errors='replace')[-3000:]}" for name, path in logs.items()
                    if path.exists())
 
 
+def _free_port(protocol: str) -> int:
+    """A free local port for serve-c3d: TCP for QTM; for NatNet a UDP port whose next one is free too (its data)."""
+    kind = socket.SOCK_STREAM if protocol == "qtm" else socket.SOCK_DGRAM
+    for _ in range(20):
+        with socket.socket(type=kind) as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+            if protocol == "qtm":
+                return port
+            try:
+                with socket.socket(type=kind) as data:
+                    data.bind(("127.0.0.1", port + 1))
+                return port
+            except OSError:
+                continue
+    raise LiveRunError("no free pair of local UDP ports for NatNet")
+
+
 def run_live(work: Path, env: dict[str, str], calibration: Path, demonstration: Path | None = None,
-             plant: str | Path | None = None, graph_args: tuple[str, ...] = (), protocol: str = "qtm") -> LiveRun:
+             plant: str | Path | None = None, graph_args: tuple[str, ...] = (), protocol: str = "qtm",
+             rate_hz: float = 100.0) -> LiveRun:
     """One live stand-up (see the module docstring) in ``work`` (its logs, probe record and bag); ``calibration``:
     the skeleton's (``human-calibrate``); ``demonstration``: what serve-c3d serves (default the shipped elderly
-    rise); ``plant``: default the CAD plant; ``graph_args``: more of the graph's ``name:=value`` arguments;
-    ``protocol``: serve-c3d's and the bridge's (qtm, or natnet: markers only, served y up).
+    rise), captured at ``rate_hz``; ``plant``: default the CAD plant; ``graph_args``: more of the graph's
+    ``name:=value`` arguments; ``protocol``: serve-c3d's and the bridge's (qtm, or natnet: markers only, served y up:
+    give ``PROTOCOL_ARGS["natnet"]``).
 
     Raises:
         LiveRunError: a process did not start, hung or failed before the figures (the logs' tails attached).
     """
     demonstration = demonstration or ROOT / "bags" / "elderly"
-    with socket.socket(type=socket.SOCK_STREAM if protocol == "qtm" else socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = _free_port(protocol)
     logs = {name: work / f"{name}.log" for name in ("launch", "probe", "serve")}
     record = work / "latency.json"
     graph = _start(["sit2stand.cli", "launch", str(folder("graphs") / "live.yaml"), f"out:={work / 'run'}",
                     f"plant:={plant or plant_path('cad')}", f"protocol:={protocol}", f"capture_port:={port}",
-                    f"calibration:={calibration}", "estimator_policy:=fifo", *graph_args, "--timeout", "200"],
-                   env, logs["launch"])
+                    f"rate_hz:={rate_hz:g}", f"calibration:={calibration}", "estimator_policy:=fifo", *graph_args,
+                    "--timeout", "200"], env, logs["launch"])
     probe = server = None
     try:
-        for line in ("TALOS seated", f"{HUMAN_COM_TOPIC} publisher found", READY_LINE):
-            if not _wait_for(logs["launch"], line, graph, 120):
-                raise LiveRunError(f"the live graph did not log {line!r}{_tails(logs)}")
+        if not _wait_for(logs["launch"], READY_LINE, graph, 180):
+            raise LiveRunError(f"the live graph did not log {READY_LINE!r}{_tails(logs)}")
         probe = _start(["sit2stand.nodes.latency_probe", str(record), *TOPICS], env, logs["probe"], OBSERVER_PRIORITY)
-        if not _wait_for(logs["probe"], "probe ready", probe, 30):
+        if not _wait_for(logs["probe"], PROBE_READY, probe, 30):
             raise LiveRunError(f"the latency probe did not start{_tails(logs)}")
         server = _start(["sit2stand.cli", "serve-c3d", str(demonstration), "--protocol", protocol, "--port",
                          str(port), "--host", "127.0.0.1"], env, logs["serve"], CAPTURE_STAND_IN_PRIORITY)
-        server.wait(120)
-        code = graph.wait(240)
-    except subprocess.TimeoutExpired:
-        raise LiveRunError(f"a process of the live run hung{_tails(logs)}") from None
+        if _wait(server, "serve-c3d", 120, logs) != 0:
+            raise LiveRunError(f"serve-c3d failed{_tails(logs)}")
+        code = _wait(graph, "the live graph", 240, logs)
     finally:
-        if probe is not None and probe.poll() is None:
-            probe.send_signal(signal.SIGINT)
-            probe.wait(30)
-        for p in (graph, server):
-            if p is not None and p.poll() is None:
-                p.kill()
-                p.wait(10)
-    log = logs["launch"].read_text(errors="replace")
+        _stop(probe, signal.SIGINT)        # it writes its record at SIGINT
+        _stop(server)
+        _stop(graph)
+    return LiveRun(_latencies(record, logs, rate_hz), code, logs["launch"].read_text(errors="replace"),
+                   _analysis(work / "run", demonstration, plant, logs), logs)
+
+
+def _latencies(record: Path, logs: dict[str, Path], rate_hz: float) -> dict[str, np.ndarray]:
+    """Capture -> arrival [ms] per topic of the probe's record; LiveRunError when a topic got nothing."""
     try:
         origin = capture_origin_ns(logs["serve"].read_text(errors="replace"))
-        lat = {t: latencies_ms(record, t, origin, RATE_HZ) for t in TOPICS}
+        lat = {t: latencies_ms(record, t, origin, rate_hz) for t in TOPICS}
     except (OSError, ValueError, KeyError, IndexError) as err:
         raise LiveRunError(f"no latency figures ({err}){_tails(logs)}") from None
+    if empty := [t for t, values in lat.items() if not len(values)]:
+        raise LiveRunError(f"no {', '.join(empty)} message reached the probe{_tails(logs)}")
+    return lat
+
+
+def _analysis(run: Path, demonstration: Path, plant: str | Path | None, logs: dict[str, Path]) -> dict:
+    """The recording's analysis summary (the stand-up graph's verdict, COM tracking)."""
     try:
-        report = analyse(work / "run", demonstration.stem, None, Path(plant or plant_path("cad"))).summary
+        return analyse(run, demonstration.stem, None, Path(plant or plant_path("cad"))).summary
     except (OSError, ValueError, IndexError) as err:
         raise LiveRunError(f"the run's recording cannot be analysed ({err}){_tails(logs)}") from None
-    return LiveRun(lat, code, log, report, logs)
 
 
 def bench_env() -> dict[str, str]:
@@ -190,15 +235,19 @@ def main(argv: list[str] | None = None) -> int:
     runs: list[dict[str, float]] = []
     with tempfile.TemporaryDirectory() as tmp:
         calibration = Path(tmp) / "calibration.yaml"
-        subprocess.run([sys.executable, "-m", "sit2stand.cli", "human-calibrate", str(ROOT / "bags" / "elderly"),
-                        "--out", str(calibration)], check=True, env=env, capture_output=True, timeout=300)
+        done = subprocess.run([sys.executable, "-m", "sit2stand.cli", "human-calibrate",
+                               str(ROOT / "bags" / "elderly"), "--out", str(calibration)], env=env,
+                              capture_output=True, text=True, timeout=300)
+        if done.returncode != 0:
+            print(f"bench-live: human-calibrate failed:\n{done.stdout[-2000:]}{done.stderr[-2000:]}", file=sys.stderr)
+            return 1
         print(f"bench-live: {args.runs} live stand-ups of bags/elderly over {args.protocol}, CAD plant", flush=True)
         for i in range(args.runs):
             work = Path(tmp) / f"run{i}"
             work.mkdir()
             try:
                 run = run_live(work, env, calibration, protocol=args.protocol,
-                               graph_args=("up:=+Y", "plates:=[]") if args.protocol == "natnet" else ())
+                               graph_args=PROTOCOL_ARGS[args.protocol])
             except LiveRunError as err:
                 print(f"run {i}: failed: {err}", flush=True)
                 continue

@@ -14,7 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io.topics import MARKERS_TOPIC
+
 ORIGIN_LINE = re.compile(r"capture clock origin (\d+) ns")
+PROBE_READY = "probe ready"
+"""What the latency probe (:mod:`sit2stand.nodes.latency_probe`) prints once it is subscribed."""
 
 
 def capture_origin_ns(server_output: str) -> int:
@@ -30,7 +34,7 @@ def capture_origin_ns(server_output: str) -> int:
 
 
 def latencies_ms(probe_json: Path, topic: str, origin_ns: int, rate_hz: float,
-                 first_topic: str = "/mocap/markers") -> np.ndarray:
+                 first_topic: str = MARKERS_TOPIC) -> np.ndarray:
     """Arrival time minus capture time [ms] of each message of ``topic`` in a probe's record: the frame index from
     the stamp's distance to the first ``first_topic`` message's, the capture time from serve-c3d's origin."""
     record = json.loads(Path(probe_json).read_text())

@@ -29,12 +29,13 @@ STREAM_FIT_STEPS = 3
 """Gauss-Newton steps per streamed frame, warm-started from the last two fits. More moved the COM by < 0.01 mm on
 both shipped demonstrations while costing ~0.3 ms each (the first fit gets 40)."""
 FIRST_RESCALE_S = 1.0
-"""The first mass scaling is solved once this much time [s] of supported frames has given its rows (a frame count
-of 100 at 100 Hz: at 200 Hz, 100 frames, half a second of a seated subject, scaled the natural rise's trunk so that
-its COM was up to 40 mm off the truth, 12 mm at 100 Hz), then every ``rescale_every_s``; none before
-``MIN_SCALE_S``."""
+"""The first mass scaling is solved once this much time [s] of supported frames (one row each) has come in: a time,
+not a frame count, so that a faster capture does not solve on less of the trial (at 200 Hz, 100 frames put the
+natural rise's COM up to 40 mm off the truth; docs/results.md, session 21)."""
 MIN_SCALE_S = 0.3
-RESCALE_EVERY_S = 1.0
+"""No mass scaling from less than this much time [s] of supported frames (the last solve at exit included)."""
+RESCALE_EVERY_S = 2.5
+"""After the first, the masses are re-solved every this much time [s] of supported frames."""
 PLATE_HISTORY_S = 2.0
 """Plate samples kept behind the newest marker frame [s]."""
 
@@ -107,6 +108,8 @@ class StreamingComEstimator:
         self.dt = 1.0 / rate_hz
         self.window = savgol_frames(window_s, self.dt)
         self.calibration_frames = calibration_frames
+        if not rescale_every_s > 0:
+            raise ValueError(f"rescale_every_s {rescale_every_s!r}: the time between two mass scalings must be > 0 s")
         # the scaling's schedule in rows (one per supported frame), from times: the same seconds at any rate
         self.rescale_every = max(1, round(rescale_every_s * rate_hz))
         self.chair_on_plate = chair_on_plate

@@ -242,9 +242,14 @@ def load_marker_set(name_or_path: str | os.PathLike | MarkerSet | None = None) -
     return _CACHE[key]
 
 
+def load_packaged_marker_sets() -> list[MarkerSet]:
+    """Every packaged marker set, read now (a live node reads them at start-up, not at its first frame)."""
+    return [load_marker_set(n) for n in packaged_names()]
+
+
 def rank_marker_sets(stream_names: list[str]) -> list[tuple[MarkerSet, int]]:
     """The packaged sets with how many of ``stream_names`` each covers, best first (ties: the default first)."""
-    sets = [load_marker_set(n) for n in packaged_names()]
+    sets = load_packaged_marker_sets()
     scored = [(s, len(s.covered(stream_names))) for s in sets]
     return sorted(scored, key=lambda sc: (-sc[1], sc[0].name != DEFAULT_MARKER_SET, len(sc[0].markers)))
 

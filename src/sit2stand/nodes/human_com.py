@@ -58,7 +58,7 @@ from visualization_msgs.msg import MarkerArray
 from ..human.calibration import StreamCalibration
 from ..human.description import SkeletonFrames, human_urdf
 from ..human.com import WINDOW_S
-from ..human.com_stream import StreamingComEstimator
+from ..human.com_stream import RESCALE_EVERY_S, StreamingComEstimator
 from ..human.marker_ik import MarkerUnitsError, TooFewMarkers
 from ..human.marker_sets import MarkerSetError, choose_marker_set
 from ..human.skeleton import Subject
@@ -101,8 +101,11 @@ class HumanComNode(Node):
         self.rate_check = marker_rate_check(self.rate_hz)
         self.window_s = declare(self, "window_s", WINDOW_S, "Savitzky-Golay window [s]")
         self.calibration_frames = declare(self, "calibration_frames", 50, "frames used to calibrate the model")
-        self.rescale_every_s = declare(self, "rescale_every_s", 2.5, "re-solve the masses every this much time [s] "
-                                       "of frames with plates")
+        self.rescale_every_s = declare(self, "rescale_every_s", RESCALE_EVERY_S, "re-solve the masses every this "
+                                       "much time [s] of frames with plates")
+        if not self.rescale_every_s > 0:
+            raise NodeError(f"human_com: parameter rescale_every_s is {self.rescale_every_s!r}; give the time [s] "
+                            "between two mass scalings (> 0)")
         self.chair_on_plate = declare(self, "chair_on_plate", True, "the chair stands on a force plate")
         self.expected_plates = declare(self, "plates", [], "plate names to expect (default: whatever appears)")
         self.fifo_after_calibration = declare(self, "fifo_after_calibration", 0, "once calibrated, run at this "

@@ -5,7 +5,7 @@ writes them as JSON (``{topic: [[stamp_ns, received_ns], ...]}``) at SIGINT or S
 
     python -m sit2stand.nodes.latency_probe OUT.json /mocap/markers /human/com /robot/retarget/ik
 
-It prints "probe ready" once subscribed. :mod:`sit2stand.capture.latency` turns the record into latencies.
+It prints ``PROBE_READY`` once subscribed. :mod:`sit2stand.capture.latency` turns the record into latencies.
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from sit2stand_msgs.msg import CenterOfMass, MocapFrame
 
+from ..capture.latency import PROBE_READY
 from ..io.topics import HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_RETARGET_IK_TOPIC
 
-READY = "probe ready"
 TYPES = {MARKERS_TOPIC: MocapFrame, HUMAN_COM_TOPIC: CenterOfMass, ROBOT_RETARGET_IK_TOPIC: JointState}
 
 
@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     stop = []
     signal.signal(signal.SIGINT, lambda *_: stop.append(1))
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
-    print(READY, flush=True)
+    print(PROBE_READY, flush=True)
     while not stop:
         rclpy.spin_once(node, timeout_sec=0.05)
     with open(out, "w") as f:

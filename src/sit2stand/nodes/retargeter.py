@@ -8,7 +8,8 @@ the calibration overlays the first human frame on; then the measured COM: the CO
 the robot trails the plan, which slows the plan). Publishes:
 
 * ``/robot/joint_command`` (trajectory_msgs/JointTrajectory, one point: positions, velocities, accelerations;
-  stamped now: the driver applies it at once), one per marker period until the (retimed) plan ends;
+  stamped now: the driver applies it at once), one per planned frame's period (the marker period, or
+  ``plan_rate_hz``'s) until the (retimed) plan ends;
 * ``/robot/planned_com`` (sit2stand_msgs/CenterOfMass, source ``robot_plan``) and ``/robot/planned_zmp``
   (geometry_msgs/PointStamped) of each command, as planned (the COM feedback's target);
 * ``/robot/com_feedback`` (geometry_msgs/Vector3Stamped): the COM shift the feedback put into each command [m];
@@ -19,8 +20,8 @@ the robot trails the plan, which slows the plan). Publishes:
 
 Parameters: ``plant``, ``controller_params`` (identified YAML; empty: CAD), ``margin_m``, ``lookahead_s``,
 ``smooth_s``, ``max_joint_speed``, ``retiming`` (local | uniform), ``seat_off_dwell_s``, ``time_scale`` (0:
-adaptive; else fixed), ``max_time_scale`` (the adaptive one's cap), ``rate_hz``, ``max_plan_rate_hz`` (plan on
-every n-th frame of a faster capture; 0: every frame), ``com_wait_s``, ``wait_for_robot``,
+adaptive; else fixed), ``max_time_scale`` (the adaptive one's cap), ``rate_hz``, ``plan_rate_hz`` (the plan's
+rate: every n-th frame of a faster capture; 0: every frame), ``com_wait_s``, ``wait_for_robot``,
 ``marker_map`` (YAML to write the calibration to), ``hold_s`` (hold the last pose this long after the plan ends,
 in ROS time, then exit; 0: never),
 ``input_timeout_s`` (marker frames waiting this long for a human COM end the node with an error), ``controller``
@@ -47,7 +48,7 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from ..data import plant_path
-from ..human.marker_sets import load_marker_set, rank_marker_sets
+from ..human.marker_sets import load_marker_set, load_packaged_marker_sets
 from ..io.messages import plate_sample_from_cdr, stamp_ns
 from ..io.stream_messages import (CenterOfMassEncoder, JointStateEncoder, JointStateReader, JointTrajectoryEncoder,
                                   StampedNumbersEncoder, pose_from_cdr)
@@ -73,8 +74,8 @@ def _live_config(node: Node) -> LiveConfig:
     scale = declare(node, "time_scale", 0.0, "0: adaptive retiming; else a fixed time scale")
     return LiveConfig(
         rate_hz=declare(node, "rate_hz", 100.0, "marker rate [Hz]"),
-        max_plan_rate_hz=declare(node, "max_plan_rate_hz", 0.0, "plan on every n-th frame, n the nearest whole "
-                                 "number to rate_hz / this (0: every frame)"),
+        plan_rate_hz=declare(node, "plan_rate_hz", 0.0, "the plan's rate [Hz]: every n-th frame, n the nearest "
+                             "whole number to rate_hz / this (0: every frame)"),
         margin_m=declare(node, "margin_m", DEFAULT_MARGIN_M, "ZMP margin inside the feet [m]"),
         lookahead_s=declare(node, "lookahead_s", LOOKAHEAD_S, "look-ahead of the retiming [s]"),
         smooth_s=declare(node, "smooth_s", SMOOTH_S, "Savitzky-Golay window of the plan [s]"),
@@ -114,8 +115,11 @@ class RetargeterNode(Node):
         self.input_timeout_s = declare(self, "input_timeout_s", 20.0, "marker frames may wait this long for a COM")
         cfg = _live_config(self)
         self.rate_check = marker_rate_check(cfg.rate_hz)
-        self.live = LiveRetargeting(cfg, self._publish, self._measured_q,
-                                    lambda: self.get_clock().now().nanoseconds * 1e-9)
+        try:
+            self.live = LiveRetargeting(cfg, self._publish, self._measured_q,
+                                        lambda: self.get_clock().now().nanoseconds * 1e-9)
+        except ValueError as err:
+            raise NodeError(f"retargeter: {err}") from None
         if self.live.cfg.controller not in CONTROLLERS:
             raise NodeError(f"retargeter: controller {self.live.cfg.controller!r} is not one of "
                             f"{', '.join(CONTROLLERS)}")
@@ -126,11 +130,12 @@ class RetargeterNode(Node):
                             f"{self.params_file or '(CAD)'}: {err}") from None
         # the marker sets now too: read at the first frame, they held it and the 10 after it up by ~0.1 s
         try:
-            rank_marker_sets([])
+            load_packaged_marker_sets()
             if cfg.marker_set:
                 load_marker_set(cfg.marker_set)
         except ValueError as err:
             raise NodeError(f"retargeter: marker_set: {err}") from None
+        self._com_found = self._ready = False
         self._subscribe()
         self.cmd_pub = self.create_publisher(JointTrajectory, ros_name(ROBOT_JOINT_COMMAND_TOPIC), PUBLISH_DEPTH)
         self.com_pub = self.create_publisher(CenterOfMass, ros_name(ROBOT_PLANNED_COM_TOPIC), PUBLISH_DEPTH)
@@ -185,19 +190,21 @@ class RetargeterNode(Node):
         first = self.robot_js is None
         self.robot_js, self.robot_rx = data, (time.monotonic(), self.robot_rx[1])
         if first:
-            self._note_robot_state()
+            self._note_ready()
 
     def _on_base_pose(self, data: bytes) -> None:
         first = self.robot_base is None
         self.robot_base, self.robot_rx = data, (self.robot_rx[0], time.monotonic())
         if first:
-            self._note_robot_state()
+            self._note_ready()
 
-    def _note_robot_state(self) -> None:
-        """Say once that the robot's state is here: the live graph is then ready for the capture to start (a frame
-        before it waits, and its latency counts it)."""
-        if self.robot_js is not None and self.robot_base is not None and self.wait_for_robot:
-            self.get_logger().info(f"{READY_LINE} (the robot's state after {time.monotonic() - self._t_init:.2f} s)")
+    def _note_ready(self) -> None:
+        """Say once (READY_LINE) that what the first frame needs is here: the human COM's publisher and, with
+        ``wait_for_robot``, the robot's state. A frame before it waits, and its latency counts the wait."""
+        robot = not self.wait_for_robot or (self.robot_js is not None and self.robot_base is not None)
+        if robot and self._com_found and not self._ready:
+            self._ready = True
+            self.get_logger().info(f"{READY_LINE} ({time.monotonic() - self._t_init:.2f} s after start)")
 
     def _on_chair(self, data: bytes) -> None:
         # 1 kHz, in the real-time process: read the stamp and Fz from the CDR bytes instead of building messages
@@ -211,6 +218,8 @@ class RetargeterNode(Node):
             self.get_logger().info(f"{HUMAN_COM_TOPIC} publisher found after {time.monotonic() - self._t_init:.2f} "
                                    f"s; subscribed ({qos.durability.name.lower()})")
             self._com_discovery.cancel()
+            self._com_found = True
+            self._note_ready()
 
     def _on_com(self, msg: CenterOfMass) -> None:
         if not self.live.coms.samples and not self.live.coms.invalid:

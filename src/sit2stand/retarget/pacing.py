@@ -6,10 +6,12 @@ chair-plate forces and the robot's measured state in as they arrive, and publish
 * **COM by stamp** (:class:`HumanComTrack`): a frame uses the estimator's estimate for its own stamp; between two
   estimates (the frame's own was invalid) their interpolation; after the newest one, that one moved on by its
   velocity if it is at most ``com_wait_s`` old; otherwise the frame waits.
-* **Pacing** (:class:`CommandPacer`): one command per period of the robot's clock (the ROS clock: wall time on a
-  robot, ``/clock`` under ``use_sim_time``, which a simulated robot follows), sent as soon as a frame brings it, so
-  a burst of queued frames (after the COM estimator's calibration pause, say) does not play the plan faster; when
-  frames are late, the timer keeps the commands at the mocap rate. Paced on wall time, a replay whose ``/clock``
+* **Plan rate**: every frame is planned, or every n-th of a faster capture (``plan_rate_hz``, by stamp); the plan's
+  period is the time of n frames.
+* **Pacing** (:class:`CommandPacer`): one command per plan period of the robot's clock (the ROS clock: wall time on
+  a robot, ``/clock`` under ``use_sim_time``, which a simulated robot follows), sent as soon as a frame brings it,
+  so a burst of queued frames (after the COM estimator's calibration pause, say) does not play the plan faster;
+  when frames are late, the timer keeps the commands at the plan's rate. Paced on wall time, a replay whose ``/clock``
   fell behind (a loaded machine) played the plan 1.7x faster to the simulated robot than the player said.
 * **Latency** (:class:`LatencyLog`): marker received -> its command sent; the same from when the frame's human COM
   was also there (the retargeter's own share); and over the frames whose COM kept in step with the markers.
@@ -29,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from ..errors import InputError
 from ..io.messages import reorder_markers
 from .player import (DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S, SEAT_OFF_DWELL_S,
                      SMOOTH_S, Command, PlanPlayer)
@@ -56,12 +59,23 @@ def robot_state_current(received_ago_s: float, stamped_ago_s: float, sim_time: b
 
 
 READY_LINE = "ready for the capture"
-"""What the retargeter node logs once it has the robot's state: a marker frame that comes before it waits for it (the
-calibration overlays the first frame on the robot's measured posture), and that wait counts in its latency."""
-def plan_stride(rate_hz: float, max_plan_rate_hz: float) -> int:
+"""What the retargeter node logs once it has what its first frame needs: the human COM's publisher and, unless
+``wait_for_robot`` is off, the robot's state (the calibration overlays the first frame on the robot's measured
+posture). A marker frame that comes before waits, and the wait counts in its latency."""
+
+
+def plan_stride(rate_hz: float, plan_rate_hz: float) -> int:
     """Every how many capture frames the live retargeter plans one: the nearest whole number of frames to
-    ``rate_hz / max_plan_rate_hz``, at least 1 (``max_plan_rate_hz`` 0: every frame)."""
-    return max(1, round(rate_hz / max_plan_rate_hz)) if max_plan_rate_hz > 0 else 1
+    ``rate_hz / plan_rate_hz``, at least 1 (``plan_rate_hz`` 0: every frame; the plan then runs at
+    ``rate_hz / stride``, e.g. 125 Hz for a 250 Hz capture and 100 Hz asked).
+
+    Raises:
+        InputError: a negative ``plan_rate_hz``.
+    """
+    if plan_rate_hz < 0:
+        raise InputError(f"plan_rate_hz {plan_rate_hz:g}: give the plan's rate [Hz], or 0 to plan every frame")
+    return max(1, round(rate_hz / plan_rate_hz)) if plan_rate_hz > 0 else 1
+
 
 
 STAMP_TOLERANCE_S = 1e-6
@@ -203,9 +217,10 @@ class LiveConfig:
     """The live retargeting's settings (the node's parameters)."""
 
     rate_hz: float = 100.0
-    # plan on every n-th frame, n = round(rate_hz / max_plan_rate_hz) (0: every frame): a 200 Hz capture planned at
-    # 100 Hz halves the retargeter's work; on 2 cores beside the estimator and the robot's loop it ran out of time
-    max_plan_rate_hz: float = 0.0
+    # the plan's rate [Hz]: every n-th frame, n the nearest whole number to rate_hz / plan_rate_hz (0: every frame):
+    # a 200 Hz capture planned at 100 Hz halves the retargeter's work; on 2 cores beside the estimator and the
+    # robot's loop, planning every frame ran out of time
+    plan_rate_hz: float = 0.0
     margin_m: float = DEFAULT_MARGIN_M
     lookahead_s: float = LOOKAHEAD_S
     smooth_s: float = SMOOTH_S
@@ -238,7 +253,7 @@ class LiveRetargeting:
                  robot_clock: Callable[[], float] = time.monotonic) -> None:
         self.cfg = cfg
         self.send, self.measured_q, self.robot_clock = send, measured_q, robot_clock
-        self.stride = plan_stride(cfg.rate_hz, cfg.max_plan_rate_hz)
+        self.stride = plan_stride(cfg.rate_hz, cfg.plan_rate_hz)
         self.plan_period_s = self.stride / cfg.rate_hz     # the time one planned frame stands for [s]
         self._first_stamp_s: float | None = None
         self.frames: deque[MarkerFrame] = deque()
@@ -386,7 +401,7 @@ class LiveRetargeting:
         return default
 
     def tick(self) -> bool:
-        """The timer: keep commands at the mocap rate when frames are late; after the markers stop (three periods
+        """The timer: keep commands at the plan's rate when frames are late; after the markers stop (three periods
         of the robot's clock without one: on a graph held in lockstep, wall time says nothing), close the plan and
         play the rest; once played, hold its last pose (re-sent at the same rate, as a controller streams, still
         corrected by the COM feedback: a robot left standing keeps its balance).
@@ -424,8 +439,8 @@ class LiveRetargeting:
 
 def summary_line(f: dict[str, str]) -> str:
     """One line of a run's :meth:`LiveRetargeting.figures` (the node prints it when it stops)."""
-    between = f" (and {f['between_plan_frames']} between the plan's)" if f.get("between_plan_frames", "0") != "0" \
-        else ""
+    between = f" planned ({f['between_plan_frames']} between them left out)" \
+        if f.get("between_plan_frames", "0") != "0" else ""
     return (f"{f['frames']} frames{between}, {f['infeasible_frames']} infeasible, {f['skipped_frames']} without a "
             f"human COM; "
             f"time scale {f['time_scale']}; IK p50 {f['ik_p50_ms']} ms p99 {f['ik_p99_ms']} ms; marker->command "
