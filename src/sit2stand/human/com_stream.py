@@ -25,9 +25,11 @@ from .mass_scaling import (FactorAtBound, FrameRows, MassScaling, apply_scaling,
 from .skeleton import Subject, build_human
 from .support import SupportRule, plate_wrench_at
 
-STREAM_FIT_STEPS = 3
-"""Gauss-Newton steps per streamed frame, warm-started from the last two fits. More moved the COM by < 0.01 mm on
-both shipped demonstrations while costing ~0.3 ms each (the first fit gets 40)."""
+STREAM_FIT_STEPS = 2
+"""Gauss-Newton steps per streamed frame, warm-started from the last two fits (the first fit gets 40). A third step
+moved the COM by at most 0.002 mm on the real Vicon child trial and by less than 0.01 mm on 10 digital humans at 100
+and 200 Hz, and cost 12 % of a frame: at 200 Hz on 2 cores the live estimator then fell 30 ms behind in 2 of 3 runs,
+in none of 3 without it (docs/results.md, session 21)."""
 FIRST_RESCALE_S = 1.0
 """The first mass scaling is solved once this much time [s] of supported frames (one row each) has come in: a time,
 not a frame count, so that a faster capture does not solve on less of the trial (at 200 Hz, 100 frames put the
