@@ -1,6 +1,6 @@
 """`make bench-live`: the live stand-up's latency over several runs on one machine (issue 19's figures; not a test).
 
-    python -m sit2stand.bench_live [--runs 5] [--protocol qtm|natnet] [--out bench/results/live.json]
+    python -m sit2stand.bench_live [--runs 5] [--protocol qtm|natnet] [--marker-rate 200] [--out FILE.json]
 
 Each run is :func:`run_live`: the live graph (``live.yaml``: mocap_bridge -> human_com -> retargeter -> driver ->
 recorder; CAD plant; the skeleton calibrated beforehand with ``human-calibrate``, so the estimator runs in real time
@@ -224,30 +224,44 @@ def summary(runs: list[dict[str, float]]) -> dict[str, float]:
     return out
 
 
+def _cli(args: list[str], env: dict[str, str]) -> bool:
+    """Run ``sit2stand ARGS``; False (its output printed) when it fails."""
+    done = subprocess.run([sys.executable, "-m", "sit2stand.cli", *args], env=env, capture_output=True, text=True,
+                          timeout=600)
+    if done.returncode != 0:
+        print(f"bench-live: sit2stand {args[0]} failed:\n{done.stdout[-2000:]}{done.stderr[-2000:]}", file=sys.stderr)
+    return done.returncode == 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sit2stand.bench_live", description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--out", type=Path, default=Path("bench/results/live.json"))
     parser.add_argument("--protocol", default="qtm", choices=["qtm", "natnet"],
                         help="natnet: markers only, served y up (the estimator without plates)")
+    parser.add_argument("--marker-rate", type=float, default=100.0,
+                        help="the capture's rate [Hz]; other than 100, an elderly digital human synthesised at that "
+                        "rate (synth-human --marker-rate) is served instead of bags/elderly")
     args = parser.parse_args(argv)
     env = bench_env()
     runs: list[dict[str, float]] = []
     with tempfile.TemporaryDirectory() as tmp:
-        calibration = Path(tmp) / "calibration.yaml"
-        done = subprocess.run([sys.executable, "-m", "sit2stand.cli", "human-calibrate",
-                               str(ROOT / "bags" / "elderly"), "--out", str(calibration)], env=env,
-                              capture_output=True, text=True, timeout=300)
-        if done.returncode != 0:
-            print(f"bench-live: human-calibrate failed:\n{done.stdout[-2000:]}{done.stderr[-2000:]}", file=sys.stderr)
+        demonstration, calibration = ROOT / "bags" / "elderly", Path(tmp) / "calibration.yaml"
+        if args.marker_rate != 100.0:
+            demonstration = Path(tmp) / "demonstration"
+            if not _cli(["synth-human", "--style", "elderly", "--marker-rate", f"{args.marker_rate:g}", "--out",
+                         str(demonstration)], env):
+                return 1
+        if not _cli(["human-calibrate", str(demonstration), "--out", str(calibration)], env):
             return 1
-        print(f"bench-live: {args.runs} live stand-ups of bags/elderly over {args.protocol}, CAD plant", flush=True)
+        print(f"bench-live: {args.runs} live stand-ups of {demonstration.name} at {args.marker_rate:g} Hz over "
+              f"{args.protocol}, CAD plant", flush=True)
         for i in range(args.runs):
             work = Path(tmp) / f"run{i}"
             work.mkdir()
             try:
-                run = run_live(work, env, calibration, protocol=args.protocol,
-                               graph_args=PROTOCOL_ARGS[args.protocol])
+                run = run_live(work, env, calibration, demonstration, protocol=args.protocol,
+                               graph_args=PROTOCOL_ARGS[args.protocol], rate_hz=args.marker_rate)
             except LiveRunError as err:
                 print(f"run {i}: failed: {err}", flush=True)
                 continue
@@ -258,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
     if not runs:
         print("bench-live: no run got as far as its figures", file=sys.stderr)
         return 1
-    result = {"runs": runs, "summary": summary(runs)}
+    result = {"protocol": args.protocol, "marker_rate_hz": args.marker_rate, "runs": runs, "summary": summary(runs)}
     print(json.dumps(result["summary"], indent=2))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2))
