@@ -42,6 +42,7 @@ PROTOCOL_ARGS = {"qtm": (), "natnet": ("up:=+Y", "plates:=[]")}
 is told so and the estimator expects no plates (its seat-off and the retargeter's from the pelvis markers)."""
 MARKERS_P99_TARGET_MS = 2.0
 COMMAND_P99_TARGET_MS = 10.0
+"""Issue 19's targets [ms]: capture -> ``/mocap/markers`` p99, and capture -> joint command p99 on one machine."""
 TOPICS = (MARKERS_TOPIC, HUMAN_COM_TOPIC, ROBOT_RETARGET_IK_TOPIC)
 
 
