@@ -187,15 +187,13 @@ class RetargeterNode(Node):
 
     # -- inputs ------------------------------------------------------------------------------------------------
     def _on_joint_states(self, data: bytes) -> None:
-        first = self.robot_js is None
         self.robot_js, self.robot_rx = data, (time.monotonic(), self.robot_rx[1])
-        if first:
+        if not self._ready:
             self._note_ready()
 
     def _on_base_pose(self, data: bytes) -> None:
-        first = self.robot_base is None
         self.robot_base, self.robot_rx = data, (self.robot_rx[0], time.monotonic())
-        if first:
+        if not self._ready:
             self._note_ready()
 
     def _note_ready(self) -> None:
@@ -235,7 +233,7 @@ class RetargeterNode(Node):
         if (wrong_rate := self.rate_check.add(t_s)) is not None:
             raise NodeError(wrong_rate)
         self.live.add_frame(MarkerFrame(t_s, list(msg.marker_names), pos, np.asarray(msg.valid, bool),
-                                            time.perf_counter(), msg.header))
+                                        time.perf_counter(), msg.header))
         self._process()
 
     # -- processing --------------------------------------------------------------------------------------------

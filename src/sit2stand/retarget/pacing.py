@@ -77,7 +77,6 @@ def plan_stride(rate_hz: float, plan_rate_hz: float) -> int:
     return max(1, round(rate_hz / plan_rate_hz)) if plan_rate_hz > 0 else 1
 
 
-
 STAMP_TOLERANCE_S = 1e-6
 """Two stamps this close are the same frame's."""
 MAX_CATCH_UP_PERIODS = 5.0

@@ -311,10 +311,10 @@ class Retargeter:
         frames = []
         for k in range(n):
             u = k / n
-            x = x0 + (x1 - x0) * (3 * u**2 - 2 * u**3) + human_com_vx_mps * duration * (u**3 - u**2)
+            ease = smoothstep(u)       # Hermite: from rest at x0 to x1, arriving with the human's COM velocity
+            x = x0 + (x1 - x0) * ease + human_com_vx_mps * duration * (u**3 - u**2)
             com = np.array([x, human_com_m[1], human_com_m[2]])
-            frames.append(self.step(t0_s - (n - k) * dt, positions_m, valid, com, None,
-                                    marker_weight=smoothstep(u)))
+            frames.append(self.step(t0_s - (n - k) * dt, positions_m, valid, com, None, marker_weight=ease))
             if on_frame is not None:
                 on_frame(frames[-1])
         return frames
