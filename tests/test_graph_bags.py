@@ -276,7 +276,11 @@ def test_two_replayers_on_one_domain_stop_instead_of_mixing(sts_bag, ros_env, ru
         time.sleep(0.1)
     stopped = [r for r in replayers if r.proc.poll() is not None]
     assert stopped and stopped[0].proc.returncode == 2, "".join(r.output for r in replayers)
-    # the later node stops on the other's announcement (GraphGuard), or on seeing its topics published twice
+    # the later node stops on the other's announcement (GraphGuard), or on seeing its topics published twice; which
+    # comes first, and whether DDS has named the other publisher by then, is discovery's timing, not the behaviour
     out = stopped[0].output
-    assert "another graph's /replayer (run pid" in out or " has 2 publishers (/replayer)" in out, out
-    assert f"ROS_DOMAIN_ID {ros_env['ROS_DOMAIN_ID']}" in out or f"on ROS domain {ros_env['ROS_DOMAIN_ID']}" in out
+    domain = ros_env["ROS_DOMAIN_ID"]
+    guard = re.search(rf"another graph's /replayer \(run pid\d+, pid \d+\) is running on ROS_DOMAIN_ID {domain}\b", out)
+    collision = re.search(rf"/\S+ has 2 publishers \([^)]*\) on ROS domain {domain}:", out)
+    assert guard or collision, out
+    assert "_UNKNOWN_" not in out, out

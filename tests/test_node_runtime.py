@@ -46,3 +46,17 @@ def test_a_teardown_blocked_holding_pythons_lock_still_ends_after_saying_its_res
     assert result.returncode == 1, result.stderr
     assert "[stuck] result: exit 3; tearing down DDS" in result.stdout
     assert "destroy_node" in result.stderr          # faulthandler's traceback: where it hung
+
+
+def test_publishers_discovery_has_not_named_read_as_another_publisher():
+    from types import SimpleNamespace
+
+    from sit2stand.nodes.runtime import publisher_names
+
+    def info(ns, name):
+        return SimpleNamespace(node_namespace=ns, node_name=name)
+
+    unnamed = info("_NODE_NAMESPACE_UNKNOWN_", "_NODE_NAME_UNKNOWN_")
+    assert publisher_names([info("/", "replayer"), unnamed]) == ["/replayer", "another publisher"]
+    assert publisher_names([info("/", "replayer"), unnamed, unnamed]) == ["/replayer", "2 other publishers"]
+    assert publisher_names([info("/robot2", "replayer"), info("/", "replayer")]) == ["/replayer", "/robot2/replayer"]

@@ -70,7 +70,8 @@ from ..io.bag import BagError, BagReader
 from ..io.messages import cdr_header_stamp_ns
 from ..io.playback import (ClockTicks, Lockstep, PlaybackClock, check_rate, lockstep_lead_ns, parse_wait_for,
                            played_fraction)
-from .runtime import LATCHED_QOS, NodeError, declare, message_class, node_main, publish_depth, qos_from_bag
+from .runtime import (LATCHED_QOS, NodeError, declare, message_class, node_main, publish_depth, publisher_names,
+                      qos_from_bag)
 
 # Reliable writers heartbeat every 5 ms instead of Fast DDS's 3 s, so acknowledgements (and with them the unpaced
 # mode's flow control) come quickly. Set before rclpy.init; a user's own profile file takes precedence.
@@ -398,7 +399,7 @@ class Replayer(Node):
         for topic in self.pubs:
             publishers = self.get_publishers_info_by_topic(ros_name(topic))  # ours among them
             if len(publishers) > 1:
-                names = sorted({f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in publishers})
+                names = publisher_names(publishers)
                 domain = os.environ.get("ROS_DOMAIN_ID", "0")
                 raise SharedDomain(f"{self.resolve_topic_name(ros_name(topic))} has {len(publishers)} publishers "
                                    f"({', '.join(names)}) on ROS domain {domain}: two graphs there would mix their "

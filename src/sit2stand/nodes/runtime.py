@@ -164,6 +164,19 @@ def qos_from_bag(profiles, depth: int = PUBLISH_DEPTH) -> QoSProfile:
         durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)
 
 
+UNNAMED_BY_DDS = "_NODE_NAME_UNKNOWN_"   # rmw's name for a publisher whose node discovery has not named yet
+
+
+def publisher_names(infos) -> list[str]:
+    """The publishers of a topic as a person reads them: ``/ns/node`` where DDS has named the node, "another
+    publisher" (counted) where discovery has not yet brought its name (rmw's ``_NODE_NAME_UNKNOWN_``)."""
+    named = sorted({f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos if i.node_name != UNNAMED_BY_DDS})
+    unnamed = sum(1 for i in infos if i.node_name == UNNAMED_BY_DDS)
+    if unnamed:
+        named.append("another publisher" if unnamed == 1 else f"{unnamed} other publishers")
+    return named
+
+
 def qos_matching_publishers(node: Node, topic: str, keep_all: bool = True, depth: int = 1000) -> QoSProfile:
     """A subscription QoS that connects to every current publisher of ``topic`` (as rosbag2 record does):
     reliable only if all publishers are reliable, transient-local only if all are.
