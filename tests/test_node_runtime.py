@@ -3,6 +3,9 @@
 import subprocess
 import sys
 import textwrap
+from types import SimpleNamespace
+
+from sit2stand.nodes.runtime import publisher_names
 
 # A node whose destroy_node never returns (the DDS teardown hang a CI run saw), bounded at 0.5 s
 BLOCKED_TEARDOWN = textwrap.dedent("""\
@@ -49,10 +52,6 @@ def test_a_teardown_blocked_holding_pythons_lock_still_ends_after_saying_its_res
 
 
 def test_publishers_discovery_has_not_named_read_as_another_publisher():
-    from types import SimpleNamespace
-
-    from sit2stand.nodes.runtime import publisher_names
-
     def info(ns, name):
         return SimpleNamespace(node_namespace=ns, node_name=name)
 
