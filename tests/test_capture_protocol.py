@@ -97,6 +97,14 @@ def _recording(n: int = 30) -> CaptureRecording:
                             [RecordedPlate(PlateInfo(1, "p", 2000.0, corners), samples)], "synthetic")
 
 
+async def until(condition, timeout_s: float = 10.0) -> bool:
+    """Let the event loop run until ``condition()`` holds; False if it does not within ``timeout_s``."""
+    deadline = asyncio.get_running_loop().time() + timeout_s
+    while not condition() and asyncio.get_running_loop().time() < deadline:
+        await asyncio.sleep(0.01)
+    return condition()
+
+
 @pytest.fixture
 def server():
     srv = QtmServer(_recording(), "127.0.0.1", 0, log=lambda *a, **k: None)
@@ -117,7 +125,8 @@ def test_qtm_rt_gets_every_frame_over_tcp_then_no_more_data_and_the_stop_event(s
         assert parse_labels(xml) == ["A", "B"] and parse_plates(xml)[0].rate_hz == 2000.0
         got = []
         assert await conn.stream_frames(components=["3dres", "force"], on_packet=got.append) == b"Ok"
-        await asyncio.sleep(0.5)
+        # the server sends the stop event after the last frame, on the same connection: waited for, not timed
+        assert await until(lambda: qtm_rt.QRTEvent.EventRTfromFileStopped in events), (len(got), events)
         return got, events
 
     got, events = asyncio.run(run())
@@ -144,14 +153,16 @@ def test_frames_go_over_udp_to_the_port_the_client_names(server):
     sock.settimeout(2.0)
 
     async def run():
-        conn = await qtm_rt.connect("127.0.0.1", server.port)
+        events = []
+        conn = await qtm_rt.connect("127.0.0.1", server.port, on_event=events.append)
         await conn._protocol.send_command(f"streamframes allframes udp:{sock.getsockname()[1]} 3d force",
                                           callback=False)
-        await asyncio.sleep(0.4)
+        # the stop event (over TCP) follows the last frame's datagram: waited for, not timed
+        assert await until(lambda: qtm_rt.QRTEvent.EventRTfromFileStopped in events), events
 
     asyncio.run(run())
     numbers = []
-    sock.settimeout(0.2)
+    sock.settimeout(0.2)     # every datagram is in the socket's buffer by now (loopback): this only reads them out
     try:
         while True:
             numbers.append(QRTPacket(sock.recv(65536)[8:]).framenumber)

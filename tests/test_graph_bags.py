@@ -24,7 +24,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool
 
-from sit2stand.io.bag import BagReader, BagWriter
+from sit2stand.io.bag import BagError, BagReader, BagWriter
 from sit2stand.io.c3d import read_c3d, write_trial_bag
 from sit2stand.io.recover import recover_bag
 from sit2stand_msgs.msg import MocapFrame
@@ -111,10 +111,15 @@ def test_recorder_killed_with_sigkill_loses_at_most_the_last_second(ros_env, tmp
     out = tmp_path / "killed"
     rec = run_node("sit2stand.nodes.recorder", "--ros-args", "-p", f"output:={out}", "-p", "regex:=^/(mocap|force)",
                    "-p", "discovery_period_s:=0.2")
-    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={bag}", "-p", "wait_for_subscribers:=1")
+    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={bag}", "-p", "wait_for_subscribers:=1",
+                    "-p", "wait_timeout_s:=60.0")
     assert play.wait_for_output("playing", 20)
-    assert rec.wait_for_output("subscribed to /mocap/markers", 20)
-    time.sleep(3.0)
+    assert rec.wait_for_output("subscribed to /mocap/markers", 60), rec.output
+    # killed once it has flushed more than 100 messages to disk, while the 9 s bag still plays (not after a time)
+    deadline = time.monotonic() + 60
+    while flushed_messages(out, tmp_path / "probe") <= 100 and play.proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert play.proc.poll() is None, f"the replay ended before the kill:\n{play.output}"
     kill_time_ns = time.time_ns()
     rec.proc.send_signal(signal.SIGKILL)
     rec.wait(10)
@@ -137,19 +142,25 @@ def test_recorder_closes_cleanly_on_sigterm_and_picks_up_late_topics(sts_bag, ro
     rec = run_node("sit2stand.nodes.recorder", "--ros-args", "-p", f"output:={out}",
                    "-p", "topics:=['/mocap/markers']", "-p", "discovery_period_s:=0.2")
     assert rec.wait_for_output("recording to", 20)
-    time.sleep(0.5)  # nothing publishes yet: the topic appears later
-    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={sts_bag}",
-                    "-p", "wait_for_subscribers:=1", "-p", "topics:=['/mocap/markers']")
-    assert play.wait(60) == 0, play.output
-    time.sleep(0.3)
+    # the scenario, not a wait: nothing publishes yet, the topic appears later; nothing depends on how long (the
+    # replayer plays once the recorder subscribes)
+    time.sleep(0.5)
+    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={sts_bag}", "-p", "wait_for_subscribers:=1",
+                    "-p", "wait_timeout_s:=60.0", "-p", "topics:=['/mocap/markers']")
+    # the replayer ends once the recorder acknowledged every message: SIGTERM then finds them all delivered (the
+    # recorder takes what DDS delivered before it closes)
+    assert play.wait(90) == 0, play.output
+    assert "did not acknowledge" not in play.output, play.output
     assert rec.stop(signal.SIGTERM) == 0, rec.output
     assert_bags_equal(sts_bag, out, topics=["/mocap/markers"])
 
 
 def test_pause_resume_progress_and_clock(sts_bag, ros_env, tmp_path, run_node):
 
+    # wait_for_subscribers: it plays (and reports progress) once this test's subscription to /mocap/markers matched
     play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={sts_bag}", "-p", "start_paused:=true",
-                    "-p", "topics:=['/mocap/markers']", "-p", "at_end:=idle")
+                    "-p", "topics:=['/mocap/markers']", "-p", "at_end:=idle", "-p", "wait_for_subscribers:=1",
+                    "-p", "wait_timeout_s:=60.0")
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
@@ -168,17 +179,30 @@ def test_pause_resume_progress_and_clock(sts_bag, ros_env, tmp_path, run_node):
             while time.monotonic() < end:
                 executor.spin_once(timeout_sec=0.05)
 
-        assert client.wait_for_service(timeout_sec=20), play.output
+        def spin_until(condition, seconds):
+            end = time.monotonic() + seconds
+            while not condition() and time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.05)
+            return condition()
+
+        def final(status):
+            values = {kv.key: kv.value for kv in status.values}
+            return values["messages_sent"] == "91" and float(values["fraction"]) == pytest.approx(1.0)
+
+        assert client.wait_for_service(timeout_sec=60), play.output
+        # its progress (2 Hz, once it found this subscriber) says paused; then, for 1.5 s (a window to see that
+        # nothing comes, not a wait: no frame may come however long it is), it publishes nothing
+        assert spin_until(lambda: progress, 60), play.output
+        assert progress[-1].message == "paused"
         spin_for(1.5)
         assert frames == [], "a paused replayer must not publish"
-        assert progress and progress[-1].message == "paused"
+        assert progress[-1].message == "paused"
         future = client.call_async(SetBool.Request(data=False))
         executor.spin_until_future_complete(future, timeout_sec=10)
         assert future.result().success and future.result().message == "playing"
-        deadline = time.monotonic() + 20
-        while len(frames) < 91 and time.monotonic() < deadline:
-            spin_for(0.1)
-        spin_for(0.6)
+        # its last progress (once every subscriber acknowledged every frame) says all 91 sent: then every frame is
+        # here, and no more come (at_end:=idle)
+        assert spin_until(lambda: len(frames) >= 91 and final(progress[-1]), 30), (len(frames), progress[-1])
         assert len(frames) == 91
         values = {kv.key: kv.value for kv in progress[-1].values}
         assert float(values["fraction"]) == pytest.approx(1.0) and values["messages_sent"] == "91"
@@ -196,13 +220,34 @@ def test_loop_plays_the_bag_again(sts_bag, ros_env, tmp_path, run_node):
     rec = run_node("sit2stand.nodes.recorder", "--ros-args", "-p", f"output:={out}", "-p", "topics:=['/mocap/markers']",
                    "-p", "discovery_period_s:=0.2")
     play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={sts_bag}", "-p", "loop:=true",
-                    "-p", "rate:=10.0", "-p", "topics:=['/mocap/markers']", "-p", "wait_for_subscribers:=1")
+                    "-p", "rate:=10.0", "-p", "topics:=['/mocap/markers']", "-p", "wait_for_subscribers:=1",
+                    "-p", "wait_timeout_s:=60.0")
     assert play.wait_for_output("playing", 20)
-    time.sleep(2.0)
+    # stopped once it has published the 91 frames three times over (its progress line), not after a time
+    deadline = time.monotonic() + 60
+    while max(sent_messages(play.output), default=0) < 3 * 91 and time.monotonic() < deadline:
+        assert play.proc.poll() is None, play.output
+        time.sleep(0.1)
+    assert max(sent_messages(play.output), default=0) >= 3 * 91, play.output
     assert play.stop() == 0
     assert rec.stop() == 0
     with BagReader(out) as b:
         assert b.topics()["/mocap/markers"].count > 2 * 91
+
+
+def sent_messages(output: str) -> list[int]:
+    """The messages a replayer has published, by its progress lines (every 2 s while it plays)."""
+    return [int(n) for n in re.findall(r"bag time [\d.]+/[\d.]+ s, (\d+) messages", output)]
+
+
+def flushed_messages(bag_dir, scratch) -> int:
+    """The messages a running recorder has written to disk so far: its open .mcap read as a killed one is (rebuilt
+    into ``scratch``, the recorder's file only read); 0 before it holds a readable start."""
+    shutil.rmtree(scratch, ignore_errors=True)
+    try:
+        return recover_bag(bag_dir, scratch).messages if any(bag_dir.glob("*.mcap")) else 0
+    except BagError:
+        return 0
 
 
 def replayer_cli(ros_env, *params):

@@ -71,10 +71,10 @@ def test_too_few_markers_stop_the_node_with_a_clear_error(tmp_path, ros_env, run
             bag.write(MARKERS_TOPIC, t, M.mocap_frame(t, ["LASI", "RASI", "LPSI", "FOO", "BAR"], np.ones((5, 3)),
                                                         np.ones(5, bool)))
     node = run_node("sit2stand.nodes.human_com", "--ros-args", "-p", "height_m:=1.75", "-p", "mass_kg:=75.0")
-    assert node.wait_for_output("waiting for", 20)
+    assert node.wait_for_output("waiting for", 60), node.output
     play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={tmp_path / 'few'}",
-                    "-p", "wait_for_subscribers:=1")
-    assert node.wait(60) == 2, node.output
+                    "-p", "wait_for_subscribers:=1", "-p", "wait_timeout_s:=60.0")
+    assert node.wait(120) == 2, node.output
     assert "/mocap/markers" in node.output and "at least 8 are needed" in node.output
     play.stop()
 
@@ -95,9 +95,10 @@ def test_the_node_on_opensims_gait2392_markers_with_the_subject_from_the_bag(tmp
         == 0
     node = run_node("sit2stand.nodes.human_com", "--ros-args", "-p", "marker_set:=gait2392", "-p", "rate_hz:=60.0",
                     "-p", "calibration_frames:=20", "-p", "chair_on_plate:=false", "-p", "viz_rate_hz:=0.0")
-    assert node.wait_for_output("waiting for", 20)
-    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={bag}", "-p", "wait_for_subscribers:=1")
-    assert play.wait(60) == 0, play.output
+    assert node.wait_for_output("waiting for", 60), node.output
+    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={bag}", "-p", "wait_for_subscribers:=1",
+                    "-p", "wait_timeout_s:=60.0")
+    assert play.wait(120) == 0, play.output
     assert node.stop() == 0, node.output         # after a signal it finishes the frames already received
     out = node.output
     assert "subject from /human/subject: 1.8 m, 72.6 kg" in out
@@ -114,9 +115,10 @@ def test_a_capture_at_another_rate_than_the_nodes_stops_it_saying_which(tmp_path
         == 0
     node = run_node("sit2stand.nodes.human_com", "--ros-args", "-p", "marker_set:=gait2392", "-p",
                     "chair_on_plate:=false", "-p", "calibration_frames:=20", "-p", "viz_rate_hz:=0.0")
-    assert node.wait_for_output("waiting for", 20)
-    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={bag}", "-p", "wait_for_subscribers:=1")
-    assert node.wait(60) == 2, node.output
+    assert node.wait_for_output("waiting for", 60), node.output
+    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={bag}", "-p", "wait_for_subscribers:=1",
+                    "-p", "wait_timeout_s:=60.0")
+    assert node.wait(120) == 2, node.output
     assert "/mocap/markers: frames stamped every 16.67 ms (60.0 Hz), but rate_hz is 100 Hz" in node.output, node.output
     assert "rate_hz:=60" in node.output
     play.stop()

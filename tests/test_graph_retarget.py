@@ -90,9 +90,9 @@ def test_marker_frames_without_a_human_com_stop_the_retargeter_with_a_clear_erro
     node = run_node("sit2stand.nodes.retargeter", "--ros-args", "-p", "wait_for_robot:=false",
                     "-p", "input_timeout_s:=3.0")
     play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={ROOT / 'bags' / 'elderly'}",
-                    "-p", "wait_for:=['/mocap/markers:1']", "-p", "publish_clock:=false")
-    assert play.wait(60) == 0
-    assert node.wait(60) == 2
+                    "-p", "wait_for:=['/mocap/markers:1']", "-p", "wait_timeout_s:=60.0", "-p", "publish_clock:=false")
+    assert play.wait(120) == 0, play.output
+    assert node.wait(60) == 2, node.output
     assert "waited 3 s for /human/com" in node.output
 
 

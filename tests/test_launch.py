@@ -19,7 +19,6 @@ CHILD = textwrap.dedent("""\
     #!{python}
     import os, signal, sys, time
     name = sys.argv[1]
-    open(os.path.join({tmp!r}, name + ".pid"), "w").write(str(os.getpid()))
     def on_int(*_):
         print(name, "got SIGINT", flush=True)
         time.sleep(float(os.environ.get("STOP_S", "0")))     # a node that takes this long to close
@@ -28,7 +27,15 @@ CHILD = textwrap.dedent("""\
     if {ignore_int!r}:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     print(name, "args", " ".join(sys.argv[2:]), flush=True)
-    time.sleep(float(os.environ.get("LIFETIME", "60")))
+    # NAME.pid says "ready": written (whole, by a rename) once the signal handling is set and the args printed
+    pid_file = os.path.join({tmp!r}, name + ".pid")
+    with open(pid_file + ".tmp", "w") as f:
+        f.write(str(os.getpid()))
+    os.replace(pid_file + ".tmp", pid_file)
+    end = time.monotonic() + float(os.environ.get("LIFETIME", "60"))
+    until = os.environ.get("UNTIL")          # a file: live until it exists (LIFETIME at most), not for a time
+    while time.monotonic() < end and not (until and os.path.exists(until)):
+        time.sleep(0.02 if until else max(0.0, end - time.monotonic()))
     print(name, "done", flush=True)
     """)
 
@@ -112,12 +119,19 @@ def wait_for_pids(tmp_path, names, timeout=10.0):
     raise AssertionError(f"children {names} did not start")
 
 
+def wait_until(condition, message: str, timeout: float = 10.0) -> None:
+    """Poll ``condition`` until it holds; fail with ``message`` if it still does not ``timeout`` s later."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, message
+        time.sleep(0.05)
+
+
 def test_sigint_is_forwarded_and_output_prefixed(tmp_path):
     script = child_script(tmp_path)
     proc = run_launch(tmp_path, [{"name": "alpha", "executable": str(script), "arguments": ["alpha"]},
                                  {"name": "beta", "executable": str(script), "arguments": ["beta"]}])
-    pids = wait_for_pids(tmp_path, ["alpha", "beta"])
-    time.sleep(0.3)
+    pids = wait_for_pids(tmp_path, ["alpha", "beta"])     # both ready: their SIGINT handlers are set
     proc.send_signal(signal.SIGINT)
     out, _ = proc.communicate(timeout=30)
     assert proc.returncode == 0, out
@@ -140,8 +154,9 @@ def test_stubborn_node_gets_sigterm_after_grace(tmp_path):
 
 def test_shutdown_node_ends_the_graph(tmp_path):
     script = child_script(tmp_path)
-    nodes = [{"name": "short", "executable": str(script), "arguments": ["short"], "env": {"LIFETIME": "0.5"},
-              "on_exit": "shutdown"},
+    # short ends once long is ready (its SIGINT handler set), not after a time long might still be starting in
+    nodes = [{"name": "short", "executable": str(script), "arguments": ["short"],
+              "env": {"UNTIL": str(tmp_path / "long.pid")}, "on_exit": "shutdown"},
              {"name": "long", "executable": str(script), "arguments": ["long"]}]
     proc = run_launch(tmp_path, nodes)
     out, _ = proc.communicate(timeout=30)
@@ -151,12 +166,15 @@ def test_shutdown_node_ends_the_graph(tmp_path):
 
 def test_a_crashed_recorder_fails_the_job_but_does_not_stop_the_graph(tmp_path):
     script = child_script(tmp_path)
+    # the robot ends when told, once its recorder has died (not after a time the start-up might take)
     nodes = [{"name": "rec", "executable": str(script), "arguments": ["rec"], "on_exit": "continue"},
-             {"name": "robot", "executable": str(script), "arguments": ["robot"], "env": {"LIFETIME": "2"},
-              "on_exit": "shutdown"}]
+             {"name": "robot", "executable": str(script), "arguments": ["robot"],
+              "env": {"UNTIL": str(tmp_path / "end-robot")}, "on_exit": "shutdown"}]
     proc = run_launch(tmp_path, nodes)
     rec_pid, _ = wait_for_pids(tmp_path, ["rec", "robot"])
     os.kill(rec_pid, signal.SIGKILL)
+    wait_until(lambda: not alive(rec_pid), "rec outlived SIGKILL")
+    (tmp_path / "end-robot").touch()
     out, _ = proc.communicate(timeout=30)
     assert "[robot] robot done" in out, "the robot must run on without its recorder"
     assert "the graph goes on without rec (on_exit: continue)" in out
@@ -165,12 +183,13 @@ def test_a_crashed_recorder_fails_the_job_but_does_not_stop_the_graph(tmp_path):
 
 def test_recorders_stop_last_and_have_their_own_grace(tmp_path):
     script = child_script(tmp_path)
+    # the closing times are the scenario: the recorder takes longer to close than the graph's grace (2 s) and less
+    # than its own (10 s), the robot well within the graph's; the margins (1.5 s, 7 s) leave a loaded host room
     nodes = [{"name": "rec", "executable": str(script), "arguments": ["rec"], "on_exit": "continue",
-              "env": {"STOP_S": "1.5"}, "grace_s": 5},
+              "env": {"STOP_S": "3"}, "grace_s": 10},
              {"name": "robot", "executable": str(script), "arguments": ["robot"], "env": {"STOP_S": "0.5"}}]
-    proc = run_launch(tmp_path, nodes, "--grace", "1")
-    wait_for_pids(tmp_path, ["rec", "robot"])
-    time.sleep(0.3)
+    proc = run_launch(tmp_path, nodes, "--grace", "2")
+    wait_for_pids(tmp_path, ["rec", "robot"])       # both ready: their SIGINT handlers are set
     proc.send_signal(signal.SIGINT)
     out, _ = proc.communicate(timeout=30)
     assert proc.returncode == 0, out
@@ -185,10 +204,7 @@ def test_no_orphans_when_the_launcher_is_killed(tmp_path):
     pids = wait_for_pids(tmp_path, ["a", "b"])
     proc.kill()
     proc.wait(10)
-    deadline = time.monotonic() + 10
-    while time.monotonic() < deadline and any(alive(p) for p in pids):
-        time.sleep(0.05)
-    assert not any(alive(p) for p in pids), "children outlived a SIGKILLed launcher"
+    wait_until(lambda: not any(alive(p) for p in pids), "children outlived a SIGKILLed launcher")
 
 
 SCHED_CHILD = textwrap.dedent("""\
