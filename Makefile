@@ -12,8 +12,9 @@ SOAK_MIN ?= 2
 setup:            ## create .venv (pinned wheels, ROS 2 Jazzy), build msgs/, install src/ (idempotent)
 	@ros_ws/bootstrap.sh
 
-demo: setup       ## the main job on the shipped demonstration (writes runs/demo/)
+demo: setup       ## the main job on the shipped demonstrations, TALOS then G1 (writes runs/demo/, runs/demo_g1/)
 	@$(PY) -m sit2stand.demo --out runs/demo
+	@$(PY) -m sit2stand.demo --robot g1 --out runs/demo_g1
 
 test: setup lint  ## lint, then the whole test suite: unit tests (2 workers, a file per worker), then the graph tests alone
 	@$(PY) -m pytest -q -n 2 --dist loadfile --durations=8 -m "not graph" tests
@@ -46,8 +47,8 @@ bench-capture: setup  ## the mocap bridge 10 min at 200 Hz against serve-c3d: fr
 bench-live: setup     ## the live stand-up (serve-c3d -> bridge -> estimator -> retargeter -> robot) 5 times: capture -> markers / COM / joint command p50, p99; bench/results/live.json
 	@$(PY) -m sit2stand.bench_live --out bench/results/live.json
 
-bench-standup: setup  ## 30 digital humans (stature, mass, seat, natural/elderly/fast) retargeted and simulated: success, time scale, COM, torque; bench/results/standup/
-	@$(PY) -m sit2stand.bench_standup --out bench/results/standup $(BENCH_STANDUP_ARGS)
+bench-standup: setup  ## 30 digital humans (stature, mass, seat, natural/elderly/fast) retargeted and simulated: success, time scale, COM, torque; bench/results/standup/ (BENCH_STANDUP_ARGS="--robot g1": standup_g1/)
+	@$(PY) -m sit2stand.bench_standup $(BENCH_STANDUP_ARGS)
 
 bench-faults: setup  ## fault campaign (corrupt/cut files, NaN/missing/mm markers, bad identification, killed recorder, second graph) + a SOAK_MIN-minute soak (default 2; the issue's: SOAK_MIN=30); bench/results/faults.json
 	@$(PY) -m sit2stand.bench_faults --soak-min $(SOAK_MIN) --out bench/results/faults.json

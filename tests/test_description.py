@@ -9,8 +9,11 @@ import pytest
 from sit2stand.io.topics import LAB_FRAME, WORLD_FRAME
 from sit2stand.robot.description import (DescriptionError, FrameTree, quaternions_xyzw, robot_description,
                                          urdf_joints)
-from sit2stand.robot.model import PlantConfig, SOLE_OFFSET_M
+from sit2stand.robot.model import PlantConfig
+from sit2stand.robot.profile import ProfileError, load_profile
 from sit2stand.robot.plant import Plant
+
+TALOS = load_profile("talos")
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +58,7 @@ def test_the_description_is_talos_urdf_with_its_mesh_uris():
 
 
 def test_bad_variants_and_mesh_kinds_are_named():
-    with pytest.raises(DescriptionError, match="no URDF talos_nope.urdf .*talos_reduced"):
+    with pytest.raises(ProfileError, match="'talos_nope': no such robot profile file.*packaged: g1, talos"):
         robot_description("talos_nope")
     with pytest.raises(DescriptionError, match="meshes 'http'"):
         robot_description(meshes="http")
@@ -101,8 +104,9 @@ def test_the_tree_has_one_root_and_sit2stands_frames(tree):
     assert len(tree.pairs) == 1 + 32 + 2
     static = {(s.parent, s.child): s for s in tree.static_transforms()}
     assert static[(LAB_FRAME, WORLD_FRAME)].translation_m == (0.0, 0.0, 0.0)
-    assert static[("leg_left_6_link", "sole_left")].translation_m == (0.0, 0.0, -SOLE_OFFSET_M)
-    np.testing.assert_allclose(static[("leg_left_6_link", "left_sole_link")].translation_m, (0, 0, -SOLE_OFFSET_M))
+    assert static[("leg_left_6_link", "sole_left")].translation_m == (0.0, 0.0, -TALOS.sole.below_foot_m)
+    np.testing.assert_allclose(static[("leg_left_6_link", "left_sole_link")].translation_m,
+                               (0, 0, -TALOS.sole.below_foot_m))
     assert {"base_link", "leg_left_4_link", "left_sole_link", "sole_right_world_aligned"} <= set(tree.links())
 
 

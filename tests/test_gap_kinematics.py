@@ -10,8 +10,11 @@ import pytest
 
 from sit2stand.gap.effects import alter_model, tilted_axis
 from sit2stand.gap.kinematics import _pin_q, contact_points, kinematic_model
-from sit2stand.robot.model import SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, PlantConfig, controller_model
+from sit2stand.robot.profile import load_profile
+from sit2stand.robot.model import PlantConfig, controller_model
 from sit2stand.robot.plant import Plant
+
+TALOS = load_profile("talos")
 
 EFFECTS = {
     "none": [],
@@ -62,8 +65,8 @@ def test_the_point_that_stays_put_is_the_edge_a_foot_rolls_on():
     wrench = np.array([[0, 0, fz, 0.01 * fz, -0.03 * fz, 0],          # COP (0.03, 0.01): flat
                        [0, 0, fz, -0.06 * fz, -0.02 * fz, 0],          # COP (0.02, -0.06): right edge
                        [0, 0, fz, 0.06 * fz, -0.12 * fz, 0]])          # COP (0.12, 0.06): toe, left corner
-    points, kinds = contact_points(wrench)
+    points, kinds = contact_points(wrench, TALOS.sole)
     assert np.allclose(points[0], 0.0) and kinds[0] == 0
-    assert np.allclose(points[1], [0.0, -SOLE_HALF_SIZE_M[1], 0.0])
-    assert np.allclose(points[2], [SOLE_CENTRE_X_M + SOLE_HALF_SIZE_M[0], SOLE_HALF_SIZE_M[1], 0.0])
+    assert np.allclose(points[1], [0.0, -TALOS.sole.half_size_m[1], 0.0])
+    assert np.allclose(points[2], [TALOS.sole.centre_x_m + TALOS.sole.half_size_m[0], TALOS.sole.half_size_m[1], 0.0])
     assert len(set(kinds.tolist())) == 3

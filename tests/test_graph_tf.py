@@ -12,8 +12,11 @@ import pinocchio as pin
 import pytest
 
 from sit2stand.io.bag import BagReader
-from sit2stand.io.topics import BASE_FRAME, HUMAN_ROOT_FRAME, LAB_FRAME, WORLD_FRAME, sole_world_aligned_frame
-from sit2stand.robot.model import SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M, controller_model
+from sit2stand.io.topics import HUMAN_ROOT_FRAME, LAB_FRAME, WORLD_FRAME, sole_world_aligned_frame
+from sit2stand.robot.model import controller_model
+from sit2stand.robot.profile import load_profile
+
+TALOS = load_profile("talos")
 
 pytestmark = pytest.mark.graph
 ROOT = Path(__file__).resolve().parents[1]
@@ -29,7 +32,7 @@ EXPECTED_FRAME = {
     "/robot/base_pose": WORLD_FRAME, "/robot/cop": WORLD_FRAME, "/robot/planned_com": WORLD_FRAME,
     "/robot/planned_zmp": WORLD_FRAME, "/robot/com_feedback": WORLD_FRAME, "/robot/retarget/ik": WORLD_FRAME,
     "/robot/ft/left": sole_world_aligned_frame("left"), "/robot/ft/right": sole_world_aligned_frame("right"),
-    "/robot/joint_states": BASE_FRAME, "/robot/joint_command": BASE_FRAME, "/viz/markers": WORLD_FRAME,
+    "/robot/joint_states": TALOS.root_link, "/robot/joint_command": TALOS.root_link, "/viz/markers": WORLD_FRAME,
 }
 # /tf samples of a stand-up at least (50 Hz: the robot's 6 s, seated, rising and standing, at the human's timing)
 MIN_SAMPLES = 300
@@ -151,7 +154,7 @@ def test_tf_has_world_to_base_link_and_every_leg_link_at_50_hz(bag, frames):
     period_ms = np.median(np.diff(stamps)) * 1e-6
     assert period_ms == pytest.approx(20.0, abs=0.5), "tf_rate_hz 50 of a 200 Hz state"
     edges = frames[stamps[0]][0]
-    assert edges[BASE_FRAME][0] == WORLD_FRAME and edges[WORLD_FRAME][0] == LAB_FRAME
+    assert edges[TALOS.root_link][0] == WORLD_FRAME and edges[WORLD_FRAME][0] == LAB_FRAME
     for link in LEG_LINKS + ["left_sole_link", "right_sole_link", "sole_left", "sole_right", "arm_left_7_link",
                              "head_2_link", sole_world_aligned_frame("left")]:
         assert _in(edges, link, LAB_FRAME) is not None
@@ -201,7 +204,7 @@ def test_the_base_pose_is_in_world(frames):
     """/robot/base_pose (world) is the transform world -> base_link of the same stamp, and the pelvis's height."""
     for edges, _, base in frames.values():
         p, o = base.pose.position, base.pose.orientation
-        X = _in(edges, BASE_FRAME)
+        X = _in(edges, TALOS.root_link)
         np.testing.assert_allclose(X.translation, [p.x, p.y, p.z], atol=1e-12)
         np.testing.assert_allclose(X.rotation, pin.Quaternion(o.w, o.x, o.y, o.z).toRotationMatrix(), atol=1e-12)
 
@@ -215,7 +218,7 @@ def test_the_feet_wrenches_are_in_the_world_aligned_sole_frames(bag, frames):
     read, _ = bag
     wrench = {s: {_ns(m.header): m.wrench for _, m in read(f"/robot/ft/{s}")} for s in SIDES}
     cop = {_ns(m.header): m.point for _, m in read("/robot/cop")}
-    half_x, half_y = SOLE_HALF_SIZE_M[0], SOLE_HALF_SIZE_M[1]
+    half_x, half_y = TALOS.sole.half_size_m[0], TALOS.sole.half_size_m[1]
     outside, compared = [], 0
     for stamp, (edges, _, _) in frames.items():
         force, moment = np.zeros(3), np.zeros(3)
@@ -231,7 +234,7 @@ def test_the_feet_wrenches_are_in_the_world_aligned_sole_frames(bag, frames):
             moment += tau + np.cross(X.translation, f)
             if f[2] > 100.0:        # this foot's COP in its world-aligned sole frame, against the sole plate
                 local = sole.rotation.T @ np.array([-tau[1] / f[2], tau[0] / f[2], 0.0])
-                outside.append(max(abs(local[0] - SOLE_CENTRE_X_M) - half_x, abs(local[1]) - half_y))
+                outside.append(max(abs(local[0] - TALOS.sole.centre_x_m) - half_x, abs(local[1]) - half_y))
         c = cop[stamp]
         if np.isfinite(c.x):
             np.testing.assert_allclose([c.x, c.y], [-moment[1] / force[2], moment[0] / force[2]], atol=2e-3)
@@ -258,11 +261,11 @@ def test_the_plans_com_zmp_and_feedback_are_in_world(bag, frames):
     assert np.mean(err) < 0.03, f"planned COM {np.mean(err) * 100:.1f} cm from the robot's"
     edges = frames[tf_stamps[-1]][0]
     soles = np.array([_in(edges, f"sole_{s}").translation for s in SIDES])
-    heel = soles[:, 0].min() + SOLE_CENTRE_X_M - SOLE_HALF_SIZE_M[0]
-    toe = soles[:, 0].max() + SOLE_CENTRE_X_M + SOLE_HALF_SIZE_M[0]
+    heel = soles[:, 0].min() + TALOS.sole.centre_x_m - TALOS.sole.half_size_m[0]
+    toe = soles[:, 0].max() + TALOS.sole.centre_x_m + TALOS.sole.half_size_m[0]
     zmp = np.array([[m.point.x, m.point.y, m.point.z] for _, m in read("/robot/planned_zmp")[-100:]])
     assert np.all(zmp[:, 2] == 0.0) and np.all((zmp[:, 0] > heel) & (zmp[:, 0] < toe))
-    assert np.all(np.abs(zmp[:, 1]) < np.abs(soles[:, 1]).max() + SOLE_HALF_SIZE_M[1])
+    assert np.all(np.abs(zmp[:, 1]) < np.abs(soles[:, 1]).max() + TALOS.sole.half_size_m[1])
     assert all(m.vector.z == 0.0 for _, m in read("/robot/com_feedback"))
 
 
@@ -274,7 +277,7 @@ def test_the_ik_base_pose_is_in_world(bag, frames):
     names = list(first.name)
     root = np.array([first.position[names.index(f"root_{c}")] for c in "xyz"])
     edges = frames[_nearest(sorted(frames), _ns(first.header))][0]
-    assert np.linalg.norm(root - _in(edges, BASE_FRAME).translation) < 0.05
+    assert np.linalg.norm(root - _in(edges, TALOS.root_link).translation) < 0.05
 
 
 def _markers(msg, names):

@@ -132,7 +132,7 @@ def test_packaged_files_are_found_by_name_or_path(tmp_path):
     mine = tmp_path / "mine.yaml"
     mine.write_text("name: mine\n")
     assert plant_path(mine) == mine and plant_path(str(mine)) == mine
-    with pytest.raises(DataFileNotFound, match="cad, default, heavy_front") as err:
+    with pytest.raises(DataFileNotFound, match="cad, default, g1_cad, g1_default, heavy_front") as err:
         plant_path("no_such_plant")
     assert isinstance(err.value, Sit2StandError) and isinstance(err.value, FileNotFoundError)
     with pytest.raises(DataFileNotFound, match="standup"):

@@ -18,10 +18,12 @@ from sit2stand.robot.model import PlantConfig, add_seat_frame, controller_model
 from sit2stand.robot.plant import CONTROLLERS, DEFAULT_CONTROLLER, Plant
 from sit2stand.robot.torque_control import ANCHOR_BLEND_S, STANDING_SETTLE_S, WholeBodyController
 from sit2stand.robot.model import sole_corners_local
+from sit2stand.robot.profile import load_profile
 from sit2stand.robot.wbc import Reference, WbcGains, WholeBodyQP, feet_anchored_reference
 
 
 ROOT = Path(__file__).resolve().parents[1]
+TALOS = load_profile("talos")
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +63,7 @@ def test_seated_equilibrium_is_consistent(plant):
     assert np.all(res.feet_forces[:, 2] >= -1e-6)
     mu = qp.g.friction / np.sqrt(2)
     assert np.all(np.abs(res.feet_forces[:, :2]) <= mu * res.feet_forces[:, 2:3] + 1e-3)
-    hx = sole_corners_local(qp.g.cop_margin_m)[:, 0]
+    hx = sole_corners_local(TALOS, qp.g.cop_margin_m)[:, 0]
     assert hx.min() - 1e-9 <= res.cop[0] - res.corners[:, 0].mean() + 0.02 <= hx.max() + 1e-9
 
 
@@ -152,7 +154,7 @@ def test_dynamics_filter_keeps_the_cop_inside_where_the_kinematic_plan_does_not(
     q0[2] -= data.oMf[model.getFrameId("sole_left")].translation[2]
     soles = [data.oMf[model.getFrameId(f"sole_{s}")] for s in ("left", "right")]
     pin.framesForwardKinematics(model, data, q0)
-    corners = np.array([X.act(p)[:2] for X in soles for p in sole_corners_local(0.0)])
+    corners = np.array([X.act(p)[:2] for X in soles for p in sole_corners_local(TALOS, 0.0)])
     polygon = support_polygon(corners)
     dt = 0.01
     filt = DynamicsFilter(model, dt, polygon, gains=WbcGains(cop_margin_m=0.02))

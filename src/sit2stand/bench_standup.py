@@ -1,7 +1,8 @@
-"""Benchmark (not a test): a population of digital humans stood up by the simulated TALOS (issue 15, item 4).
+"""Benchmark (not a test): a population of digital humans stood up by a simulated robot (TALOS, or ``--robot``).
 
     python -m sit2stand.bench_standup [--cases 30] [--seed 0] [--jobs 1] [--only-style S] [--marker-rate 100]
-                                      [--controller wbc|inverse_dynamics] [--out DIR]       (make bench-standup)
+                                      [--controller wbc|inverse_dynamics] [--robot g1] [--out DIR]
+                                                                                           (make bench-standup)
 
 Each case is a demonstration of :mod:`sit2stand.human.synth`: stature uniform in 1.5-1.95 m, body mass uniform in
 50-110 kg within a BMI of 17-38 (no implausible body: 50 kg at 1.95 m is a BMI of 13, 110 kg at 1.5 m one of 49),
@@ -39,16 +40,21 @@ from pathlib import Path
 
 import numpy as np
 
-from .data import plant_path
 from .demo import robot_identification
 from .human.demonstration_bag import write_demonstration_bag
 from .human.synth import SynthConfig, synthesize
 from .retarget import offline
+from .robot.model import DEFAULT_ROBOT
 from .robot.plant import CONTROLLERS, DEFAULT_CONTROLLER
 
 ROOT = Path(__file__).resolve().parents[2]
-DEFAULT_PARAMS = ROOT / "runs" / "demo" / "robot" / "identified_full.yaml"
 DEFAULT_OUT = ROOT / "bench" / "results" / "standup"
+
+
+def demo_params(robot: str) -> Path:
+    """Where ``make demo`` leaves ``robot``'s identified parameters."""
+    run = "demo" if robot == DEFAULT_ROBOT else f"demo_{robot}"
+    return ROOT / "runs" / run / "robot" / "identified_full.yaml"
 
 STYLES = ("natural", "elderly", "fast")
 RISE_S = {"natural": (1.4, 1.8), "elderly": (2.6, 3.4), "fast": (0.9, 1.2)}
@@ -127,7 +133,8 @@ def synthesise(case: Case, attempts: int = SYNTH_ATTEMPTS):
     raise ValueError(f"no demonstration in {attempts} seeds from {case.seed}: {last}")
 
 
-def run_case(case: Case, out: Path, params: Path | None, controller: str = DEFAULT_CONTROLLER) -> dict:
+def run_case(case: Case, out: Path, params: Path | None, controller: str = DEFAULT_CONTROLLER,
+             robot: str = DEFAULT_ROBOT) -> dict:
     """Synthesise, bag, retarget and simulate one case; its figures (an ``error`` where a stage raised, and
     ``stage: synthesis`` where the synthesiser refused every seed: no robot run to judge)."""
     t0 = time.monotonic()
@@ -138,7 +145,7 @@ def run_case(case: Case, out: Path, params: Path | None, controller: str = DEFAU
             demo, row["synth_seed"] = synthesise(case)
             write_demonstration_bag(demo, Path(tmp) / case.name)
             summary = offline.run(Path(tmp) / case.name, out / case.name, params=params,
-                                  plant=plant_path("default"), simulate=True, controller=controller)
+                                  plant="default", simulate=True, controller=controller, robot=robot)
         row.update(_figures(summary, demo.rise_end_s - demo.rise_start_s))
     except Exception as exc:  # noqa: BLE001 - a case that breaks is a result too: recorded, the population goes on
         row["error"] = f"{type(exc).__name__}: {exc}"
@@ -259,24 +266,25 @@ def resolve_params(args: argparse.Namespace) -> tuple[Path | None, str]:
         return None, "CAD (--cad)"
     if args.params is not None:
         return args.params, f"identified: {args.params}"
-    if DEFAULT_PARAMS.exists():
-        return DEFAULT_PARAMS, f"identified: {DEFAULT_PARAMS.relative_to(ROOT)} (make demo)"
-    robot_identification(args.out / "robot", 88)        # as make demo does
+    demo = demo_params(args.robot)
+    if demo.exists():
+        return demo, f"identified: {demo.relative_to(ROOT)} (make demo)"
+    robot_identification(args.out / "robot", 88, args.robot)        # as make demo does
     return args.out / "robot" / "identified_full.yaml", f"identified here: {args.out / 'robot'}"
 
 
 def run_population(cases: list[Case], out: Path, params: Path | None, jobs: int,
-                   controller: str = DEFAULT_CONTROLLER) -> list[dict]:
+                   controller: str = DEFAULT_CONTROLLER, robot: str = DEFAULT_ROBOT) -> list[dict]:
     """Every case, ``jobs`` at a time; one line per case as it finishes; rows in case order."""
     rows = []
     print(TABLE_HEAD, flush=True)
     if jobs <= 1:
         for case in cases:
-            rows.append(run_case(case, out / "cases", params, controller))
+            rows.append(run_case(case, out / "cases", params, controller, robot))
             print(case_line(rows[-1]), flush=True)
     else:
         with ProcessPoolExecutor(jobs, mp_context=get_context("spawn")) as pool:
-            futures = [pool.submit(run_case, c, out / "cases", params, controller) for c in cases]
+            futures = [pool.submit(run_case, c, out / "cases", params, controller, robot) for c in cases]
             for fut in as_completed(futures):
                 rows.append(fut.result())
                 print(case_line(rows[-1]), flush=True)
@@ -297,19 +305,23 @@ def main(argv: list[str] | None = None) -> int:
                         "inverse-dynamics feed-forward (inverse_dynamics)")
     parser.add_argument("--marker-rate", type=float, default=100.0,
                         help="the digital humans' capture rate [Hz] (default 100; divides the plates' 1000 Hz)")
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--robot", default=DEFAULT_ROBOT, help="robot profile: talos (default), g1 or a file")
+    parser.add_argument("--out", type=Path, default=None, help="default: bench/results/standup (G1: standup_g1)")
     args = parser.parse_args(argv)
+    args.out = args.out or (DEFAULT_OUT if args.robot == DEFAULT_ROBOT else
+                            DEFAULT_OUT.with_name(f"standup_{args.robot}"))
     cases = sample_population(args.cases, args.seed, (args.only_style,) if args.only_style else STYLES,
                               args.marker_rate)
     params, source = resolve_params(args)
     print(f"bench-standup: {len(cases)} digital humans (seed {args.seed}, captured at {args.marker_rate:g} Hz), "
-          f"default plant, parameters {source}, controller {args.controller}", flush=True)
+          f"robot {args.robot}, default plant, parameters {source}, controller {args.controller}", flush=True)
     t0 = time.monotonic()
-    rows = run_population(cases, args.out, params, args.jobs, args.controller)
+    rows = run_population(cases, args.out, params, args.jobs, args.controller, args.robot)
     agg = aggregate(rows)
     print("\n" + summary_text(agg))
     args.out.mkdir(parents=True, exist_ok=True)
-    doc = {"seed": args.seed, "marker_rate_hz": args.marker_rate, "parameters": source, "plant": "default",
+    doc = {"robot": args.robot, "seed": args.seed, "marker_rate_hz": args.marker_rate, "parameters": source,
+           "plant": "default",
            "controller": args.controller,
            "jobs": args.jobs, "wall_s": round(time.monotonic() - t0, 1), "aggregate": agg, "cases": rows}
     (args.out / "bench_standup.json").write_text(json.dumps(doc, indent=2) + "\n")

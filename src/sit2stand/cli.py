@@ -12,14 +12,17 @@
     sit2stand excite [--plant PLANT] [--seed N] --out DIR    (an excitation run of the simulated robot)
     sit2stand gap BAG [BAG ...] [--model cad|FILE] [--controller P.yaml] --out DIR   (what the robot model misses)
     sit2stand gap-human BAG [--out FILE.json]                (the same on a human demonstration)
+    sit2stand robot check ROBOT | robot list                  (a robot profile: check it; the packaged ones)
     sit2stand bag info|recover|merge ...
     sit2stand launch GRAPH [NAME:=VALUE ...] [--timeout S]   (a graph file, or a packaged graph's name: standup)
     sit2stand replay BAG [--rate R] [--loop] [--topics T ...]   (the replayer node)
     sit2stand record --out BAG [--topics T ...] [--regex RE]    (the recorder node)
     sit2stand serve-c3d FILE.c3d --protocol qtm [--port P] [--rate R] [--loop]   (a QTM stand-in for the bridge)
 
-PLANT is a plant YAML or a packaged plant's name (default, heavy_front, cad). Errors are printed as one line naming
-the file, topic or field, with exit code 2.
+PLANT is a plant YAML or a packaged plant's name (default, heavy_front, cad; G1's: g1_default, g1_cad). ROBOT
+(``--robot``) is a robot profile, packaged (talos, g1) or a YAML file; with it a packaged plant's name means that
+robot's own (``default`` is ``g1_default`` for G1). Errors are printed as one line naming the file, topic or field,
+with exit code 2.
 
 Each sub-command imports its stage when it runs: importing every stage (Pinocchio, MuJoCo, SciPy, rclpy) costs
 ~3 s, while ``--help`` and ``bag info`` need 0.2-0.7 s (measured on the 2-core development machine).
@@ -44,6 +47,7 @@ COMMANDS = [
     robot.add_identify,
     robot.add_excite,
     robot.add_gap,
+    robot.add_robot,
     human.add_gap_human,
     graph.add_bag,
     graph.add_launch,
@@ -70,8 +74,9 @@ def main(argv: list[str] | None = None) -> int:
 
     args = build_parser().parse_args(argv)
     try:
-        if hasattr(args, "plant"):
-            args.plant = plant_path(args.plant or "default")
+        if hasattr(args, "plant"):       # named here before any stage loads (a packaged name: the robot's own)
+            args.plant = args.plant or "default"
+            plant_path(args.plant)
         return int(args.func(args) or 0)
     except (Sit2StandError, OSError) as err:
         print(f"sit2stand {args.command}: error: {err}", file=sys.stderr)

@@ -13,12 +13,13 @@ For each shipped bag (``bags/natural``, ``bags/elderly``):
    analysed (:mod:`sit2stand.retarget.report`): stood up or not, COM tracking, the paper's Fig. 6, and a strip of
    rendered frames.
 
-Before that, for the robot: static postures of the simulated TALOS (default plant, with mass its CAD model lacks),
-identification of its mass/COM parameters (full model), the held-out COM error next to CAD's, and the figures.
+Before that, for the robot (``--robot``: TALOS by default, G1): static postures of the simulated robot (its default
+plant, with mass its CAD model lacks), identification of its mass/COM parameters (full model), the held-out COM error
+next to CAD's, and the figures.
 After: the sagittal COM paths of the humans, and Fig. 7 (the robot's COM paths, natural against elderly, identified
 against CAD parameters). Everything in ``summary.json``; the last line says "stood up" for each demonstration.
 
-    python -m sit2stand.demo --out runs/demo [--bags bags/natural bags/elderly] [--rate 1.0]
+    python -m sit2stand.demo --out runs/demo [--bags bags/natural bags/elderly] [--rate 1.0] [--robot g1]
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from .nodes.driver import FELL_EXIT_CODE
-from .data import graph_path, plant_path
+from .data import graph_path
 from .gap.excite import excite
 from .gap.report import cop_rms, gap_command
 from .gap.naming import describe
@@ -50,7 +51,7 @@ from .io.topics import GROUND_TRUTH_COM_TOPIC, HUMAN_COM_TOPIC
 from .retarget.report import RunAnalysis, analyse, figure_6, figure_7, render_strip
 from .robot.figures import com_path_figure, posture_figure
 from .robot.identify import identify, read_postures, write_yaml
-from .robot.model import PlantConfig
+from .robot.model import DEFAULT_ROBOT, PlantConfig
 from .robot.postures import collect_postures
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -88,12 +89,12 @@ def live(bag: Path, out: Path, rate: float) -> dict:
             "cost_p99_ms": float(cost.group(2)) if cost else None}
 
 
-def standup(bag: Path, out: Path, params: Path) -> dict:
-    """Run the stand-up graph on ``bag`` with the identified ``params``; analyse and plot the run."""
+def standup(bag: Path, out: Path, params: Path, robot: str = DEFAULT_ROBOT) -> dict:
+    """Run the stand-up graph on ``bag`` with ``robot``'s identified ``params``; analyse and plot the run."""
     with BagReader(bag) as b:
         meta = b.custom_data
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    plant = plant_path("default")
+    plant = PlantConfig.load("default", robot).source
     height, mass = meta.get("height_m", "1.75"), meta.get("body_mass_kg", "75")
     # the skeleton calibrated beforehand on the first 0.5 s (seated, still), as on a static trial: the live
     # estimator then has no calibration pause, and runs in real time below the retargeter
@@ -101,7 +102,7 @@ def standup(bag: Path, out: Path, params: Path) -> dict:
     calibrate_from_bag(bag, calibration, 50, float(height), float(mass))
     cmd = [sys.executable, "-m", "sit2stand.cli", "launch", str(graph_path("standup")),
            f"bag:={bag.resolve()}", f"out:={(out / 'standup').resolve()}", f"params:={params.resolve()}",
-           f"plant:={plant}", f"height:={height}", f"mass:={mass}", f"calibration:={calibration}",
+           f"plant:={plant}", f"robot:={robot}", f"height:={height}", f"mass:={mass}", f"calibration:={calibration}",
            "estimator_policy:=fifo", "driver_policy:=fifo", f"marker_map:={(out / 'marker_map.yaml').resolve()}"]
     t0 = time.monotonic()
     cmd[4:4] = ["--timeout", "300"]           # a graph that hangs is stopped, its bag and log kept
@@ -113,7 +114,7 @@ def standup(bag: Path, out: Path, params: Path) -> dict:
     stats = re.search(r"\[retargeter\] (\d+) frames, (\d+) infeasible, \d+ without a human COM; time scale ([\d.]+); "
                       r"IK p50 ([\d.]+) ms p99 ([\d.]+) ms; marker->command latency p50 ([\d.]+) ms p99 ([\d.]+) ms .*"
                       r"COM->command p50 ([\d.]+) ms p99 ([\d.]+) ms", proc.stdout)
-    a = analyse(out / "standup", bag.name, params, plant)
+    a = analyse(out / "standup", bag.name, params, plant, robot=robot)
     figure_6(a, out / "fig6_com.png")
     why = render_strip(a, plant, out / "standup_frames.png")
     if why:
@@ -126,15 +127,15 @@ def standup(bag: Path, out: Path, params: Path) -> dict:
     return res, a
 
 
-def robot_identification(out: Path, n_postures: int) -> dict:
-    """Static postures of the default plant, full-model identification, figures."""
-    print(f"[robot] {n_postures} static postures of the simulated TALOS (default plant)", flush=True)
+def robot_identification(out: Path, n_postures: int, robot: str = DEFAULT_ROBOT) -> dict:
+    """Static postures of ``robot``'s default plant, full-model identification, figures."""
+    cfg = PlantConfig.load("default", robot)
+    print(f"[robot] {n_postures} static postures of the simulated {cfg.profile.title} (plant {cfg.name})", flush=True)
     out.mkdir(parents=True, exist_ok=True)
-    counts = collect_postures(PlantConfig.load(plant_path("default")), n_postures,
-                              out / "postures", progress=False)
-    result = identify(out / "postures", "full")
+    counts = collect_postures(cfg, n_postures, out / "postures", progress=False)
+    result = identify(out / "postures", "full", robot=robot)
     print(f"      {result.summary()}", flush=True)
-    write_yaml(result, out / "identified_full.yaml", source=str(out / "postures"))
+    write_yaml(result, out / "identified_full.yaml", source=str(out / "postures"), robot=cfg.profile.name)
     posture_figure(result, read_postures(out / "postures"), out / "identified_full.png")
     com_path_figure(result, out / "identified_full_com_path.png")
     return {"postures_kept": counts["kept"], "eval_rms_mm": result.eval_rms_m * 1e3,
@@ -142,15 +143,16 @@ def robot_identification(out: Path, n_postures: int) -> dict:
             "cad_mass_kg": result.cad_mass_kg, "identify_s": result.seconds}
 
 
-def model_gap(out: Path) -> dict:
-    """The model-gap workflow on the default plant against the CAD model: an excitation run (standing, stance to
-    stance) recorded like the driver's stream, plus the identification's static postures."""
-    plant = plant_path("default")
-    print("[gap] excitation run of the simulated TALOS (default plant), then sit2stand gap against CAD", flush=True)
-    excite(PlantConfig.load(plant), out / "excite", seed=0)
+def model_gap(out: Path, robot: str = DEFAULT_ROBOT) -> dict:
+    """The model-gap workflow on ``robot``'s default plant against the CAD model: an excitation run (standing,
+    stance to stance) recorded like the driver's stream, plus the identification's static postures."""
+    cfg = PlantConfig.load("default", robot)
+    print(f"[gap] excitation run of the simulated {cfg.profile.title} (plant {cfg.name}), then sit2stand gap "
+          "against CAD", flush=True)
+    excite(cfg, out / "excite", seed=0)
     bags = [out / "excite"] + ([out.parent / "robot" / "postures"] if (out.parent / "robot" / "postures").exists()
                                else [])
-    result = gap_command(bags, out)
+    result = gap_command(bags, out, robot=robot)
     for e in result.effects:
         print(f"      {describe(e)}", flush=True)
     cop = cop_rms(result)
@@ -199,16 +201,17 @@ def main(argv: list[str] | None = None) -> int:
     runs: dict[str, tuple[Path, Path]] = {}
     params = None
     if not args.skip_robot:
-        summary["robot"] = robot_identification(args.out / "robot", args.postures)
+        summary["robot"] = robot_identification(args.out / "robot", args.postures, args.robot)
         params = args.out / "robot" / "identified_full.yaml"
     analyses = []
     for i, bag in enumerate(args.bags, 1):
         runs[bag.name] = (args.out / bag.name, bag)
-        summary[bag.name], a = demonstration(bag, args.out / bag.name, args.rate, params, f"[{i}/{len(args.bags)}]")
+        summary[bag.name], a = demonstration(bag, args.out / bag.name, args.rate, params, f"[{i}/{len(args.bags)}]",
+                                             args.robot)
         if a is not None:
             analyses.append(a)
     if not args.skip_robot:
-        summary["robot_gap"] = model_gap(args.out / "gap")
+        summary["robot_gap"] = model_gap(args.out / "gap", args.robot)
     com_paths_figure(runs, args.out / "com_paths.png")
     if analyses:
         figure_7(analyses, args.out / "fig7_com_paths.png")
@@ -224,11 +227,12 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--rate", type=float, default=1.0)
     parser.add_argument("--postures", type=int, default=88, help="static postures for the robot identification")
     parser.add_argument("--skip-robot", action="store_true")
+    parser.add_argument("--robot", default=DEFAULT_ROBOT, help="robot profile: talos (default), g1 or a file")
     return parser.parse_args(argv)
 
 
 def demonstration(bag: Path, run_dir: Path, rate: float, params: Path | None,
-                  tag: str) -> tuple[dict, RunAnalysis | None]:
+                  tag: str, robot: str = DEFAULT_ROBOT) -> tuple[dict, RunAnalysis | None]:
     """One demonstration: the human COM offline and live, then (with identified ``params``) the robot's stand-up;
     its summary and the stand-up's analysis (None without a robot)."""
     name = bag.name
@@ -245,7 +249,7 @@ def demonstration(bag: Path, run_dir: Path, rate: float, params: Path | None,
     if params is None:
         return out, None
     print("      stand-up graph: replayer -> human_com -> retargeter -> driver -> recorder", flush=True)
-    out["standup"], a = standup(bag, run_dir, params)
+    out["standup"], a = standup(bag, run_dir, params, robot)
     st = out["standup"]
     print(f"      {'stood up' if st['stood_up'] else 'DID NOT STAND UP'}: pelvis {st['pelvis_start_m']:.2f} -> "
           f"{st['pelvis_final_m']:.2f} m, COM tracking RMS {st['com_tracking_rms_m'] * 100:.1f} cm, time scale "

@@ -19,11 +19,15 @@ DEFAULT_CONTROLLER = "wbc"
 """``robot.plant.DEFAULT_CONTROLLER``, spelled here for the same reason (the same test keeps them equal)."""
 
 
+ROBOT_HELP = "robot profile: a packaged one (talos, g1) or a YAML file (default: the plant's; TALOS)"
+"""The ``--robot`` option's help; ``docs/robots.md`` says how to write a profile."""
+
+
 def _retarget(args: argparse.Namespace) -> int:
     from ..retarget.offline import run
     from ..retarget.stream import RetargetConfig
 
-    summary = run(Path(args.bag), Path(args.out), params=args.params, plant=args.plant,
+    summary = run(Path(args.bag), Path(args.out), params=args.params, plant=args.plant, robot=args.robot,
                   config=RetargetConfig(marker_set=args.marker_set), calibration_frame=args.calibration_frame,
                   static=args.static,
                   human_com_bag=args.human_com, margin_m=args.margin, time_scale=args.time_scale,
@@ -49,15 +53,16 @@ def _drive(args: argparse.Namespace) -> int:
     from ..nodes.driver import main as driver_main
 
     return driver_main(["driver"] + ros_params([
-        ("plant", str(args.plant)), ("controller_params", str(args.params) if args.params else None),
-        ("real_time_factor", float(args.rtf)), ("publish_clock", args.clock), ("feedforward", args.feedforward)]))
+        ("plant", str(args.plant) if args.plant else None), ("robot", args.robot),
+        ("controller_params", str(args.params) if args.params else None), ("real_time_factor", float(args.rtf)),
+        ("publish_clock", args.clock), ("feedforward", args.feedforward)]))
 
 
 def _collect_postures(args: argparse.Namespace) -> int:
     from ..robot.model import PlantConfig
     from ..robot.postures import collect_postures
 
-    cfg = PlantConfig.load(args.plant)
+    cfg = PlantConfig.load(args.plant, args.robot)
     counts = collect_postures(cfg, args.n, args.out, seed=args.seed)
     print(f"wrote {args.out}: {counts['kept']} postures held ({counts['dropped']} tipped over and were dropped; the "
           f"upright stance showed the real COM {counts['home_com_bias_m'] * 1e3:+.0f} mm from CAD's)")
@@ -67,10 +72,12 @@ def _collect_postures(args: argparse.Namespace) -> int:
 def _identify(args: argparse.Namespace) -> int:
     from ..robot.figures import com_path_figure, posture_figure
     from ..robot.identify import identify, read_postures, write_yaml
+    from ..robot.model import DEFAULT_ROBOT
+    from ..robot.profile import load_profile
 
-    result = identify(args.dir, args.model, eval_fraction=args.eval_fraction, seed=args.seed)
+    result = identify(args.dir, args.model, eval_fraction=args.eval_fraction, seed=args.seed, robot=args.robot)
     print(result.summary())
-    write_yaml(result, args.out, source=str(args.dir))
+    write_yaml(result, args.out, source=str(args.dir), robot=load_profile(args.robot or DEFAULT_ROBOT).name)
     png = Path(args.out).with_suffix(".png")
     posture_figure(result, read_postures(args.dir), png, args.eval_fraction, args.seed)
     written = [str(args.out), str(png)]
@@ -86,7 +93,7 @@ def _excite(args: argparse.Namespace) -> int:
     from ..gap.excite import excite
     from ..robot.model import PlantConfig
 
-    info = excite(PlantConfig.load(args.plant), args.out, seed=args.seed, n_moves=args.moves, progress=True)
+    info = excite(PlantConfig.load(args.plant, args.robot), args.out, seed=args.seed, n_moves=args.moves, progress=True)
     print(f"wrote {args.out}: {info['duration_s']:.1f} s of excitation"
           + (f"; the robot fell ({info['status']})" if info["fell"] else ""))
     return 1 if info["fell"] else 0
@@ -98,7 +105,7 @@ def _gap(args: argparse.Namespace) -> int:
     from ..gap.workflow import progress_printer
 
     result = gap_command(args.bags, args.out, model=args.model, rate_hz=args.rate, progress=progress_printer,
-                         controller=args.controller)
+                         controller=args.controller, robot=args.robot)
     print(f"nominal model: {result.model_source}")
     if result.effects:
         print(f"named {len(result.effects)} effect(s):")
@@ -152,6 +159,7 @@ def add_retarget(sub) -> None:
                    "made on (default: the one that sees the most markers in the quietest seated stretch)")
     p.add_argument("--static", type=Path, metavar="FILE", help="calibrate the human skeleton on a static trial "
                    "(bag, .c3d or .trc) when the human COM is estimated here")
+    p.add_argument("--robot", help=ROBOT_HELP)
     p.set_defaults(func=_retarget)
 
 
@@ -162,6 +170,7 @@ def add_drive(sub) -> None:
     p.add_argument("--rtf", type=float, default=1.0, help="real-time factor; 0 = as fast as possible")
     p.add_argument("--clock", action="store_true", help="publish /clock (the driver is the time source)")
     p.add_argument("--feedforward", choices=["gravity", "inverse_dynamics", "none"], default="gravity")
+    p.add_argument("--robot", help=ROBOT_HELP)
     p.set_defaults(func=_drive)
 
 
@@ -171,6 +180,7 @@ def add_collect_postures(sub) -> None:
     p.add_argument("--n", type=int, default=88, help="postures to keep (the paper had 88)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--robot", help=ROBOT_HELP)
     p.set_defaults(func=_collect_postures)
 
 
@@ -181,6 +191,7 @@ def add_identify(sub) -> None:
     p.add_argument("--eval-fraction", type=float, default=0.1)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, required=True, help="parameters YAML (figures are written beside it)")
+    p.add_argument("--robot", help=ROBOT_HELP)
     p.set_defaults(func=_identify)
 
 
@@ -190,6 +201,7 @@ def add_excite(sub) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--moves", type=int, default=8)
     p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--robot", help=ROBOT_HELP)
     p.set_defaults(func=_excite)
 
 
@@ -201,4 +213,35 @@ def add_gap(sub) -> None:
                    "default: CAD): the control law is re-evaluated with them")
     p.add_argument("--rate", type=float, default=50.0, help="analysis rate [Hz] for runs")
     p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--robot", help=ROBOT_HELP)
     p.set_defaults(func=_gap)
+
+
+def _robot_check(args: argparse.Namespace) -> int:
+    from ..robot.check import check_robot
+
+    result = check_robot(args.robot, args.plant)
+    print(json.dumps(result.as_dict(), indent=2) if args.json else "\n".join(result.lines()))
+    return 0 if result.ok else 1
+
+
+def _robot_list(args: argparse.Namespace) -> int:
+    from ..robot.profile import load_profile, packaged_names
+
+    for name in packaged_names():
+        profile = load_profile(name)
+        print(f"{name:8s} {profile.title} ({profile.urdf.name})")
+    return 0
+
+
+def add_robot(sub) -> None:
+    p = sub.add_parser("robot", help="robot profiles: list the packaged ones, check one (docs/robots.md)")
+    verbs = p.add_subparsers(dest="verb", required=True)
+    check = verbs.add_parser("check", help="load a profile, build its robot, sit it on its chair, print its mass, "
+                             "heights and the torque headroom of a sit-to-stand")
+    check.add_argument("robot", help="a packaged profile's name (talos, g1) or a profile YAML file")
+    check.add_argument("--plant", help="a plant of this robot (default: none of its unmodeled effects)")
+    check.add_argument("--json", action="store_true", help="print the figures as JSON")
+    check.set_defaults(func=_robot_check)
+    listing = verbs.add_parser("list", help="the packaged robot profiles")
+    listing.set_defaults(func=_robot_list)

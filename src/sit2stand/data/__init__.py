@@ -1,6 +1,6 @@
 """The files shipped inside the package: plants (``plants/*.yaml``), graphs (``graphs/*.yaml``), ROS parameter
-files (``params/*.yaml``) and Foxglove layouts (``layouts/*.json``), found with :mod:`importlib.resources` so that
-an installed copy finds them too.
+files (``params/*.yaml``), robot profiles (``robots/*.yaml``) and Foxglove layouts (``layouts/*.json``), found with
+:mod:`importlib.resources` so that an installed copy finds them too.
 
 Each lookup takes a packaged file's name (``"default"``, ``"standup"``; ``.yaml`` optional) or a path: a name
 resolves to the packaged file, an existing file is returned as it is, anything else raises
@@ -23,7 +23,7 @@ from pathlib import Path
 
 from ..errors import Sit2StandError
 
-KINDS = ("plants", "graphs", "params", "layouts")
+KINDS = ("plants", "graphs", "params", "layouts", "robots")
 SUFFIXES = (".yaml", ".yml")
 
 
@@ -76,7 +76,7 @@ def find(kind: str, name_or_path: str | os.PathLike) -> Path:
             packaged = folder(kind) / candidate
             if packaged.suffix in SUFFIXES and packaged.is_file():
                 return packaged
-    singular = {"plants": "plant", "graphs": "graph", "params": "parameter"}[kind]
+    singular = {"plants": "plant", "graphs": "graph", "params": "parameter", "robots": "robot profile"}[kind]
     raise DataFileNotFound(f"{text!r}: no such {singular} file, nor a packaged {singular} file's name "
                            f"(packaged: {', '.join(names(kind)) or 'none'})")
 

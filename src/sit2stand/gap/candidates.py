@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from ..robot.profile import SIDES, profile_of
 from .bounds import Limits, refusal
 from .dataset import MOVING_RADPS, Dataset
 from .effects import FT_AXES
@@ -29,10 +30,11 @@ def rigid_groups(model: pin.Model, ds: Dataset) -> dict[int, list[int]]:
     did not move are one rigid body in these data. The feet (below the F/T sensors) are left out."""
     moved = moved_joints(ds)
     by_name = {n: moved[i] for i, n in enumerate(ds.joint_names)}
+    feet = {profile_of(model).foot_joint(s) for s in SIDES}
     groups: dict[int, list[int]] = {}
     for jid in range(1, model.njoints):
         name = model.names[jid]
-        if name.startswith("leg_") and name.endswith("_6_joint"):
+        if name in feet:
             continue
         root = jid
         while root > 1 and not by_name.get(model.names[root], True):

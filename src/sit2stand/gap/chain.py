@@ -6,7 +6,8 @@ and turns it back at the children: to first order the same as an encoder offset 
 opposite offset on each child joint whose axis is parallel to the parent's. Only the positions of the links in
 between tell the two apart, which the torques show weakly. The selection can therefore name such a set of offsets,
 a confident name for an effect the library does not hold (seen: the torso's pitch axis tilted 5 degrees toward x
-named as offsets of +0.08 rad at torso_1_joint and -0.08 rad at both arm_*_1_joint, the replay then within noise).
+named as offsets of +0.08 rad at the torso's yaw and -0.08 rad at both first shoulder joints, the replay then within
+noise).
 Independent encoder errors do not cancel: a parent offset matched, within ``CANCEL_TOLERANCE``, by opposite offsets
 of children about parallel axes (``PARALLEL_COS``, at the model's zero posture) is refused, with the children's, and
 the residual they would have absorbed is left to be reported as unexplained.

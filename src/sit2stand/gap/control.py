@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..dynamics import savgol_series
-from ..robot.model import PlantConfig
+from ..robot.model import DEFAULT_ROBOT, PlantConfig
 from ..robot.plant import Plant, contact_feedforward, feedforward_seated, reference_at
 from .recording import Recording, smoothing_window
 
@@ -64,14 +64,14 @@ def feedforward_rate(ff: np.ndarray, t_s: np.ndarray, valid: np.ndarray) -> np.n
     return savgol_series(held, window, 3, 1) / float(np.median(np.diff(t_s)))
 
 
-def control_law(rec: Recording, controller_params: dict | None = None, sensor_lag_s: float = 0.001
-                ) -> ControlLaw | None:
-    """The control law along ``rec``; None without commands. ``controller_params``: the controller's identified link
-    parameters (None: CAD)."""
+def control_law(rec: Recording, controller_params: dict | None = None, sensor_lag_s: float = 0.001,
+                robot: str = DEFAULT_ROBOT) -> ControlLaw | None:
+    """The control law along ``rec`` of ``robot`` (a profile's name); None without commands. ``controller_params``:
+    the controller's identified link parameters (None: CAD)."""
     cmd = rec.commands
     if cmd is None or rec.static or len(cmd.t_s) < 2:
         return None
-    plant = Plant(PlantConfig(), controller_params=controller_params)
+    plant = Plant(PlantConfig(robot=robot), controller_params=controller_params)
     names = plant.joint_names
     if names != rec.joint_names:
         order = [names.index(j) for j in rec.joint_names]

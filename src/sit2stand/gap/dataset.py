@@ -12,6 +12,8 @@ import pinocchio as pin
 
 from ..dynamics import savgol_series
 from ..errors import Sit2StandError
+from ..robot.model import DEFAULT_ROBOT
+from ..robot.profile import profile_of
 from .control import ControlLaw, control_law
 from .recording import Recording, read_recording
 from .residuals import Evaluation, evaluate
@@ -58,11 +60,16 @@ def phases(rec: Recording) -> tuple[np.ndarray, dict]:
     return labels, {"seat_off_s": t_so, "standing_s": float(t[k_up])}
 
 
-def fallen(rec: Recording) -> np.ndarray:
-    """Samples after the robot fell (pelvis below 0.45 m or the base tilted past 60 degrees)."""
+FALLEN_ABOVE_FALL_M = 0.10
+"""A recording counts as fallen from a pelvis this far above the robot's fall height (its profile's; TALOS: 0.45 m)."""
+
+
+def fallen(rec: Recording, fall_height_m: float) -> np.ndarray:
+    """Samples after the robot fell (pelvis below ``fall_height_m`` + ``FALLEN_ABOVE_FALL_M`` or the base tilted
+    past 60 degrees)."""
     w = rec.base_pose[:, 3:7]
     tilt = 2 * np.arccos(np.clip(np.sqrt(w[:, 0] ** 2 + w[:, 3] ** 2), 0, 1))
-    bad = (rec.base_pose[:, 2] < 0.45) | (tilt > np.radians(60))
+    bad = (rec.base_pose[:, 2] < fall_height_m + FALLEN_ABOVE_FALL_M) | (tilt > np.radians(60))
     return np.maximum.accumulate(bad)
 
 
@@ -77,6 +84,7 @@ class Dataset:
     events: list[dict]
     floors: list[np.ndarray] = field(default_factory=list)     # per recording: (C,) noise floor per channel
     notes: list[str] = field(default_factory=list)
+    robot: str = DEFAULT_ROBOT                                 # the robot's profile name
 
     @property
     def channels(self) -> list[str]:
@@ -94,9 +102,10 @@ def load_dataset(bags: list[str | Path], model: pin.Model, rate_hz: float = 50.0
     """Read each bag (what follows a fall left out), label its phases and evaluate ``model`` along it; controller
     channels for all recordings when any has commands (``controller_params``: the controller's links, None: CAD)."""
     recs, labels, events, notes = [], [], [], []
+    profile = profile_of(model)
     for bag in bags:
         rec = read_recording(bag, model, rate_hz=rate_hz)
-        down = fallen(rec)
+        down = fallen(rec, profile.fall_pelvis_height_m)
         if down.any():
             notes.append(f"{bag}: the robot fell at {rec.t_s[np.argmax(down)]:.2f} s; the samples after are left out")
             rec = rec.subset(~down)
@@ -110,7 +119,7 @@ def load_dataset(bags: list[str | Path], model: pin.Model, rate_hz: float = 50.0
         labels.append(lab)
         events.append(ev_info)
         notes.extend(rec.notes)
-    ds = Dataset(recs, [], labels, events, notes=notes)
+    ds = Dataset(recs, [], labels, events, notes=notes, robot=profile.name)
     evaluate_all(ds, model, controller_params)
     return ds
 
@@ -120,7 +129,7 @@ def evaluate_all(ds: Dataset, model: pin.Model, controller_params: dict | None =
     ds.evaluations = []
     for rec, lab in zip(ds.recordings, ds.labels):
         ev = evaluate(model, rec, seated=np.isin(lab, ["seated", "seat-off"]))
-        law = control_law(rec, controller_params)
+        law = control_law(rec, controller_params, robot=ds.robot)
         if law is not None:
             ev.add_control(law, rec.tau, rec.joint_names)
         ds.evaluations.append(ev)

@@ -86,7 +86,7 @@ def unmodeled_dict(um: Unmodeled) -> dict:
 
 def alter_model(model: mujoco.MjModel, effects: list[dict]) -> None:
     """Apply the ``MODEL_KINDS`` effects of ``effects`` to a compiled plant model in place (a location may be a glob
-    such as ``leg_*_4_link``); the other kinds are left to :func:`unmodeled_from`."""
+    such as ``*_knee_link``); the other kinds are left to :func:`unmodeled_from`."""
     for e in effects:
         k, v = e["kind"], float(e.get("value", 0.0))
         if k == "extra_mass" and e["mass_kg"] < 0:

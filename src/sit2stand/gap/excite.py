@@ -78,11 +78,12 @@ def excite(cfg: PlantConfig, out: str | Path, seed: int = 0, n_moves: int = 8, m
             plant.command(q, qd, qdd, refresh=False)
             if k % every == 0:
                 t_ns = t0_ns + int(round(t * 1e9))
-                command = M.joint_trajectory_point(t_ns, plant.joint_names, q, qd, qdd)
+                command = M.joint_trajectory_point(t_ns, plant.joint_names, q, qd, qdd, plant.cfg.profile.root_link)
                 bag.write(ROBOT_JOINT_COMMAND_TOPIC, t_ns, command)
                 sens = plant.sensors()
                 for topic, msg in M.robot_state(t_ns, plant.joint_names, sens.q, sens.qd, sens.tau,
-                                                sens.wrench_world, sens.cop_m, sens.base_pose):
+                                                sens.wrench_world, sens.cop_m, sens.base_pose,
+                                                plant.cfg.profile.root_link):
                     bag.write(topic, t_ns, msg)
                 if progress and k % int(round(2.0 / dt)) == 0:
                     print(f"  excite: {t:.1f}/{duration:.1f} s", file=sys.stderr, flush=True)

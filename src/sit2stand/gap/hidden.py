@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..robot.model import PlantConfig
+from ..robot.model import DEFAULT_ROBOT, PlantConfig
+from ..robot.profile import SIDES, load_profile
 from .effects import FT_AXES, MODEL_KINDS, unmodeled_from
 from .excite import excite
 from .workflow import run
@@ -29,18 +30,34 @@ KINDS = ("extra_mass", "viscous_friction", "coulomb_friction", "torque_bias", "t
 # cases the workflow's library does not hold: an honest answer flags the residual as unexplained. A torso joint's
 # tilted axis: no closure sees the upper body's kinematics (the legs' are in the library: gap.kinematics)
 OUT_OF_LIBRARY = ("torso_axis", "ft_rotation")
-# a link of every rigid group of an excitation run, and links inside groups (a hand, the head, a wrist)
-MASS_LINKS = ("base_link", "torso_2_link", "leg_left_3_link", "leg_right_3_link", "leg_left_4_link",
-              "leg_right_4_link", "leg_left_5_link", "leg_right_5_link", "arm_left_1_link", "arm_right_2_link",
-              "arm_left_4_link", "arm_right_4_link", "arm_left_7_link", "arm_right_6_link", "head_2_link")
-MOVING_JOINTS = ("torso_2_joint", "leg_left_3_joint", "leg_left_4_joint", "leg_left_5_joint", "leg_right_3_joint",
-                 "leg_right_4_joint", "leg_right_5_joint", "arm_left_1_joint", "arm_left_2_joint", "arm_left_4_joint",
-                 "arm_right_1_joint", "arm_right_2_joint", "arm_right_4_joint")
-LOADED_JOINTS = ("torso_2_joint", "leg_left_3_joint", "leg_left_4_joint", "leg_left_5_joint", "leg_right_3_joint",
-                 "leg_right_4_joint", "leg_right_5_joint")
-LEG_PITCH_JOINTS = tuple(j for j in LOADED_JOINTS if j.startswith("leg_"))
-ALL_JOINTS_FOR_BIAS = MOVING_JOINTS + ("leg_left_1_joint", "leg_right_2_joint", "torso_1_joint", "head_2_joint",
-                                       "arm_left_3_joint")
+# Where the suite hides effects, from the robot's profile (``gap``): a link of every rigid group of an excitation run
+# and links inside groups (a hand, the head, a wrist) for masses; the joints that move for friction and backlash;
+# the loaded joints (trunk pitch, hip, knee, ankle pitch) for gains, offsets, springs and rotor inertia; the moving
+# joints and some that stay still for torque biases.
+
+
+@dataclass(frozen=True)
+class Places:
+    """Where the hidden-effect suite may hide an effect on one robot."""
+
+    mass_links: tuple[str, ...]
+    moving_joints: tuple[str, ...]
+    loaded_joints: tuple[str, ...]
+    leg_pitch_joints: tuple[str, ...]
+    bias_joints: tuple[str, ...]
+    leg_length_links: tuple[str, ...]       # thigh and shank links, one side ({side}: "left"/"right"/"*" below)
+    trunk_pitch: str
+
+
+def places(robot: str = DEFAULT_ROBOT) -> Places:
+    """The places of ``robot``'s profile (its ``gap`` section and leg roles)."""
+    profile = load_profile(robot)
+    leg_pitch = tuple(profile.leg(s, r) for s in SIDES for r in ("hip_pitch", "knee", "ankle_pitch"))
+    moving = tuple(profile.gap.get("moving_joints", ()))
+    return Places(tuple(profile.gap.get("mass_links", ())), moving, (profile.trunk_pitch,) + leg_pitch, leg_pitch,
+                  moving + tuple(profile.gap.get("still_joints", ())),
+                  tuple(profile.child_link(profile.leg("left", r)) for r in ("knee", "ankle_pitch")),
+                  profile.trunk_pitch)
 
 
 @dataclass
@@ -68,28 +85,30 @@ class Hidden:
         return f"{self.kind} @ {self.location}: {self.magnitude:.4g}{second}{extra}"
 
 
-def draw(kind: str, seed: int) -> Hidden:
-    """A hidden effect of ``kind`` with location and magnitude drawn from ``seed``."""
+def draw(kind: str, seed: int, robot: str = DEFAULT_ROBOT) -> Hidden:
+    """A hidden effect of ``kind`` on ``robot`` (a profile) with location and magnitude drawn from ``seed``."""
     if kind in OUT_OF_LIBRARY:
-        return draw_outside(kind, seed)
+        return draw_outside(kind, seed, robot)
+    at = places(robot)
+    profile = load_profile(robot)
     rng = np.random.default_rng([KINDS.index(kind), seed])
     sign = rng.choice([-1.0, 1.0])
     if kind == "extra_mass":
-        link = str(rng.choice(MASS_LINKS))
-        mass = rng.uniform(1.5, 4.0) if link.startswith("arm") else rng.uniform(2.0, 8.0)
+        link = str(rng.choice(at.mass_links))
+        mass = rng.uniform(1.5, 4.0) if profile.is_arm_link(link) else rng.uniform(2.0, 8.0)
         pos = tuple(float(v) for v in rng.uniform(-0.12, 0.12, 3))
         return Hidden(kind, link, float(mass), pos)
     if kind == "viscous_friction":
-        return Hidden(kind, str(rng.choice(MOVING_JOINTS)), float(rng.uniform(1.5, 5.0)))
+        return Hidden(kind, str(rng.choice(at.moving_joints)), float(rng.uniform(1.5, 5.0)))
     if kind == "coulomb_friction":
-        return Hidden(kind, str(rng.choice(MOVING_JOINTS)), float(rng.uniform(1.0, 3.0)))
+        return Hidden(kind, str(rng.choice(at.moving_joints)), float(rng.uniform(1.0, 3.0)))
     if kind == "torque_bias":       # within 40 % of the joint's effort (the head's is 4 N m): a sensor's range
-        joint = str(rng.choice(ALL_JOINTS_FOR_BIAS))
-        return Hidden(kind, joint, float(sign * min(rng.uniform(1.0, 5.0), 0.4 * EFFORT_NM.get(joint, 100.0))))
+        joint = str(rng.choice(at.bias_joints))
+        return Hidden(kind, joint, float(sign * min(rng.uniform(1.0, 5.0), 0.4 * profile.effort_nm(joint))))
     if kind == "torque_gain":
-        return Hidden(kind, str(rng.choice(LOADED_JOINTS)), float(1.0 + sign * rng.uniform(0.05, 0.15)))
+        return Hidden(kind, str(rng.choice(at.loaded_joints)), float(1.0 + sign * rng.uniform(0.05, 0.15)))
     if kind == "joint_offset":
-        return Hidden(kind, str(rng.choice(LOADED_JOINTS)), float(sign * rng.uniform(0.01, 0.04)))
+        return Hidden(kind, str(rng.choice(at.loaded_joints)), float(sign * rng.uniform(0.01, 0.04)))
     if kind == "ft_bias":
         side, axis = str(rng.choice(["left", "right"])), str(rng.choice(FT_AXES))
         size = rng.uniform(5.0, 20.0) if axis.startswith("f") else rng.uniform(1.0, 4.0)
@@ -97,26 +116,26 @@ def draw(kind: str, seed: int) -> Hidden:
     if kind == "actuator_delay":
         return Hidden(kind, "all joints", float(rng.uniform(0.005, 0.025)))
     if kind == "joint_spring":
-        return Hidden(kind, str(rng.choice(LOADED_JOINTS)), float(rng.uniform(20.0, 80.0)))
+        return Hidden(kind, str(rng.choice(at.loaded_joints)), float(rng.uniform(20.0, 80.0)))
     if kind == "rotor_inertia":
-        return Hidden(kind, str(rng.choice(LOADED_JOINTS)), float(rng.uniform(0.5, 1.5)))
+        return Hidden(kind, str(rng.choice(at.loaded_joints)), float(rng.uniform(0.5, 1.5)))
     if kind == "contact_softness":    # the soles 2-4 times softer (contact time constant [s], MuJoCo's default 0.02)
         return Hidden(kind, "soles", float(rng.uniform(0.04, 0.08)))
     if kind == "link_length":         # thighs or shanks 3-6 % longer or shorter on both legs, or 1-2.5 % on one
         where = str(rng.choice(["*", "*", "left", "right"]))   # (one shank 5 % short: the robot cannot stand)
         size = rng.uniform(0.03, 0.06) if where == "*" else rng.uniform(0.01, 0.025)
-        return Hidden(kind, f"leg_{where}_{rng.choice([4, 5])}_link", float(1.0 + sign * size))
+        left = at.leg_length_links[int(rng.choice([0, 1]))]
+        link = profile.both_sides(left) if where == "*" else profile.side_name(profile.both_sides(left).replace(
+            "*", "{side}", 1), where)
+        return Hidden(kind, link, float(1.0 + sign * size))
     if kind == "backlash":            # half a gear's play of 0.1-0.5 degrees on a joint that moves
-        return Hidden(kind, str(rng.choice(MOVING_JOINTS)), float(rng.uniform(0.002, 0.008)))
+        return Hidden(kind, str(rng.choice(at.moving_joints)), float(rng.uniform(0.002, 0.008)))
     if kind == "joint_axis":          # a hip, knee or ankle pitch axis tilted 3-7 degrees
-        return Hidden(kind, str(rng.choice(LEG_PITCH_JOINTS)), float(sign * rng.uniform(0.05, 0.12)))
+        return Hidden(kind, str(rng.choice(at.leg_pitch_joints)), float(sign * rng.uniform(0.05, 0.12)))
     raise InputError(f"unknown effect kind {kind!r} (known: {', '.join(KINDS)})")
 
 
-EFFORT_NM = {"head_1_joint": 8.0, "head_2_joint": 4.0}     # the small joints among ALL_JOINTS_FOR_BIAS
-
-
-def draw_outside(kind: str, seed: int) -> Hidden:
+def draw_outside(kind: str, seed: int, robot: str = DEFAULT_ROBOT) -> Hidden:
     """An effect outside the workflow's library, 3-7 degrees in a direction drawn at random: the torso's pitch axis
     tilted (``torso_axis``), or one foot's F/T sensor mounted turned about a horizontal axis (``ft_rotation``: it reads
     part of the vertical load as a horizontal force, in proportion to the load)."""
@@ -126,13 +145,14 @@ def draw_outside(kind: str, seed: int) -> Hidden:
     size, direction = rng.uniform(0.05, 0.12), rng.uniform(0.0, 2.0 * np.pi)
     t1, t2 = float(size * np.cos(direction)), float(size * np.sin(direction))
     if kind == "torso_axis":
-        return Hidden("joint_axis", "torso_2_joint", t1, magnitude_2=t2, outside=True)
+        return Hidden("joint_axis", places(robot).trunk_pitch, t1, magnitude_2=t2, outside=True)
     return Hidden("ft_rotation", f"ft_{rng.choice(['left', 'right'])}", t1, magnitude_2=t2, outside=True)
 
 
-def plant_with(effects: list[Hidden], seed: int = 0) -> PlantConfig:
-    """The CAD plant with ``effects`` hidden in its ``unmodeled`` section (named "hidden": the bag tells nothing)."""
-    cfg = PlantConfig(name="hidden", seed=seed)
+def plant_with(effects: list[Hidden], seed: int = 0, robot: str = DEFAULT_ROBOT) -> PlantConfig:
+    """``robot``'s CAD plant with ``effects`` hidden in its ``unmodeled`` section (named "hidden": the bag tells
+    nothing)."""
+    cfg = PlantConfig(name="hidden", seed=seed, robot=robot)
     cfg.unmodeled = unmodeled_from([h.as_effect() for h in effects], mass_prefix="hidden")
     return cfg
 
@@ -182,17 +202,18 @@ def score(hidden: list[Hidden], named: list[dict]) -> Score:
     return s
 
 
-def run_case(hidden: list[Hidden], seed: int, workdir: str, n_moves: int = 8, replay: bool = True) -> dict:
-    """Build the plant, record its excitation bag, run the workflow on the bag alone and score it (``replay``: with
-    the re-simulation, ~6 s a case)."""
+def run_case(hidden: list[Hidden], seed: int, workdir: str, n_moves: int = 8, replay: bool = True,
+             robot: str = DEFAULT_ROBOT) -> dict:
+    """Build ``robot``'s plant, record its excitation bag, run the workflow on the bag alone and score it
+    (``replay``: with the re-simulation, ~6 s a case)."""
     # a folder of its own: two cases of one kind and seed may run at once
     bag = Path(tempfile.mkdtemp(prefix=f"case_{seed}_{'_'.join(h.kind for h in hidden) or 'none'}_", dir=workdir))
     shutil.rmtree(bag, ignore_errors=True)
     t0 = time.monotonic()
     alter = [h.as_effect() for h in hidden if h.kind in MODEL_KINDS]
-    info = excite(plant_with(hidden, seed=seed), bag, seed=seed, n_moves=n_moves, alterations=alter)
+    info = excite(plant_with(hidden, seed=seed, robot=robot), bag, seed=seed, n_moves=n_moves, alterations=alter)
     t1 = time.monotonic()
-    result = run([bag], replay=replay)
+    result = run([bag], replay=replay, robot=robot)
     t2 = time.monotonic()
     s = score(hidden, result.effects)
     shutil.rmtree(bag, ignore_errors=True)

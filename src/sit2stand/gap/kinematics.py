@@ -12,8 +12,8 @@ When the closure disagrees (some channel at ``SIGNIFICANT_Z`` floors), the legs'
 linearised by finite differences of the forward kinematics and chosen greedily (:func:`_forward`), then refined by
 Gauss-Newton on the true forward kinematics:
 
-* ``link_length``: a leg link's offset from its parent joint scaled by ``value`` (one leg, or ``leg_*_<k>_link``:
-  both legs by one factor, what a symmetric error is);
+* ``link_length``: a leg link's offset from its parent joint scaled by ``value`` (one leg, or both legs by one
+  factor, the link's name with ``*`` for its side, what a symmetric error is);
 * ``joint_axis``: a moving leg joint's axis tilted by ``value`` rad toward ``axis x z`` (``axis x x`` for a vertical
   axis) and by ``value_2`` rad toward the axis crossed with that direction (as :func:`gap.effects.alter_model`);
 * ``joint_offset``: a moving leg joint's encoder offset (reading - true angle), so that an offset is not taken for a
@@ -32,7 +32,7 @@ from fnmatch import fnmatchcase
 import numpy as np
 import pinocchio as pin
 
-from ..robot.model import SIDES, SOLE_CENTRE_X_M, SOLE_HALF_SIZE_M
+from ..robot.profile import SIDES, Sole, load_profile, profile_of
 from .candidates import stack_rows
 from .dataset import Dataset
 from .effects import tilted_axis
@@ -49,8 +49,6 @@ CLOSURE_FLOOR_M = {"x": 0.0006, "y": 0.0002, "z": 0.00015}
 LOADED_N = 100.0             # a foot with this much vertical load stays where it is
 FLAT_MARGIN_M = 0.02         # and lies flat while its centre of pressure is this far inside the sole
 STRIDE_S = 0.04              # one sample in this interval enters the fit (the closure is smooth)
-LEG_LINKS = (2, 3, 4, 5, 6)  # leg_<side>_<k>_link: their offsets set the leg's lengths
-LEG_JOINTS = (1, 2, 3, 4, 5, 6)
 MOVING_RAD = 0.1           # a joint whose angle spans this much in the recordings shows its axis
 MIN_GAIN = 0.3               # a candidate lowers the closure's squared gap by this share of what is left
 MAX_EFFECTS = 4
@@ -118,7 +116,7 @@ class Closure:
             dt = float(np.median(np.diff(rec.t_s)))
             stride = max(1, int(round(STRIDE_S / dt)))
             loaded = {s: rec.wrench[s][:, 2] > LOADED_N for s in SIDES}
-            contact = {s: contact_points(rec.wrench[s]) for s in SIDES}
+            contact = {s: contact_points(rec.wrench[s], profile_of(model).sole) for s in SIDES}
             for k in range(0, len(rec), stride):
                 if any(loaded[s][k] for s in SIDES):
                     self.samples.append((r, k, _pin_q(model, rec.joint_names, rec.base_pose[k], rec.q[k]),
@@ -163,17 +161,17 @@ class Closure:
         return np.sqrt(ss.sum(axis=0) / np.maximum(used.sum(axis=0), 1))
 
 
-def contact_points(wrench: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def contact_points(wrench: np.ndarray, sole: Sole) -> tuple[np.ndarray, np.ndarray]:
     """Per sample, the point of the sole that stays on the floor [m, sole frame] and which one it is (0: the sole
     point, the foot flat; else an edge or a corner): a foot whose centre of pressure is within ``FLAT_MARGIN_M`` of
     an edge rolls about it, and only the edge's points stay put (wrench: world axes, about the sole point; the feet
     point forward)."""
     fz = np.maximum(wrench[:, 2], 1e-9)
-    cx, cy = -wrench[:, 4] / fz - SOLE_CENTRE_X_M, wrench[:, 3] / fz
-    hx, hy = SOLE_HALF_SIZE_M[0], SOLE_HALF_SIZE_M[1]
+    cx, cy = -wrench[:, 4] / fz - sole.centre_x_m, wrench[:, 3] / fz
+    hx, hy = sole.half_size_m[0], sole.half_size_m[1]
     sx = np.where(np.abs(cx) > hx - FLAT_MARGIN_M, np.sign(cx), 0.0)      # on the toe (+1) or heel (-1) edge
     sy = np.where(np.abs(cy) > hy - FLAT_MARGIN_M, np.sign(cy), 0.0)      # on the left (+1) or right (-1) edge
-    points = np.column_stack([np.where(sx != 0, SOLE_CENTRE_X_M + sx * hx, 0.0), sy * hy, np.zeros(len(cx))])
+    points = np.column_stack([np.where(sx != 0, sole.centre_x_m + sx * hx, 0.0), sy * hy, np.zeros(len(cx))])
     return points, (sx + 1) * 3 + (sy + 1) - 4
 
 
@@ -193,15 +191,18 @@ def candidates(ds: Dataset) -> list[tuple[str, str, int]]:
     """(kind, location, number of parameters) of every kinematic candidate of the legs: each link's length (one leg,
     both legs), and the axes of the leg joints that move in the recordings (a still joint's tilt is a constant
     rotation that the closure's median takes out)."""
+    profile = load_profile(ds.robot)
+    chains = {s: profile.leg_chain(s) for s in SIDES}
     out = []
-    for k in LEG_LINKS:
-        out.append(("link_length", f"leg_*_{k}_link", 1))
-        out += [("link_length", f"leg_{s}_{k}_link", 1) for s in SIDES]
+    for k in range(1, len(chains[SIDES[0]])):          # the links below the first joint set the leg's lengths
+        links = {s: profile.child_link(chains[s][k]) for s in SIDES}
+        out.append(("link_length", profile.both_sides(links[SIDES[0]]), 1))
+        out += [("link_length", links[s], 1) for s in SIDES]
     moving = set()
     for rec in ds.recordings:
         moving |= {n for n, r in zip(rec.joint_names, np.ptp(rec.q, axis=0)) if r >= MOVING_RAD}
-    for k in LEG_JOINTS:
-        out += [(kind, f"leg_{s}_{k}_joint", n) for s in SIDES if f"leg_{s}_{k}_joint" in moving
+    for k in range(len(chains[SIDES[0]])):
+        out += [(kind, chains[s][k], n) for s in SIDES if chains[s][k] in moving
                 for kind, n in (("joint_axis", 2), ("joint_offset", 1))]
     return out
 

@@ -300,9 +300,9 @@ def write_report(result: GapResult, out: str | Path, progress=None) -> dict:
 
 
 def gap_command(bags: list[str | Path], out: str | Path, model: str | None = None, rate_hz: float = 50.0,
-                progress=None, controller: str | None = None) -> GapResult:
-    """``sit2stand gap``: run the workflow and write the report."""
-    result = run(bags, model, rate_hz=rate_hz, progress=progress, controller=controller)
+                progress=None, controller: str | None = None, robot: str | None = None) -> GapResult:
+    """``sit2stand gap``: run the workflow on ``robot``'s bags (a profile; None: TALOS) and write the report."""
+    result = run(bags, model, rate_hz=rate_hz, progress=progress, controller=controller, robot=robot)
     write_report(result, out, progress)
     return result
 

@@ -8,9 +8,9 @@ row by row along the measured state (q, v, a):
 e is zero, up to noise, when the model is right. Its rows are the **channels**: the six base rows (the whole body's
 external wrench: expressed here in world axes about the midpoint of the soles, as force [N] and moment [N m]) and one
 row per actuated joint [N m]. While the robot sits, the seat pushes on the pelvis and thighs unmeasured: the base
-rows and the hip rows (``leg_*_1..3``) are then excluded; the knees, ankles, torso, arms and head still hold. A
-joint at its position limit is held by its hard stop, whose torque the joint's sensor does not measure: its row is
-excluded there.
+rows and the hip rows (yaw, roll, pitch: ``SEATED_HIP_ROLES``) are then excluded; the knees, ankles, torso, arms and
+head still hold. A joint at its position limit is held by its hard stop, whose torque the joint's sensor does not
+measure: its row is excluded there.
 
 Every candidate physical effect enters e linearly, to first order, through a **signature** (columns d e / d theta):
 
@@ -39,14 +39,14 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import InputError
-from ..robot.model import SIDES, SOLE_OFFSET_M
+from ..robot.model import SIDES
+from ..robot.profile import profile_of
 from .control import ControlLaw
 from .recording import Recording, _joint_index
 
 CONTROLLER_PREFIX = "ctrl/"    # the controller channels: measured torque - our control law (no physics in them)
 BASE_CHANNELS = ["base/force_x", "base/force_y", "base/force_z", "base/moment_x", "base/moment_y", "base/moment_z"]
-SEATED_JOINTS = ("leg_left_1_joint", "leg_left_2_joint", "leg_left_3_joint",
-                 "leg_right_1_joint", "leg_right_2_joint", "leg_right_3_joint")
+SEATED_HIP_ROLES = ("hip_yaw", "hip_roll", "hip_pitch")   # the seat pushes on the thighs: their rows are out
 COULOMB_V0_RADPS = 0.03       # Coulomb friction's transition speed where none was fitted (fit_coulomb_widths)
 COULOMB_V0_GRID_RADPS = (0.001, 0.002, 0.005, 0.01, 0.02, 0.03)
 BACKLASH_GRID_RAD = (0.0005, 0.001, 0.002, 0.003, 0.005, 0.008, 0.012, 0.02)   # half-widths of a gear's play tried
@@ -222,7 +222,7 @@ def evaluate(model: pin.Model, rec: Recording, seated: np.ndarray | None = None,
 def _ft_bias_columns(rows: _Rows, side: str, J: np.ndarray, perm: np.ndarray, T: np.ndarray, out: np.ndarray) -> None:
     """(C, 6) signature of a bias of the ``side`` F/T sensor (sensor axes, [N], [N m]) at this state, into out."""
     R = rows.data.oMf[rows.soles[side]].rotation
-    lever = R @ np.array([0.0, 0.0, SOLE_OFFSET_M])     # sensor (ankle) minus sole, world axes
+    lever = R @ np.array([0.0, 0.0, profile_of(rows.model).sole.below_foot_m])   # sensor (ankle) - sole, world axes
     # column c: the ground wrench a unit bias beta = e_c of the sensor's reading takes off the sole (world axes)
     d_wrench = np.zeros((6, 6))
     d_wrench[:3, :3] = -R
@@ -249,7 +249,8 @@ def _valid_rows(model: pin.Model, rec: Recording, idx_v: np.ndarray, seated: np.
     at_limit = joints_at_limit(model, rec, idx_v)
     valid[:, 6:] &= ~at_limit              # a hard stop's torque is not in the measured actuator torque
     if seated is not None and seated.any():
-        hips = [6 + rec.joint_names.index(j) for j in SEATED_JOINTS if j in rec.joint_names]
+        hips = [6 + rec.joint_names.index(j) for j in profile_of(model).leg_joints(SEATED_HIP_ROLES)
+                if j in rec.joint_names]
         valid[np.ix_(seated, list(range(6)) + hips)] = False
     return valid
 

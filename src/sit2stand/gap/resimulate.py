@@ -15,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import InputError
-from ..robot.model import SIDES, PlantConfig
+from ..robot.model import DEFAULT_ROBOT, SIDES, PlantConfig
 from ..robot.plant import Plant
 from .effects import alter_model, unmodeled_from
 from .recording import Recording
@@ -23,9 +23,9 @@ from .recording import Recording
 SETTLE_S = 1.0               # the replay holds the first command this long before t = 0 (as `excite` does)
 
 
-def plant_from_effects(effects: list[dict]) -> PlantConfig:
-    """CAD plus the named effects (the workflow's effect dicts) as a plant configuration."""
-    cfg = PlantConfig(name="augmented")
+def plant_from_effects(effects: list[dict], robot: str = DEFAULT_ROBOT) -> PlantConfig:
+    """``robot``'s CAD plus the named effects (the workflow's effect dicts) as a plant configuration."""
+    cfg = PlantConfig(name="augmented", robot=robot)
     cfg.unmodeled = unmodeled_from(effects)
     return cfg
 

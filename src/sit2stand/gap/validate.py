@@ -145,7 +145,7 @@ def replay_effects(ds: Dataset, effects: list[dict], nominal: dict[int, dict] | 
     physical = [e for e in effects if e["kind"] not in SENSOR_KINDS]
     if nominal is not None and not physical:
         return nominal
-    cfg = plant_from_effects(effects) if effects else PlantConfig()
+    cfg = plant_from_effects(effects, ds.robot) if effects else PlantConfig(robot=ds.robot)
     out = {}
     for r, rec in enumerate(ds.recordings):
         if rec.static or rec.commands is None:

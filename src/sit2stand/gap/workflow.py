@@ -60,13 +60,15 @@ MAX_REFUSAL_ROUNDS = 4      # selection re-run without the refused candidates at
 
 
 # -- nominal model --------------------------------------------------------------------------------------------------
-def load_nominal(path: str | Path | None) -> tuple[pin.Model, str, list[dict]]:
-    """The nominal model: CAD (None or "cad"), identified parameters (``sit2stand identify`` YAML) or an augmented
-    model written by this workflow (its ``links``, and its joint and sensor ``effects``, returned third)."""
+def load_nominal(path: str | Path | None, robot: str | None = None) -> tuple[pin.Model, str, list[dict]]:
+    """The nominal model of ``robot`` (a profile; None: TALOS): CAD (None or "cad"), identified parameters
+    (``sit2stand identify`` YAML) or an augmented model written by this workflow (its ``links``, and its joint and
+    sensor ``effects``, returned third)."""
+    cfg = PlantConfig.load(None, robot)
     if path is None or str(path) == "cad":
-        return controller_model(PlantConfig()), "cad", []
+        return controller_model(cfg), "cad", []
     try:
-        model = controller_model(PlantConfig(), read_link_parameters(path))
+        model = controller_model(cfg, read_link_parameters(path))
         doc = yaml.safe_load(Path(path).read_text())
     except (IdentificationError, OSError, KeyError, ValueError, yaml.YAMLError) as err:
         raise GapError(f"{path}: not a usable model file: {err}") from None
@@ -161,13 +163,15 @@ def _quiet(_msg: str) -> None:
 
 
 def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: float = 50.0,
-        progress=None, controller: str | Path | None = None, replay: bool = True) -> GapResult:
+        progress=None, controller: str | Path | None = None, replay: bool = True, robot: str | None = None
+        ) -> GapResult:
     """The workflow on ``bags`` against the nominal model (see the module docstring). ``controller``: the link
     parameters the robot's controller ran with when the bags were recorded (the driver's ``controller_params``;
     None: CAD), for the controller channels; it is not the model under test. ``replay``: re-simulate the runs
-    that carry their commands (CAD nominal only: an identified model's links are not a plant file)."""
+    that carry their commands (CAD nominal only: an identified model's links are not a plant file). ``robot``: the
+    robot profile the bags are of (None: TALOS)."""
     say = progress or _quiet
-    model, source, known = load_nominal(model_path)
+    model, source, known = load_nominal(model_path, robot)
     if not bags:
         raise GapError("no measured bag given")
     params = _controller_params(controller)

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from .topics import (BASE_FRAME, COM_TYPE, LAB_FRAME, MOCAP_TYPE, PLATE_TYPE, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC,
+from .topics import (COM_TYPE, LAB_FRAME, MOCAP_TYPE, PLATE_TYPE, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC,
                      ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC, ROBOT_JOINT_STATES_TOPIC, SUBJECT_TYPE, WORLD_FRAME,
                      ft_topic, sole_world_aligned_frame)
 from .forceplate import PlateSeries
@@ -158,14 +158,15 @@ ROBOT_STATE_TOPICS = {
 
 
 def robot_state(t_ns: int, joint_names: list[str], q: np.ndarray, qd: np.ndarray | None, tau: np.ndarray,
-                wrench_world: dict[str, np.ndarray], cop_m: np.ndarray, base_pose: np.ndarray) -> list[tuple[str, Any]]:
-    """(topic, message) of one robot state sample, as the driver publishes it: joint states (effort = measured
-    torque [N m]), ground reaction per foot (world axes, torque about the sole point: frame
-    ``sole_<side>_world_aligned``), COP (NaN when unloaded) and the base pose (``base_pose`` in MuJoCo order
-    x y z qw qx qy qz)."""
+                wrench_world: dict[str, np.ndarray], cop_m: np.ndarray, base_pose: np.ndarray,
+                root_frame: str) -> list[tuple[str, Any]]:
+    """(topic, message) of one robot state sample, as the driver publishes it: joint states (frame: the robot's
+    root link ``root_frame``; effort = measured torque [N m]), ground reaction per foot (world axes, torque about the
+    sole point: frame ``sole_<side>_world_aligned``), COP (NaN when unloaded) and the base pose (``base_pose`` in MuJoCo
+    order x y z qw qx qy qz)."""
     s = typestore().types
     out: list[tuple[str, Any]] = [(ROBOT_JOINT_STATES_TOPIC, s["sensor_msgs/msg/JointState"](
-        header=header(t_ns, BASE_FRAME), name=list(joint_names), position=np.asarray(q, float),
+        header=header(t_ns, root_frame), name=list(joint_names), position=np.asarray(q, float),
         velocity=np.zeros(0) if qd is None else np.asarray(qd, float), effort=np.asarray(tau, float)))]
     for side, w in wrench_world.items():
         wrench = s["geometry_msgs/msg/Wrench"](force=_vector(w[:3]), torque=_vector(w[3:]))
@@ -182,13 +183,14 @@ def robot_state(t_ns: int, joint_names: list[str], q: np.ndarray, qd: np.ndarray
 
 
 def joint_trajectory_point(t_ns: int, joint_names: list[str], q: np.ndarray, qd: np.ndarray,
-                           qdd: np.ndarray) -> Any:
-    """A one-point trajectory_msgs/JointTrajectory: the reference the driver applies at once."""
+                           qdd: np.ndarray, root_frame: str) -> Any:
+    """A one-point trajectory_msgs/JointTrajectory (frame: the robot's root link): the reference the driver applies
+    at once."""
     s = typestore().types
     point = s["trajectory_msgs/msg/JointTrajectoryPoint"](
         positions=np.asarray(q, float), velocities=np.asarray(qd, float), accelerations=np.asarray(qdd, float),
         effort=np.zeros(0), time_from_start=s["builtin_interfaces/msg/Duration"](sec=0, nanosec=0))
-    return s["trajectory_msgs/msg/JointTrajectory"](header=header(t_ns, "base_link"), joint_names=list(joint_names),
+    return s["trajectory_msgs/msg/JointTrajectory"](header=header(t_ns, root_frame), joint_names=list(joint_names),
                                                     points=[point])
 
 

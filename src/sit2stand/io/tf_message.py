@@ -1,10 +1,10 @@
 """tf2_msgs/TFMessage as serialized bytes, for a fixed list of (parent, child) frames: only numbers change.
 
-A ``/tf`` message of TALOS holds 35 transforms. Building it as rclpy message objects costs ~300 us and rclpy's
-serialization another ~140 us (measured on a 2-core host): 20 % of a core at 500 Hz, all in the driver's control
-loop. The frames never change, so the CDR bytes are laid out once (:class:`TfEncoder`) and each message only writes
-its stamps and seven float64 per transform into a copy of that template (~10 us); rclpy publishes bytes as they are
-(``Publisher.publish(bytes)``) and subscribers, recorders and tools see an ordinary TFMessage.
+A ``/tf`` message of a 32-joint robot (TALOS) holds 35 transforms. Building it as rclpy message objects costs ~300 us
+and rclpy's serialization another ~140 us (measured on a 2-core host): 20 % of a core at 500 Hz, all in the driver's
+control loop. The frames never change, so the CDR bytes are laid out once (:class:`TfEncoder`) and each message only
+writes its stamps and seven float64 per transform into a copy of that template (~10 us); rclpy publishes bytes as they
+are (``Publisher.publish(bytes)``) and subscribers, recorders and tools see an ordinary TFMessage.
 
 Layout (XCDR1 little endian, as Fast DDS writes it): a 4-byte encapsulation header (``00 01 00 00``), then the
 sequence length (uint32) and per geometry_msgs/TransformStamped: stamp (int32 sec, uint32 nanosec), frame_id and

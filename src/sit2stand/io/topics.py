@@ -15,7 +15,6 @@ from __future__ import annotations
 # --- frames -------------------------------------------------------------------------------------------------------
 LAB_FRAME = "lab"
 WORLD_FRAME = "world"
-BASE_FRAME = "base_link"       # the robot's floating base (URDF root link)
 HUMAN_ROOT_FRAME = "pelvis"    # the human skeleton's floating base (its URDF's root link; lab -> pelvis in /tf)
 
 # --- message types of our interface package -----------------------------------------------------------------------
@@ -45,7 +44,7 @@ HUMAN_DESCRIPTION_TOPIC = "/human/robot_description"   # std_msgs/String (transi
 HUMAN_MARKERS_TOPIC = "/viz/human"                   # visualization_msgs/MarkerArray: markers, COM, COPs in lab
 SUBJECT_TOPIC = "/human/subject"                     # sit2stand_msgs/Subject (transient local): stature, mass, sex
 
-# --- robot: driver (simulated TALOS) ------------------------------------------------------------------------------
+# --- robot: driver (the simulated robot of a profile) -------------------------------------------------------------
 ROBOT_JOINT_STATES_TOPIC = "/robot/joint_states"     # sensor_msgs/JointState
 ROBOT_BASE_POSE_TOPIC = "/robot/base_pose"           # geometry_msgs/PoseStamped, world frame
 ROBOT_COP_TOPIC = "/robot/cop"                       # geometry_msgs/PointStamped, world frame
@@ -56,7 +55,7 @@ ROBOT_JOINT_COMMAND_TOPIC = "/robot/joint_command"   # trajectory_msgs/JointTraj
 ROBOT_JOINT_STATE_COMMAND_TOPIC = "/robot/joint_state_command"   # sensor_msgs/JointState (positions only)
 
 # --- robot: frames and description (driver; what robot_state_publisher gives on a full ROS install) ---------------
-TF_TOPIC = "/tf"                                     # tf2_msgs/TFMessage: world -> base_link, each moving joint
+TF_TOPIC = "/tf"                                     # tf2_msgs/TFMessage: world -> root link, each moving joint
 TF_STATIC_TOPIC = "/tf_static"                       # tf2_msgs/TFMessage (transient local): fixed frames, lab -> world
 ROBOT_DESCRIPTION_TOPIC = "/robot_description"       # std_msgs/String (transient local): the URDF
 TF_TYPE = "tf2_msgs/msg/TFMessage"

@@ -1,4 +1,5 @@
-"""Robot driver node: TALOS simulated in MuJoCo under its on-board controller, behaving like the real robot.
+"""Robot driver node: the robot of a profile (``robot``: TALOS, G1, a file) simulated in MuJoCo under its on-board
+controller, behaving like the real robot.
 
 The on-board controller (parameter ``controller``): ``inverse_dynamics``, joint PD with a feed-forward (inverse
 dynamics along a trajectory's accelerations, else the ``feedforward`` parameter's), or ``wbc``, whole-body torque
@@ -29,10 +30,10 @@ instead of the wall clock: it waits seated, publishing nothing, until the first 
 that time at once (a clock held there still sees a robot), then steps to each /clock time, and each state sample
 is stamped with the /clock time it simulates. Every name is relative (``__ns`` moves them). For RViz, Foxglove
 and tf2 (what robot_state_publisher does on a full ROS install; see
-:mod:`sit2stand.robot.description`): ``/tf`` (tf2_msgs/TFMessage: ``world`` -> ``base_link`` and every moving joint's
+:mod:`sit2stand.robot.description`): ``/tf`` (tf2_msgs/TFMessage: ``world`` -> the root link and every moving joint's
 link, from the measured joint state and base pose, at ``tf_rate_hz`` with that state sample's stamp), and, transient
 local, once: ``/tf_static`` (fixed joints, the soles, ``lab`` -> ``world``) and ``/robot_description``
-(std_msgs/String: TALOS's URDF).
+(std_msgs/String: the robot's URDF).
 
 Parameters: ``plant`` (YAML, or a packaged plant's name; default ``default``), ``controller_params`` (identified
 parameters YAML from ``sit2stand identify``; empty: CAD), ``controller`` (inverse_dynamics | wbc, above),
@@ -67,19 +68,19 @@ from trajectory_msgs.msg import JointTrajectory
 from ..io.messages import stamp_ns
 from ..io.stream_messages import JointStateEncoder, StampedNumbersEncoder
 from ..io.tf_message import TfEncoder
-from ..io.topics import (BASE_FRAME, CLOCK_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_DESCRIPTION_TOPIC,
+from ..io.topics import (CLOCK_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_DESCRIPTION_TOPIC,
                          ROBOT_JOINT_COMMAND_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_JOINT_STATE_COMMAND_TOPIC,
                          ROBOT_STATUS_TOPIC, TF_STATIC_TOPIC, TF_TOPIC, WORLD_FRAME, ft_topic, ros_name,
                          sole_world_aligned_frame)
-from ..data import plant_path
 from ..robot.description import DescriptionError, FrameTree, robot_description
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
+from ..robot.profile import ProfileError, RobotProfile
 from ..robot.plant import CONTROLLERS, Plant
 from .runtime import (LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, NodeError, declare, node_main, publish_depth,
                       robot_state_qos, steady_timer)
 
-DEFAULT_PLANT = plant_path("default")
+DEFAULT_PLANT = "default"
 SIM_EPOCH_S = 100.0      # simulated time starts here when the driver is the time source (0 reads as "unset")
 FELL_EXIT_CODE = 3
 MAX_COMMAND_LEAD_S = 0.5
@@ -94,7 +95,8 @@ class Driver(Node):
 
     def __init__(self) -> None:
         super().__init__("driver")
-        plant_file = declare(self, "plant", "", "plant YAML or packaged plant name") or str(DEFAULT_PLANT)
+        plant_file = declare(self, "plant", "", "plant YAML or packaged plant name") or DEFAULT_PLANT
+        robot = declare(self, "robot", "", "robot profile: a packaged name (talos, g1) or a file (empty: the plant's)")
         params_file = declare(self, "controller_params", "", "identified parameters YAML (empty: CAD)")
         self.controller = declare(self, "controller", "inverse_dynamics",
                                   "on-board controller: inverse_dynamics (joint PD + feed-forward) | wbc (whole-body "
@@ -110,10 +112,10 @@ class Driver(Node):
             raise NodeError(f"controller {self.controller!r}, feedforward {self.ff_mode!r} or on_fall "
                             f"{self.on_fall!r} not recognised (controller: {' | '.join(CONTROLLERS)})")
         try:
-            cfg = PlantConfig.load(plant_file)
+            cfg = PlantConfig.load(plant_file, robot or None)
             ctrl = read_link_parameters(params_file) if params_file else None
             self.plant = Plant(cfg, controller_params=ctrl)
-        except (PlantConfigError, IdentificationError, OSError) as err:
+        except (PlantConfigError, ProfileError, IdentificationError, OSError) as err:
             raise NodeError(str(err)) from None
         self.plant.feedforward = self.ff_mode
         self.settle_s = declare(self, "settle_s", 2.0, "simulated seconds to come to rest on the chair at start")
@@ -128,14 +130,14 @@ class Driver(Node):
         self.cop_pub = self.create_publisher(PointStamped, ros_name(ROBOT_COP_TOPIC), depth)
         self.base_pub = self.create_publisher(PoseStamped, ros_name(ROBOT_BASE_POSE_TOPIC), state_qos)
         self.state_encoders = {
-            "joints": JointStateEncoder(self.names, BASE_FRAME),
+            "joints": JointStateEncoder(self.names, cfg.profile.root_link),
             **{side: StampedNumbersEncoder(sole_world_aligned_frame(side), StampedNumbersEncoder.WRENCH)
                for side in SIDES},
             "cop": StampedNumbersEncoder(WORLD_FRAME, StampedNumbersEncoder.POINT),
             "base": StampedNumbersEncoder(WORLD_FRAME, StampedNumbersEncoder.POSE)}
         self.status_pub = self.create_publisher(DiagnosticStatus, ros_name(ROBOT_STATUS_TOPIC), PUBLISH_DEPTH)
         self.clock_pub = self.create_publisher(Clock, ros_name(CLOCK_TOPIC), fast) if self.publish_clock else None
-        self._setup_frames(cfg.robot)
+        self._setup_frames(cfg.profile)
         self.create_subscription(JointTrajectory, ros_name(ROBOT_JOINT_COMMAND_TOPIC), self._on_trajectory, 10)
         self.create_subscription(JointState, ros_name(ROBOT_JOINT_STATE_COMMAND_TOPIC), self._on_command, 10)
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -154,17 +156,18 @@ class Driver(Node):
         # steady ticks either way: under use_sim_time a ROS-time timer would not run before the first /clock
         steady_timer(self, 0.005, self._tick)
         steady_timer(self, 0.1, self._publish_status)
-        self.get_logger().info(f"TALOS seated on a {self.plant.seat_height_m:.3f} m chair; plant {cfg.name}; "
+        self.get_logger().info(f"{cfg.profile.title or cfg.profile.name} seated on a {self.plant.seat_height_m:.3f} m "
+                               f"chair; plant {cfg.name}; "
                                f"controller model {'identified' if params_file else 'CAD'}; "
                                f"{'as fast as possible' if self.rtf <= 0 else f'{self.rtf:g}x real time'}")
 
-    def _setup_frames(self, robot: str) -> None:
+    def _setup_frames(self, robot: RobotProfile) -> None:
         """/tf every ``tf_every`` state samples; /tf_static and /robot_description once (transient local)."""
         tf_rate = declare(self, "tf_rate_hz", 50.0, "/tf rate [Hz] (at most the state rate; 0: none)")
         meshes = declare(self, "robot_description_meshes", "package", "package | file: mesh URIs of the URDF")
         try:
             urdf = robot_description(robot, meshes)
-            self.frames = FrameTree(self.names, urdf)
+            self.frames = FrameTree(self.names, urdf, robot)
         except DescriptionError as err:
             raise NodeError(str(err)) from None
         self.tf_every = max(1, int(round(1.0 / (tf_rate * self.state_period)))) if tf_rate > 0 else 0
@@ -338,7 +341,7 @@ class Driver(Node):
             self._publish_tf(s)
 
     def _publish_tf(self, s) -> None:
-        """world -> base_link and every moving joint of this state sample (raw CDR: see io/tf_message.py)."""
+        """world -> the root link and every moving joint of this state sample (raw CDR: see io/tf_message.py)."""
         t0 = time.perf_counter()
         translations, rotations = self.frames.transforms(s.base_pose, s.q)
         self.tf_pub.publish(self.tf_encoder.encode(self._sample_ns, translations, rotations))
@@ -358,7 +361,8 @@ class Driver(Node):
         self._status_count += 1
         if self._status_count % 10 == 1:     # percentiles of up to 60,000 QP times: once a second, not at 10 Hz
             self._status_qp = self._qp_figures()
-        status = DiagnosticStatus(name=self.get_fully_qualified_name(), hardware_id="talos_sim",
+        status = DiagnosticStatus(name=self.get_fully_qualified_name(),
+        hardware_id=f"{self.plant.cfg.profile.name}_sim",
                                   level=DiagnosticStatus.ERROR if plant.fallen else DiagnosticStatus.OK,
                                   message=plant.status_text if plant.fallen else ("limp" if plant.limp else "ok"))
         status.values = [KeyValue(key=k, value=v) for k, v in (

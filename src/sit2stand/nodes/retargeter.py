@@ -47,7 +47,6 @@ from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, MocapFrame
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from ..data import plant_path
 from ..human.marker_sets import load_marker_set, load_packaged_marker_sets
 from ..io.messages import plate_sample_from_cdr, stamp_ns
 from ..io.stream_messages import (CenterOfMassEncoder, JointStateEncoder, JointStateReader, JointTrajectoryEncoder,
@@ -63,6 +62,7 @@ from ..retarget.player import (DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAUL
 from ..retarget.stabiliser import StabiliserConfig
 from ..retarget.stream import robot_model, robot_setup
 from ..robot.plant import CONTROLLERS
+from ..robot.profile import profile_of
 from .markers import plan_markers
 from .runtime import (PUBLISH_DEPTH, ROBOT_STATE_READER_QOS, IdleDrain, NodeError, declare, marker_rate_check,
                       node_main, qos_matching_publishers, scheduling_text, steady_timer)
@@ -106,7 +106,9 @@ class RetargeterNode(Node):
 
     def __init__(self) -> None:
         super().__init__("retargeter")
-        self.plant_file = str(plant_path(declare(self, "plant", "", "plant YAML (seated posture, chair)") or "default"))
+        self.plant_file = declare(self, "plant", "", "plant YAML (seated posture, chair)") or "default"
+        self.robot = declare(self, "robot", "", "robot profile: a packaged name (talos, g1) or a file (empty: the "
+                                                "plant's)") or None
         self.params_file = declare(self, "controller_params", "", "identified parameters YAML (empty: CAD)")
         self.wait_for_robot = declare(self, "wait_for_robot", True, "start from the robot's measured posture")
         self.map_out = declare(self, "marker_map", "", "write the marker calibration YAML here")
@@ -124,7 +126,7 @@ class RetargeterNode(Node):
             raise NodeError(f"retargeter: controller {self.live.cfg.controller!r} is not one of "
                             f"{', '.join(CONTROLLERS)}")
         try:        # the robot model now (~0.6 s idle, more under load), not when the first frames are queued
-            self.robot_model = robot_model(self.plant_file, self.params_file or None)
+            self.robot_model = robot_model(self.plant_file, self.params_file or None, robot=self.robot)
         except (ValueError, OSError) as err:
             raise NodeError(f"retargeter: plant {self.plant_file}, controller_params "
                             f"{self.params_file or '(CAD)'}: {err}") from None
@@ -264,7 +266,7 @@ class RetargeterNode(Node):
             raise NodeError(f"retargeter calibration: {err}") from None
         self.joint_names = robot.joint_names
         self.support_xy = robot.support_xy
-        self._encoders["command"] = JointTrajectoryEncoder(self.joint_names, "base_link")
+        self._encoders["command"] = JointTrajectoryEncoder(self.joint_names, profile_of(robot.model).root_link)
         self._encoders["ik"] = JointStateEncoder([f"root_{c}" for c in ("x", "y", "z", "qx", "qy", "qz", "qw")]
                                                  + self.joint_names, WORLD_FRAME, ("position",))
         if self.map_out:

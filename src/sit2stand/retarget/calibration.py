@@ -24,6 +24,7 @@ import yaml
 from ..errors import InputError
 from ..human.calibration_frames import FrameChoice, quiet_frames, seen
 from ..human.marker_sets import MarkerSet, MarkerSpec, load_marker_set
+from ..robot.profile import profile_of
 
 PELVIS_MARKERS = ("LASI", "RASI", "LPSI", "RPSI")
 SEGMENT_GROUPS = {"pelvis": "pelvis", "torso": "trunk", "head": "head", "upper_arm": "arm", "forearm": "arm",
@@ -224,31 +225,21 @@ def marker_group(name: str) -> str:
     return "arm"
 
 
-def talos_links(model: pin.Model, marker: str, roles: MarkerRoles | None = None) -> tuple[str, ...]:
-    """The TALOS links (Pinocchio joint names) a marker may be fixed to: those of its body part and side (``roles``:
-    of its marker set; None: Plug-in-Gait's names). Nearest-link matching alone puts a seated human's hip markers on
-    the robot's hanging arms."""
+def robot_links(model: pin.Model, marker: str, roles: MarkerRoles | None = None) -> tuple[str, ...]:
+    """The robot links (Pinocchio joint names) a marker may be fixed to: those its robot profile gives for the
+    marker's body part and side (``marker_links``; ``roles``: of its marker set; None: Plug-in-Gait's names).
+    Nearest-link matching alone puts a seated human's hip markers on the robot's hanging arms."""
     if roles is None:
         side = "left" if marker.startswith("L") else "right" if marker.startswith("R") else None
         group = marker_group(marker)
     else:
         side, group = roles.sides.get(marker), roles.group(marker) or "arm"
-    names = list(model.names[1:])
-    if group == "pelvis":
-        return (names[0],)
-    if group == "head":
-        return tuple(n for n in names if n.startswith("head_"))
-    if group == "trunk":
-        return ("torso_1_joint", "torso_2_joint")
-    if group == "arm":
-        return tuple(n for n in names if n.startswith((f"arm_{side}", f"gripper_{side}")))
-    return {"thigh": (f"leg_{side}_3_joint", f"leg_{side}_4_joint"), "shank": (f"leg_{side}_4_joint",),
-            "foot": (f"leg_{side}_6_joint",)}[group]
+    return profile_of(model).marker_joints(group, side, list(model.names[1:]))
 
 
 def calibrate_markers(model: pin.Model, q_robot: np.ndarray, names: list[str], positions_m: np.ndarray,
                       valid: np.ndarray, human_thigh_m: float, robot_thigh_m: float,
-                      allowed_links=talos_links, roles: MarkerRoles | None = None) -> MarkerMap:
+                      allowed_links=robot_links, roles: MarkerRoles | None = None) -> MarkerMap:
     """Fix each valid human marker of one seated frame to the nearest robot link (see the module docstring)
     among ``allowed_links(model, marker, roles)`` (None: any link). ``roles``: the marker set's (None: Plug-in-Gait).
 

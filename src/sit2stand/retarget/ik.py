@@ -54,7 +54,7 @@ import pinocchio as pin
 import proxsuite   # at import (~0.1 s): a node imports this before its stream starts
 
 from ..kinematics import PointJacobians, positions
-from ..robot.model import UPPER_LIMB_PREFIXES
+from ..robot.profile import profile_of
 
 
 STOP_TOLERANCE_RAD = 1e-3
@@ -81,7 +81,7 @@ def trunk_lift_dofs(model: pin.Model, dofs: np.ndarray) -> np.ndarray:
     data = model.createData()
     pin.computeJointJacobians(model, data, pin.neutral(model))
     name = {model.joints[j].idx_v: model.names[j] for j in range(2, model.njoints)}
-    return np.array([d for d in dofs if not name[d].startswith(UPPER_LIMB_PREFIXES)
+    return np.array([d for d in dofs if not profile_of(model).is_upper_limb(name[d])
                      and abs(data.J[5, d]) < 0.5], int)
 
 

@@ -33,6 +33,7 @@ from ..io.typestore import typestore
 from ..robot.identify import read_link_parameters
 from ..robot.model import PlantConfig
 from ..robot.plant import DEFAULT_CONTROLLER, Plant
+from ..robot.profile import profile_of
 from ..robot.wbc import WbcGains
 from .dynamic import DynamicsFilter
 from .phases import Phases, find_phases
@@ -90,7 +91,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         com_feedback: bool = True, stabiliser: StabiliserConfig | None = None, whole: bool = False,
         dynamic: bool = False, controller: str = DEFAULT_CONTROLLER, seat_off_dwell_s: float = SEAT_OFF_DWELL_S,
         gains: WbcGains | None = None, calibration_frame: int | None = None, static: Path | None = None,
-        retiming: str = "local") -> dict:
+        retiming: str = "local", robot: str | None = None) -> dict:
     """Retarget ``bag`` into ``out`` (see the module docstring); returns the summary. ``com_feedback``: the
     simulated robot's commands are corrected by :class:`~sit2stand.retarget.stabiliser.ComStabiliser` (gains
     ``stabiliser``, default :class:`~sit2stand.retarget.stabiliser.StabiliserConfig`), as the node does.
@@ -105,7 +106,8 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     ``calibration_frame``: that one); a ``static`` trial calibrates the human skeleton when the human COM is
     estimated here. ``plant``: None is a plant without unmodeled effects
     (:meth:`~sit2stand.robot.model.PlantConfig.load`), not the command's default (the packaged ``default`` plant,
-    26 kg hidden); parameters identified on one and simulated on the other are a model error of 26 kg."""
+    26 kg hidden); parameters identified on one and simulated on the other are a model error of 26 kg. ``robot``:
+    the robot profile (a packaged name or a file; None: the plant's, TALOS where it names none)."""
     refuse_existing_bag(out / "retarget")
     out.mkdir(parents=True, exist_ok=True)
     trial = read_trial(bag)
@@ -122,10 +124,10 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     q_start = None
     links = read_link_parameters(params) if params else None     # read once: the plan's model and the robot's
     if simulate:
-        sim = Plant(PlantConfig.load(plant), controller_params=links)
+        sim = Plant(PlantConfig.load(plant, robot), controller_params=links)
         sim.settle(2.0)     # at rest on the chair, as the driver starts; the calibration overlays this posture
         q_start = sim.pin_configuration(sim.data.qpos)
-    robot = robot_setup(plant, params, q_start=q_start, prebuilt=robot_model(plant, params, links))
+    robot = robot_setup(plant, params, q_start=q_start, prebuilt=robot_model(plant, params, links, robot=robot))
     rt = Retargeter(robot, config)
     dt = float(np.median(np.diff(trial.marker_t_s)))
     standing = np.flatnonzero(phases.labels != "seated")
@@ -151,7 +153,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     com_err = np.array([f.ik.com_error_m for f in frames])
     on_feet = [c for c in cmds if c.on_feet]
     summary = {
-        "bag": str(bag), "parameters": robot.parameters, "frames": len(frames),
+        "bag": str(bag), "robot": profile_of(robot.model).name, "parameters": robot.parameters, "frames": len(frames),
         "calibration_frame": k, "calibration_frame_reason": where.reason,
         "infeasible_frames": int((~feasible).sum()),
         "com_equality_max_error_mm_feasible": float(com_err[feasible].max() * 1e3) if feasible.any() else None,
@@ -169,7 +171,8 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
                    "played": "whole trial" if whole or phases.sit_down_s is None else "rise and stand"},
     }
     summary.update(simulated)
-    _write_bag(out / "retarget", cmds, robot.joint_names, float(trial.marker_t_s[0]), dt)
+    _write_bag(out / "retarget", cmds, robot.joint_names, float(trial.marker_t_s[0]), dt,
+               profile_of(robot.model).root_link)
     _figure(trial, com_h, frames, cmds, dt, out / "retarget.png", summary)
     if simulated:
         _timing_figure(trial, com_h, frames, cmds, np.load(out / "simulation.npy"), out / "timing.png", summary)
@@ -211,7 +214,9 @@ def _filter_summary(cmds) -> dict:
             "filter_qp_solved_fraction": float(np.mean([r.solved for r in reports]))}
 
 
-def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float) -> None:
+def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float, root_frame: str) -> None:
+    """The plan as the retargeter node publishes it: joint commands (frame: the robot's root link), planned COM and
+    ZMP (world)."""
 
     ts = typestore().types
     with BagWriter(path) as w:
@@ -224,7 +229,7 @@ def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float)
                 positions=c.q[7:].copy(), velocities=c.v[6:].copy(), accelerations=c.a[6:].copy(),
                 effort=np.zeros(0), time_from_start=ts["builtin_interfaces/msg/Duration"](sec=0, nanosec=0))
             w.write(ROBOT_JOINT_COMMAND_TOPIC, t_ns,
-                    ts["trajectory_msgs/msg/JointTrajectory"](header=M.header(t_ns, "base_link"),
+                    ts["trajectory_msgs/msg/JointTrajectory"](header=M.header(t_ns, root_frame),
                                                             joint_names=list(joint_names), points=[point]))
             w.write(ROBOT_PLANNED_COM_TOPIC, t_ns,
                     ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, WORLD_FRAME), point=M.point(*c.com)))

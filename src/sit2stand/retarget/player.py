@@ -25,7 +25,7 @@ from scipy.signal import savgol_coeffs   # at import: a live node's first frames
 
 from ..dynamics import model_cop, savgol_frames
 from ..errors import InputError
-from ..robot.model import UPPER_LIMB_PREFIXES
+from ..robot.profile import profile_of
 from ..robot.plant import contact_joint_torques
 from .dynamic import DynamicsFilter, FilterReport
 from .feasibility import frame_time_scales, support_margin, zmp_at_scale
@@ -151,7 +151,7 @@ class PlanPlayer:
         self.torque_limits = model.effortLimit[6:].copy() if torque_limited else None
         upper = np.zeros(model.nv - 6, bool)
         for j in range(2, model.njoints):
-            if model.names[j].startswith(UPPER_LIMB_PREFIXES):
+            if profile_of(model).is_upper_limb(model.names[j]):
                 upper[model.joints[j].idx_v - 6] = True
         self._room_floor = np.where(upper, TORQUE_ROOM_MIN * model.effortLimit[6:], 1e-9)
         self._q_index = np.array([model.joints[j].idx_q for j in range(2, model.njoints)])     # joint i -> its q

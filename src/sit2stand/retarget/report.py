@@ -37,7 +37,7 @@ from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, ROBOT_BASE_POSE_TOP
 from ..io.bag import BagReader
 from ..io.messages import stamp_ns
 from ..robot.identify import read_link_parameters
-from ..robot.model import PlantConfig, controller_model, sole_corners_world
+from ..robot.model import DEFAULT_ROBOT, PlantConfig, controller_model, sole_corners_world
 from ..robot.plant import Plant
 
 STOOD_RISE_M = 0.2
@@ -67,6 +67,7 @@ class RunAnalysis:
     plan_zmp_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     plan_zmp: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))    # the plan's ZMP (the commands' own) [m]
     support_x: tuple[float, float] = (np.nan, np.nan)   # the feet's heel and toe lines along x [m]
+    robot: str = DEFAULT_ROBOT                          # the robot's profile
 
 
 @dataclass
@@ -95,9 +96,11 @@ def _xyz(msgs, field: str) -> np.ndarray:
 
 
 def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | None = None,
-            hold_s: float = 2.0, stand_fraction: float = 0.9, every: int = 5) -> RunAnalysis:
-    """Analyse the stand-up bag ``run`` (see the module docstring); ``every``: use every n-th robot state."""
-    cfg = PlantConfig.load(plant_yaml)
+            hold_s: float = 2.0, stand_fraction: float = 0.9, every: int = 5, robot: str | None = None
+            ) -> RunAnalysis:
+    """Analyse the stand-up bag ``run`` of ``robot`` (a profile; None: the plant's) (see the module docstring);
+    ``every``: use every n-th robot state."""
+    cfg = PlantConfig.load(plant_yaml, robot)
     cad = controller_model(cfg)
     ident = controller_model(cfg, read_link_parameters(params_yaml) if params_yaml else None)
     msgs = _read_run(run, every)
@@ -131,7 +134,8 @@ def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | N
     zmp_t = _stamps(msgs.planned_zmp) - t0 if msgs.planned_zmp else np.zeros(0)
     zmp = _xyz(msgs.planned_zmp, "point").reshape(-1, 3)
     return RunAnalysis(name, t, q, com, com_cad, plan_t, plan_com, _stamps(msgs.cop) - t0, _xyz(msgs.cop, "point"),
-                       human_t, human_com, human_seat_off, seat_off, summary, zmp_t, zmp, _support_x(ident, q[0]))
+                       human_t, human_com, human_seat_off, seat_off, summary, zmp_t, zmp, _support_x(ident, q[0]),
+                       cfg.profile.name)
 
 
 def _support_x(model: pin.Model, q: np.ndarray) -> tuple[float, float]:
@@ -193,7 +197,7 @@ def _stood_up(cfg: PlantConfig, t: np.ndarray, z: np.ndarray, hold_s: float,
               stand_fraction: float) -> tuple[bool, bool, bool]:
     """(fallen, stood up, sat back down) from the pelvis height z [m] over time t [s] (see the module
     docstring)."""
-    fallen = bool(np.any(z < cfg.fall_pelvis_height_m))
+    fallen = bool(np.any(z < cfg.fall_height_m))
     up = z > stand_fraction * max(z.max(), 1e-9)
     back = z[-1] < z[0] + SAT_DOWN_TOLERANCE_M
     if back:          # the longest stretch standing, anywhere
@@ -273,13 +277,17 @@ def figure_7(runs: list[RunAnalysis], png: Path) -> None:
     plt.close(fig)
 
 
+SEATED_PELVIS_FRAMED_M = 0.627
+"""The frames' camera is framed for a robot whose seated pelvis is this high (TALOS) and scaled for others."""
+
+
 def render_strip(a: RunAnalysis, plant_yaml: Path | None, png: Path, frames: int = 6) -> str | None:
     """A strip of offscreen-rendered frames of the run; returns None, or why nothing was rendered. MuJoCo picks its GL
     backend when it is imported, so each backend (``MUJOCO_GL`` if set, else egl then osmesa) is tried in a process
     of its own."""
     with tempfile.TemporaryDirectory() as tmp:
         states = Path(tmp) / "states.npz"
-        np.savez(states, q=a.q, t=a.t, name=a.name)
+        np.savez(states, q=a.q, t=a.t, name=a.name, robot=a.robot)
         reason = "no GL backend"
         for gl in ([os.environ["MUJOCO_GL"]] if os.environ.get("MUJOCO_GL") else ["egl", "osmesa"]):
             code = ("import sys; from pathlib import Path; from sit2stand.retarget.report import _render_file; "
@@ -296,18 +304,21 @@ def render_strip(a: RunAnalysis, plant_yaml: Path | None, png: Path, frames: int
 def _render_file(states: str, plant_yaml: str, png: str, frames: str) -> None:
     """:func:`_render` of the states saved by :func:`render_strip` (command-line arguments as strings)."""
     d = np.load(states)
-    _render(d["q"], d["t"], str(d["name"]), Path(plant_yaml) if plant_yaml else None, Path(png), int(frames))
+    _render(d["q"], d["t"], str(d["name"]), Path(plant_yaml) if plant_yaml else None, Path(png), int(frames),
+            str(d["robot"]))
 
 
-def _render(qs: np.ndarray, ts: np.ndarray, name: str, plant_yaml: Path | None, png: Path, frames: int) -> None:
+def _render(qs: np.ndarray, ts: np.ndarray, name: str, plant_yaml: Path | None, png: Path, frames: int,
+            robot: str = DEFAULT_ROBOT) -> None:
     """Render ``frames`` evenly spaced configurations of the run in MuJoCo, side by side, into ``png``."""
     matplotlib.use("Agg")
-    plant = Plant(PlantConfig.load(plant_yaml))
+    plant = Plant(PlantConfig.load(plant_yaml, robot))
     model, data = plant.model, plant.data
     renderer = mujoco.Renderer(model, 360, 270)
     cam = mujoco.MjvCamera()
-    cam.lookat[:] = [0.0, 0.0, 0.6]
-    cam.distance, cam.azimuth, cam.elevation = 2.6, 90.0, -10.0    # from the robot's left side
+    size = plant.q_seated[2] / SEATED_PELVIS_FRAMED_M     # the robot's size: TALOS's seated pelvis is 0.627 m
+    cam.lookat[:] = [0.0, 0.0, 0.6 * size]
+    cam.distance, cam.azimuth, cam.elevation = 2.6 * size, 90.0, -10.0    # from the robot's left side
     idx = np.linspace(0, len(qs) - 1, frames).astype(int)
     images = []
     for k in idx:
@@ -324,7 +335,7 @@ def _render(qs: np.ndarray, ts: np.ndarray, name: str, plant_yaml: Path | None, 
         x.imshow(img)
         x.set_title(f"{ts[k]:.1f} s", fontsize=9)
         x.axis("off")
-    fig.suptitle(f"{name}: TALOS standing up (simulated, side view)")
+    fig.suptitle(f"{name}: {plant.cfg.profile.title or robot} standing up (simulated, side view)")
     fig.tight_layout()
     fig.savefig(png, dpi=100)
     plt.close(fig)

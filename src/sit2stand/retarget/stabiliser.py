@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ..robot.model import UPPER_LIMB_PREFIXES
+from ..robot.profile import profile_of
 from .ik import ComIk
 
 
@@ -98,7 +98,7 @@ class ComStabiliser:
         self.sole_targets = sole_targets
         mu = np.ones(model.nv)
         for j in range(2, model.njoints):
-            if model.names[j].startswith(UPPER_LIMB_PREFIXES):
+            if profile_of(model).is_upper_limb(model.names[j]):
                 jt = model.joints[j]
                 mu[jt.idx_v:jt.idx_v + jt.nv] = self.cfg.held_weight
         self.ik = ComIk(model, sole_frames, velocity_limit=1e3, posture_weight=mu, damping=1e-6)

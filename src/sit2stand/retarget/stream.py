@@ -42,9 +42,10 @@ import pinocchio as pin
 from ..errors import InputError
 from ..io.frame_rate import MIN_RATE_HZ
 from ..robot.identify import read_link_parameters
-from ..robot.model import (SIDES, UPPER_LIMB_PREFIXES, PlantConfig, add_seat_frame, build_spec, controller_model,
+from ..robot.model import (SIDES, PlantConfig, add_seat_frame, build_spec, controller_model,
                            sole_corners_world)
 from ..robot.plant import seat_top_height, seated_configuration
+from ..robot.profile import profile_of
 from ..human.marker_sets import choose_marker_set
 from .calibration import MarkerMap, calibrate_markers, left_leg_points, marker_roles
 from .feasibility import support_polygon
@@ -79,14 +80,14 @@ class RobotSetup:
 
 
 def robot_model(plant_yaml: str | Path | None = None, params_yaml: str | Path | None = None,
-                link_parameters: dict | None = None) -> tuple[pin.Model, np.ndarray, str]:
-    """The retargeter's robot model (TALOS with the identified COM parameters of ``params_yaml``, ``sit2stand
-    identify --model full`` output, or CAD's), its nominal seated configuration from the plant file (Pinocchio
-    order; only the posture and chair, never ``unmodeled``), and the parameters' label. The slow part of
-    :func:`robot_setup` (~0.6 s): a node builds it before the stream starts. ``link_parameters``: those of
-    ``params_yaml`` when the caller has read them already."""
+                link_parameters: dict | None = None, robot: str | None = None) -> tuple[pin.Model, np.ndarray, str]:
+    """The retargeter's robot model (``robot``'s profile, or the plant file's; with the identified COM parameters of
+    ``params_yaml``, ``sit2stand identify --model full`` output, or CAD's), its nominal seated configuration from
+    the plant file (Pinocchio order; only the posture and chair, never ``unmodeled``), and the parameters' label.
+    The slow part of :func:`robot_setup` (~0.6 s): a node builds it before the stream starts. ``link_parameters``:
+    those of ``params_yaml`` when the caller has read them already."""
 
-    cfg = PlantConfig.load(plant_yaml)
+    cfg = PlantConfig.load(plant_yaml, robot)
     links = link_parameters or (read_link_parameters(params_yaml) if params_yaml else None)
     model = controller_model(cfg, links)
     label = str(params_yaml) if params_yaml else "CAD"
@@ -100,14 +101,14 @@ def robot_model(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
 
 def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | None = None,
                 q_start: np.ndarray | None = None, start_joint_names: list[str] | None = None,
-                prebuilt: tuple[pin.Model, np.ndarray, str] | None = None) -> RobotSetup:
-    """TALOS seated as in the plant file, with the identified COM parameters of ``params_yaml`` or the CAD ones
-    (see :func:`robot_model`; ``prebuilt``: its result, made earlier). ``q_start``: the robot's measured seated
-    configuration (Pinocchio order), as the paper calibrates on the robot's measured sitting posture; default: the
-    plant file's nominal one. ``start_joint_names``: the joint of each of ``q_start[7:]`` when they come in another
-    order (e.g. a JointState's)."""
+                prebuilt: tuple[pin.Model, np.ndarray, str] | None = None, robot: str | None = None) -> RobotSetup:
+    """The robot (``robot``'s profile, or the plant file's) seated as in the plant file, with the identified COM
+    parameters of ``params_yaml`` or the CAD ones (see :func:`robot_model`; ``prebuilt``: its result, made earlier).
+    ``q_start``: the robot's measured seated configuration (Pinocchio order), as the paper calibrates on the robot's
+    measured sitting posture; default: the plant file's nominal one. ``start_joint_names``: the joint of each of
+    ``q_start[7:]`` when they come in another order (e.g. a JointState's)."""
 
-    model, q, label = prebuilt if prebuilt is not None else robot_model(plant_yaml, params_yaml)
+    model, q, label = prebuilt if prebuilt is not None else robot_model(plant_yaml, params_yaml, robot=robot)
     q = q.copy()
     if q_start is not None:
         if np.shape(q_start) != q.shape or not np.all(np.isfinite(q_start)):
@@ -124,7 +125,9 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
     soles = [model.getFrameId(f"sole_{s}") for s in SIDES]
     targets = [data.oMf[f].copy() for f in soles]
     corners = sole_corners_world(model, data)[:, :2]
-    hip, knee, ankle = (data.oMi[model.getJointId(f"leg_left_{i}_joint")].translation for i in (3, 4, 6))
+    profile = profile_of(model)
+    hip, knee, ankle = (data.oMi[model.getJointId(profile.leg("left", role))].translation
+                        for role in ("hip_pitch", "knee", "ankle_roll"))
     ankle_floor = targets[0].translation.copy()
     return RobotSetup(model, list(model.names[2:]), q, soles, targets, support_polygon(corners),
                       float(corners[:, 0].min()), float(corners[:, 0].max()), ankle_floor,
@@ -245,10 +248,10 @@ class Retargeter:
         mu = np.full(self.model.nv, self.cfg.posture_weight)
         # arms, head and the lateral joints are regularised toward the seated posture (the rest: the previous frame)
         self.held_to_seated = np.zeros(self.model.nq, bool)
-        lateral = ("torso_1_joint",) + tuple(f"leg_{s}_{i}_joint" for s in ("left", "right") for i in (1, 2, 6))
+        lateral = set(profile_of(self.model).lateral_joints())
         for j in range(2, self.model.njoints):
             name, jt = self.model.names[j], self.model.joints[j]
-            w = self.cfg.upper_limb_weight if name.startswith(UPPER_LIMB_PREFIXES) else \
+            w = self.cfg.upper_limb_weight if profile_of(self.model).is_upper_limb(name) else \
                 self.cfg.lateral_weight if name in lateral else None
             if w is not None:
                 mu[jt.idx_v:jt.idx_v + jt.nv] = w

@@ -1,25 +1,25 @@
-"""TALOS's robot description and frame tree for ROS tools: ``/robot_description``, ``/tf`` and ``/tf_static``.
+"""A robot's description and frame tree for ROS tools: ``/robot_description``, ``/tf`` and ``/tf_static``.
 
 What ``robot_state_publisher`` does on a full ROS install (it is not on PyPI): the URDF's link tree, where each
 moving joint gives a transform parent link -> child link from the measured joint position and each fixed joint a
-static one; the floating base adds ``world`` -> ``base_link`` from the base pose. Each transform is the placement of
-the child link's frame in the parent link's, from Pinocchio's model of the URDF itself (``pin.buildModelFromXML``;
-the URDF link names are Pinocchio's body frames), so a tool that loads the URDF sees the robot where the transforms
-put it. For a revolute joint j between links p and c that placement is
+static one; the floating base adds ``world`` -> the profile's root link from the base pose. Each transform is the
+placement of the child link's frame in the parent link's, from Pinocchio's model of the URDF itself
+(``pin.buildModelFromXML``; the URDF link names are Pinocchio's body frames), so a tool that loads the URDF sees the
+robot where the transforms put it. For a revolute joint j between links p and c that placement is
 
     X_pc(theta) = A_j * Rot(a_j, theta),     A_j = F_p^-1 * M_j
 
 with M_j the joint's placement in its parent joint, F_p the parent link's placement in its joint (a link fixed to
 another has one; a URDF child link's frame is its joint's) and a_j the joint's axis. These are constants taken from
-the model once, so each message costs a few vectorised quaternion products: ~30 us for TALOS's 32 joints, against
+the model once, so each message costs a few vectorised quaternion products: ~30 us for 32 joints (TALOS), against
 ~200 us for Pinocchio's forward kinematics and 32 relative placements in a Python loop (measured on a 2-core host).
 The soles' world positions come from Pinocchio's forward kinematics.
 
 sit2stand adds its own frames:
 
 * ``lab`` -> ``world`` (static, identity): the capture volume's frame and the simulation's coincide here;
-* ``sole_<side>`` under ``leg_<side>_6_link`` (static, ``SOLE_OFFSET_M`` below, no rotation): the controller
-  model's sole frames; they coincide with the URDF's ``<side>_sole_link``;
+* ``sole_<side>`` under the profile's foot link (static, the sole's depth below it, no rotation): the controller
+  model's sole frames (on TALOS they coincide with the URDF's own sole links);
 * ``sole_<side>_world_aligned`` under ``world`` (moving): the sole point with world axes, the frame of the feet's
   ground reactions ``/robot/ft/<side>`` (force in world axes, torque about the sole point).
 
@@ -37,10 +37,9 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import Sit2StandError
-from ..io.topics import BASE_FRAME, LAB_FRAME, WORLD_FRAME, sole_world_aligned_frame
-from .model import SIDES, SOLE_OFFSET_M, talos_dir
-
-MESH_PREFIX = "package://example-robot-data/robots/"
+from ..io.topics import LAB_FRAME, WORLD_FRAME, sole_world_aligned_frame
+from .model import floating_base_removed
+from .profile import SIDES, RobotProfile, load_profile, mesh_uris_to_files
 
 
 class DescriptionError(Sit2StandError, ValueError):
@@ -57,25 +56,25 @@ class Transform:
     rotation_xyzw: tuple[float, float, float, float]
 
 
-def robot_description(variant: str = "talos_reduced", meshes: str = "package") -> str:
-    """The URDF of TALOS from example-robot-data, as shipped.
+def robot_description(robot: str | RobotProfile = "talos", meshes: str = "package") -> str:
+    """The URDF of a robot profile's robot, as its file has it, less a floating joint from a ``world`` link (the
+    frame tree puts the root link in the world).
 
     Args:
-        variant: the URDF's name in ``talos_data/robots`` (the plant's ``robot``).
-        meshes: ``package`` keeps the ``package://example-robot-data/...`` mesh URIs (RViz and Foxglove resolve
-            them where example-robot-data is a ROS package: ``ros-jazzy-example-robot-data``, or the PyPI wheel's
-            ``cmeel.prefix`` on ``AMENT_PREFIX_PATH``/``ROS_PACKAGE_PATH``); ``file`` makes them ``file://`` paths
-            of this machine's installed copy.
+        robot: a robot profile (a packaged name, a file, or the profile).
+        meshes: ``package`` keeps the file's mesh URIs (``package://example-robot-data/...``: RViz and Foxglove
+            resolve them where example-robot-data is a ROS package, ``ros-jazzy-example-robot-data``, or the PyPI
+            wheel's ``cmeel.prefix/share`` on ``AMENT_PREFIX_PATH``/``ROS_PACKAGE_PATH``); ``file`` makes them
+            ``file://`` paths of this machine's installed copy.
     """
     if meshes not in ("package", "file"):
         raise DescriptionError(f"meshes {meshes!r}: use 'package' or 'file'")
-    d = talos_dir()
-    path = d / "robots" / f"{variant}.urdf"
-    if not path.is_file():
-        raise DescriptionError(f"no URDF {path.name} in {path.parent} (variants: "
-                               f"{', '.join(sorted(p.stem for p in path.parent.glob('*.urdf')))})")
-    text = path.read_text()
-    return text if meshes == "package" else text.replace(MESH_PREFIX, f"file://{d.parent}/")
+    profile = load_profile(robot)
+    text = floating_base_removed(profile.urdf.read_text())
+    if meshes == "package":
+        return text
+    local = mesh_uris_to_files(text, profile.urdf)
+    return local.replace('filename="/', 'filename="file:///')
 
 
 def urdf_joints(urdf: str) -> list[tuple[str, str, str, str]]:
@@ -136,23 +135,26 @@ class FrameTree:
     Args:
         joint_names: the joints whose positions :meth:`transforms` gets, in that order (the plant's); URDF joints
             not named stay at zero.
-        urdf: the URDF text (default: :func:`robot_description` of ``talos_reduced``).
+        urdf: the URDF text (default: :func:`robot_description` of ``robot``).
+        robot: the robot profile (root link, foot links, soles).
 
     Raises:
         DescriptionError: a joint name the URDF lacks, a moving joint that is not revolute (prismatic, continuous,
-            floating and planar joints are not handled), or a URDF without ``base_link`` as its root.
+            floating and planar joints are not handled), or a URDF whose root is not the profile's root link.
     """
 
-    def __init__(self, joint_names: Sequence[str], urdf: str | None = None) -> None:
-        urdf = urdf if urdf is not None else robot_description()
+    def __init__(self, joint_names: Sequence[str], urdf: str | None = None,
+                 robot: str | RobotProfile = "talos") -> None:
+        profile = load_profile(robot)
+        urdf = urdf if urdf is not None else robot_description(profile)
         joints = urdf_joints(urdf)
         try:
             self.model = pin.buildModelFromXML(urdf, pin.JointModelFreeFlyer())
         except (RuntimeError, ValueError) as err:
             raise DescriptionError(f"Pinocchio cannot read the robot description: {err}") from None
-        if self.model.frames[self.model.getFrameId(BASE_FRAME, pin.BODY)].name != BASE_FRAME:
-            raise DescriptionError(f"the URDF has no link {BASE_FRAME!r} (its root must be {BASE_FRAME})")
-        self.data = self.model.createData()
+        self.root = profile.root_link
+        if self.model.frames[self.model.getFrameId(self.root, pin.BODY)].name != self.root:
+            raise DescriptionError(f"the URDF has no link {self.root!r} (its root must be {self.root})")
         unknown = [n for n in joint_names if not self.model.existJointName(n)]
         if unknown:
             raise DescriptionError(f"joints {', '.join(unknown)} are not in the URDF")
@@ -161,8 +163,11 @@ class FrameTree:
         moving = [(p, c) for _, kind, p, c in joints if kind != "fixed"]
         self._fixed = [(p, c) for _, kind, p, c in joints if kind == "fixed"]
         self._joint_constants([(self._body(p), self._body(c)) for p, c in moving])
-        self._soles = [self._body(f"{side}_sole_link") for side in SIDES]
-        self.pairs: list[tuple[str, str]] = [(WORLD_FRAME, BASE_FRAME), *moving,
+        self._foot = {side: profile.foot_links[side] for side in SIDES}
+        self._sole_below_m = profile.sole.below_foot_m
+        self._soles = [self._sole_frame(side) for side in SIDES]
+        self.data = self.model.createData()
+        self.pairs: list[tuple[str, str]] = [(WORLD_FRAME, self.root), *moving,
                                              *((WORLD_FRAME, sole_world_aligned_frame(s)) for s in SIDES)]
         """(parent, child) of each transform :meth:`transforms` gives, in its order."""
 
@@ -187,6 +192,12 @@ class FrameTree:
         self._A_q = quaternions_xyzw(np.array([X.rotation for X in A]))
         self._axis = np.array(axes).reshape(-1, 3)
         self._joint_q = np.array(idx, int)
+
+    def _sole_frame(self, side: str) -> int:
+        """A frame at the sole point under ``side``'s foot link."""
+        foot = self.model.frames[self._body(self._foot[side])]
+        below = foot.placement * pin.SE3(np.eye(3), np.array([0.0, 0.0, -self._sole_below_m]))
+        return self.model.addFrame(pin.Frame(f"sole_{side}", foot.parentJoint, below, pin.FrameType.OP_FRAME))
 
     def _body(self, link: str) -> int:
         fid = self.model.getFrameId(link, pin.BODY)
@@ -223,7 +234,7 @@ class FrameTree:
         return t, r
 
     def static_transforms(self) -> list[Transform]:
-        """``lab`` -> ``world``, every fixed joint of the URDF, and ``sole_<side>`` under ``leg_<side>_6_link``."""
+        """``lab`` -> ``world``, every fixed joint of the URDF, and ``sole_<side>`` under the foot link."""
         pin.framesForwardKinematics(self.model, self.data, pin.neutral(self.model))
         oMf = self.data.oMf
         out = [Transform(LAB_FRAME, WORLD_FRAME, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))]
@@ -232,7 +243,7 @@ class FrameTree:
             out.append(Transform(p, c, tuple(map(float, X.translation)),
                                  tuple(map(float, quaternions_xyzw(X.rotation)[0]))))
         for side in SIDES:
-            out.append(Transform(f"leg_{side}_6_link", f"sole_{side}", (0.0, 0.0, -SOLE_OFFSET_M),
+            out.append(Transform(self._foot[side], f"sole_{side}", (0.0, 0.0, -self._sole_below_m),
                                  (0.0, 0.0, 0.0, 1.0)))
         return out
 

@@ -35,17 +35,42 @@ from ..io.bag import BagError, BagReader
 from ..io.topics import (ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC,
                          ROBOT_JOINT_STATES_TOPIC, ft_topic)
 from ..optim import constrained_lsq
-from .model import SIDES, controller_model
+from .model import SIDES, PlantConfig, controller_model
+from .profile import profile_of
 
-PLANAR_LINKS = {
-    # link: (frame body per side (a joint name) or a single joint, whether it is per leg)
-    "foot": ("leg_{side}_5_joint", True),
-    "shank": ("leg_{side}_4_joint", True),
-    "thigh": ("leg_{side}_3_joint", True),
-    "pelvis": ("{root}", False),          # the floating base (joint 1, whatever its name)
-    "torso": ("torso_2_joint", False),
+PLANAR_SEGMENTS = {
+    # segment: the joint whose body frame holds its parameters (a leg role, per leg; "root" or "trunk_pitch")
+    "foot": "ankle_pitch",
+    "shank": "knee",
+    "thigh": "hip_pitch",
+    "pelvis": "root",
+    "torso": "trunk_pitch",
 }
-PLANAR_JOINT_ROWS = ["torso_2_joint"] + [f"leg_{s}_{i}_joint" for s in SIDES for i in (3, 4, 5)]
+"""The paper's five planar segments. Each segment is every body that moves with its joint while the lateral joints
+(hip yaw and roll, ankle roll, trunk yaw and roll) stay at zero, as they do in the static postures: a mass anywhere on
+the segment then acts on the base's sagittal wrench and on the pitch joints exactly as the same mass on the joint's own
+body, so the segment's parameters are those of that body's frame (G1's thigh sums its hip pitch, roll and yaw links:
+its hip pitch comes first in the chain, and the thigh's mass sits on the hip yaw link)."""
+
+
+def planar_segment_joints(model: pin.Model) -> dict[str, list[str]]:
+    """Per planar segment, the joint (one, or one per leg) whose body frame holds its parameters."""
+    profile = profile_of(model)
+    out = {}
+    for segment, role in PLANAR_SEGMENTS.items():
+        if role == "root":
+            out[segment] = [model.names[1]]
+        elif role == "trunk_pitch":
+            out[segment] = [profile.trunk_pitch]
+        else:
+            out[segment] = [profile.leg(s, role) for s in SIDES]
+    return out
+
+
+def planar_joint_rows(model: pin.Model) -> list[str]:
+    """The joints whose torques the planar model explains: the trunk pitch, then each leg's hip, knee, ankle pitch."""
+    profile = profile_of(model)
+    return [profile.trunk_pitch] + [profile.leg(s, r) for s in SIDES for r in ("hip_pitch", "knee", "ankle_pitch")]
 
 
 class IdentificationError(Sit2StandError, ValueError):
@@ -207,7 +232,7 @@ def identify_full(data: PostureData, eval_fraction: float = 0.1, seed: int = 0, 
     nb = model.njoints - 1
     fixed = np.zeros(4 * nb, bool)
     for side in SIDES:          # the feet: their weight is already taken out of the F/T reading with CAD
-        i = model.getJointId(f"leg_{side}_6_joint") - 1
+        i = model.getJointId(profile_of(model).foot_joint(side)) - 1
         fixed[4 * i:4 * i + 4] = True
     free = ~fixed
     A = np.vstack([rows[k][0] for k in train])
@@ -240,10 +265,8 @@ def identify_full(data: PostureData, eval_fraction: float = 0.1, seed: int = 0, 
 def planar_columns(model: pin.Model, Y: np.ndarray) -> np.ndarray:
     """(nv, 15) columns of the planar5 parameters (m, m c_x, m c_z per link; legs left = right)."""
     cols = []
-    for joint, per_leg in PLANAR_LINKS.values():
-        joints = [joint.format(side=s, root=model.names[1]) for s in SIDES] if per_leg else \
-            [joint.format(root=model.names[1])]
-        for a in (0, 1, 3):     # m, m c_x, m c_z of the link's frame body
+    for joints in planar_segment_joints(model).values():
+        for a in (0, 1, 3):     # m, m c_x, m c_z of the segment's frame body
             cols.append(sum(Y[:, 4 * (model.getJointId(j) - 1) + a] for j in joints))
     return np.stack(cols, axis=1)
 
@@ -255,7 +278,9 @@ def identify_planar5(data: PostureData, eval_fraction: float = 0.1, seed: int = 
     model = model if model is not None else controller_model()
     mdata = model.createData()
     train, ev = split(len(data), eval_fraction, seed)
-    row_idx = [0, 2, 4] + [model.joints[model.getJointId(j)].idx_v for j in PLANAR_JOINT_ROWS]
+    rows = planar_joint_rows(model)
+    segments = planar_segment_joints(model)
+    row_idx = [0, 2, 4] + [model.joints[model.getJointId(j)].idx_v for j in rows]
     A_list, b_list = [], []
     for k in range(len(data)):
         Y, rhs = static_rows(model, mdata, data, k)
@@ -264,7 +289,7 @@ def identify_planar5(data: PostureData, eval_fraction: float = 0.1, seed: int = 
     A = np.vstack([A_list[k] for k in train])
     b = np.concatenate([b_list[k] for k in train])
     rank, cond = _check_data(data, train, A)
-    w = np.tile(np.r_[[1 / wrench_sd] * 3, [1 / tau_sd_nm] * len(PLANAR_JOINT_ROWS)], len(train))
+    w = np.tile(np.r_[[1 / wrench_sd] * 3, [1 / tau_sd_nm] * len(rows)], len(train))
     res = constrained_lsq(A, b, weights=w, prior=np.zeros(15), prior_weights=np.full(15, 1e-6))
     theta = res.x
     # covariance of weighted least squares, from the training residual
@@ -277,9 +302,9 @@ def identify_planar5(data: PostureData, eval_fraction: float = 0.1, seed: int = 
         q = _pin_q(model, data, k)
         pin.forwardKinematics(model, mdata, q)
         total_m, moment = 0.0, 0.0
-        for i, (joint, per_leg) in enumerate(PLANAR_LINKS.values()):
+        for i, joints in enumerate(segments.values()):
             m, mcx, mcz = theta[3 * i:3 * i + 3]
-            for j in ([joint.format(side=s) for s in SIDES] if per_leg else [joint.format(root=model.names[1])]):
+            for j in joints:
                 M = mdata.oMi[model.getJointId(j)]
                 total_m += m
                 moment += m * M.translation[0] + (M.rotation @ np.array([mcx, 0.0, mcz]))[0]
@@ -290,8 +315,8 @@ def identify_planar5(data: PostureData, eval_fraction: float = 0.1, seed: int = 
     rms = lambda pred, idx: float(np.sqrt(np.mean((pred - data.cop[idx, 0]) ** 2)))  # noqa: E731
     cad_train = np.array([com_x(model, data, k) for k in train])
     cad_eval = np.array([com_x(model, data, k) for k in ev])
-    total = sum(theta[3 * i] * (2 if per_leg else 1) for i, (_, per_leg) in enumerate(PLANAR_LINKS.values()))
-    names = [f"{link}.{p}" for link in PLANAR_LINKS for p in ("mass", "mcx", "mcz")]
+    total = sum(theta[3 * i] * len(joints) for i, joints in enumerate(segments.values()))
+    names = [f"{segment}.{p}" for segment in segments for p in ("mass", "mcx", "mcz")]
     return IdentificationResult("planar5", names, theta, np.sqrt(np.maximum(np.diag(cov), 0.0)), rms(t_train, train),
                                 rms(t_eval, ev), rms(cad_train, train), rms(cad_eval, ev), cond, rank, len(train),
                                 len(ev), float(total), float(pin.computeTotalMass(model)), time.perf_counter() - t0,
@@ -313,8 +338,10 @@ def _evaluate(name: str, data: PostureData, train, ev, cad: pin.Model, ident: pi
                                                   "cad_x": [cad_pred[k] for k in ev]})
 
 
-def identify(path: str | Path, model: str = "full", eval_fraction: float = 0.1, seed: int = 0) -> IdentificationResult:
-    """Identify ``model`` ("planar5" or "full") from the posture bag at ``path``."""
+def identify(path: str | Path, model: str = "full", eval_fraction: float = 0.1, seed: int = 0,
+             robot: str | None = None) -> IdentificationResult:
+    """Identify ``model`` ("planar5" or "full") from the posture bag at ``path`` of ``robot`` (a profile; default
+    TALOS)."""
     if model not in ("planar5", "full"):
         raise IdentificationError(f"model must be 'planar5' or 'full', not {model!r}")
     if not 0.0 < eval_fraction < 0.9:
@@ -322,7 +349,7 @@ def identify(path: str | Path, model: str = "full", eval_fraction: float = 0.1, 
     data = read_postures(path)
     if len(data) < 6:
         raise IdentificationError(f"{path}: only {len(data)} postures (need at least 6: 5 to train, 1 to evaluate)")
-    cad = controller_model()          # built once (~0.3 s): for the joint check and the identification
+    cad = controller_model(PlantConfig.load(None, robot))   # built once (~0.3 s): the joint check, the fit
     check_postures(data, cad, path)
     fn = identify_full if model == "full" else identify_planar5
     result = fn(data, eval_fraction=eval_fraction, seed=seed, model=cad)
@@ -346,8 +373,9 @@ def check_postures(data: PostureData, model: pin.Model, path: str | Path) -> Non
     joints = [n for n in model.names[2:]]
     foreign = [n for n in data.joint_names if n not in joints]
     if foreign:
-        raise IdentificationError(f"{path}: joints the robot model does not have: {', '.join(foreign[:6])}"
-                                  f"{' ...' if len(foreign) > 6 else ''}")
+        raise IdentificationError(f"{path}: joints the robot model ({model.name}) does not have: "
+                                  f"{', '.join(foreign[:6])}{' ...' if len(foreign) > 6 else ''} (postures of "
+                                  f"another robot? pass its --robot)")
     missing = [n for n in joints if n not in data.joint_names]
     if missing:
         raise IdentificationError(f"{path}: {len(data.joint_names)} of the robot's {len(joints)} joints; missing "
@@ -395,9 +423,10 @@ def read_link_parameters(path: str | Path) -> dict:
     return doc["links"]
 
 
-def write_yaml(result: IdentificationResult, path: str | Path, source: str = "") -> None:
-    """The parameters for the retargeter and the analysis (``model.apply_link_parameters`` loads ``links``)."""
-    doc = {"model": result.model_name, "source": source, "total_mass_kg": result.total_mass_kg,
+def write_yaml(result: IdentificationResult, path: str | Path, source: str = "", robot: str = "") -> None:
+    """The parameters for the retargeter and the analysis (``model.apply_link_parameters`` loads ``links``);
+    ``robot``: the profile's name, which the file carries (a model of another robot refuses its links)."""
+    doc = {"robot": robot, "model": result.model_name, "source": source, "total_mass_kg": result.total_mass_kg,
            "cad_mass_kg": result.cad_mass_kg, "eval_rms_m": result.eval_rms_m, "cad_eval_rms_m": result.cad_eval_rms_m,
            "train_rms_m": result.train_rms_m, "cad_train_rms_m": result.cad_train_rms_m,
            "condition_number": result.condition_number, "rank": result.rank,

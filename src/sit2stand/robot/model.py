@@ -1,22 +1,21 @@
-"""PAL TALOS as a MuJoCo plant and as the controller's Pinocchio model, from PyPI ``example-robot-data``.
+"""The robot of a profile (:mod:`sit2stand.robot.profile`) as a MuJoCo plant and as the controller's Pinocchio model.
 
 * :class:`PlantConfig` (YAML): robot, chair, seated posture, gains, control rate, sensor noise, and ``unmodeled``:
   what only the simulated plant has (extra rigid masses fixed to links, joint friction, sensor biases, actuator
   delay). Nothing outside :mod:`sit2stand.robot.plant` reads ``unmodeled``.
 * :func:`build_spec` makes the MuJoCo spec: free-floating base, torque motors limited to the URDF efforts, a small
-  armature, ``jointactuatorfrc`` sensors, 6-axis force/torque at a site on ``leg_*_6_link`` (the sole link has no
-  contact geometry), a floor and a box chair; only the legs and the pelvis collide.
+  armature, ``jointactuatorfrc`` sensors, 6-axis force/torque at a site on each foot link, a sole box under it, a
+  floor and a box chair; only the profile's colliding links (legs, pelvis) touch them.
 * :func:`controller_model` is the "CAD" model the controller and the identification start from: the URDF's
   inertias, built by Pinocchio from the MJCF MuJoCo compiles (same joint order as the plant).
 
-Facts and pitfalls: ``../shared/notes/robot-talos.md``.
+Facts and pitfalls: ``../shared/notes/robot-talos.md`` and ``robot-g1.md``.
 """
 
 from __future__ import annotations
 
 import fnmatch
 import re
-import sys
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,57 +26,56 @@ import pinocchio as pin
 import yaml
 
 from ..data import DataFileNotFound, plant_path
+from ..data import names as data_names
 from ..errors import Sit2StandError
+from .profile import SIDES, RobotProfile, load_profile, mesh_uris_to_files, profile_of
 
-SIDES = ("left", "right")
-# TALOS joints above the trunk (their names start so): the retargeter and its COM feedback hold them near a reference
-# rather than let them carry the COM (the heavy arms could otherwise meet a COM target by swinging)
-UPPER_LIMB_PREFIXES = ("arm_", "head_", "gripper_")
-LEG_JOINTS = [f"leg_{s}_{i}_joint" for s in SIDES for i in range(1, 7)]
-SOLE_OFFSET_M = 0.107
-"""The sole is this far below the origin of ``leg_*_6_link`` (URDF ``*_sole_link``)."""
-SOLE_HALF_SIZE_M = (0.105, 0.065, 0.005)
-SOLE_CENTRE_X_M = 0.02
-"""TALOS's sole plate (21 x 13 cm, centre 2 cm ahead of the ankle): the reduced URDF's foot collision mesh spans
-only 13.5 cm, which would leave a support polygon far smaller than the robot's, so the plant stands on this box."""
-COLLIDING = ("base_link",) + tuple(f"leg_{s}_{i}_link" for s in SIDES for i in range(1, 7))
+DEFAULT_ROBOT = "talos"
+"""The robot of a plant that names none, and of commands not told ``--robot``: the paper's closest public analog."""
+SEAT_CLEARANCE_BELOW_M = 0.002
+"""A chair's top is this far below the lowest seat link of the seated posture (when the plant gives no height)."""
 
 
 class PlantConfigError(Sit2StandError, ValueError):
     """A plant file that cannot be used; the message names the file and the field."""
 
 
-def sole_corners_local(margin_m: float = 0.0) -> np.ndarray:
-    """(4, 3) corners of a sole in its frame [m], ``margin_m`` inside its edges."""
-    hx, hy = SOLE_HALF_SIZE_M[0] - margin_m, SOLE_HALF_SIZE_M[1] - margin_m
-    return np.array([[SOLE_CENTRE_X_M + sx * hx, sy * hy, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
+def sole_corners_local(profile: RobotProfile, margin_m: float = 0.0) -> np.ndarray:
+    """(4, 3) corners of a sole of ``profile``'s robot in the sole frame [m], ``margin_m`` inside its edges."""
+    sole = profile.sole
+    hx, hy = sole.half_size_m[0] - margin_m, sole.half_size_m[1] - margin_m
+    return np.array([[sole.centre_x_m + sx * hx, sy * hy, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
 
 
 def sole_corners_world(model: pin.Model, data: pin.Data) -> np.ndarray:
     """(8, 3) corners of both soles in the world [m] (left's four, then right's), from ``data``'s frame placements
     (after ``pin.framesForwardKinematics``)."""
-    local = sole_corners_local()
+    local = sole_corners_local(profile_of(model))
     return np.vstack([[data.oMf[model.getFrameId(f"sole_{side}")].act(c) for c in local] for side in SIDES])
 
 
-def talos_dir() -> Path:
-    """The installed ``talos_data`` folder of example-robot-data."""
-    for base in map(Path, sys.path):
-        d = base / "cmeel.prefix" / "share" / "example-robot-data" / "robots" / "talos_data"
-        if d.is_dir():
-            return d
-    raise FileNotFoundError("example-robot-data is not installed (pip install example-robot-data==6.0.0)")
+MUJOCO_COMPILER = ('<mujoco><compiler strippath="false" fusestatic="false" discardvisual="false" '
+                   'balanceinertia="false" autolimits="true"/></mujoco>')
+"""Keep the sole and F/T frames (fusestatic would drop them) and meshes of the same file name in two folders."""
 
 
-def talos_urdf_text(variant: str = "talos_reduced") -> str:
-    """The TALOS URDF with absolute mesh paths and the MuJoCo compiler options it needs."""
-    d = talos_dir()
-    text = (d / "robots" / f"{variant}.urdf").read_text()
-    text = text.replace("package://example-robot-data/robots/", str(d.parent) + "/")
-    # keep the sole and F/T frames (fusestatic would drop them) and both meshes named base_link.STL
-    compiler = ('<mujoco><compiler strippath="false" fusestatic="false" discardvisual="false" '
-                'balanceinertia="false" autolimits="true"/></mujoco>')
-    return re.sub(r"(<robot\b[^>]*>)", r"\1" + compiler, text, count=1)
+def floating_base_removed(urdf: str) -> str:
+    """The URDF without a ``world`` link and the floating joint that hangs the robot from it (G1's file has them;
+    sit2stand adds its own free joint, and the root link is the profile's)."""
+    floating = re.search(r'<joint\b[^>]*type="floating"[^>]*>.*?</joint>', urdf, flags=re.S)
+    if floating is None:
+        return urdf
+    parent = re.search(r'<parent\s+link="([^"]+)"', floating.group(0))
+    urdf = urdf.replace(floating.group(0), "")
+    if parent is not None:
+        urdf = re.sub(rf'<link\s+name="{re.escape(parent.group(1))}"\s*(/>|>\s*</link>)', "", urdf)
+    return urdf
+
+
+def urdf_for_mujoco(profile: RobotProfile) -> str:
+    """The profile's URDF with absolute mesh paths, no floating base and the MuJoCo compiler options it needs."""
+    text = floating_base_removed(mesh_uris_to_files(profile.urdf.read_text(), profile.urdf))
+    return re.sub(r"(<robot\b[^>]*>)", r"\1" + MUJOCO_COMPILER, text, count=1)
 
 
 @dataclass
@@ -113,7 +111,7 @@ class PlantConfig:
     """Everything about the simulated robot and its surroundings (see ``sit2stand/data/plants/default.yaml``)."""
 
     name: str = "default"
-    robot: str = "talos_reduced"
+    robot: str = DEFAULT_ROBOT           # the robot profile: a packaged profile's name or a file
     timestep_s: float = 0.001
     armature: float = 0.1
     control_rate_hz: float = 1000.0
@@ -121,32 +119,35 @@ class PlantConfig:
     kp_per_effort: float = 10.0          # kp = effort limit / 0.1 rad
     kd_ratio: float = 0.05               # kd = kd_ratio * kp (implicit: no cap needed)
     chair_height_m: float | None = None  # None: 1 cm below the lowest pelvis/thigh point when seated
-    chair_front_gap_m: float = 0.02      # chair front edge this far behind the heels
-    chair_depth_m: float = 0.45
-    chair_width_m: float = 0.5
+    chair_front_gap_m: float | None = None   # chair front edge this far behind the heels; None: the profile's
+    chair_depth_m: float | None = None       # None: the profile's
+    chair_width_m: float | None = None       # None: the profile's
     chair_friction: float = 0.9
     floor_friction: float = 1.0
-    seated_posture: dict[str, float] = field(default_factory=lambda: {
-        "leg_*_3_joint": -1.5708, "leg_*_4_joint": 2.2689, "leg_*_5_joint": -0.6981,
-        "arm_left_2_joint": 0.2, "arm_right_2_joint": -0.2, "arm_*_4_joint": -0.4})
+    seated_posture: dict[str, float] | None = None   # joint glob -> angle [rad]; None: the robot profile's
     joint_torque_noise_nm: float = 0.2
     ft_force_noise_n: float = 0.5
     ft_torque_noise_nm: float = 0.05
     encoder_noise_rad: float = 0.0
-    fall_pelvis_height_m: float = 0.35
+    fall_pelvis_height_m: float | None = None        # None: the robot profile's
     fall_tilt_rad: float = 1.3
     seed: int = 0
     unmodeled: Unmodeled = field(default_factory=Unmodeled)
     source: str = ""
 
     @staticmethod
-    def load(path: str | Path | None) -> PlantConfig:
+    def load(path: str | Path | None, robot: str | None = None) -> PlantConfig:
         """Read a plant YAML, a file or a packaged plant's name (``default``; None: the defaults, which carry no
-        unmodeled effects)."""
+        unmodeled effects).
+
+        ``robot``: the robot profile the plant must be for. A packaged plant's name then means that robot's own
+        (``default`` is ``g1_default`` for G1), a file that names no robot is taken as this robot's, and one that
+        names another is refused. None: the plant file's robot (TALOS where it names none).
+        """
         if path is None:
-            return PlantConfig()
+            return PlantConfig(robot=robot or DEFAULT_ROBOT)
         try:
-            path = plant_path(path)
+            path = plant_path(_robots_own_plant(path, robot))
         except DataFileNotFound as err:
             raise PlantConfigError(str(err)) from None
         try:
@@ -180,11 +181,53 @@ class PlantConfig:
                                  for k, v in (um.get("ft_rotation_rad") or {}).items()})
         except (KeyError, TypeError, ValueError) as err:
             raise PlantConfigError(f"{path}: unmodeled section: {err!r}") from None
+        if robot is not None:
+            _check_robot(cfg, doc, robot, path)
         return cfg
+
+    @property
+    def profile(self) -> RobotProfile:
+        """The robot's profile (:mod:`sit2stand.robot.profile`)."""
+        return load_profile(self.robot)
+
+    @property
+    def seated(self) -> dict[str, float]:
+        """The seated posture: joint glob -> angle [rad] (the plant file's, else the profile's)."""
+        return self.seated_posture if self.seated_posture is not None else self.profile.seated_posture
+
+    def chair(self, dimension: str) -> float:
+        """The chair's ``front_gap_m``, ``depth_m`` or ``width_m`` [m]: the plant file's, else the profile's."""
+        value = getattr(self, f"chair_{dimension}")
+        return float(value) if value is not None else float(self.profile.chair[dimension])
+
+    @property
+    def fall_height_m(self) -> float:
+        """A pelvis lower than this [m] has fallen (the plant file's, else the profile's)."""
+        return self.fall_pelvis_height_m if self.fall_pelvis_height_m is not None else \
+            self.profile.fall_pelvis_height_m
 
     def total_extra_mass(self) -> float:
         """Sum of the unmodeled extra masses [kg]."""
         return sum(m.mass_kg for m in self.unmodeled.masses)
+
+
+def _robots_own_plant(name_or_path: str | Path, robot: str | None) -> str | Path:
+    """A packaged plant's name for ``robot``: ``<robot>_<name>`` where the package has it, else the name."""
+    if robot is None or Path(str(name_or_path)).name != str(name_or_path):
+        return name_or_path
+    own = f"{load_profile(robot).name}_{name_or_path}"
+    return own if own in data_names("plants") else name_or_path
+
+
+def _check_robot(cfg: PlantConfig, doc: dict, robot: str, path: Path) -> None:
+    """Refuse a plant file written for another robot than ``robot``; one that names none is ``robot``'s."""
+    if "robot" not in doc:
+        cfg.robot = robot
+        return
+    want, have = load_profile(robot), cfg.profile
+    if want.name != have.name:
+        raise PlantConfigError(f"{path}: field 'robot': this plant is for {have.name}, not {want.name} (pass a "
+                               f"plant of {want.name}, or --robot {have.name})")
 
 
 def _six(values, what: str) -> tuple[float, ...]:
@@ -204,7 +247,7 @@ def _three(values, what: str) -> tuple[float, float, float]:
 
 
 def expand(pattern_values: dict[str, float], joint_names: list[str]) -> dict[str, float]:
-    """Joint-name globs (``leg_*_4_joint``) to per-joint values; later patterns win."""
+    """Joint-name globs (``*_knee_joint``) to per-joint values; later patterns win."""
     out: dict[str, float] = {}
     for pattern, value in pattern_values.items():
         matches = fnmatch.filter(joint_names, pattern)
@@ -218,7 +261,9 @@ def expand(pattern_values: dict[str, float], joint_names: list[str]) -> dict[str
 def build_spec(cfg: PlantConfig, *, plant: bool) -> mujoco.MjSpec:
     """MuJoCo spec of the robot on its floor with the chair; ``plant=True`` adds the ``unmodeled`` masses and
     friction (the simulated truth), ``plant=False`` gives the CAD robot."""
-    spec = mujoco.MjSpec.from_string(talos_urdf_text(cfg.robot))
+    profile = cfg.profile
+    spec = mujoco.MjSpec.from_string(urdf_for_mujoco(profile))
+    spec.modelname = profile.name
     spec.option.timestep = cfg.timestep_s
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     # elliptic friction cones with a high impedance ratio: with MuJoCo's default pyramidal cones and impratio 1 the
@@ -226,11 +271,14 @@ def build_spec(cfg: PlantConfig, *, plant: bool) -> mujoco.MjSpec:
     spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
     spec.option.impratio = 10.0
     root = spec.worldbody.first_body()
+    if root.name != profile.root_link:
+        raise PlantConfigError(f"{profile.source}: field 'root_link': {profile.root_link!r}, but the URDF's root "
+                               f"link is {root.name!r}")
     root.add_freejoint(name="root")
     names = _add_joint_actuators(spec, cfg)
-    _add_soles(spec)
+    _add_soles(spec, profile)
     root.add_site(name="pelvis", pos=[0, 0, 0])
-    _add_contacts_and_floor(spec, cfg)
+    _add_contacts_and_floor(spec, cfg, profile)
     if plant:
         _add_unmodeled(spec, cfg, names)
     return spec
@@ -264,29 +312,37 @@ def _add_joint_actuators(spec: mujoco.MjSpec, cfg: PlantConfig) -> list[str]:
     return [j.name for j in joints]
 
 
-def _add_soles(spec: mujoco.MjSpec) -> None:
-    """Per foot: the sole box that makes contact, the F/T and sole sites, and the force [N] and torque [N m] sensors."""
+def _add_soles(spec: mujoco.MjSpec, profile: RobotProfile) -> None:
+    """Per foot: the sole box that makes contact, the F/T and sole sites, and the force [N] and torque [N m] sensors
+    (the F/T site at the foot link's origin: a site on a link without contact geometry reads nothing)."""
+    sole = profile.sole
     for side in SIDES:
-        body = spec.body(f"leg_{side}_6_link")
+        body = spec.body(profile.foot_links[side])
+        if body is None:
+            raise PlantConfigError(f"{profile.source}: field 'foot_link': {profile.foot_links[side]!r} is not a link "
+                                   f"of {profile.urdf.name}")
         for geom in body.geoms:            # the foot mesh stays for drawing; the sole box does the contact
             geom.contype, geom.conaffinity = 0, 0
-        sole = body.add_geom(name=f"sole_box_{side}", type=mujoco.mjtGeom.mjGEOM_BOX, size=list(SOLE_HALF_SIZE_M),
-                             pos=[SOLE_CENTRE_X_M, 0, -SOLE_OFFSET_M + SOLE_HALF_SIZE_M[2]], rgba=[0.3, 0.3, 0.3, 1],
-                             mass=0.0)
-        sole.group = 3
+        box = body.add_geom(name=f"sole_box_{side}", type=mujoco.mjtGeom.mjGEOM_BOX, size=list(sole.half_size_m),
+                            pos=[sole.centre_x_m, 0, -sole.below_foot_m + sole.half_size_m[2]],
+                            rgba=[0.3, 0.3, 0.3, 1], mass=0.0)
+        box.group = 3
         body.add_site(name=f"ft_{side}", pos=[0, 0, 0])
-        body.add_site(name=f"sole_{side}", pos=[0, 0, -SOLE_OFFSET_M])
+        body.add_site(name=f"sole_{side}", pos=[0, 0, -sole.below_foot_m])
         spec.add_sensor(name=f"force_{side}", type=mujoco.mjtSensor.mjSENS_FORCE,
                         objtype=mujoco.mjtObj.mjOBJ_SITE, objname=f"ft_{side}")
         spec.add_sensor(name=f"torque_{side}", type=mujoco.mjtSensor.mjSENS_TORQUE,
                         objtype=mujoco.mjtObj.mjOBJ_SITE, objname=f"ft_{side}")
 
 
-def _add_contacts_and_floor(spec: mujoco.MjSpec, cfg: PlantConfig) -> None:
-    """Which robot geoms collide (with the environment only), their friction, and the floor plane."""
+def _add_contacts_and_floor(spec: mujoco.MjSpec, cfg: PlantConfig, profile: RobotProfile) -> None:
+    """Which robot geoms collide (with the environment only: the profile's colliding links, the feet by their sole
+    boxes alone), their friction, and the floor plane."""
+    feet = set(profile.foot_links.values())
     for geom in spec.geoms:
         body_name = geom.parent.name if hasattr(geom.parent, "name") else ""
-        collide = body_name in COLLIDING and (not body_name.endswith("_6_link") or geom.name.startswith("sole_box"))
+        collide = profile.matches(profile.colliding_links, body_name) and \
+            (body_name not in feet or geom.name.startswith("sole_box"))
         # robot geoms (bit 1) touch only the environment (bit 2): no self-collision in deep hip flexion
         geom.contype, geom.conaffinity = (1, 2) if collide else (0, 0)
         geom.friction = [cfg.floor_friction, 0.005, 0.0001]
@@ -319,7 +375,7 @@ def _add_unmodeled(spec: mujoco.MjSpec, cfg: PlantConfig, names: list[str]) -> N
 
 def add_chair(spec: mujoco.MjSpec, cfg: PlantConfig, seat_top_z: float, front_x: float) -> None:
     """A box chair whose seat top is at ``seat_top_z`` and front edge at ``front_x`` (lab x)."""
-    half = [cfg.chair_depth_m / 2, cfg.chair_width_m / 2, seat_top_z / 2]
+    half = [cfg.chair("depth_m") / 2, cfg.chair("width_m") / 2, seat_top_z / 2]
     chair = spec.worldbody.add_body(name="chair", pos=[front_x - half[0], 0.0, half[2]])
     g = chair.add_geom(name="chair_seat", type=mujoco.mjtGeom.mjGEOM_BOX, size=half, rgba=[0.55, 0.35, 0.2, 1])
     g.contype, g.conaffinity = 2, 1
@@ -334,6 +390,7 @@ def controller_model(cfg: PlantConfig | None = None, link_parameters: dict | Non
     Pinocchio's free-flyer quaternion is (x, y, z, w), MuJoCo's (w, x, y, z).
     """
     cfg = cfg or PlantConfig()
+    profile = cfg.profile
     spec = build_spec(cfg, plant=False)
     spec.compile()
     xml = spec.to_xml()
@@ -345,10 +402,11 @@ def controller_model(cfg: PlantConfig | None = None, link_parameters: dict | Non
         model = pin.buildModelFromMJCF(path)
     finally:
         Path(path).unlink(missing_ok=True)
+    model.name = profile.name               # profile_of(model) finds the profile by it
     for side in SIDES:
-        jid = model.getJointId(f"leg_{side}_6_joint")
-        model.addFrame(pin.Frame(f"sole_{side}", jid, pin.SE3(np.eye(3), np.array([0, 0, -SOLE_OFFSET_M])),
-                                 pin.FrameType.OP_FRAME))
+        jid = model.getJointId(profile.foot_joint(side))
+        below = np.array([0, 0, -profile.sole.below_foot_m])
+        model.addFrame(pin.Frame(f"sole_{side}", jid, pin.SE3(np.eye(3), below), pin.FrameType.OP_FRAME))
         model.addFrame(pin.Frame(f"ft_{side}", jid, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
     if link_parameters:
         apply_link_parameters(model, link_parameters)
@@ -375,7 +433,16 @@ def actuated_joint_names(model) -> list[str]:
 def apply_link_parameters(model, params: dict) -> None:
     """Set link masses [kg] and COMs [m, link frame] of a Pinocchio model from ``{link_joint: {mass, com}}``
     (``sit2stand identify --model full``'s ``links``, :func:`sit2stand.robot.identify.read_link_parameters`): the
-    one way identified parameters enter a model. Rotational inertias scale with the mass."""
+    one way identified parameters enter a model. Rotational inertias scale with the mass.
+
+    Raises:
+        PlantConfigError: the parameters name joints the model lacks (identified on another robot).
+    """
+    foreign = [j for j in params if not model.existJointName(j)]
+    if foreign:
+        raise PlantConfigError(f"identified parameters of joints {', '.join(foreign[:4])}"
+                               f"{' ...' if len(foreign) > 4 else ''}, which {model.name or 'the robot'} does not "
+                               f"have: they were identified on another robot")
     for joint, p in params.items():
         jid = model.getJointId(joint)
         old = model.inertias[jid]

@@ -1,4 +1,4 @@
-"""The simulated robot: TALOS in MuJoCo under joint PD control with the feed-forward of a torque-controlled robot.
+"""The simulated robot (a profile's humanoid) in MuJoCo under joint PD with a torque-controlled robot's feed-forward.
 
 :class:`Plant` is pure Python (no ROS): ``command()`` sets the reference (positions, optional velocities and
 accelerations), ``step()`` advances the physics under
@@ -18,6 +18,7 @@ explicit-PD ankle instability, and the whole-body sway on the feet is well dampe
 
 from __future__ import annotations
 
+import fnmatch
 from collections import deque
 from dataclasses import dataclass
 
@@ -30,7 +31,8 @@ from ..errors import InputError
 from ..io.forceplate import DEFAULT_COP_THRESHOLD_N
 from ..vectors import cross
 from .torque_control import WholeBodyController
-from .model import SIDES, PlantConfig, add_chair, add_seat_frame, build_spec, controller_model, expand
+from .model import (SEAT_CLEARANCE_BELOW_M, SIDES, PlantConfig, PlantConfigError, add_chair, add_seat_frame, build_spec,
+                    controller_model, expand)
 
 CONTROLLERS = ("inverse_dynamics", "wbc")
 """The simulated robot's on-board controllers (``Plant.command``'s ``feedforward`` for a planned motion): joint PD
@@ -67,29 +69,53 @@ def seated_configuration(model: mujoco.MjModel, cfg: PlantConfig) -> np.ndarray:
     names = [model.joint(i).name for i in range(1, model.njnt)]
     q = model.qpos0.copy()
     q[3:7] = [1, 0, 0, 0]
-    for name, value in expand(cfg.seated_posture, names).items():
+    for name, value in expand(cfg.seated, names).items():
         q[model.joint(name).qposadr[0]] = value
     data = mujoco.MjData(model)
     data.qpos[:] = q
     mujoco.mj_kinematics(model, data)
-    foot_z, _ = lowest_point(model, data, tuple(f"leg_{s}_6_link" for s in SIDES))   # the foot mesh, not the URDF sole
+    foot_z, _ = lowest_point(model, data, tuple(cfg.profile.foot_links.values()))
     sole_x = np.mean([data.site(f"sole_{s}").xpos[0] for s in SIDES])
     q[2] -= foot_z
     q[0] -= sole_x           # feet (sole centres) at x = 0
     return q
 
 
+MIN_SEAT_HEIGHT_M = 0.1
+SEAT_REACH_M = 0.03
+"""A plant's chair may be this much lower or higher than the seated posture's seat links rest (2 mm under them)."""
+
+
 def seat_top_height(model: mujoco.MjModel, q_seated: np.ndarray, cfg: PlantConfig) -> float:
-    """Height [m] of the chair's top: the plant file's, or 2 mm under the pelvis and thighs of the seated posture
-    ``q_seated`` (qpos)."""
-    if cfg.chair_height_m is not None:
-        return float(cfg.chair_height_m)
+    """Height [m] of the chair's top: the plant file's, or 2 mm under the seat links of the seated posture
+    ``q_seated`` (qpos).
+
+    Raises:
+        PlantConfigError: the seated posture puts the seat links less than ``MIN_SEAT_HEIGHT_M`` above the floor,
+            or the plant's chair is more than ``SEAT_REACH_M`` from where they rest (the posture cannot reach it).
+    """
     data = mujoco.MjData(model)
     data.qpos[:] = q_seated
     mujoco.mj_kinematics(model, data)
-    seat_z, _ = lowest_point(model, data, ("base_link",) + tuple(f"leg_{s}_{i}_link" for s in SIDES
-                                                                   for i in (1, 2, 3)))
-    return seat_z - 0.002
+    seat_z, _ = lowest_point(model, data, bodies_matching(model, cfg.profile.seat_links))
+    natural = seat_z - SEAT_CLEARANCE_BELOW_M
+    if natural < MIN_SEAT_HEIGHT_M:
+        raise PlantConfigError(f"{cfg.profile.source}: field 'seated_posture': it puts the seat links "
+                               f"({', '.join(cfg.profile.seat_links)}) {seat_z:.3f} m above the floor, lower than "
+                               f"any chair ({MIN_SEAT_HEIGHT_M} m)")
+    if cfg.chair_height_m is None:
+        return natural
+    if abs(cfg.chair_height_m - natural) > SEAT_REACH_M:
+        raise PlantConfigError(f"{cfg.source or 'plant'}: field 'chair_height_m': {cfg.chair_height_m:.3f} m, but "
+                               f"the seated posture of {cfg.profile.name} rests its seat links on a seat at "
+                               f"{natural:.3f} m (within {SEAT_REACH_M} m it can reach)")
+    return float(cfg.chair_height_m)
+
+
+def bodies_matching(model: mujoco.MjModel, globs: tuple[str, ...]) -> tuple[str, ...]:
+    """The names of ``model``'s bodies that match any of the link ``globs``."""
+    names = [model.body(i).name for i in range(model.nbody)]
+    return tuple(n for n in names if any(fnmatch.fnmatchcase(n, g) for g in globs))
 
 
 def lowest_point(model: mujoco.MjModel, data: mujoco.MjData, bodies: tuple[str, ...]) -> tuple[float, float]:
@@ -115,7 +141,7 @@ def lowest_point(model: mujoco.MjModel, data: mujoco.MjData, bodies: tuple[str, 
 
 
 class Plant:
-    """TALOS on a chair in MuJoCo under joint PD + feed-forward (see the module docstring)."""
+    """The robot on a chair in MuJoCo under joint PD + feed-forward (see the module docstring)."""
 
     def __init__(self, cfg: PlantConfig | None = None, controller_params: dict | None = None,
                  with_chair: bool = True) -> None:
@@ -126,9 +152,10 @@ class Plant:
         pd = mujoco.MjData(probe)
         pd.qpos[:] = self.q_seated
         mujoco.mj_kinematics(probe, pd)
-        heel_x = min(pd.site(f"sole_{s}").xpos[0] for s in SIDES) - 0.1   # the sole is ~0.2 m long
+        sole = cfg.profile.sole
+        heel_x = min(pd.site(f"sole_{s}").xpos[0] for s in SIDES) + sole.centre_x_m - sole.half_size_m[0]
         self.seat_height_m = seat_top_height(probe, self.q_seated, cfg)
-        self.chair_front_x = heel_x - cfg.chair_front_gap_m
+        self.chair_front_x = heel_x - cfg.chair("front_gap_m")
         if with_chair:
             add_chair(spec, cfg, self.seat_height_m, self.chair_front_x)
         self.model = spec.compile()
@@ -182,7 +209,7 @@ class Plant:
         self.ft_adr = {s: (m.sensor_adr[m.sensor(f"force_{s}").id], m.sensor_adr[m.sensor(f"torque_{s}").id])
                        for s in SIDES}
         self.site_id = {name: m.site(name).id for name in [f"{k}_{s}" for k in ("ft", "sole") for s in SIDES]}
-        feet = {s: self.ctrl.inertias[self.ctrl.getJointId(f"leg_{s}_6_joint")] for s in SIDES}
+        feet = {s: self.ctrl.inertias[self.ctrl.getJointId(cfg.profile.foot_joint(s))] for s in SIDES}
         self.foot = {s: (float(f.mass), f.lever.copy()) for s, f in feet.items()}
         self.ff_every = max(1, int(round(1.0 / (cfg.feedforward_rate_hz * cfg.timestep_s))))
         self.wbc_every = max(1, int(round(1.0 / (WBC_RATE_HZ * cfg.timestep_s))))
@@ -332,7 +359,7 @@ class Plant:
         z = self.data.qpos[2]
         w = self.data.qpos[3:7]
         tilt = 2 * np.arccos(min(1.0, np.sqrt(w[0] ** 2 + w[3] ** 2)))   # angle of the base z axis from vertical
-        if z < self.cfg.fall_pelvis_height_m or tilt > self.cfg.fall_tilt_rad:
+        if z < self.cfg.fall_height_m or tilt > self.cfg.fall_tilt_rad:
             self.fallen = True
             self.status_text = f"fallen: pelvis at {z:.2f} m, base tilted {np.degrees(tilt):.0f} deg"
 

@@ -28,12 +28,19 @@ from ..io.bag import BagWriter
 from ..io.topics import GROUND_TRUTH_ROBOT_COM_TOPIC, WORLD_FRAME
 from ..io.typestore import typestore
 from .model import SIDES, PlantConfig
+from .profile import RobotProfile
 from .plant import Plant, lowest_point
 
 PAPER_RANGES = {"hip": 1.47, "knee": 1.69, "ankle": 0.56, "torso": 0.56}
-STANDUP_RANGES = {**PAPER_RANGES, "torso": 0.785}
-"""The paper's ranges [rad], with TALOS's whole torso flexion (to its 0.785 rad limit): a stand-up uses all of it, and
-a model identified only up to 0.56 rad misplaces the COM by ~3 cm there (measured on the default plant)."""
+"""The paper's ranges [rad]. A profile's ``posture_ranges`` take the trunk's whole flexion (TALOS: to its 0.785 rad
+stop): a stand-up uses all of it, and a model identified only up to 0.56 rad misplaces the COM by ~3 cm there
+(measured on TALOS's default plant)."""
+
+
+def standup_ranges(profile: RobotProfile) -> dict[str, float]:
+    """The ranges [rad] of the static postures of ``profile``'s robot (hip, knee and torso flexion)."""
+    r = profile.posture_ranges
+    return {"hip": r.hip, "knee": r.knee, "torso": r.trunk}
 
 
 @dataclass
@@ -51,15 +58,17 @@ class PostureSample:
 
 
 def _set_leg(plant: Plant, q: np.ndarray, hip: float, knee: float, ankle: float, torso: float) -> np.ndarray:
+    """``q`` with both legs' sagittal joints at ``hip``, ``knee``, ``ankle``, the trunk pitch at ``torso`` [rad]
+    and the legs' and trunk's lateral joints at zero."""
+    profile = plant.cfg.profile
     q = q.copy()
+    at = lambda joint: plant.qadr[plant.joint_names.index(joint)]  # noqa: E731
     for s in SIDES:
-        q[plant.qadr[plant.joint_names.index(f"leg_{s}_3_joint")]] = hip
-        q[plant.qadr[plant.joint_names.index(f"leg_{s}_4_joint")]] = knee
-        q[plant.qadr[plant.joint_names.index(f"leg_{s}_5_joint")]] = ankle
-        for j in (1, 2, 6):
-            q[plant.qadr[plant.joint_names.index(f"leg_{s}_{j}_joint")]] = 0.0
-    q[plant.qadr[plant.joint_names.index("torso_2_joint")]] = torso
-    q[plant.qadr[plant.joint_names.index("torso_1_joint")]] = 0.0
+        for role, value in (("hip_pitch", hip), ("knee", knee), ("ankle_pitch", ankle)):
+            q[at(profile.leg(s, role))] = value
+    for joint in profile.lateral_joints():
+        q[at(joint)] = 0.0
+    q[at(profile.trunk_pitch)] = torso
     return q
 
 
@@ -77,20 +86,22 @@ def standing_qpos(plant: Plant, hip: float, knee: float, ankle: float, torso: fl
     d = mujoco.MjData(plant.model)
     d.qpos[:] = q
     mujoco.mj_kinematics(plant.model, d)
-    foot_z, _ = lowest_point(plant.model, d, tuple(f"leg_{s}_6_link" for s in SIDES))
+    foot_z, _ = lowest_point(plant.model, d, tuple(plant.cfg.profile.foot_links.values()))
     sole_x = np.mean([d.site(f"sole_{s}").xpos[0] for s in SIDES])
     q[2] -= foot_z
     q[0] -= sole_x
     return q
 
 
-def random_arms(rng: np.random.Generator) -> dict[str, float]:
-    """Shoulder (pitch, roll) and elbow angles [rad] for both arms, each side drawn on its own."""
+def random_arms(rng: np.random.Generator, profile: RobotProfile) -> dict[str, float]:
+    """Angles [rad] of the profile's posture arm joints (shoulders, elbows) for both arms, each side drawn on its own
+    within the profile's ranges (the right arm's mirrored where the profile says)."""
+    ranges = profile.posture_ranges
     out = {}
-    for side, sign in (("left", 1.0), ("right", -1.0)):
-        out[f"arm_{side}_1_joint"] = sign * rng.uniform(-0.6, 0.2)    # the right arm's range is the mirror
-        out[f"arm_{side}_2_joint"] = sign * rng.uniform(0.1, 0.6)
-        out[f"arm_{side}_4_joint"] = rng.uniform(-1.3, -0.2)
+    for side in SIDES:
+        for template, (lo, hi) in ranges.arms.items():
+            sign = -1.0 if side == "right" and template in ranges.mirrored else 1.0
+            out[profile.side_name(template, side)] = sign * rng.uniform(lo, hi)
     return out
 
 
@@ -102,8 +113,9 @@ def cad_com_x(plant: Plant, qpos: np.ndarray) -> float:
 def solve_ankle(plant: Plant, hip: float, knee: float, torso: float, com_x_m: float,
                 arms: dict[str, float] | None = None) -> float | None:
     """Ankle pitch [rad] putting the controller's (CAD) COM at ``com_x_m`` (feet centred at 0), or None."""
-    a_lo = max(plant.model.joint("leg_left_5_joint").range[0], -0.9)
-    a_hi = min(plant.model.joint("leg_left_5_joint").range[1], 0.4)
+    ankle = plant.model.joint(plant.cfg.profile.leg("left", "ankle_pitch")).range
+    search = plant.cfg.profile.posture_ranges.ankle
+    a_lo, a_hi = max(ankle[0], search[0]), min(ankle[1], search[1])
     f = lambda a: cad_com_x(plant, standing_qpos(plant, hip, knee, a, torso, arms)) - com_x_m  # noqa: E731
     f_lo, f_hi = f(a_lo), f(a_hi)
     if np.sign(f_lo) == np.sign(f_hi):
@@ -119,7 +131,7 @@ def solve_ankle(plant: Plant, hip: float, knee: float, torso: float, com_x_m: fl
 
 
 def plan_postures(plant: Plant, n: int, seed: int = 0, com_offset_m: float = 0.025, com_centre_m: float = 0.02,
-                  ranges: dict[str, float] = STANDUP_RANGES, com_bias_m: float = 0.0,
+                  ranges: dict[str, float] | None = None, com_bias_m: float = 0.0,
                   move_arms: bool = True) -> list[np.ndarray]:
     """``n`` statically stable symmetric stances spanning the paper's joint ranges (qpos, MuJoCo order): the ankle
     puts the CAD COM at a random x within +-``com_offset_m`` of the sole's middle (``com_centre_m`` ahead of the
@@ -127,6 +139,8 @@ def plan_postures(plant: Plant, n: int, seed: int = 0, com_offset_m: float = 0.0
     real COM was measured from CAD's, e.g. by :func:`collect_postures` in its home stance). With ``move_arms`` the
     arms take random shoulder and elbow angles: with the arms always hanging, the arms' parameters cannot be told
     from the torso's, and a model identified so misplaces the COM by 2-3 cm once the arms move (measured)."""
+    profile = plant.cfg.profile
+    ranges = ranges or standup_ranges(profile)
     rng = np.random.default_rng(seed)
     out: list[np.ndarray] = []
     tries = 0
@@ -135,13 +149,13 @@ def plan_postures(plant: Plant, n: int, seed: int = 0, com_offset_m: float = 0.0
         hip = -rng.uniform(0.0, ranges["hip"])
         knee = rng.uniform(0.0, ranges["knee"])
         torso = rng.uniform(0.0, ranges["torso"])
-        arms = random_arms(rng) if move_arms else None
+        arms = random_arms(rng, profile) if move_arms else None
         ankle = solve_ankle(plant, hip, knee, torso,
                             com_centre_m + rng.uniform(-com_offset_m, com_offset_m) - com_bias_m, arms)
         if ankle is None:
             continue
         q = standing_qpos(plant, hip, knee, ankle, torso, arms)
-        if q[2] < 0.45:   # too deep for the knees' torque at this mass
+        if q[2] < profile.posture_ranges.min_pelvis_height_m:   # too deep for the knees' torque at this mass
             continue
         out.append(q)
     return out
@@ -217,7 +231,7 @@ def collect_postures(cfg: PlantConfig, n: int, out: str | Path, seed: int = 0, p
             kept += 1
             t_ns = kept * 2_000_000_000
             for topic, msg in M.robot_state(t_ns, plant.joint_names, sample.q, None, sample.tau, sample.wrench,
-                                            sample.cop, sample.base_pose):
+                                            sample.cop, sample.base_pose, plant.cfg.profile.root_link):
                 bag.write(topic, t_ns, msg)
             bag.write(GROUND_TRUTH_ROBOT_COM_TOPIC, t_ns, store["geometry_msgs/msg/PointStamped"](
                 header=M.header(t_ns, WORLD_FRAME), point=M.point(*sample.true_com)))

@@ -36,6 +36,7 @@ import pinocchio as pin
 
 from ..vectors import skew_rows
 from .model import SIDES, sole_corners_local
+from .profile import profile_of
 
 INF = np.inf         # no bound
 FORCE_UNIT_N = 100.0
@@ -128,7 +129,7 @@ class WholeBodyQP:
         self.n = self.nv + self.n_f
         self.tau_max = model.effortLimit[6:].copy()
         self.q_lo, self.q_hi = model.lowerPositionLimit[7:].copy(), model.upperPositionLimit[7:].copy()
-        self.corner_local = sole_corners_local(self.g.cop_margin_m)
+        self.corner_local = sole_corners_local(profile_of(model), self.g.cop_margin_m)
         self.mass = float(pin.computeTotalMass(model))
         n_pts = 4 * len(self.soles) + 1
         self.C_fric = friction_rows(n_pts, self.g.friction)
