@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from .capture.latency import PROBE_READY, capture_origin_ns, latencies_ms, p50_p99
-from .data import folder, plant_path
+from .data import folder
 from .io.topics import HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_RETARGET_IK_TOPIC
 from .retarget.pacing import READY_LINE
 from .retarget.report import analyse
@@ -140,12 +140,12 @@ def _free_port(protocol: str) -> int:
 
 def run_live(work: Path, env: dict[str, str], calibration: Path, demonstration: Path | None = None,
              plant: str | Path | None = None, graph_args: tuple[str, ...] = (), protocol: str = "qtm",
-             rate_hz: float = 100.0) -> LiveRun:
+             rate_hz: float = 100.0, robot: str | None = None) -> LiveRun:
     """One live stand-up (see the module docstring) in ``work`` (its logs, probe record and bag); ``calibration``:
     the skeleton's (``human-calibrate``); ``demonstration``: what serve-c3d serves (default the shipped elderly
     rise), captured at ``rate_hz``; ``plant``: default the CAD plant; ``graph_args``: more of the graph's
     ``name:=value`` arguments; ``protocol``: serve-c3d's and the bridge's (qtm, or natnet: markers only, served y up:
-    give ``PROTOCOL_ARGS["natnet"]``).
+    give ``PROTOCOL_ARGS["natnet"]``); ``robot``: the robot profile (None: the plant's, TALOS).
 
     Raises:
         LiveRunError: a process did not start, hung or failed before the figures (the logs' tails attached).
@@ -155,7 +155,8 @@ def run_live(work: Path, env: dict[str, str], calibration: Path, demonstration: 
     logs = {name: work / f"{name}.log" for name in ("launch", "probe", "serve")}
     record = work / "latency.json"
     graph = _start(["sit2stand.cli", "launch", str(folder("graphs") / "live.yaml"), f"out:={work / 'run'}",
-                    f"plant:={plant or plant_path('cad')}", f"protocol:={protocol}", f"capture_port:={port}",
+                    f"plant:={plant or 'cad'}", f"robot:={robot or ''}", f"protocol:={protocol}",
+                    f"capture_port:={port}",
                     f"rate_hz:={rate_hz:g}", f"calibration:={calibration}", "estimator_policy:=fifo", *graph_args,
                     "--timeout", "200"], env, logs["launch"])
     probe = server = None
@@ -175,7 +176,7 @@ def run_live(work: Path, env: dict[str, str], calibration: Path, demonstration: 
         _stop(server)
         _stop(graph)
     return LiveRun(_latencies(record, logs, rate_hz), code, logs["launch"].read_text(errors="replace"),
-                   _analysis(work / "run", demonstration, plant, logs), logs)
+                   _analysis(work / "run", demonstration, plant, logs, robot), logs)
 
 
 def _latencies(record: Path, logs: dict[str, Path], rate_hz: float) -> dict[str, np.ndarray]:
@@ -190,10 +191,11 @@ def _latencies(record: Path, logs: dict[str, Path], rate_hz: float) -> dict[str,
     return lat
 
 
-def _analysis(run: Path, demonstration: Path, plant: str | Path | None, logs: dict[str, Path]) -> dict:
+def _analysis(run: Path, demonstration: Path, plant: str | Path | None, logs: dict[str, Path],
+              robot: str | None = None) -> dict:
     """The recording's analysis summary (the stand-up graph's verdict, COM tracking)."""
     try:
-        return analyse(run, demonstration.stem, None, Path(plant or plant_path("cad"))).summary
+        return analyse(run, demonstration.stem, None, plant or "cad", robot=robot).summary
     except (OSError, ValueError, IndexError) as err:
         raise LiveRunError(f"the run's recording cannot be analysed ({err}){_tails(logs)}") from None
 

@@ -54,6 +54,12 @@ def constrained_lsq(A: np.ndarray, b: np.ndarray, *, weights: np.ndarray | None 
     Hs = H / scale[:, None] / scale[None, :]
     gs = g / scale
     cond = float(np.linalg.cond(Hs)) ** 0.5   # condition number of the scaled regressor (sqrt of the normal matrix's)
+    if E is None and lb is None and ub is None:
+        # nothing to constrain: the normal equations directly (a QP solver can call a nearly singular, regularised
+        # problem dual infeasible)
+        x = np.linalg.lstsq(Hs, -gs, rcond=None)[0] / scale
+        resid = Aw @ x - bw
+        return LsqResult(x, float(resid @ resid), cond, 0, "SOLVED (normal equations)")
     n_eq = 0 if E is None else np.atleast_2d(E).shape[0]
     Es = None if E is None else np.atleast_2d(np.asarray(E, float)) / scale[None, :]
     n_in = n if (lb is not None or ub is not None) else 0

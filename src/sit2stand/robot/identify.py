@@ -67,6 +67,34 @@ def planar_segment_joints(model: pin.Model) -> dict[str, list[str]]:
     return out
 
 
+PLANAR_PRIOR_WEIGHT = 1e-2
+"""The planar model's pull toward CAD's segment parameters (per kg or kg m; the rows weigh ~1 per N or N m): what the
+postures cannot tell apart (a mass at the knee, on the thigh or on the shank; the foot's height) stays as CAD has it,
+which moves the identifiable combinations by far less than the noise (their normal matrix reaches 1e4-1e5)."""
+
+
+def cad_planar_parameters(model: pin.Model) -> np.ndarray:
+    """(15,) CAD's planar parameters (m, m c_x, m c_z per segment, one leg's): each segment sums the bodies that move
+    with its joint while the lateral joints are at zero (a body belongs to its nearest segment joint up the chain),
+    in that joint's frame at the neutral posture."""
+    segments = planar_segment_joints(model)
+    owner = {model.getJointId(j): (seg, k == 0) for seg, joints in segments.items() for k, j in enumerate(joints)}
+    data = model.createData()
+    pin.forwardKinematics(model, data, pin.neutral(model))
+    out = {seg: np.zeros(3) for seg in segments}
+    for j in range(1, model.njoints):
+        a = j
+        while a not in owner:
+            a = model.parents[a]
+        seg, counted = owner[a]
+        if not counted:                  # the right leg's bodies: the left's mirror, counted once
+            continue
+        inertia = model.inertias[j]
+        com = data.oMi[a].actInv(data.oMi[j].act(inertia.lever))
+        out[seg] += inertia.mass * np.array([1.0, com[0], com[2]])
+    return np.concatenate(list(out.values()))
+
+
 def planar_joint_rows(model: pin.Model) -> list[str]:
     """The joints whose torques the planar model explains: the trunk pitch, then each leg's hip, knee, ankle pitch."""
     profile = profile_of(model)
@@ -290,7 +318,8 @@ def identify_planar5(data: PostureData, eval_fraction: float = 0.1, seed: int = 
     b = np.concatenate([b_list[k] for k in train])
     rank, cond = _check_data(data, train, A)
     w = np.tile(np.r_[[1 / wrench_sd] * 3, [1 / tau_sd_nm] * len(rows)], len(train))
-    res = constrained_lsq(A, b, weights=w, prior=np.zeros(15), prior_weights=np.full(15, 1e-6))
+    res = constrained_lsq(A, b, weights=w, prior=cad_planar_parameters(model),
+                          prior_weights=np.full(15, PLANAR_PRIOR_WEIGHT))
     theta = res.x
     # covariance of weighted least squares, from the training residual
     Aw = A * w[:, None]
