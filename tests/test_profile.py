@@ -151,3 +151,16 @@ def test_no_robots_joint_or_link_is_named_in_the_code():
     found = [f"{p.relative_to(SRC)}:{i}: {m.group(1)}" for p in SRC.rglob("*.py")
              for i, line in enumerate(p.read_text().splitlines(), 1) for m in [pattern.search(line)] if m]
     assert not found, found
+
+
+def test_a_copied_profile_naming_another_urdf_of_the_robot_stands_up(tmp_path, capsys):
+    """G1's profile copied, pointing at G1's 43-DoF URDF with hands: no code change, its own plants vouched for by
+    the profile it copied."""
+    hands = str(load_profile("g1").urdf.with_name("g1_29dof_with_hand_rev_1_0.urdf"))
+    path = copied_profile(tmp_path, name="g1_hands", urdf=hands)
+    assert PlantConfig.load("default", str(path)).name == "g1_default"
+    out = tmp_path / "rt"
+    assert sit2stand(["retarget", str(Path(__file__).resolve().parents[1] / "bags" / "natural"), "--robot",
+                      str(path), "--simulate", "--out", str(out)]) == 0, capsys.readouterr().out[-2000:]
+    summary = yaml.safe_load((out / "summary.json").read_text())
+    assert summary["robot"] == "g1_hands" and summary["stood_up"] and summary["time_scale"] <= 1.1

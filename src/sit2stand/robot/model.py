@@ -26,12 +26,14 @@ import pinocchio as pin
 import yaml
 
 from ..data import DataFileNotFound, plant_path
-from ..data import names as data_names
 from ..errors import Sit2StandError
 from .profile import SIDES, RobotProfile, load_profile, mesh_uris_to_files, profile_of
 
 DEFAULT_ROBOT = "talos"
 """The robot of a plant that names none, and of commands not told ``--robot``: the paper's closest public analog."""
+GENERIC_PLANTS = ("default", "cad")
+"""Plants every robot has: a profile names its own (``plants``); one that does not gets its robot with nothing
+unmodeled for both."""
 SEAT_CLEARANCE_BELOW_M = 0.002
 """A chair's top is this far below the lowest seat link of the seated posture (when the plant gives no height)."""
 
@@ -141,13 +143,17 @@ class PlantConfig:
         unmodeled effects).
 
         ``robot``: the robot profile the plant must be for. A packaged plant's name then means that robot's own
-        (``default`` is ``g1_default`` for G1), a file that names no robot is taken as this robot's, and one that
+        (``default`` is ``g1_default`` for G1; a profile without one of its own gets its robot with nothing
+        unmodeled for ``default`` and ``cad``), a file that names no robot is taken as this robot's, and one that
         names another is refused. None: the plant file's robot (TALOS where it names none).
         """
-        if path is None:
-            return PlantConfig(robot=robot or DEFAULT_ROBOT)
+        own = _robots_own_plant(path, robot) if path is not None else None
+        vouched = own is not None and robot is not None and \
+            str(path).removesuffix(".yaml") in load_profile(robot).plants
+        if own is None:
+            return PlantConfig(robot=robot or DEFAULT_ROBOT, name=str(path or "default"))
         try:
-            path = plant_path(_robots_own_plant(path, robot))
+            path = plant_path(own)
         except DataFileNotFound as err:
             raise PlantConfigError(str(err)) from None
         try:
@@ -181,7 +187,9 @@ class PlantConfig:
                                  for k, v in (um.get("ft_rotation_rad") or {}).items()})
         except (KeyError, TypeError, ValueError) as err:
             raise PlantConfigError(f"{path}: unmodeled section: {err!r}") from None
-        if robot is not None:
+        if vouched:
+            cfg.robot = robot            # one of the profile's own plants (its ``plants``): the profile vouches for it
+        elif robot is not None:
             _check_robot(cfg, doc, robot, path)
         return cfg
 
@@ -211,12 +219,16 @@ class PlantConfig:
         return sum(m.mass_kg for m in self.unmodeled.masses)
 
 
-def _robots_own_plant(name_or_path: str | Path, robot: str | None) -> str | Path:
-    """A packaged plant's name for ``robot``: ``<robot>_<name>`` where the package has it, else the name."""
-    if robot is None or Path(str(name_or_path)).name != str(name_or_path):
+def _robots_own_plant(name_or_path: str | Path, robot: str | None) -> str | Path | None:
+    """A packaged plant's name for ``robot``: the profile's own plant of that name (its ``plants``), else the name;
+    None for ``default`` or ``cad`` when the profile has none of its own (the robot with nothing unmodeled)."""
+    name = str(name_or_path)
+    if robot is None or Path(name).name != name:
         return name_or_path
-    own = f"{load_profile(robot).name}_{name_or_path}"
-    return own if own in data_names("plants") else name_or_path
+    profile = load_profile(robot)
+    if name.removesuffix(".yaml") in profile.plants:
+        return profile.plants[name.removesuffix(".yaml")]
+    return None if name.removesuffix(".yaml") in GENERIC_PLANTS else name_or_path
 
 
 def _check_robot(cfg: PlantConfig, doc: dict, robot: str, path: Path) -> None:

@@ -102,6 +102,7 @@ class RobotProfile:
     sensors: str = ""                          # what the real robot measures (prose for reports)
     gap: dict = field(default_factory=dict)    # the model-gap suite's choices (links for hidden masses, joints)
     sides: dict[str, str] = field(default_factory=lambda: {s: s for s in SIDES})   # sit2stand's -> the robot's
+    plants: dict[str, str] = field(default_factory=dict)   # generic plant name -> the packaged plant of this robot
     _joints: dict[str, tuple[str, str]] | None = field(default=None, repr=False)
 
     # -- names by role ----------------------------------------------------------------------------------------
@@ -387,7 +388,8 @@ def _parse(doc: dict, path: Path) -> RobotProfile:
         seat_links=f.names("seat_links"), seated_posture={str(k): float(v) for k, v in seated.items()},
         fall_pelvis_height_m=fall, chair={k: f.number(f"chair.{k}") for k in CHAIR_FIELDS}, marker_links=markers,
         posture_ranges=ranges, title=str(f.get("title", default="")),
-        sensors=str(f.get("sensors", default="")), gap=dict(f.get("gap", dict, default={})), sides=side_names)
+        sensors=str(f.get("sensors", default="")), gap=dict(f.get("gap", dict, default={})), sides=side_names,
+        plants={str(k): str(v) for k, v in f.get("plants", dict, default={}).items()})
     if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_\-]*", profile.name):
         raise f.fail("name", f"{profile.name!r}: letters, digits, '_' and '-' only")
     return profile
@@ -395,7 +397,7 @@ def _parse(doc: dict, path: Path) -> RobotProfile:
 
 _FIELDS = ("name", "title", "urdf", "root_link", "sides", "legs", "foot_link", "sole", "trunk", "upper_limbs",
            "colliding_links", "seat_links", "seated_posture", "fall_pelvis_height_m", "chair", "marker_links",
-           "posture_ranges", "sensors", "gap")
+           "posture_ranges", "sensors", "gap", "plants")
 
 
 def package_share(package: str) -> Path | None:
