@@ -3,11 +3,14 @@ stand-up from a shipped demonstration, with nothing but ``--robot g1``."""
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from sit2stand.cli import main as sit2stand
 from sit2stand.io.bag import BagReader
+from sit2stand.retarget.offline import end_posture_verdict
 from sit2stand.robot.identify import identify
 from sit2stand.robot.model import PlantConfig
 from sit2stand.robot.postures import collect_postures
@@ -45,6 +48,19 @@ def test_g1_stands_up_from_the_natural_demonstration_near_the_humans_timing(tmp_
     assert summary["robot"] == "g1" and summary["stood_up"] and summary["fall"] is None
     assert summary["time_scale"] <= 1.1 and summary["com_tracking_rms_m"] < 0.03, summary
     assert summary["pelvis_final_m"] > 0.6                          # G1's pelvis: 0.385 m seated, 0.79 m straight
+    # standing, not squatting: knees within 15 degrees of the human's at the end (measured 13.6 against 12.0)
+    assert summary["standing_knees_match"] and summary["final_pelvis_height_ratio"] > 0.9, summary
     with BagReader(out / "retarget") as bag:
         _, first = bag.read("/robot/joint_command")[0]
     assert first.header.frame_id == "pelvis" and "left_knee_joint" in first.joint_names
+
+
+def test_a_squat_is_not_a_stand():
+    """The verdict asks for a standing end posture: the robot's knees within 15 degrees of the human's final knee
+    flexion (the robot used to end a rise with its knees at 71 degrees, the human's at 8)."""
+    frames = [SimpleNamespace(human_knee_flexion_rad=np.radians(a)) for a in (95.0, 40.0, 8.0)]
+    squat = end_posture_verdict({"stood_up": True, "sat_down": None, "final_knee_flexion_deg_robot": 71.0}, frames)
+    assert squat == {"final_knee_flexion_deg_human": pytest.approx(8.0), "standing_knees_match": False,
+                     "stood_up": False}
+    stand = end_posture_verdict({"stood_up": True, "sat_down": None, "final_knee_flexion_deg_robot": 20.0}, frames)
+    assert stand["stood_up"] and stand["standing_knees_match"]

@@ -140,7 +140,8 @@ def test_the_local_player_is_slower_only_where_a_frame_needs_it(retargeted):
     assert np.abs(np.diff(scales)).max() <= MAX_TIME_SCALE_RATE * 0.01 + 1e-9
     need = np.array([player.frame_scale(int(round(c.t_plan_s / 0.01))) for c in cmds])
     assert np.all(scales >= need - MAX_TIME_SCALE_RATE * 0.01 - 1e-9), "a frame played faster than it can be"
-    assert scales.max() > 1.5 and scales[-1] == 1.0
+    # the last commands may stay a little slow: the knees straighten toward the human's as it stands (the knee task)
+    assert scales.max() > 1.5 and scales[-1] <= 1.05
     assert np.mean(scales < 1.0 + 1e-9) > 0.3, "the human's timing wherever the robot can follow it"
     on_feet = [c for c in cmds if c.on_feet]
     assert min(c.margin_at_scale_m for c in on_feet if player.frame_scale(int(round(c.t_plan_s / 0.01))) <

@@ -39,7 +39,11 @@ def _retarget(args: argparse.Namespace) -> int:
     if args.simulate:
         ok = summary["stood_up"] and summary.get("sat_down") is not False
         if not summary["stood_up"]:
-            print(f"did not stand up: {summary['fall'] or 'pelvis too low'}")
+            squat = summary.get("standing_knees_match") is False
+            why = summary["fall"] or (f"ended in a squat: knees flexed {summary['final_knee_flexion_deg_robot']:.0f} "
+                                      f"degrees, the human's {summary['final_knee_flexion_deg_human']:.0f}"
+                                      if squat else "pelvis too low")
+            print(f"did not stand up: {why}")
         elif summary.get("sat_down") is None:
             print("stood up")
         else:

@@ -30,6 +30,8 @@ from .anthropometry import TOE_MASS_FRACTION, ankle_height_m, anthropometric_set
 from .marker_sets import DEFAULT_MARKER_SET, MarkerSet, MarkerSetError, load_marker_set
 
 SIDES = ("l", "r")
+KNEE_JOINTS = tuple(f"knee_{s}_y" for s in SIDES)
+"""The knees' flexion joints (positive flexion) of the skeleton, as ``/human/joint_states`` names them."""
 SEGMENTS = ["pelvis", "torso", "head"] + [f"{s}_{side}" for side in SIDES for s in
                                          ("upper_arm", "forearm", "hand", "thigh", "shank", "foot", "toes")]
 LENGTH_GROUPS = ("pelvis", "torso", "head", "upper_arm", "forearm", "hand", "thigh", "shank", "foot")

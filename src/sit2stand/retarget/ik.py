@@ -47,7 +47,7 @@ Units SI; frames by Pinocchio frame id; positions in the world frame (REP-103).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
@@ -118,6 +118,7 @@ class _Frame:
     base_pitch_min: float | None
     base_z_min: float | None = None              # the base's lowest world z [m] (hips off the seat)
     lift_speed_prev: np.ndarray | None = None    # the trunk joints' speeds into the previous frame [rad/s]
+    joint_targets: list[tuple[int, float, float]] = field(default_factory=list)   # (tangent index, rad, 1/rad^2)
 
 
 class ComIk:
@@ -188,17 +189,21 @@ class ComIk:
               sole_targets: list[pin.SE3], q_ref: np.ndarray | None = None, com_axes: tuple[int, ...] = (0, 1, 2),
               q_prev: np.ndarray | None = None, max_iterations: int = 10, tol: float = 1e-7,
               base_xz: np.ndarray | None = None, base_weight: float | None = None,
-              base_pitch_min: float | None = None, base_z_min: float | None = None) -> IkResult:
+              base_pitch_min: float | None = None, base_z_min: float | None = None,
+              joint_targets: list[tuple[int, float, float]] | None = None) -> IkResult:
         """Solve one frame from ``q0``. ``markers``: (frame id, target position [m], weight) triples.
         ``q_prev``: the previous frame's configuration; the joint speed limits bound the motion from it (none for
         the first frame). ``base_xz``: hold the floating base's world x and z at these values [m] (e.g. the hips on
         a seat): two more equality rows, or, with ``base_weight``, a soft task of that weight. ``base_pitch_min``
         [rad]: the base may not pitch back beyond this (a pelvis on a seat cannot roll back about its hips).
-        ``base_z_min`` [m]: the base's world z stays at or above this (hips that have left a seat stay off it)."""
+        ``base_z_min`` [m]: the base's world z stays at or above this (hips that have left a seat stay off it).
+        ``joint_targets``: (tangent index, angle [rad], weight [1/rad^2]) soft tasks on single joints (the human's
+        knee flexion)."""
         t0 = time.perf_counter()
         frame = _Frame([int(m[0]) for m in markers], np.array([m[1] for m in markers], float).reshape(-1, 3),
                        np.array([m[2] for m in markers], float), com_target, list(com_axes), sole_targets,
-                       q0 if q_ref is None else q_ref, q_prev, base_xz, base_weight, base_pitch_min, base_z_min)
+                       q0 if q_ref is None else q_ref, q_prev, base_xz, base_weight, base_pitch_min, base_z_min,
+                       joint_targets=list(joint_targets or ()))
         frame.lift_speed_prev = self._lift_speed_prev(q_prev)
         q = q0.copy()
         feasible, dua = True, 0.0
@@ -259,6 +264,9 @@ class ComIk:
         post[:6] = 0.0
         H[np.diag_indices(nv)] += self.mu + self.damping
         g += self.mu * post
+        for i, angle, w in f.joint_targets:          # q's index of a 1-DoF joint is its tangent index + 1
+            H[i, i] += w
+            g[i] += w * (q[i + 1] - angle)
         if self.momentum_weight > 0 and f.q_prev is not None and self._L_prev is not None:
             # L(dq) = A (v0 + dq / dt), v0 the motion from the previous frame to q; its change as a ZMP shift [m]
             A = pin.computeCentroidalMap(self.model, self.data, q)[3:] / self.dt

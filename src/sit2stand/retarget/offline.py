@@ -31,13 +31,14 @@ from ..io.topics import (HUMAN_COM_TOPIC, ROBOT_JOINT_COMMAND_TOPIC, ROBOT_PLANN
                          WORLD_FRAME)
 from ..io.typestore import typestore
 from ..robot.identify import read_link_parameters
-from ..robot.model import PlantConfig
+from ..robot.model import SIDES, PlantConfig
 from ..robot.plant import DEFAULT_CONTROLLER, Plant
+from ..robot.postures import standing_pelvis_height_m
 from ..robot.profile import profile_of
 from ..robot.wbc import WbcGains
 from .dynamic import DynamicsFilter
 from .phases import Phases, find_phases
-from .report import SAT_DOWN_TOLERANCE_M, STOOD_RISE_M
+from .report import KNEE_TOLERANCE_DEG, SAT_DOWN_TOLERANCE_M, STOOD_RISE_M
 from .player import DEFAULT_MARGIN_M, DEFAULT_MAX_TIME_SCALE, SEAT_OFF_DWELL_S, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig, com_feedback_applies, com_lag_m
 from .calibration import map_frame
@@ -171,6 +172,8 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
                    "played": "whole trial" if whole or phases.sit_down_s is None else "rise and stand"},
     }
     summary.update(simulated)
+    if simulated:
+        summary.update(end_posture_verdict(summary, frames))
     _write_bag(out / "retarget", cmds, robot.joint_names, float(trial.marker_t_s[0]), dt,
                profile_of(robot.model).root_link)
     _figure(trial, com_h, frames, cmds, dt, out / "retarget.png", summary)
@@ -255,6 +258,8 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
     (None: the commands as planned)."""
     ticks = taken = 0
     rows, cmds, torque = [], [], []
+    profile = plant.cfg.profile
+    knees = plant.qadr[[plant.joint_names.index(profile.leg(s, "knee")) for s in SIDES]]
     offset, lag = np.zeros(2), 0.0
     held = 0
     while held < int(hold_s / dt):
@@ -285,7 +290,8 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
         rows.append([plant.t_s, *plant.true_com(), *c.com,
                      *s.cop_m, plant.data.qpos[2], plant.data.qpos[0], c.q[0],
                      float(np.abs(err).max()), float(np.argmax(np.abs(err))), plant.chair_force_n(),
-                     *pin.centerOfMass(plant.ctrl, plant.ctrl_data, plant.pin_configuration(plant.data.qpos)), *offset])
+                     *pin.centerOfMass(plant.ctrl, plant.ctrl_data, plant.pin_configuration(plant.data.qpos)), *offset,
+                     float(np.mean(plant.data.qpos[knees]))])
         if plant.fallen:
             while not player.done:      # the rest of the plan, for its bag and figures
                 cmds.append(player.pull())
@@ -295,11 +301,26 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
     stood, sat_down = _verdict(plant.fallen, arr[:, 10], np.array([c.q[2] for c in cmds]),
                                not cmds[-1].on_feet and any(c.on_feet for c in cmds))
     err = arr[:, 1:4] - arr[:, 4:7]
+    up = int(np.argmax(arr[:, 10])) if sat_down is not None else -1     # the standing instant judged
     return cmds, {"stood_up": stood, "sat_down": sat_down, "fall": plant.status_text if plant.fallen else None,
                   "pelvis_final_m": float(arr[-1, 10]), "pelvis_planned_final_m": float(cmds[-1].q[2]),
+                  "final_knee_flexion_deg_robot": float(np.degrees(arr[up, -1])),
+                  "final_pelvis_height_ratio": float(arr[up, 10] / standing_pelvis_height_m(plant)),
                   "com_tracking_rms_m": float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))),
                   "com_feedback_max_offset_m": float(np.abs(arr[:, 19:21]).max()), **_torques(plant, np.array(torque)),
                   **_qp_times(plant)}
+
+
+def end_posture_verdict(summary: dict, frames: list) -> dict:
+    """The human's final knee flexion [deg] (the last frame's; the most extended one when the trial sits back
+    down) beside the robot's, and ``stood_up`` only when they are within ``KNEE_TOLERANCE_DEG``."""
+    flexion = [f.human_knee_flexion_rad for f in frames if f.human_knee_flexion_rad is not None]
+    if not flexion or "final_knee_flexion_deg_robot" not in summary:
+        return {"final_knee_flexion_deg_human": None}
+    human = float(np.degrees(min(flexion) if summary.get("sat_down") is not None else flexion[-1]))
+    knees_match = abs(summary["final_knee_flexion_deg_robot"] - human) <= KNEE_TOLERANCE_DEG
+    return {"final_knee_flexion_deg_human": human, "standing_knees_match": bool(knees_match),
+            "stood_up": bool(summary["stood_up"] and knees_match)}
 
 
 def _verdict(fallen: bool, pelvis_z: np.ndarray, planned_z: np.ndarray, ends_seated: bool) -> tuple[bool, bool | None]:

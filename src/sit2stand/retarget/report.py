@@ -32,18 +32,24 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
-from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_COM_FEEDBACK_TOPIC,
-                         ROBOT_COP_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC)
+from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, HUMAN_JOINTS_TOPIC, ROBOT_BASE_POSE_TOPIC,
+                         ROBOT_COM_FEEDBACK_TOPIC, ROBOT_COP_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_PLANNED_COM_TOPIC,
+                         ROBOT_PLANNED_ZMP_TOPIC)
 from ..io.bag import BagReader
 from ..io.messages import stamp_ns
 from ..robot.identify import read_link_parameters
 from ..robot.model import DEFAULT_ROBOT, PlantConfig, controller_model, sole_corners_world
+from ..human.skeleton import KNEE_JOINTS
 from ..robot.plant import Plant
+from ..robot.postures import standing_pelvis_height_m
+from ..robot.profile import SIDES
 
 STOOD_RISE_M = 0.2
 """A robot that stood up: its pelvis at least this far above where it sat [m]."""
 SAT_DOWN_TOLERANCE_M = 0.05
 """A robot that sat back down: its pelvis within this of the seated height [m]."""
+KNEE_TOLERANCE_DEG = 15.0
+"""A robot that stood up ends with its knees within this of the human's final knee flexion: a squat is not a stand."""
 
 
 @dataclass
@@ -82,6 +88,7 @@ class _RunMessages:
     human_com: list
     chair: list
     com_feedback_shift_m: list[float]     # horizontal size of each COM feedback correction
+    human_joints: list = field(default_factory=list)   # the fitted skeleton's joint states (the last few)
 
 
 def _stamps(msgs) -> np.ndarray:
@@ -122,9 +129,11 @@ def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | N
     rise = np.flatnonzero(z > z[0] + 0.02)
     seat_off = float(t[rise[0]]) if len(rise) else None
     fallen, stood, sat_down = _stood_up(cfg, t, z, hold_s, stand_fraction)
+    posture = _end_posture(cfg, cad, q, msgs.human_joints)
+    stood = stood and posture.get("standing_knees_match", True)
     shift = msgs.com_feedback_shift_m
     summary = {"stood_up": bool(stood), "sat_down": sat_down, "fallen": fallen, "pelvis_start_m": float(z[0]),
-               "pelvis_final_m": float(z[-1]),
+               "pelvis_final_m": float(z[-1]), **posture,
                "robot_seat_off_s": seat_off, "human_seat_off_s": human_seat_off,
                "com_tracking_rms_m": _tracking_rms(t, com, plan_t, plan_com),
                "planned_final_com_z_m": float(plan_com[-1, 2]) if len(plan_com) else None,
@@ -146,6 +155,24 @@ def _support_x(model: pin.Model, q: np.ndarray) -> tuple[float, float]:
     return float(x.min()), float(x.max())
 
 
+def _end_posture(cfg: PlantConfig, model: pin.Model, q: np.ndarray, human_joints: list) -> dict:
+    """The robot's final knee flexion [deg] and pelvis height over its straight-legged stance's, beside the human's
+    last knee flexion (its skeleton's, when the run has ``/human/joint_states``), and whether the knees match within
+    ``KNEE_TOLERANCE_DEG``."""
+    profile = cfg.profile
+    knees = [model.joints[model.getJointId(profile.leg(s, "knee"))].idx_q for s in SIDES]
+    out = {"final_knee_flexion_deg_robot": float(np.degrees(np.mean(q[-1, knees]))),
+           "final_pelvis_height_ratio": float(q[-1, 2] / standing_pelvis_height_m(Plant(cfg, with_chair=False)))}
+    if human_joints:
+        msg = human_joints[-1][1]
+        names = list(msg.name)
+        if all(k in names for k in KNEE_JOINTS):
+            human = float(np.degrees(np.mean([msg.position[names.index(k)] for k in KNEE_JOINTS])))
+            out["final_knee_flexion_deg_human"] = human
+            out["standing_knees_match"] = bool(abs(out["final_knee_flexion_deg_robot"] - human) <= KNEE_TOLERANCE_DEG)
+    return out
+
+
 def _read_run(run: Path, every: int) -> _RunMessages:
     """Read the run's topics (every ``every``-th joint state); ValueError if it is not a stand-up run."""
     with BagReader(run) as bag:
@@ -161,7 +188,8 @@ def _read_run(run: Path, every: int) -> _RunMessages:
             bag.read(HUMAN_COM_TOPIC) if HUMAN_COM_TOPIC in topics else [],
             bag.read(CHAIR_PLATE_TOPIC) if CHAIR_PLATE_TOPIC in topics else [],
             [np.hypot(m.vector.x, m.vector.y) for _, m in bag.read(ROBOT_COM_FEEDBACK_TOPIC)]
-            if ROBOT_COM_FEEDBACK_TOPIC in topics else [])
+            if ROBOT_COM_FEEDBACK_TOPIC in topics else [],
+            bag.read(HUMAN_JOINTS_TOPIC)[-1:] if HUMAN_JOINTS_TOPIC in topics else [])
 
 
 def _measured_configurations(msgs: _RunMessages, t_js: np.ndarray, cad: pin.Model) -> np.ndarray:

@@ -60,6 +60,9 @@ LEAD_IN_COM_SPEED_MPS = 0.2
 """Mean forward COM speed [m/s] of the lead-in that a recording starting mid-rise gets (the shipped natural rise
 moves its COM 0.26 m in ~1.3 s)."""
 MIN_LEAD_IN_S = 0.5
+KNEE_RAMP_POWER = 2.0
+"""The knee task's weight grows with the human's knee extension from its seated flexion, to this power: full only as
+the human stands, so that it straightens the end posture without steering the rise."""
 
 
 @dataclass
@@ -169,6 +172,9 @@ class RetargetConfig:
     seat_clearance_m: float = 0.02        # after the robot's seat-off its pelvis stays at least this far above its
     #                                       seated height: hips the plan has taken off the seat must be off it
     seat_clearance_s: float = 0.3         # ... reached along a smoothstep over this [s of human time]
+    knee_weight: float = 3.0              # after seat-off, both robot knees pulled toward the human's knee flexion
+    #                                       [1/rad^2], ramped in as the human's pelvis rises: with the markers alone
+    #                                       the robot ended its rise in a squat (knees 71 degrees, the human's 8)
     iterations: int = 2                   # Gauss-Newton steps per frame (warm-started from the previous frame)
     qp_tolerance: float = 1e-6            # proxsuite eps_abs of each step's QP
     damping: float = 0.1                  # Levenberg-Marquardt damping of each Gauss-Newton step: with less, the
@@ -189,6 +195,7 @@ class RetargetFrame:
     human_seat_off: bool
     ik: IkResult
     markers: list = field(default_factory=list)     # the marker tasks solved: (frame id, target [m], weight)
+    human_knee_flexion_rad: float | None = None     # the human's (left) knee flexion in the frame, from its markers
 
 
 class Retargeter:
@@ -256,6 +263,8 @@ class Retargeter:
             if w is not None:
                 mu[jt.idx_v:jt.idx_v + jt.nv] = w
                 self.held_to_seated[jt.idx_q:jt.idx_q + jt.nq] = True
+        profile = profile_of(self.model)
+        self.knees = [self.model.joints[self.model.getJointId(profile.leg(s, "knee"))] for s in SIDES]
         self.ik = ComIk(self.model, self.robot.sole_frames, self.cfg.velocity_limit_rad_s, posture_weight=mu,
                         damping=self.cfg.damping, momentum_weight=self.cfg.momentum_weight,
                         stop_torque_share=self.cfg.stop_torque_share,
@@ -267,6 +276,9 @@ class Retargeter:
         self.human_pelvis0 = pelvis
         self.robot_pelvis0 = self.robot.q_seated[:3].copy()
         self.pelvis_markers = pel
+        self.leg_roles = roles
+        self.human_knee_seated = self.human_knee_flexion(positions_m, valid & np.all(np.isfinite(positions_m), axis=1),
+                                                         pelvis) or np.pi / 2
         # forward-axis knots of the COM map (robot x relative to its left ankle vs scaled human x relative to its)
         ax, rx = ankle[0], self.robot.ankle_left[0]
         foot = self.robot.toe_x_m - self.robot.heel_x_m
@@ -366,9 +378,12 @@ class Retargeter:
             target[1] = self._y_off + self._since_seat_off(t_s, cfg.y_ramp_s) * (mid_y - self._y_off)
         # markers: the calibration's similarity (pelvis on pelvis, scaled), fixed for the whole demonstration
         tgt = self.robot_pelvis0 + self.scale * (positions_m - self.human_pelvis0)
+        knees = []
+        flexion = self.human_knee_flexion(positions_m, ok, pelvis_now)
         if not self.seated:
             progress = np.clip((pelvis_now[2] - self._z_off) / (0.9 * self.human_thigh), 0.0, 1.0)
             tgt = tgt - (1.0 - progress) * self._marker_offset
+            knees = self._knee_targets(flexion, marker_weight)
         markers = [(self.marker_frames[self.names[i]], tgt[i], marker_weight * float(self.weights[i]))
                    for i in range(len(self.names)) if ok[i] and self.weights[i] > 0 and marker_weight > 0]
         # hips on the seat: pelvis x and z held (hard); after seat-off the hold fades out as a soft task, so that
@@ -384,11 +399,35 @@ class Retargeter:
         res = self.ik.solve(self.q, markers, target, robot.sole_targets, q_ref=q_ref, com_axes=axes,
                             q_prev=self.q, max_iterations=cfg.iterations, tol=cfg.tolerance, base_xz=hold,
                             base_weight=weight, base_pitch_min=self.pitch_seated if self.seated else None,
-                            base_z_min=z_min)
+                            base_z_min=z_min, joint_targets=knees)
         self.q = res.q
         pin.centerOfMass(self.model, self.data, self.q)
         return RetargetFrame(t_s, res.q, target, axes, self.data.com[0].copy(), self.seated or self.sat_down,
-                             self.human_seat_off, res, markers)
+                             self.human_seat_off, res, markers, flexion)
+
+    def human_knee_flexion(self, positions_m: np.ndarray, ok: np.ndarray, pelvis_m: np.ndarray) -> float | None:
+        """The human's left knee flexion [rad] in the sagittal (x-z) plane: the angle between the thigh (pelvis
+        centre -> knee) and the shank (knee -> ankle); None when a knee or ankle marker is not seen."""
+        points = []
+        for markers in (self.leg_roles.knee, self.leg_roles.ankle):
+            seen = [self.names.index(m) for m in markers if m in self.names and ok[self.names.index(m)]]
+            if not seen:
+                return None
+            points.append(positions_m[seen].mean(axis=0))
+        thigh, shank = (points[0] - pelvis_m)[[0, 2]], (points[1] - points[0])[[0, 2]]
+        turn = np.arctan2(thigh[0] * shank[1] - thigh[1] * shank[0], thigh @ shank)
+        return float(-turn)                     # the shank turns back (clockwise seen from the left) as it flexes
+
+    def _knee_targets(self, flexion: float | None, share: float) -> list[tuple[int, float, float]]:
+        """Both robot knees' soft targets at the human's knee ``flexion`` [rad], weighted ``knee_weight`` x
+        ``share`` x (how far the human's knee has extended from its seated flexion) ** ``KNEE_RAMP_POWER``."""
+        if flexion is None or self.sat_down or self.cfg.knee_weight <= 0 or share <= 0:
+            return []
+        seated = max(self.human_knee_seated, 1e-3)
+        share *= float(np.clip((seated - flexion) / seated, 0.0, 1.0)) ** KNEE_RAMP_POWER
+        lo, hi = self.model.lowerPositionLimit, self.model.upperPositionLimit
+        return [(j.idx_v, float(np.clip(flexion, lo[j.idx_q], hi[j.idx_q])), self.cfg.knee_weight * share)
+                for j in self.knees]
 
     def seat_clearance(self, t_s: float) -> float:
         """How far above its seated height the pelvis must be at ``t_s`` [s] after the robot's seat-off [m]

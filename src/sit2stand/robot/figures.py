@@ -13,13 +13,14 @@ import pinocchio as pin
 from ..errors import InputError
 from .identify import IdentificationResult, PostureData, com_x, controller_model, split, with_parameters
 from .model import PlantConfig
+from .profile import SAGITTAL_LEG_ROLES
 from .plant import Plant
 from .postures import standing_qpos
 
 
 def identified_model(result: IdentificationResult) -> pin.Model:
     """The controller model with identified parameters (full: per link; planar5: not a per-link model -> None)."""
-    model = controller_model()
+    model = controller_model(PlantConfig.load(None, result.robot))
     if result.model_name == "full":
         return with_parameters(model, result.values)
     raise InputError("only the full model gives per-link parameters for a whole-body COM path")
@@ -31,7 +32,7 @@ def posture_figure(result: IdentificationResult, data: PostureData, png: Path, e
 
     matplotlib.use("Agg")
 
-    cad = controller_model()
+    cad = controller_model(PlantConfig.load(None, result.robot))
     train, ev = split(len(data), eval_fraction, seed)
     cop = data.cop[:, 0]
     cad_x = np.array([com_x(cad, data, k) for k in range(len(data))])
@@ -78,7 +79,8 @@ def com_path_figure(result: IdentificationResult, png: Path, cfg: PlantConfig | 
     matplotlib.use("Agg")
 
 
-    cfg = cfg or PlantConfig()
+    cfg = cfg or PlantConfig.load(None, result.robot)
+    profile = cfg.profile
     plant = Plant(cfg, with_chair=False)
     cad = controller_model(cfg)
     ident = identified_model(result)
@@ -86,10 +88,10 @@ def com_path_figure(result: IdentificationResult, png: Path, cfg: PlantConfig | 
     stand = standing_qpos(plant, 0.0, 0.0, 0.0, 0.0)
     paths = {"CAD": [], "identified": []}
     for s in np.linspace(0.0, 1.0, 60):
-        legs = [plant.joint_names.index(f"leg_{side}_{i}_joint") for side in ("left", "right") for i in (3, 4, 5)]
+        legs = [plant.joint_names.index(j) for j in profile.leg_joints(SAGITTAL_LEG_ROLES)]
         q = start.copy()
         q[plant.qadr[legs]] = start[plant.qadr[legs]] + s * (stand[plant.qadr[legs]] - start[plant.qadr[legs]])
-        hip, knee, ankle = (q[plant.qadr[plant.joint_names.index(f"leg_left_{i}_joint")]] for i in (3, 4, 5))
+        hip, knee, ankle = (q[plant.qadr[plant.joint_names.index(profile.leg("left", r))]] for r in SAGITTAL_LEG_ROLES)
         qq = standing_qpos(plant, hip, knee, ankle, 0.0)
         for name, model in (("CAD", cad), ("identified", ident)):
             pq = plant.pin_configuration(qq)

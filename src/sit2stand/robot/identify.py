@@ -35,7 +35,7 @@ from ..io.bag import BagError, BagReader
 from ..io.topics import (ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC,
                          ROBOT_JOINT_STATES_TOPIC, ft_topic)
 from ..optim import constrained_lsq
-from .model import SIDES, PlantConfig, controller_model
+from .model import DEFAULT_ROBOT, SIDES, PlantConfig, controller_model
 from .profile import profile_of
 
 PLANAR_SEGMENTS = {
@@ -216,6 +216,7 @@ class IdentificationResult:
     seconds: float
     link_parameters: dict[str, dict] = field(default_factory=dict)   # joint -> {mass, com} for the full model
     eval_predictions: dict[str, list[float]] = field(default_factory=dict)
+    robot: str = DEFAULT_ROBOT                                        # the robot profile's name
 
     def summary(self) -> str:
         return (f"{self.model_name}: held-out COM-vs-COP RMS {self.eval_rms_m * 1e3:.1f} mm (CAD "
@@ -382,6 +383,7 @@ def identify(path: str | Path, model: str = "full", eval_fraction: float = 0.1, 
     check_postures(data, cad, path)
     fn = identify_full if model == "full" else identify_planar5
     result = fn(data, eval_fraction=eval_fraction, seed=seed, model=cad)
+    result.robot = profile_of(cad).name
     check_result(result, path)
     return result
 

@@ -93,6 +93,11 @@ def standing_qpos(plant: Plant, hip: float, knee: float, ankle: float, torso: fl
     return q
 
 
+def standing_pelvis_height_m(plant: Plant) -> float:
+    """The pelvis height [m] of the robot standing upright on straight legs, soles on the floor."""
+    return float(standing_qpos(plant, 0.0, 0.0, 0.0, 0.0)[2])
+
+
 def random_arms(rng: np.random.Generator, profile: RobotProfile) -> dict[str, float]:
     """Angles [rad] of the profile's posture arm joints (shoulders, elbows) for both arms, each side drawn on its own
     within the profile's ranges (the right arm's mirrored where the profile says)."""
