@@ -13,6 +13,7 @@
     sit2stand gap BAG [BAG ...] [--model cad|FILE] [--controller P.yaml] --out DIR   (what the robot model misses)
     sit2stand gap-human BAG [--out FILE.json]                (the same on a human demonstration)
     sit2stand robot check ROBOT | robot list                  (a robot profile: check it; the packaged ones)
+    sit2stand export RUN --format csv|npz [--rate HZ] --out FILE   (a simulated stand-up as a motion file)
     sit2stand bag info|recover|merge ...
     sit2stand launch GRAPH [NAME:=VALUE ...] [--timeout S]   (a graph file, or a packaged graph's name: standup)
     sit2stand replay BAG [--rate R] [--loop] [--topics T ...]   (the replayer node)
@@ -48,6 +49,7 @@ COMMANDS = [
     robot.add_excite,
     robot.add_gap,
     robot.add_robot,
+    robot.add_export,
     human.add_gap_human,
     graph.add_bag,
     graph.add_launch,

@@ -76,12 +76,10 @@ def _collect_postures(args: argparse.Namespace) -> int:
 def _identify(args: argparse.Namespace) -> int:
     from ..robot.figures import com_path_figure, posture_figure
     from ..robot.identify import identify, read_postures, write_yaml
-    from ..robot.model import DEFAULT_ROBOT
-    from ..robot.profile import load_profile
 
     result = identify(args.dir, args.model, eval_fraction=args.eval_fraction, seed=args.seed, robot=args.robot)
     print(result.summary())
-    write_yaml(result, args.out, source=str(args.dir), robot=load_profile(args.robot or DEFAULT_ROBOT).name)
+    write_yaml(result, args.out, source=str(args.dir), robot=result.robot)
     png = Path(args.out).with_suffix(".png")
     posture_figure(result, read_postures(args.dir), png, args.eval_fraction, args.seed)
     written = [str(args.out), str(png)]
@@ -219,6 +217,26 @@ def add_gap(sub) -> None:
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--robot", help=ROBOT_HELP)
     p.set_defaults(func=_gap)
+
+
+def _export(args: argparse.Namespace) -> int:
+    from ..retarget.export import export
+
+    done = export(args.run, args.out, args.format, args.rate, args.robot)
+    print(f"wrote {done['out']}: {done['frames']} frames of {done['robot']} at {done['rate_hz']:g} Hz "
+          f"({done['duration_s']:.2f} s, {done['joints']} joints)")
+    return 0
+
+
+def add_export(sub) -> None:
+    p = sub.add_parser("export", help="a simulated stand-up as a motion file for learning pipelines (CSV rows: root "
+                       "xyz, root quaternion xyzw, joints; or NPZ arrays)")
+    p.add_argument("run", type=Path, help="a retarget --simulate folder or a stand-up bag")
+    p.add_argument("--format", choices=("csv", "npz"), default="csv")
+    p.add_argument("--rate", type=float, default=50.0, help="frames per second (default 50)")
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--robot", help="robot profile (default: the packaged one whose joints the states name)")
+    p.set_defaults(func=_export)
 
 
 def _robot_check(args: argparse.Namespace) -> int:

@@ -289,7 +289,8 @@ def write_report(result: GapResult, out: str | Path, progress=None) -> dict:
     replays = replay_all(result)
     if replays:
         replay_figure(result, replays, out / "gap_replay.png")
-    nominal, _, _ = load_nominal(None if result.model_source == "cad" else result.model_source)
+    nominal, _, _ = load_nominal(None if result.model_source == "cad" else result.model_source,
+                                 result.dataset.robot)
     doc = write_augmented(result, nominal, out / "augmented_model.yaml")
     write_json(result, out / "gap.json")
     (out / "report.md").write_text(markdown(result))

@@ -20,7 +20,7 @@ from sit2stand_msgs.srv import IdentifyCom
 from ..io.topics import IDENTIFY_COM_SERVICE, ROBOT_INERTIAL_PARAMETERS_TOPIC, ros_name
 from ..io.bag import BagError
 from ..robot.identify import IdentificationError, identify, write_yaml
-from .runtime import node_main
+from .runtime import declare, node_main
 
 
 class IdentificationNode(Node):
@@ -32,6 +32,8 @@ class IdentificationNode(Node):
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.params_pub = self.create_publisher(InertialParameters, ros_name(ROBOT_INERTIAL_PARAMETERS_TOPIC),
                                                 latched)
+        self.robot = declare(self, "robot", "", "robot profile: a packaged name (talos, g1) or a file (empty: TALOS)") \
+            or None
         self.create_service(IdentifyCom, ros_name(IDENTIFY_COM_SERVICE), self._on_request)
         self.get_logger().info("ready: /robot/identify_com")
 
@@ -39,7 +41,7 @@ class IdentificationNode(Node):
         model = req.model or "full"
         fraction = req.eval_fraction if req.eval_fraction > 0 else 0.1
         try:
-            result = identify(req.data_path, model, eval_fraction=fraction, seed=int(req.seed))
+            result = identify(req.data_path, model, eval_fraction=fraction, seed=int(req.seed), robot=self.robot)
         except (IdentificationError, BagError, ValueError, OSError) as err:
             res.success, res.message = False, str(err)
             self.get_logger().error(f"identification failed: {err}")
@@ -49,7 +51,7 @@ class IdentificationNode(Node):
             self.get_logger().error(f"identification failed unexpectedly: {err!r}")
             return res
         out = req.output_path or str(Path(req.data_path) / f"identified_{model}.yaml")
-        write_yaml(result, out, source=req.data_path)
+        write_yaml(result, out, source=req.data_path, robot=result.robot)
         res.success, res.message = True, result.summary()
         res.parameter_names = list(result.names)
         res.parameter_values = [float(v) for v in result.values]

@@ -147,7 +147,8 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     if sim is not None:      # the commands pulled as the robot moves: a robot that trails its plan slows it
         com_feedback = com_feedback_applies(com_feedback, controller)
         stab = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, stabiliser) if com_feedback else None
-        cmds, simulated = _simulate(sim, player, dt, out, stabiliser=stab, controller=controller)
+        cmds, simulated = _simulate(sim, player, dt, out, stabiliser=stab, controller=controller,
+                                    t0_s=float(trial.marker_t_s[0]))
         simulated = {"com_feedback": bool(com_feedback), "controller": controller, **simulated}
     ik_ms = np.array([f.ik.seconds for f in frames]) * 1e3
     feasible = np.array([f.ik.feasible for f in frames])
@@ -240,6 +241,20 @@ def _write_bag(path: Path, cmds, joint_names: list[str], t0_s: float, dt: float,
                     ts["geometry_msgs/msg/PointStamped"](header=M.header(t_ns, WORLD_FRAME), point=M.point(*c.zmp)))
 
 
+def _write_robot_bag(path: Path, sensed: list, joint_names: list[str], root_frame: str, t0_s: float,
+                     dt: float) -> None:
+    """The simulated robot's sensed states, one per command period ``dt`` from ``t0_s``, as the driver publishes
+    them (joint states, feet wrenches, COP, base pose)."""
+    with BagWriter(path, custom_data={"source": "sit2stand retarget --simulate", "robot_root": root_frame}) as w:
+        for topic, msgtype in M.ROBOT_STATE_TOPICS.items():
+            w.add_topic(topic, msgtype)
+        for k, s in enumerate(sensed, start=1):
+            t_ns = int(round((t0_s + k * dt) * 1e9))
+            for topic, msg in M.robot_state(t_ns, joint_names, s.q, s.qd, s.tau, s.wrench_world, s.cop_m, s.base_pose,
+                                            root_frame):
+                w.write(topic, t_ns, msg)
+
+
 def physics_steps_due(commands: int, dt: float, timestep_s: float, taken: int) -> int:
     """Physics steps to take after the ``commands``-th command (period ``dt`` [s]) when ``taken`` have been: the
     simulation kept on the commands' clock. A 120 Hz frame is 8.33 steps of 1 ms; 8 a frame would play the plan
@@ -248,15 +263,18 @@ def physics_steps_due(commands: int, dt: float, timestep_s: float, taken: int) -
 
 
 def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3.0,
-              stabiliser: ComStabiliser | None = None, *, controller: str) -> tuple[list, dict]:
+              stabiliser: ComStabiliser | None = None, *, controller: str, t0_s: float = 0.0) -> tuple[list, dict]:
     """Drive the plant with the player's commands (PD + inverse-dynamics feed-forward), pulled one per frame period
     with the robot's lag behind the plan (the COM feedback's error), then hold the last one. Returns (commands,
     figures). Writes ``simulation.npy``: t, true COM (3), planned COM (3), COP (3), pelvis z, pelvis x, planned
     pelvis x, largest joint tracking error [rad] and its joint index, chair force [N], COM of the measured state
     with the controller's model (3), COM feedback offset (x, y) [m]. ``stabiliser``: a
     :class:`~sit2stand.retarget.stabiliser.ComStabiliser` correcting each command for the plant's measured state
-    (None: the commands as planned)."""
+    (None: the commands as planned). Writes the robot's sensed state once per command period into the bag
+    ``robot`` (the driver's topics, stamped from ``t0_s`` on the commands' clock): what ``sit2stand export``
+    reads."""
     ticks = taken = 0
+    sensed = []
     rows, cmds, torque = [], [], []
     profile = plant.cfg.profile
     knees = plant.qadr[[plant.joint_names.index(profile.leg(s, "knee")) for s in SIDES]]
@@ -286,6 +304,7 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
         demand = np.abs(plant.data.actuator_force[plant.pd_ids] + plant.data.actuator_force[plant.ff_ids])
         torque.append(demand / plant.effort)
         s = plant.sensors()
+        sensed.append(s)
         err = plant.data.qpos[plant.qadr] - plant.q_ref
         rows.append([plant.t_s, *plant.true_com(), *c.com,
                      *s.cop_m, plant.data.qpos[2], plant.data.qpos[0], c.q[0],
@@ -298,6 +317,7 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
             break
     arr = np.array(rows)
     np.save(out / "simulation.npy", arr)
+    _write_robot_bag(out / "robot", sensed, plant.joint_names, profile.root_link, t0_s, dt)
     stood, sat_down = _verdict(plant.fallen, arr[:, 10], np.array([c.q[2] for c in cmds]),
                                not cmds[-1].on_feet and any(c.on_feet for c in cmds))
     err = arr[:, 1:4] - arr[:, 4:7]
