@@ -60,6 +60,13 @@ LEAD_IN_COM_SPEED_MPS = 0.2
 """Mean forward COM speed [m/s] of the lead-in that a recording starting mid-rise gets (the shipped natural rise
 moves its COM 0.26 m in ~1.3 s)."""
 MIN_LEAD_IN_S = 0.5
+RISE_SCALE_RANGE = (0.8, 1.5)
+"""The markers' vertical scale stays within these multiples of the leg-length scale (see ``Retargeter._rise_scale``).
+"""
+KNEE_RELEASE_DROP_M = 0.05
+"""Once the human's pelvis is this far below its highest, the human is sitting back down: the knee task lets go and
+the markers' vertical scale returns to the leg-length one as the pelvis comes down (at the rise's scale all the
+way down, the robot fell back onto its seat)."""
 KNEE_RAMP_POWER = 2.0
 """The knee task's weight grows with the human's knee extension from its seated flexion, to this power: full only as
 the human stands, so that it straightens the end posture without steering the rise."""
@@ -79,6 +86,7 @@ class RobotSetup:
     toe_x_m: float
     ankle_left: np.ndarray               # left ankle projected on the floor [m]
     leg_length_m: float                  # hip joint -> knee -> ankle
+    ankle_height_m: float                # the ankle joint's height above the sole [m]
     parameters: str                      # "CAD" or the identified YAML
 
 
@@ -134,7 +142,8 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
     ankle_floor = targets[0].translation.copy()
     return RobotSetup(model, list(model.names[2:]), q, soles, targets, support_polygon(corners),
                       float(corners[:, 0].min()), float(corners[:, 0].max()), ankle_floor,
-                      float(np.linalg.norm(knee - hip) + np.linalg.norm(ankle - knee)), label)
+                      float(np.linalg.norm(knee - hip) + np.linalg.norm(ankle - knee)),
+                      float(ankle[2] - ankle_floor[2]), label)
 
 
 def smoothstep(u: float) -> float:
@@ -285,6 +294,9 @@ class Retargeter:
         # a frame whose COM is not behind the heel is after the human's seat-off: the seated knot then comes from
         # the body's proportions, and a lead-in (see :meth:`lead_in`) takes the robot from its seat to this frame
         self.started_seated = human_com_m[0] < heel[0] and heel[0] < ax
+        # a recording that starts mid-rise has no seated pelvis to scale the rise from: leg lengths alone
+        rise = self._rise_scale(pelvis, knee, ankle, human_leg) if self.started_seated else self.scale
+        self.marker_scale = np.array([self.scale, self.scale, rise])
         self.seated_com_x = float(human_com_m[0]) if self.started_seated else \
             float(ax - SEATED_COM_BEHIND_ANKLE_THIGHS * self.human_thigh)
         self.human_seat_off = not self.started_seated
@@ -297,6 +309,23 @@ class Retargeter:
         self.human_ankle_x, self.robot_ankle_x = ax, rx
         self.calibrated = True
         return marker_map
+
+    def _rise_scale(self, pelvis: np.ndarray, knee: np.ndarray, ankle: np.ndarray, human_leg: float) -> float:
+        """The markers' vertical scale: the robot's pelvis rise from its seat to its straight-legged stance over the
+        human's (each stance estimated as the ankle's height plus the leg's length, from a seated frame), within
+        ``RISE_SCALE_RANGE`` of the leg-length scale. Scaled by leg length alone, the rise fell short (a robot's
+        seated posture is not the human's: TALOS's shanks lean 40 degrees back), and the robot ended bowed at the
+        hips with its pelvis at 84-92 % of its stance. The human's seated leg (pelvis centre -> knee -> ankle)
+        underestimates its standing one, so on the shipped demonstrations the ratio meets the range's top."""
+        robot = self.robot
+        data = robot.model.createData()
+        pin.forwardKinematics(robot.model, data, robot.q_seated)
+        hip = data.oMi[robot.model.getJointId(profile_of(robot.model).leg("left", "hip_pitch"))].translation
+        robot_rise = robot.ankle_height_m + robot.leg_length_m - hip[2]
+        human_rise = ankle[2] + human_leg - pelvis[2]
+        if not (robot_rise > 0 and human_rise > 0):
+            return self.scale
+        return float(np.clip(robot_rise / human_rise, *(np.array(RISE_SCALE_RANGE) * self.scale)))
 
     def com_target_x(self, human_com_x_m: float | np.ndarray) -> np.ndarray:
         """The robot's forward COM target [m] for a human COM x [m] (lab), through the piecewise-linear map, at
@@ -368,7 +397,7 @@ class Retargeter:
             self._y_off = float(self.data.com[0][1])
             # the human's pelvis has already moved (the robot leaves the seat later): take that displacement out of
             # the marker targets, and give it back as the human's pelvis rises, so the robot's pelvis does not lunge
-            self._marker_offset = self.scale * (pelvis_now - self.human_pelvis0)
+            self._marker_offset = self.marker_scale * (pelvis_now - self.human_pelvis0)
             self._z_off = pelvis_now[2]
         mid_y = float(np.mean([X.translation[1] for X in robot.sole_targets]))
         if self.seated:
@@ -377,13 +406,19 @@ class Retargeter:
             axes = (0, 1)
             target[1] = self._y_off + self._since_seat_off(t_s, cfg.y_ramp_s) * (mid_y - self._y_off)
         # markers: the calibration's similarity (pelvis on pelvis, scaled), fixed for the whole demonstration
-        tgt = self.robot_pelvis0 + self.scale * (positions_m - self.human_pelvis0)
+        rise = pelvis_now[2] - self.human_pelvis0[2]
+        scale = self.marker_scale.copy()
+        if self.sat_down or self._pelvis_rise_peak_m - rise > KNEE_RELEASE_DROP_M:   # sitting back down
+            share = np.clip(rise / max(self._pelvis_rise_peak_m, 1e-6), 0.0, 1.0)
+            scale[2] = self.scale + share * (scale[2] - self.scale)
+        tgt = self.robot_pelvis0 + scale * (positions_m - self.human_pelvis0)
         knees = []
         flexion = self.human_knee_flexion(positions_m, ok, pelvis_now)
         if not self.seated:
             progress = np.clip((pelvis_now[2] - self._z_off) / (0.9 * self.human_thigh), 0.0, 1.0)
             tgt = tgt - (1.0 - progress) * self._marker_offset
-            knees = self._knee_targets(flexion, marker_weight)
+            lowering = self._pelvis_rise_peak_m - (pelvis_now[2] - self.human_pelvis0[2]) > KNEE_RELEASE_DROP_M
+            knees = [] if lowering else self._knee_targets(flexion, marker_weight)
         markers = [(self.marker_frames[self.names[i]], tgt[i], marker_weight * float(self.weights[i]))
                    for i in range(len(self.names)) if ok[i] and self.weights[i] > 0 and marker_weight > 0]
         # hips on the seat: pelvis x and z held (hard); after seat-off the hold fades out as a soft task, so that
