@@ -160,7 +160,8 @@ def _figures(summary: dict, human_rise_s: float) -> dict:
             "com_tracking_rms_m", "com_deviation_rms_m", "com_deviation_max_m", "torque_demand_peak_ratio",
             "torque_demand_peak_joint", "torque_saturated_share", "infeasible_frames", "frames",
             "min_zmp_margin_on_feet_m", "zmp_outside_feet_share", "parameters", "controller_qp_ms_p99",
-            "controller_qp_cpu_ms_p99")
+            "controller_qp_cpu_ms_p99", "final_knee_flexion_deg_robot", "final_knee_flexion_deg_human",
+            "final_pelvis_height_ratio", "standing_knees_match")
     return {"human_rise_s": round(human_rise_s, 3), **{k: summary.get(k) for k in keys}}
 
 
@@ -194,6 +195,12 @@ def aggregate(rows: list[dict]) -> dict:
         "share_stood_time_scale_le_1_5": len(fast_enough) / n if n else None,
         "share_stood_duration_ratio_le_1_5": len(ratio_ok) / n if n else None,
         "com_tracking_rms_m": _spread(col("com_tracking_rms_m", lambda r: r.get("stood_up"))),
+        # the end posture: the robot's pelvis over its straight stance; its knees against the human's [deg]
+        "final_pelvis_height_ratio": _spread(col("final_pelvis_height_ratio")),
+        "share_pelvis_ge_95": _share_ge(col("final_pelvis_height_ratio"), 0.95),
+        "final_knee_gap_deg": _spread([abs(r["final_knee_flexion_deg_robot"] - r["final_knee_flexion_deg_human"])
+                                       for r in rows if r.get("final_knee_flexion_deg_human") is not None
+                                       and r.get("final_knee_flexion_deg_robot") is not None]),
         "com_deviation_rms_m": _spread(col("com_deviation_rms_m")),
         "com_deviation_max_m": _spread(col("com_deviation_max_m")),
         "torque_demand_peak_ratio": _spread(col("torque_demand_peak_ratio")),
@@ -205,6 +212,11 @@ def aggregate(rows: list[dict]) -> dict:
         "controller_qp_cpu_ms_p99": _spread(col("controller_qp_cpu_ms_p99")),
         "share_qp_p99_le_1_ms": _share(col("controller_qp_ms_p99"), QP_TARGET_MS),
     }
+
+
+def _share_ge(values: list[float], bound: float) -> float | None:
+    """The share of ``values`` at or above ``bound`` (None without any)."""
+    return float(np.mean(np.asarray(values) >= bound)) if values else None
 
 
 def _share(values: list[float], bound: float) -> float | None:
@@ -226,13 +238,15 @@ def case_line(r: dict) -> str:
             f"{_fmt(r.get('duration_ratio')):>5} {_fmt(r.get('com_deviation_rms_m'), 100, '.1f'):>5} "
             f"{_fmt(r.get('com_deviation_max_m'), 100, '.1f'):>5} {_fmt(r.get('com_tracking_rms_m'), 100, '.2f'):>5} "
             f"{_fmt(r.get('torque_demand_peak_ratio')):>5} {_fmt(r.get('torque_saturated_share'), 100, '.0f'):>5} "
-            f"{r['wall_s']:6.1f}"
+            f"{_fmt(r.get('final_pelvis_height_ratio'), 100, '.0f'):>4} "
+            f"{_fmt(r.get('final_knee_flexion_deg_robot'), 1, '.0f'):>4}/"
+            f"{_fmt(r.get('final_knee_flexion_deg_human'), 1, '.0f'):<3} {r['wall_s']:6.1f}"
             + (f"  {r['error'][:80]}" if "error" in r else ""))
 
 
-TABLE_HEAD = ("  # style    H [m] m[kg] s seat  rise | out   scale ratio dvRMS dvMax trkRMS tauPk  sat%  wall_s\n"
-              "                                      | COM in cm (dv: plan vs mapped human, forward); tauPk: demand"
-              " / limit; sat%: commands clamped")
+TABLE_HEAD = ("  # style    H [m] m[kg] s seat  rise | out   scale ratio dvRMS dvMax trkRMS tauPk  sat% pel% knees   "
+              "wall_s\n                                      | COM in cm (dv: plan vs mapped human, forward); tauPk: "
+              "demand / limit; sat%: commands clamped; pel%: final pelvis / straight stance; knees: robot/human [deg]")
 
 
 def summary_text(agg: dict) -> str:
@@ -250,6 +264,9 @@ def summary_text(agg: dict) -> str:
         f"stood with time_scale <= 1.5: {_fmt(agg['share_stood_time_scale_le_1_5'], 100, '.0f')} %; with "
         f"duration_ratio <= 1.5: {_fmt(agg['share_stood_duration_ratio_le_1_5'], 100, '.0f')} % (target 90 %)",
         f"COM tracking RMS (stood) [cm]  {s(agg['com_tracking_rms_m'], 100)}",
+        f"end posture: pelvis / straight stance [%]  {s(agg['final_pelvis_height_ratio'], 100, '.0f')} (at >= 95 %: "
+        f"{_fmt(agg['share_pelvis_ge_95'], 100, '.0f')} % of cases); |robot - human knee| [deg]  "
+        f"{s(agg['final_knee_gap_deg'], 1, '.0f')}",
         f"COM plan vs mapped human, RMS [cm]  {s(agg['com_deviation_rms_m'], 100)}",
         f"peak torque demand / limit  {s(agg['torque_demand_peak_ratio'])}; a joint clamped at its limit in "
         f"{agg['torque_saturated_cases']} cases; share of commands clamped "

@@ -345,8 +345,8 @@ def _render(qs: np.ndarray, ts: np.ndarray, name: str, plant_yaml: Path | None, 
     renderer = mujoco.Renderer(model, 360, 270)
     cam = mujoco.MjvCamera()
     size = plant.q_seated[2] / SEATED_PELVIS_FRAMED_M     # the robot's size: TALOS's seated pelvis is 0.627 m
-    cam.lookat[:] = [0.0, 0.0, 0.6 * size]
-    cam.distance, cam.azimuth, cam.elevation = 2.6 * size, 90.0, -10.0    # from the robot's left side
+    cam.lookat[:] = [0.0, 0.0, 0.8 * size]        # the whole robot, seated and standing straight
+    cam.distance, cam.azimuth, cam.elevation = 3.7 * size, 90.0, -10.0    # from the robot's left side
     idx = np.linspace(0, len(qs) - 1, frames).astype(int)
     images = []
     for k in idx:
