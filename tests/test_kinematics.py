@@ -6,7 +6,7 @@ import pytest
 
 from sit2stand.human.skeleton import Subject, build_human
 from sit2stand.kinematics import PointJacobians, positions
-from sit2stand.retarget.stream import robot_setup
+from sit2stand.retarget.robot import robot_setup
 
 
 @pytest.mark.parametrize("which", ["talos", "human"])

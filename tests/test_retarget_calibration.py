@@ -9,7 +9,8 @@ from sit2stand.human.marker_sets import load_marker_set
 from sit2stand.human.offline import read_trial
 from sit2stand.retarget.calibration import (MarkerMap, calibrate_markers, map_com, map_frame, marker_group,
                                             marker_roles)
-from sit2stand.retarget.stream import RetargetConfig, Retargeter, robot_setup
+from sit2stand.retarget.robot import robot_setup
+from sit2stand.retarget.stream import RetargetConfig, Retargeter
 from sit2stand.robot.model import PlantConfig
 from sit2stand.robot.plant import Plant
 

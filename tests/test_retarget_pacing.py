@@ -9,7 +9,7 @@ import pytest
 from sit2stand.data import plant_path
 from sit2stand.retarget.player import Command
 from sit2stand.retarget.stabiliser import ComStabiliser, StabiliserConfig
-from sit2stand.retarget.stream import robot_model, robot_setup
+from sit2stand.retarget.robot import robot_model, robot_setup
 from sit2stand.retarget.pacing import (ROBOT_STATE_MAX_AGE_S, ROBOT_STATE_MAX_DELAY_S, ChairForceTrack, CommandPacer,
                                        HumanComTrack, LatencyLog, LiveConfig, LiveRetargeting, MarkerFrame,
                                        percentile_text, plan_stride, robot_state_current, summary_line)

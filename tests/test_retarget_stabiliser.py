@@ -11,7 +11,7 @@ import pytest
 from sit2stand.data import plant_path
 from sit2stand.retarget.offline import physics_steps_due, run
 from sit2stand.retarget.stabiliser import ComStabiliser, StabiliserConfig
-from sit2stand.retarget.stream import robot_setup
+from sit2stand.retarget.robot import robot_setup
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -12,7 +12,8 @@ from sit2stand.human.offline import read_trial
 from sit2stand.human.synth import SynthConfig, synthesize
 from sit2stand.retarget.feasibility import plan_dynamics, plan_zmp, support_margin, zmp_at_scale
 from sit2stand.retarget.player import LIFT_OFF_SPEED_RAD_S, MAX_TIME_SCALE_RATE, PlanPlayer
-from sit2stand.retarget.stream import Retargeter, retarget_sequence, robot_setup
+from sit2stand.retarget.robot import robot_setup
+from sit2stand.retarget.stream import Retargeter, retarget_sequence
 
 ROOT = Path(__file__).resolve().parents[1]
 

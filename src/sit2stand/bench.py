@@ -43,7 +43,8 @@ from .io.bag import BagReader, BagWriter, merge_bags
 from .io.topics import MARKERS_TOPIC, MOCAP_TYPE, PLATE_TYPE, plate_topic
 from .retarget.player import PlanPlayer
 from .retarget.report import analyse
-from .retarget.stream import Retargeter, robot_setup
+from .retarget.robot import robot_setup
+from .retarget.stream import Retargeter
 from .robot.identify import identify
 from .robot.model import PlantConfig
 from .robot.plant import Plant

@@ -60,7 +60,7 @@ from ..retarget.pacing import (READY_LINE, LiveConfig, LiveRetargeting, MarkerFr
 from ..retarget.player import (DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S,
                                SEAT_OFF_DWELL_S, SMOOTH_S, Command)
 from ..retarget.stabiliser import StabiliserConfig
-from ..retarget.stream import robot_model, robot_setup
+from ..retarget.robot import robot_model, robot_setup
 from ..robot.plant import CONTROLLERS
 from ..robot.profile import profile_of
 from .markers import plan_markers

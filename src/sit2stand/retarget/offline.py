@@ -42,7 +42,8 @@ from .report import KNEE_TOLERANCE_DEG, SAT_DOWN_TOLERANCE_M, STOOD_RISE_M
 from .player import DEFAULT_MARGIN_M, DEFAULT_MAX_TIME_SCALE, SEAT_OFF_DWELL_S, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig, com_feedback_applies, com_lag_m
 from .calibration import map_frame
-from .stream import RetargetConfig, Retargeter, retarget_sequence, robot_model, robot_setup
+from .robot import robot_model, robot_setup
+from .stream import RetargetConfig, Retargeter, retarget_sequence
 
 def human_com_series(bag: Path, human_com_bag: Path | None, trial, calibration: StreamCalibration | None = None,
                      marker_set: str | None = None) -> np.ndarray:

@@ -36,7 +36,8 @@ from ..io.messages import reorder_markers
 from .player import (DEFAULT_MARGIN_M, DEFAULT_MAX_JOINT_SPEED, DEFAULT_MAX_TIME_SCALE, LOOKAHEAD_S, SEAT_OFF_DWELL_S,
                      SMOOTH_S, Command, PlanPlayer)
 from .stabiliser import ComStabiliser, StabiliserConfig, com_feedback_applies, com_lag_m
-from .stream import RetargetConfig, Retargeter, RobotSetup
+from .robot import RobotSetup
+from .stream import RetargetConfig, Retargeter
 
 ROBOT_STATE_MAX_AGE_S = 0.1
 ROBOT_STATE_MAX_DELAY_S = 0.2
