@@ -85,7 +85,7 @@ def robot_of(names: list[str], robot: str | None = None) -> RobotProfile:
     if robot is not None:
         return load_profile(robot)
     for name in packaged_names():
-        if set(actuated_joint_names(controller_model(PlantConfig(robot=name)))) == set(names):
+        if load_profile(name).moving_joints() == set(names):
             return load_profile(name)
     raise InputError(f"no packaged robot profile has the joints {', '.join(names[:4])} ...: pass --robot FILE")
 

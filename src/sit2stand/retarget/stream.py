@@ -209,7 +209,8 @@ class Retargeter:
         self.human_pelvis0 = pelvis
         self.robot_pelvis0 = self.robot.q_seated[:3].copy()
         self.pelvis_markers = pel
-        self.leg_roles = roles
+        # the left knee's and ankle's marker indices, looked up once: the knee flexion is read every frame
+        self.knee_ankle_markers = [[names.index(m) for m in group if m in names] for group in (roles.knee, roles.ankle)]
         self.human_knee_seated = self.human_knee_flexion(positions_m, valid & np.all(np.isfinite(positions_m), axis=1),
                                                          pelvis) or np.pi / 2
         # forward-axis knots of the COM map (robot x relative to its left ankle vs scaled human x relative to its)
@@ -368,8 +369,8 @@ class Retargeter:
         """The human's left knee flexion [rad] in the sagittal (x-z) plane: the angle between the thigh (pelvis
         centre -> knee) and the shank (knee -> ankle); None when a knee or ankle marker is not seen."""
         points = []
-        for markers in (self.leg_roles.knee, self.leg_roles.ankle):
-            seen = [self.names.index(m) for m in markers if m in self.names and ok[self.names.index(m)]]
+        for markers in self.knee_ankle_markers:
+            seen = [i for i in markers if ok[i]]
             if not seen:
                 return None
             points.append(positions_m[seen].mean(axis=0))

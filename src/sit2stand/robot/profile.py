@@ -104,6 +104,7 @@ class RobotProfile:
     sides: dict[str, str] = field(default_factory=lambda: {s: s for s in SIDES})   # sit2stand's -> the robot's
     plants: dict[str, str] = field(default_factory=dict)   # generic plant name -> the packaged plant of this robot
     _joints: dict[str, tuple[str, str]] | None = field(default=None, repr=False)
+    _efforts: dict[str, float] = field(default_factory=dict, repr=False)   # moving joint -> URDF effort [N m]
 
     # -- names by role ----------------------------------------------------------------------------------------
     def leg(self, side: str, role: str) -> str:
@@ -167,8 +168,13 @@ class RobotProfile:
 
     def effort_nm(self, joint: str) -> float:
         """The URDF effort limit [N m] of ``joint`` (inf where it gives none)."""
-        limit = ET.fromstring(self.urdf.read_text()).find(f"joint[@name='{joint}']/limit")
-        return float(limit.get("effort", "inf")) if limit is not None else float("inf")
+        self.urdf_joints()
+        return self._efforts.get(joint, float("inf"))
+
+    def moving_joints(self) -> set[str]:
+        """The URDF's moving (not fixed, not floating) joints."""
+        self.urdf_joints()
+        return set(self._efforts)
 
     def child_link(self, joint: str) -> str:
         """The URDF link ``joint`` moves."""
@@ -181,6 +187,9 @@ class RobotProfile:
             self._joints = {j.get("name", ""): (j.find("parent").get("link", ""), j.find("child").get("link", ""))
                             for j in root.findall("joint") if j.find("parent") is not None
                             and j.find("child") is not None}
+            self._efforts = {j.get("name", ""): float(j.find("limit").get("effort", "inf"))
+                             if j.find("limit") is not None else float("inf")
+                             for j in root.findall("joint") if j.get("type") not in ("fixed", "floating")}
         return self._joints
 
     def both_sides(self, name: str) -> str:
