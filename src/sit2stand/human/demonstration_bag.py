@@ -8,6 +8,7 @@ import numpy as np
 
 from ..io import messages as M
 from ..io.bag import BagWriter, reliable_qos
+from ..io.forceplate import PLATE_CORNERS_KEY, plate_corners_json
 from ..io.topics import (COM_TYPE, GROUND_TRUTH_COM_TOPIC, GROUND_TRUTH_JOINTS_TOPIC, GROUND_TRUTH_PARAMETERS_TOPIC,
                          MARKERS_TOPIC, MOCAP_TYPE, PLATE_TYPE, SUBJECT_TOPIC, SUBJECT_TYPE, plate_topic)
 from ..io.typestore import typestore
@@ -53,6 +54,7 @@ def write_demonstration_bag(demo: Demonstration, out) -> dict[str, int]:
         "source": "sit2stand synth-human", "style": cfg.style, "seed": str(cfg.seed),
         "height_m": f"{cfg.height_m:g}", "body_mass_kg": f"{declared_kg:.3f}", "sex": cfg.sex,
         "seat_height_m": f"{demo.seat_height_m:.3f}", "plates": "chair, feet",
+        PLATE_CORNERS_KEY: plate_corners_json(demo.plates),
         "events": (f"rise_start@{START_TIME_S + demo.rise_start_s:.3f}s;"
                    f" seat_off@{START_TIME_S + demo.seat_off_s:.3f}s;"
                    f" rise_end@{START_TIME_S + demo.rise_end_s:.3f}s"),

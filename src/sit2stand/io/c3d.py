@@ -29,7 +29,7 @@ from .topics import (COM_TYPE, MARKERS_TOPIC, MOCAP_TYPE, MODEL_POINTS_TOPIC, PL
                      SUBJECT_TOPIC, SUBJECT_TYPE, plate_topic)
 from ..errors import Sit2StandError
 from .bag import BagWriter, reliable_qos
-from .forceplate import DEFAULT_COP_THRESHOLD_N, PlateSeries, wrench_in_lab
+from .forceplate import DEFAULT_COP_THRESHOLD_N, PLATE_CORNERS_KEY, PlateSeries, plate_corners_json, wrench_in_lab
 from .messages import center_of_mass, mocap_frame, plate_messages, subject
 
 LENGTH_SCALE = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "dm": 0.1}
@@ -441,6 +441,7 @@ def write_trial_bag(trial: C3DTrial, out: str | Path) -> dict[str, int]:
         "source": str(trial.path.name),
         "lab_axes": f"forward={trial.axes.forward} up={trial.axes.up}: {trial.axes.reason}",
         "plates": ", ".join(f"{p.name}=index {p.index}" for p in trial.plates) or "none",
+        PLATE_CORNERS_KEY: plate_corners_json(trial.plates),
         "plate_baseline": (f"mean of frames {trial.zero_frames[0]}..{trial.zero_frames[1]} subtracted"
                            if trial.zero_frames else "none"),
     }

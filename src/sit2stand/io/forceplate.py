@@ -13,14 +13,20 @@ plane about which the moment has no component in the plane:
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 
 import numpy as np
+
 from ..errors import InputError
 from ..vectors import cross
 
 DEFAULT_COP_THRESHOLD_N = 20.0
 """Normal force below which a plate counts as unloaded and its COP as undefined (Vicon Nexus' default)."""
+
+PLATE_CORNERS_KEY = "plate_corners_m"
+"""A bag's ``custom_data`` key for its plates' corners: JSON, plate name -> four [x, y, z] in the lab [m] (the
+plate messages carry wrenches and COPs, not where the plates are)."""
 
 
 @dataclass
@@ -193,3 +199,20 @@ def point_in_polygon(points_xy: np.ndarray, polygon_xy: np.ndarray, margin_m: fl
     dist = sign * cross / np.linalg.norm(edges, axis=1)[None, :]
     inside = np.all(dist >= margin_m, axis=1) & np.all(np.isfinite(pts), axis=1)
     return inside[0] if np.ndim(points_xy) == 1 else inside
+
+
+def plate_corners_json(plates: list[PlateSeries]) -> str:
+    """The :data:`PLATE_CORNERS_KEY` entry of ``plates`` (those whose corners are known), rounded to 0.1 mm."""
+    return json.dumps({p.name: np.round(p.corners_m, 4).tolist() for p in plates if p.corners_m is not None})
+
+
+def plate_corners_from(custom_data: dict[str, str]) -> dict[str, np.ndarray]:
+    """Plate name -> (4, 3) corners [m] from a bag's ``custom_data`` (empty when it does not say)."""
+    text = custom_data.get(PLATE_CORNERS_KEY)
+    if not text:
+        return {}
+    try:
+        corners = {name: np.asarray(c, float).reshape(4, 3) for name, c in json.loads(text).items()}
+    except (ValueError, TypeError, AttributeError) as err:
+        raise InputError(f"custom_data {PLATE_CORNERS_KEY!r}: not plate name -> four [x, y, z]: {err}") from None
+    return corners
