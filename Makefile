@@ -7,7 +7,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export RCUTILS_COLORIZED_OUTPUT ?= 0
 SOAK_MIN ?= 2
 
-.PHONY: setup demo test test-fast lint bench bench-gap bench-gap-human bench-retarget bench-human bench-capture bench-live bench-standup bench-faults lock clean
+.PHONY: setup demo figures test test-fast lint bench bench-gap bench-gap-human bench-retarget bench-human bench-capture bench-live bench-standup bench-faults lock clean
 
 setup:            ## create .venv (pinned wheels, ROS 2 Jazzy), build msgs/, install src/ (idempotent)
 	@ros_ws/bootstrap.sh
@@ -15,6 +15,11 @@ setup:            ## create .venv (pinned wheels, ROS 2 Jazzy), build msgs/, ins
 demo: setup       ## the main job on the shipped demonstrations, TALOS then G1 (writes runs/demo/, runs/demo_g1/)
 	@$(PY) -m sit2stand.demo --out runs/demo
 	@$(PY) -m sit2stand.demo --robot g1 --out runs/demo_g1
+
+figures: setup     ## the README's pictures: Rerun's own viewer (headless) on the demo's stand-ups, TALOS and G1, mid-rise (runs `make demo` first if runs/demo is missing; needs Vulkan: Debian's mesa-vulkan-drivers)
+	@test -d runs/demo/natural/standup || $(MAKE) demo
+	@$(PY) -m sit2stand.cli view runs/demo/natural --screenshot docs/figures/view_talos.png
+	@$(PY) -m sit2stand.cli view runs/demo_g1/natural --screenshot docs/figures/view_g1.png
 
 test: setup lint  ## lint, then the whole test suite: unit tests (2 workers, a file per worker), then the graph tests alone
 	@$(PY) -m pytest -q -n 2 --dist loadfile --durations=8 -m "not graph" tests

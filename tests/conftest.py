@@ -12,7 +12,9 @@ import time
 from pathlib import Path
 
 import pytest
+from rerun.chunk import McapReader, RrdReader
 
+from sit2stand.cli import main as sit2stand_main
 from sit2stand.data import folder, plant_path
 from sit2stand.io.c3d import read_c3d, write_trial_bag
 from sit2stand.scheduling import Scheduling
@@ -169,6 +171,24 @@ def elderly_standup(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess
            f"bag:={ROOT / 'bags' / 'elderly'}", f"out:={run_dir / 'run'}", f"plant:={plant_path('cad')}",
            f"marker_map:={run_dir / 'markers.yaml'}", "controller:=inverse_dynamics"]
     return run_dir, subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=240)
+
+
+@pytest.fixture(scope="session")
+def g1_simulated_run(tmp_path_factory) -> Path:
+    """``sit2stand retarget bags/natural --robot g1 --simulate`` (once per session and worker): its output folder."""
+    out = tmp_path_factory.mktemp("g1") / "rt"
+    assert sit2stand_main(["retarget", str(ROOT / "bags" / "natural"), "--robot", "g1", "--simulate", "--out",
+                      str(out)]) == 0
+    return out
+
+
+def rerun_entities(path: Path) -> dict[str, set[str]]:
+    """Entity path -> its component columns, as Rerun's own readers see a recording (``.rrd``) or an MCAP file."""
+    reader = McapReader(path) if Path(path).suffix == ".mcap" else RrdReader(path)
+    out: dict[str, set[str]] = {}
+    for chunk in reader.stream():
+        out.setdefault(chunk.entity_path, set()).update(f.name for f in chunk.to_record_batch().schema)
+    return out
 
 
 @pytest.fixture(scope="session")

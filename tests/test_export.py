@@ -6,7 +6,6 @@ import mujoco
 import numpy as np
 import pytest
 
-from sit2stand.cli import main as sit2stand
 from sit2stand.errors import InputError
 from sit2stand.retarget.export import export, read_states
 from sit2stand.robot.model import PlantConfig
@@ -16,11 +15,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def g1_run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("g1") / "rt"
-    assert sit2stand(["retarget", str(ROOT / "bags" / "natural"), "--robot", "g1", "--simulate", "--out",
-                      str(out)]) == 0
-    return out
+def g1_run(g1_simulated_run):
+    return g1_simulated_run
 
 
 def test_the_csv_has_a_row_per_frame_that_replays_the_simulated_joints_exactly(g1_run, tmp_path):

@@ -15,6 +15,7 @@ from websockets.sync.client import connect
 from sit2stand.data import folder
 from sit2stand.io.live_view import SUBPROTOCOL, LiveView, standup_layout
 from sit2stand.io.typestore import typestore
+from sit2stand.robot.profile import package_asset
 
 ROOT = Path(__file__).resolve().parents[1]
 MESSAGE_DATA = 0x01          # Foxglove WebSocket protocol: binary opcode of a message
@@ -26,7 +27,7 @@ class Client:
     def __init__(self, port: int) -> None:
         # no keepalive pings: a flood of plate samples would queue their pongs behind it
         self._connection = connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL], open_timeout=10,
-                                   ping_interval=None, max_queue=None)
+                                   ping_interval=None, max_queue=None, max_size=None)   # meshes: MBs
         self.ws = self._connection.__enter__()
         self.channels: dict[str, dict] = {}
         self.server_info = json.loads(self.ws.recv(timeout=10))
@@ -109,6 +110,14 @@ def test_a_client_does_the_handshake_and_receives_cdr_as_logged():
         view.close()
 
 
+def _wait_until_served(fox, topics: list[str], timeout_s: float = 30.0) -> None:
+    """Until the node has logged each topic as served: the SDK advertises a channel to clients a moment before its
+    server accepts subscriptions to it ("attempted to subscribe to unknown channel"), and a subscription refused
+    that way is never retried."""
+    for topic in topics:
+        assert fox.wait_for_output(f"serving {topic} (", timeout_s), fox.output
+
+
 @pytest.mark.graph
 def test_the_foxglove_node_serves_a_replayed_run(run_node):
     """The foxglove node (port 0) and a replayer of bags/natural: the client gets the run's markers as MocapFrames
@@ -122,6 +131,7 @@ def test_the_foxglove_node_serves_a_replayed_run(run_node):
                     "-p", "loop:=true")     # still playing whenever the client's subscription takes effect
     try:
         client.wait_for_channels({"/mocap/markers", "/force_plate/feet"}, 30)
+        _wait_until_served(fox, ["/mocap/markers", "/force_plate/feet"])
         subs = client.subscribe(["/mocap/markers", "/force_plate/feet"])
         got = client.messages(subs, 20, 30, each=True)
     except TimeoutError as err:
@@ -147,3 +157,55 @@ def test_the_shipped_layout_is_the_stand_up_layout():
     for needed in ('"/robot_description"', '"/human/robot_description"', "ThreeDee", "/human/com.position.z",
                    "/robot/planned_com.position.z"):
         assert needed in text
+
+
+FETCH_ASSET_RESPONSE = 0x04  # Foxglove WebSocket protocol: binary opcode of a fetched asset
+
+
+def _fetch_asset(client: Client, uri: str, request_id: int = 7, timeout_s: float = 20.0) -> tuple[int, bytes]:
+    """A fetchAsset request, answered as (status: 0 found, 1 error, the asset's bytes or the error text)."""
+    client.ws.send(json.dumps({"op": "fetchAsset", "uri": uri, "requestId": request_id}))
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        frame = client.ws.recv(timeout=timeout_s)
+        if isinstance(frame, bytes) and frame[0] == FETCH_ASSET_RESPONSE:
+            rid, status, n = struct.unpack_from("<IBI", frame, 1)
+            if rid == request_id:
+                return status, frame[10 + n:] if status == 0 else frame[10:10 + n]
+    raise TimeoutError(f"no answer to fetchAsset {uri}")
+
+
+@pytest.mark.graph
+def test_a_client_gets_the_robots_tf_description_markers_and_meshes_from_the_node(run_node):
+    """The driver (TALOS seated), a replayer of bags/natural's markers and the foxglove node: a real client receives
+    /tf, /robot_description (its meshes as package:// URIs, which a browser asks the server for) and the markers,
+    then fetches a mesh through the connection and gets the file's bytes."""
+    fox = run_node("sit2stand.nodes.foxglove", "--ros-args", "-p", "port:=0")
+    assert fox.wait_for_output("WebSocket server on", 30), fox.output
+    port = int(re.search(r"ws://127\.0\.0\.1:(\d+)", fox.output).group(1))
+    client = Client(port)
+    driver = run_node("sit2stand.nodes.driver")
+    play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={ROOT / 'bags' / 'natural'}",
+                    "-p", "topics:=['/mocap/markers']", "-p", "loop:=true")
+    wanted = ["/tf", "/robot_description", "/mocap/markers"]
+    try:
+        assert "assets" in client.server_info["capabilities"]
+        client.wait_for_channels(set(wanted), 60)
+        _wait_until_served(fox, wanted)
+        got = client.messages(client.subscribe(wanted), 1, 60, each=True)
+        [desc] = [typestore().deserialize_cdr(p, "std_msgs/msg/String").data for t, _, p in got
+                  if t == "/robot_description"][:1]
+        uris = re.findall(r'<mesh filename="([^"]+)"', desc)
+        assert uris and all(u.startswith("package://example-robot-data/") for u in uris), uris[:3]
+        status, mesh = _fetch_asset(client, uris[0])
+        assert status == 0 and mesh == package_asset(uris[0]) and len(mesh) > 84
+        status, error = _fetch_asset(client, "file:///etc/passwd", request_id=8)
+        assert status == 1, "only the packages' meshes are served"
+    except TimeoutError as err:
+        raise AssertionError(f"{err}\n--- foxglove node:\n{fox.output}\n--- driver:\n{driver.output}") from None
+    finally:
+        client.close()
+    tf = [typestore().deserialize_cdr(p, "tf2_msgs/msg/TFMessage") for t, _, p in got if t == "/tf"]
+    assert {tr.child_frame_id for tr in tf[0].transforms} >= {"base_link", "leg_left_4_link"}
+    assert any(t == "/mocap/markers" for t, _, _ in got)
+    assert play.stop() == 0 and driver.stop() == 0 and fox.stop() == 0

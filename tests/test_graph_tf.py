@@ -3,6 +3,8 @@ then its /tf, /tf_static and /robot_description checked against Pinocchio, and t
 checked against the frame its numbers are in."""
 
 import re
+import subprocess
+import sys
 from bisect import bisect_left
 from functools import cache
 from pathlib import Path
@@ -10,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import rerun_entities
 
 from sit2stand.io.bag import BagReader
 from sit2stand.io.topics import HUMAN_ROOT_FRAME, LAB_FRAME, WORLD_FRAME, sole_world_aligned_frame
@@ -181,6 +184,36 @@ def test_the_sole_tf_is_where_pinocchio_puts_it_for_the_recorded_state(frames):
 
 
 # --- frame labels ----------------------------------------------------------------------------------------------------
+def test_the_description_names_mesh_files_that_rerun_opens_with_no_ros_environment(run, bag, monkeypatch):
+    """A bag alone shows the robot: /robot_description's meshes are file:// paths that exist, and Rerun's own MCAP
+    reader (the one its viewer uses) turns them into meshes with no ROS_PACKAGE_PATH or AMENT_PREFIX_PATH."""
+    read, _ = bag
+    [(_, desc)] = read("/robot_description")
+    uris = re.findall(r'<mesh filename="([^"]+)"', desc.data)
+    assert uris and all(u.startswith("file:///") and Path(u[len("file://"):]).is_file() for u in uris)
+    for var in ("ROS_PACKAGE_PATH", "AMENT_PREFIX_PATH"):
+        monkeypatch.delenv(var, raising=False)
+    [mcap] = Path(run[0]).glob("*.mcap")
+    meshes = [e for e, cols in rerun_entities(mcap).items() if any(c.startswith("Asset3D:") for c in cols)]
+    assert len(meshes) >= 20, f"{len(meshes)} meshes from the bag"
+
+
+def test_sit2stand_view_shows_robot_human_chair_com_and_cop_in_one_recording(run, tmp_path):
+    rrd = tmp_path / "run.rrd"
+    done = subprocess.run([sys.executable, "-m", "sit2stand.cli", "view", str(run[0]), "--save", str(rrd)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    entities = rerun_entities(rrd)
+    meshes = [e for e, cols in entities.items() if e.startswith("/world/robot/")
+              and any(c.startswith("Asset3D:") for c in cols)]
+    assert len(meshes) >= 20
+    for needed in ("/world/chair", "/world/human/skeleton", "/world/human/com",
+                   "/world/human/cop", "/world/robot/com", "/world/robot/planned_com", "/world/robot/planned_zmp",
+                   "/world/robot/cop", "/world/robot/support", "/plots/knee/human", "/plots/knee/robot"):
+        assert needed in entities, f"{needed} missing"
+    assert any(c.startswith("LineStrips3D:") for c in entities["/world/human/skeleton"])
+
+
 def test_every_stamped_topic_says_a_known_frame(bag):
     """Each stamped topic is in this module's table (a new topic needs its frame stated) and says that frame."""
     read, reader = bag

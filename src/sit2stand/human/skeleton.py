@@ -32,6 +32,10 @@ from .marker_sets import DEFAULT_MARKER_SET, MarkerSet, MarkerSetError, load_mar
 SIDES = ("l", "r")
 KNEE_JOINTS = tuple(f"knee_{s}_y" for s in SIDES)
 """The knees' flexion joints (positive flexion) of the skeleton, as ``/human/joint_states`` names them."""
+HIP_FLEXION_JOINTS = tuple(f"hip_{s}_y" for s in SIDES)
+"""The hips' flexion/extension joints (negative flexion, see above)."""
+TRUNK_FLEXION_JOINT = "lumbar_y"
+"""The trunk's flexion joint (positive flexion), the lumbar joint between pelvis and torso."""
 SEGMENTS = ["pelvis", "torso", "head"] + [f"{s}_{side}" for side in SIDES for s in
                                          ("upper_arm", "forearm", "hand", "thigh", "shank", "foot", "toes")]
 LENGTH_GROUPS = ("pelvis", "torso", "head", "upper_arm", "forearm", "hand", "thigh", "shank", "foot")

@@ -8,6 +8,9 @@ definition (the type's text and each type it uses, as rosbag2's MCAP writer stor
 decodes ROS 2 data with. So the 3D panel draws ``/tf``, ``/robot_description`` and ``MarkerArray`` topics, and the
 plots read any field, with no conversion here.
 
+A client fetches the robot's meshes through the connection (the protocol's ``fetchAsset``, the server's
+``assets`` capability): the URIs of ``/robot_description`` are the ``package://`` ones a client asks for.
+
 Latched topics (transient local: ``/tf_static``, the descriptions, the subject) have no counterpart in the protocol:
 a client that subscribes later is sent the last message again (:meth:`LiveView.relatch`).
 """
@@ -15,6 +18,7 @@ a client that subscribes later is sent the last message again (:meth:`LiveView.r
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 
 import foxglove
 import foxglove.layouts as fl
@@ -47,9 +51,11 @@ class _Subscriptions(foxglove.ServerListener):
 
 
 class LiveView:
-    """A Foxglove WebSocket server on ``host``:``port`` (0: any free port, see :attr:`port`) for ROS topics."""
+    """A Foxglove WebSocket server on ``host``:``port`` (0: any free port, see :attr:`port`) for ROS topics;
+    ``asset_handler``: the bytes of a URI a client fetches (a URDF's meshes), or None."""
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 8765, name: str = "sit2stand") -> None:
+    def __init__(self, host: str = "127.0.0.1", port: int = 8765, name: str = "sit2stand",
+                 asset_handler: Callable[[str], bytes | None] | None = None) -> None:
         self._lock = threading.Lock()
         self._to_relatch: set[str] = set()
         self._subscribed: set[str] = set()                    # topics some client has subscribed to
@@ -57,7 +63,7 @@ class LiveView:
         self._latched: dict[str, tuple[bytes, int]] = {}      # topic -> (last message, its log time [ns])
         self.context = foxglove.Context()
         self.server = foxglove.start_server(name=name, host=host, port=port, context=self.context,
-                                            server_listener=_Subscriptions(self))
+                                            server_listener=_Subscriptions(self), asset_handler=asset_handler)
 
     @property
     def port(self) -> int:

@@ -40,8 +40,8 @@ parameters YAML from ``sit2stand identify``; empty: CAD), ``controller`` (invers
 ``feedforward`` (joint PD's, for commands without accelerations: gravity | inverse_dynamics | none),
 ``real_time_factor`` (1.0; 0 = as fast as it can), ``state_rate_hz``, ``publish_clock``, ``on_fall`` (limp | hold),
 ``settle_s`` (2: simulated seconds to come to rest on the chair before anything is published), ``tf_rate_hz`` (50;
-at most the state rate, 0: no ``/tf``), ``robot_description_meshes`` (``package``: the URDF's ``package://`` mesh
-URIs, or ``file``: this machine's paths).
+at most the state rate, 0: no ``/tf``), ``robot_description_meshes`` (``file``: this machine's paths, the default,
+see :data:`~sit2stand.robot.description.DESCRIPTION_MESHES`; ``package``: the URDF's ``package://`` URIs).
 Service: ``~/reset`` (std_srvs/Trigger): back to sitting on the chair.
 Safety: torques clamped to the URDF efforts by the joints; a fall (pelvis below ``fall_pelvis_height_m`` or the base
 tilted past ``fall_tilt_rad``) is published on the status and the robot goes limp or holds its posture.
@@ -72,7 +72,7 @@ from ..io.topics import (CLOCK_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, RO
                          ROBOT_JOINT_COMMAND_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_JOINT_STATE_COMMAND_TOPIC,
                          ROBOT_STATUS_TOPIC, TF_STATIC_TOPIC, TF_TOPIC, WORLD_FRAME, ft_topic, ros_name,
                          sole_world_aligned_frame)
-from ..robot.description import DescriptionError, FrameTree, robot_description
+from ..robot.description import DESCRIPTION_MESHES, DescriptionError, FrameTree, robot_description
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
 from ..robot.profile import ProfileError, RobotProfile
@@ -164,7 +164,7 @@ class Driver(Node):
     def _setup_frames(self, robot: RobotProfile) -> None:
         """/tf every ``tf_every`` state samples; /tf_static and /robot_description once (transient local)."""
         tf_rate = declare(self, "tf_rate_hz", 50.0, "/tf rate [Hz] (at most the state rate; 0: none)")
-        meshes = declare(self, "robot_description_meshes", "package", "package | file: mesh URIs of the URDF")
+        meshes = declare(self, "robot_description_meshes", DESCRIPTION_MESHES, "package | file: mesh URIs of the URDF")
         try:
             urdf = robot_description(robot, meshes)
             self.frames = FrameTree(self.names, urdf, robot)

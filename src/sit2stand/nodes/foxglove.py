@@ -11,6 +11,10 @@ Parameters:
                                  descriptions).
     use_sim_time (bool)          standard: log times from /clock (a replay's bag time).
 
+The robot's meshes: ``/robot_description`` goes out with ``package://`` mesh URIs (:func:`_with_package_uris`), and
+the server answers a client's fetch of one with the mesh file (the protocol's assets capability), so Foxglove's web
+app draws the robot too.
+
 Topics are those of the node's namespace, served under their bag names (``/robot2/tf`` as ``/tf`` for a node in
 ``/robot2``: one view per robot). Each is subscribed raw with its publishers' QoS (as the recorder does), so the
 bytes go to the client undecoded; transient-local topics are resent to clients that subscribe later.
@@ -22,12 +26,26 @@ import re
 
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
+from std_msgs.msg import String
 
 from ..io.live_view import LiveView
-from ..io.topics import bag_name
+from ..io.topics import HUMAN_DESCRIPTION_TOPIC, ROBOT_DESCRIPTION_TOPIC, bag_name
+from ..robot.profile import package_asset, package_uris
 from .runtime import IdleDrain, NodeError, declare, message_class, node_main, qos_matching_publishers, steady_timer
 
 DEFAULT_REGEX = r"^/(mocap|force_plate|human|robot|viz)/|^/tf(_static)?$|^/robot_description$"
+
+
+DESCRIPTION_TOPICS = frozenset({ROBOT_DESCRIPTION_TOPIC, HUMAN_DESCRIPTION_TOPIC})
+
+
+def _with_package_uris(data: bytes) -> bytes:
+    """A description (std_msgs/String, CDR) whose ``file://`` mesh URIs are served as ``package://`` ones: a client
+    fetches those through the connection (a browser cannot open a ``file://`` URI of this machine)."""
+    msg = deserialize_message(bytes(data), String)
+    served = package_uris(msg.data)
+    return data if served == msg.data else serialize_message(String(data=served))
 
 
 class FoxgloveNode(Node):
@@ -46,7 +64,7 @@ class FoxgloveNode(Node):
         except re.error as err:
             raise NodeError(f"parameter regex is not a regular expression: {err}") from None
         try:
-            self.view = LiveView(host, port)
+            self.view = LiveView(host, port, asset_handler=package_asset)
         except RuntimeError as err:        # the SDK's error for a port in use
             raise NodeError(f"cannot serve on {host}:{port}: {err}") from None
         self.subs: dict[str, object] = {}
@@ -78,6 +96,8 @@ class FoxgloveNode(Node):
             self.get_logger().info(f"serving {topic} ({types[0]})")
 
     def _on_message(self, topic: str, data: bytes) -> None:
+        if topic in DESCRIPTION_TOPICS:
+            data = _with_package_uris(data)
         self.view.log(topic, data, self.get_clock().now().nanoseconds)
         self.sent += 1
 

@@ -56,6 +56,13 @@ class Transform:
     rotation_xyzw: tuple[float, float, float, float]
 
 
+DESCRIPTION_MESHES = "file"
+"""The mesh URIs the driver publishes on ``/robot_description`` (and so every stand-up bag keeps): ``file://`` paths
+of the meshes the simulated robot is built from. Rerun, Foxglove's desktop app and RViz open a bag's robot with
+them and no ROS environment (``package://`` needs ``ROS_PACKAGE_PATH``, which a PyPI install does not set); the
+``foxglove`` node serves them to a live client as ``package://`` URIs through the protocol's asset fetching."""
+
+
 def robot_description(robot: str | RobotProfile = "talos", meshes: str = "package") -> str:
     """The URDF of a robot profile's robot, as its file has it, less a floating joint from a ``world`` link (the
     frame tree puts the root link in the world).

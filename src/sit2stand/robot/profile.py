@@ -445,6 +445,42 @@ def _resolve_urdf(f: _Fields) -> Path:
     return path
 
 
+MESH_FILENAME = r'(<mesh\b[^>]*?\bfilename=)'
+"""A ``<mesh filename=`` attribute up to its value (other ``filename`` attributes, such as Gazebo plugins', are no
+URIs to resolve)."""
+MESH_SUFFIXES = (".stl", ".dae", ".obj", ".glb", ".gltf", ".ply", ".png", ".jpg", ".jpeg")
+"""What :func:`package_asset` serves: meshes and their textures."""
+
+
+def package_uris(urdf_text: str) -> str:
+    """The URDF with every ``file://`` mesh URI inside a package of :data:`PACKAGE_SHARES` written back as
+    ``package://PACKAGE/...`` (what a Foxglove client fetches through the live connection); others as they are."""
+    shares = {pkg: share for pkg in PACKAGE_SHARES if (share := package_share(pkg)) is not None}
+
+    def relative(match: re.Match) -> str:
+        path = Path(match.group(2))
+        for pkg, share in shares.items():
+            if path.is_relative_to(share):
+                return f'{match.group(1)}"package://{pkg}/{path.relative_to(share).as_posix()}"'
+        return match.group(0)
+    return re.sub(MESH_FILENAME + r'"file://([^"]+)"', relative, urdf_text)
+
+
+def package_asset(uri: str) -> bytes | None:
+    """The bytes of a mesh (or texture) a ``package://`` or ``file://`` URI names inside a package of
+    :data:`PACKAGE_SHARES`; None for anything else (no other file of this machine is served)."""
+    try:
+        path = resolve_uri(uri).resolve()
+    except FileNotFoundError:
+        return None
+    if path.suffix.lower() not in MESH_SUFFIXES or not path.is_file():
+        return None
+    shares = [share.resolve() for pkg in PACKAGE_SHARES if (share := package_share(pkg)) is not None]
+    if not any(path.is_relative_to(share) for share in shares):
+        return None
+    return path.read_bytes()
+
+
 def mesh_uris_to_files(urdf_text: str, urdf_path: Path) -> str:
     """The URDF with every mesh URI (``package://``, relative) an absolute file path of this machine."""
     def absolute(match: re.Match) -> str:
@@ -454,4 +490,4 @@ def mesh_uris_to_files(urdf_text: str, urdf_path: Path) -> str:
         except FileNotFoundError:
             return match.group(0)
         return f'{match.group(1)}"{path}"'
-    return re.sub(r'(filename=)"([^"]+)"', absolute, urdf_text)
+    return re.sub(MESH_FILENAME + r'"([^"]+)"', absolute, urdf_text)
