@@ -7,7 +7,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export RCUTILS_COLORIZED_OUTPUT ?= 0
 SOAK_MIN ?= 2
 
-.PHONY: setup demo figures test test-fast lint bench bench-gap bench-gap-human bench-retarget bench-human bench-capture bench-live bench-standup bench-faults lock clean
+.PHONY: setup demo figures test test-fast lint bench bench-gap bench-gap-human bench-retarget bench-human bench-capture bench-live bench-standup bench-batch bench-faults lock clean
 
 setup:            ## create .venv (pinned wheels, ROS 2 Jazzy), build msgs/, install src/ (idempotent)
 	@ros_ws/bootstrap.sh
@@ -21,15 +21,15 @@ figures: setup     ## the README's pictures: Rerun's own viewer (headless) on th
 	@$(PY) -m sit2stand.cli view runs/demo/natural --screenshot docs/figures/view_talos.png
 	@$(PY) -m sit2stand.cli view runs/demo_g1/natural --screenshot docs/figures/view_g1.png
 
-test: setup lint  ## lint, then the whole test suite: unit tests (2 workers, a file per worker), then the graph tests alone
-	@$(PY) -m pytest -q -n 2 --dist loadfile --durations=8 -m "not graph" tests
-	@$(PY) -m pytest -q --durations=8 -m graph tests
+test: setup lint  ## lint, then the whole test suite: unit tests (2 workers, a file per worker), then the graph and cluster tests alone
+	@$(PY) -m pytest -q -n 2 --dist loadfile --durations=8 -m "not graph and not cluster" tests
+	@$(PY) -m pytest -q --durations=8 -m "graph or cluster" tests
 
 lint: setup       ## ruff (ruff.toml): zero findings
 	@$(VENV)/bin/ruff check
 
 test-fast: setup  ## unit tests only (no node processes)
-	@$(PY) -m pytest -q tests -m "not graph"
+	@$(PY) -m pytest -q tests -m "not graph and not cluster"
 
 bench: setup      ## speed figures (printed and written to bench/results/bench.json); not a test
 	@$(PY) -m sit2stand.bench --out bench/results/bench.json
@@ -54,6 +54,9 @@ bench-live: setup     ## the live stand-up (serve-c3d -> bridge -> estimator -> 
 
 bench-standup: setup  ## 30 digital humans (stature, mass, seat, natural/elderly/fast) retargeted and simulated: success, time scale, COM, torque; bench/results/standup/ (BENCH_STANDUP_ARGS="--robot g1": standup_g1/)
 	@$(PY) -m sit2stand.bench_standup $(BENCH_STANDUP_ARGS)
+
+bench-batch: setup  ## a stand-up batch (40 G1 digital humans, CAD) in one process, on Ray with 1 and with 2 workers: throughput and ratios; bench/results/batch.json
+	@$(PY) -m sit2stand.bench_batch --out bench/results/batch.json
 
 bench-faults: setup  ## fault campaign (corrupt/cut files, NaN/missing/mm markers, bad identification, killed recorder, second graph) + a SOAK_MIN-minute soak (default 2; the issue's: SOAK_MIN=30); bench/results/faults.json
 	@$(PY) -m sit2stand.bench_faults --soak-min $(SOAK_MIN) --out bench/results/faults.json

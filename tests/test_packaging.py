@@ -25,7 +25,8 @@ IMPORT_TO_DIST = {"numpy": "numpy", "scipy": "scipy", "matplotlib": "matplotlib"
                   "pinocchio": "pin", "proxsuite": "proxsuite", "daqp": "daqp", "mujoco": "mujoco", "ezc3d": "ezc3d",
                   "rosbags": "rosbags", "mcap": "mcap", "rclpy": "ros-jazzy-rclpy",
                   "zstandard": "mcap", "lz4": "mcap",   # mcap's own dependencies (MCAP chunk compressions)
-                  "qtm_rt": "qtm-rt", "natnet": "natnet", "foxglove": "foxglove-sdk", "rerun": "rerun-sdk"}
+                  "qtm_rt": "qtm-rt", "natnet": "natnet", "foxglove": "foxglove-sdk", "rerun": "rerun-sdk",
+                  "ray": "ray", "pandas": "pandas"}
 # ROS interface packages and where they come from on PyPI (sit2stand_msgs and tf2_msgs: msgs/, built with colcon)
 WITH_RCLPY = {"builtin_interfaces", "rcl_interfaces", "rosgraph_msgs"}
 COMMON_INTERFACES = {"std_msgs", "std_srvs", "sensor_msgs", "geometry_msgs", "trajectory_msgs", "diagnostic_msgs",

@@ -22,12 +22,12 @@ import sys
 import tempfile
 import tempfile as _tmp
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 from rosbags.rosbag2 import Reader
 
+from .batch.engine import Job, run_jobs
 from .bench_gap_human import CASES as GAP_HUMAN_CASES, bench_gap_human, summary_table
 from .bench_human import bench_human_real, print_table
 from .bench_live import COMMAND_P99_TARGET_MS
@@ -46,7 +46,7 @@ from .retarget.report import analyse
 from .retarget.robot import robot_setup
 from .retarget.stream import Retargeter
 from .robot.identify import identify
-from .robot.model import PlantConfig
+from .robot.model import DEFAULT_ROBOT, PlantConfig
 from .robot.plant import Plant
 from .robot.postures import collect_postures
 
@@ -291,43 +291,55 @@ def _print_sections(results: dict, sections: list[str]) -> None:
                 print(f"  {key:<{width}}  {text}")
 
 
-def gap_cases(n_per_kind: int, n_two: int, kinds: tuple[str, ...] = KINDS + OUT_OF_LIBRARY) -> list[tuple]:
-    """(kind, hidden effects, seed) of the model-gap benchmark: ``n_per_kind`` seeds per kind in ``kinds`` (in the
-    library and outside it), as many plants with nothing hidden, and ``n_two`` with two in-library kinds."""
-    cases = [(kind, [draw(kind, seed)], seed) for kind in kinds for seed in range(n_per_kind)]
+def gap_cases(n_per_kind: int, n_two: int, kinds: tuple[str, ...] = KINDS + OUT_OF_LIBRARY,
+              robot: str = DEFAULT_ROBOT) -> list[tuple]:
+    """(kind, hidden effects, seed) of the model-gap benchmark on ``robot``: ``n_per_kind`` seeds per kind in
+    ``kinds`` (in the library and outside it), as many plants with nothing hidden, and ``n_two`` with two in-library
+    kinds."""
+    cases = [(kind, [draw(kind, seed, robot)], seed) for kind in kinds for seed in range(n_per_kind)]
     cases += [("none", [], seed) for seed in range(n_per_kind)]
     rng = np.random.default_rng(7)
     for seed in range(n_two):
         a, b = rng.choice(len(KINDS), 2, replace=False)
-        cases.append(("two", [draw(KINDS[a], 100 + seed), draw(KINDS[b], 200 + seed)], 100 + seed))
+        cases.append(("two", [draw(KINDS[a], 100 + seed, robot), draw(KINDS[b], 200 + seed, robot)], 100 + seed))
     return cases
 
 
+def run_gap_case(arg: tuple[list, int, str], workdir: Path) -> dict:
+    """One hidden-effect plant as a batch case (:class:`~sit2stand.batch.engine.Job`'s ``run``): its scores."""
+    hidden, seed, robot = arg
+    return run_case(hidden, seed, str(workdir), robot=robot)
+
+
+def gap_jobs(cases: list[tuple], robot: str = DEFAULT_ROBOT) -> list[Job]:
+    """One batch job per hidden-effect plant of :func:`gap_cases`."""
+    return [Job("gap", f"{kind}_{seed}", {"hidden_kind": kind, "seed": seed, "robot": robot}, run_gap_case,
+                (hidden, seed, robot)) for kind, hidden, seed in cases]
+
+
 def bench_gap(n_per_kind: int = 10, n_two: int = 5, workers: int = 2, progress: bool = True,
-              kinds: tuple[str, ...] = KINDS + OUT_OF_LIBRARY) -> dict:
-    """Hit rates of the model-gap workflow on hidden-effect plants (see :func:`gap_cases`). In-library: a hit names
+              kinds: tuple[str, ...] = KINDS + OUT_OF_LIBRARY, address: str | None = None) -> dict:
+    """Hit rates of the model-gap workflow on hidden-effect plants (see :func:`gap_cases`), the plants as a batch
+    (:mod:`sit2stand.batch.engine`: ``workers`` Ray workers, or the cluster at ``address``). In-library: a hit names
     the hidden effect's kind and location with its magnitude within 20 %, "clean" names nothing else. Outside the
-    library: honest when a residual is flagged as unexplained (a close proxy may be named beside it)."""
-    cases = gap_cases(n_per_kind, n_two, kinds)
-    rows, skipped = [], []
+    library: honest when a residual is flagged as unexplained (a close proxy may be named beside it). A plant that
+    cannot stand to be excited (the case fails twice) is said, not scored."""
+    jobs = gap_jobs(gap_cases(n_per_kind, n_two, kinds))
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory() as tmp, ProcessPoolExecutor(workers) as pool:
-        futures = [(kind, pool.submit(run_case, hidden, seed, tmp)) for kind, hidden, seed in cases]
-        for i, (kind, f) in enumerate(futures):
-            try:
-                r = f.result()
-            except RuntimeError as err:        # a plant that cannot stand to be excited: said, not scored
-                print(f"  [{i + 1}/{len(cases)}] SKIPPED {kind}: {err}", flush=True)
-                skipped.append({"kind": kind, "why": str(err)})
-                continue
-            r["kind"] = kind
-            rows.append(r)
-            if progress:
-                print(f"  [{i + 1}/{len(cases)}] {'hit ' if _gap_ok(r) else 'MISS'} {kind}: hidden {r['hidden']} -> "
-                      f"named {r['named']}" + (f"; unexplained {r['unexplained'][:1]}" if r["unexplained"] else ""),
-                      flush=True)
-    out = _gap_rates(rows)
-    out["skipped"] = skipped
+
+    def show(r: dict) -> None:
+        if not progress:
+            return
+        if r["status"] == "failed":
+            print(f"  SKIPPED {r['hidden_kind']}: {r['error']}", flush=True)
+        else:
+            print(f"  {'hit ' if _gap_ok(r) else 'MISS'} {r['hidden_kind']}: hidden {r['hidden']} -> named "
+                  f"{r['named']}" + (f"; unexplained {r['unexplained'][:1]}" if r["unexplained"] else ""), flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        rows = run_jobs(jobs, Path(tmp), workers=workers, address=address, on_row=show, label="bench-gap")
+    scored = [{**r, "kind": r["hidden_kind"]} for r in rows if r["status"] == "ok"]
+    out = _gap_rates(scored)
+    out["skipped"] = [{"kind": r["hidden_kind"], "why": r["error"]} for r in rows if r["status"] == "failed"]
     out["wall_s"] = time.perf_counter() - t0
     return out
 

@@ -4,9 +4,9 @@
 
 Cases: an extra point mass hidden on one segment group (one case per group of the skeleton), a whole-body scale
 error, nothing hidden; ``n`` digital humans per case, every one a different body of the stand-up benchmark's
-population (:func:`sit2stand.bench_standup.sample_population`: stature 1.5-1.95 m, mass 50-110 kg within a BMI of
+population (:func:`sit2stand.batch.standup.sample_population`: stature 1.5-1.95 m, mass 50-110 kg within a BMI of
 17-38, sex, seat height, natural/elderly/fast in turn, a synthesiser seed; a body the synthesiser refuses is redrawn
-with the next seeds, :func:`sit2stand.bench_standup.synthesise`; one it refuses at every seed is replaced by a spare
+with the next seeds, :func:`sit2stand.batch.standup.synthesise`; one it refuses at every seed is replaced by a spare
 body of the same style, :func:`spare_body`). Each is synthesised, written as a bag and run through
 :func:`sit2stand.gap.human.human_gap` on the bag alone. The synthesiser's bodies differ from the model's de Leva
 proportions by design (segment masses sd 8 %, ``vary_subject``): each row lists the largest of those differences
@@ -33,13 +33,12 @@ from __future__ import annotations
 import dataclasses
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
 
-from .bench_standup import Case, sample_population, synthesise
+from .batch.engine import Job, run_jobs
+from .batch.standup import Case, sample_population, synthesise
 from .gap.human import WITHIN_VARIATION, human_gap
 from .gap.workflow import NO_DISCREPANCY
 from .human.demonstration_bag import write_demonstration_bag
@@ -93,7 +92,7 @@ class GapCase(Case):
 
 def draw_cases(n: int, cases: tuple[str, ...] = CASES, seed: int = 0, vary_subject: bool = True) -> list[GapCase]:
     """``n`` digital humans per case, all different: one population of ``n x len(cases)`` bodies drawn by
-    :func:`~sit2stand.bench_standup.sample_population` and dealt out case by case; what each hides is drawn from
+    :func:`~sit2stand.batch.standup.sample_population` and dealt out case by case; what each hides is drawn from
     one RNG seeded with ``seed`` (the same for every choice of ``cases``, case by case). ``vary_subject`` False:
     bodies of de Leva's proportions exactly (the synthesiser's random segment factors off)."""
     unknown = [c for c in cases if c not in CASES]
@@ -202,6 +201,11 @@ def _hidden_text(h: dict | None) -> str:
     return f"mass_scale {h['value']:.3f}"
 
 
+FAILED_ROW = {"named": [], "verdict": "error", "found": False, "size_error": float("nan"), "hit": False,
+              "clean": False, "wrong_side": False, "spurious": []}
+"""The scores of a run that broke: a miss."""
+
+
 def run_one(case: GapCase) -> dict:
     """Synthesise, bag and analyse one digital human; its row (``error`` where a stage raised)."""
     t0 = time.monotonic()
@@ -229,8 +233,7 @@ def run_one(case: GapCase) -> dict:
         row["z_after_max"] = float(np.max(r.rms_after / r.floors))
         row.update(score_run(row["hidden"], r.effects, r.verdict))
     except Exception as exc:  # noqa: BLE001 - a run that breaks is a result too (a miss), the benchmark goes on
-        row.update({"error": f"{type(exc).__name__}: {exc}", "named": [], "verdict": "error", "found": False,
-                    "size_error": float("nan"), "hit": False, "clean": False, "wrong_side": False, "spurious": []})
+        row.update({"error": f"{type(exc).__name__}: {exc}", **FAILED_ROW})
     row["wall_s"] = round(time.monotonic() - t0, 2)
     return row
 
@@ -239,35 +242,49 @@ def progress_line(i: int, n: int, row: dict) -> str:
     """``[i/n] hit/MISS case: hidden ... -> named ...`` (``+`` after hit/MISS: something else named too)."""
     mark = ("hit " if row["hit"] else "MISS") + (" " if row["clean"] or row["hidden"] is None else "+")
     size = "" if np.isnan(row["size_error"]) else f" (size off {100 * row['size_error']:.0f} %)"
-    err = f"; ERROR {row['error'][:100]}" if "error" in row else ""
+    err = f"; ERROR {row['error'][:100]}" if row.get("error") else ""
     return (f"  [{i}/{n}] {mark} {row['case']}: hidden {_hidden_text(row['hidden'])} -> named {row['named']}{size}; "
             f"{row['body']['style']} {row['body']['height_m']:.2f} m {row['body']['mass_kg']:.0f} kg; "
             f"{row['wall_s']:.1f} s{err}")
 
 
+def run_gap_human(case: GapCase, workdir: Path) -> dict:
+    """:func:`run_one` as a batch case (:class:`~sit2stand.batch.engine.Job`'s ``run``)."""
+    return run_one(case)
+
+
+def gap_human_jobs(cases: list[GapCase]) -> list[Job]:
+    """One batch job per digital human; its row shows the case, the body and what is hidden."""
+    return [Job("gap-human", f"{c.case}_{c.index:02d}",
+                {"case": c.case, "index": c.index, "style": c.style, "height_m": c.height_m, "mass_kg": c.mass_kg},
+                run_gap_human, c) for c in cases]
+
+
 def bench_gap_human(n: int = 20, cases: tuple[str, ...] = CASES, workers: int = 1, seed: int = 0,
-                    progress: bool = True, vary_subject: bool = True) -> dict:
-    """The human-side hit rates (see the module docstring): rows run ``workers`` at a time, figures per case and
-    overall against the issue's targets (``vary_subject`` False: bodies of de Leva's proportions, a diagnosis)."""
+                    progress: bool = True, vary_subject: bool = True, out: Path | None = None,
+                    address: str | None = None) -> dict:
+    """The human-side hit rates (see the module docstring): the rows as a batch (:mod:`sit2stand.batch.engine`:
+    ``workers`` Ray workers, or the cluster at ``address``; 1: this process; its table in ``out``, default a
+    temporary folder), figures per case and overall against the issue's targets (``vary_subject`` False: bodies of
+    de Leva's proportions, a diagnosis)."""
     todo = draw_cases(n, cases, seed, vary_subject)
-    rows: list[dict] = []
     t0 = time.perf_counter()
-    pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn")) if workers > 1 else None
-    try:
-        results = pool.map(run_one, todo) if pool else map(run_one, todo)
-        for case, row in zip(todo, results):
-            if progress and case.index == 0:
-                print(f" {case.case}: {n} digital humans", flush=True)
-            rows.append(row)
-            if progress:
-                print(progress_line(case.index + 1, n, row), flush=True)
-    finally:
-        if pool:
-            pool.shutdown()
-    out = gap_human_rates(rows)
-    out.update({"humans_per_case": n, "workers": workers, "seed": seed, "vary_subject": vary_subject,
-                "wall_s": time.perf_counter() - t0})
-    return out
+    done = [0]
+
+    def show(row: dict) -> None:
+        done[0] += 1
+        if progress:
+            print(progress_line(done[0], len(todo), row) if row["status"] == "ok" else
+                  f"  [{done[0]}/{len(todo)}] FAILED {row['key']}: {row['error']}", flush=True)
+    with tempfile.TemporaryDirectory(prefix="sit2stand-gap-human-") as tmp:
+        rows = run_jobs(gap_human_jobs(todo), out or Path(tmp), address=address, workers=workers, fresh=True,
+                        on_row=show, label="bench-gap-human")
+    rows = [r if r["status"] == "ok" else {**r, **FAILED_ROW, "hidden": c.hidden(), "wall_s": float("nan")}
+            for r, c in zip(rows, todo)]
+    out_rates = gap_human_rates(rows)
+    out_rates.update({"humans_per_case": n, "workers": workers, "seed": seed, "vary_subject": vary_subject,
+                      "wall_s": time.perf_counter() - t0})
+    return out_rates
 
 
 def _median_pct(values: list[float]) -> float:
@@ -302,7 +319,7 @@ def gap_human_rates(rows: list[dict]) -> dict:
         if key in out:
             out[f"{key}_vs_{100 * target:.0f}pct_target"] = out[key] / target
     out["runs"] = len(rows)
-    out["errors"] = sum("error" in r for r in rows)
+    out["errors"] = sum(bool(r.get("error")) for r in rows)
     out["run_s_median"] = float(np.median([r["wall_s"] for r in rows])) if rows else float("nan")
     out["misses"] = [{k: r.get(k) for k in ("case", "hidden", "named", "size_error", "verdict", "error")}
                      for r in rows if not (r["hit"] and r["clean"])]

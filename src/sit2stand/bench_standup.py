@@ -1,16 +1,13 @@
 """Benchmark (not a test): a population of digital humans stood up by a simulated robot (TALOS, or ``--robot``).
 
-    python -m sit2stand.bench_standup [--cases 30] [--seed 0] [--jobs 1] [--only-style S] [--marker-rate 100]
-                                      [--controller wbc|inverse_dynamics] [--robot g1] [--out DIR]
+    python -m sit2stand.bench_standup [--cases 30] [--seed 0] [--jobs 1] [--address RAY] [--only-style S]
+                                      [--marker-rate 100] [--controller wbc|inverse_dynamics] [--robot g1] [--out DIR]
                                                                                            (make bench-standup)
 
-Each case is a demonstration of :mod:`sit2stand.human.synth`: stature uniform in 1.5-1.95 m, body mass uniform in
-50-110 kg within a BMI of 17-38 (no implausible body: 50 kg at 1.95 m is a BMI of 13, 110 kg at 1.5 m one of 49),
-sex at random, seat height 0.26 x stature (the synthesiser's default) +- 5 cm, and one of three styles in turn:
-``natural`` (rise 1.4-1.8 s), ``elderly`` (2.6-3.4 s) and ``fast``, the natural kinematics rushed into 0.9-1.2 s
-(the synthesiser's ``duration_s``; it has no third style of its own). One RNG seed fixes the whole population.
-The synthesiser refuses some of its own random segment proportions (the chair and feet plates would overlap); such
-a body is redrawn with the next seeds, same stature, mass, seat and style, and marked ``*`` in the table.
+Each case is a digital human of :func:`sit2stand.batch.standup.sample_population` (stature, mass, BMI, sex, seat,
+three styles in turn; one seed fixes the whole population; a body the synthesiser refuses is redrawn with the next
+seeds and marked ``*`` in the table), run as a batch (:mod:`sit2stand.batch.engine`: ``--jobs`` Ray workers, or
+the cluster at ``--address``; 1: this process).
 
 Each demonstration is written to a temporary bag and run through :func:`sit2stand.retarget.offline.run` on the
 default plant with the identified parameters, its other options at their defaults (what ``sit2stand retarget BAG
@@ -21,7 +18,8 @@ compared at the human time each command plays), the peak joint torque the contro
 the QP's torques) over the URDF effort limit, the share of commands with some joint clamped at its limit, the share
 of off-chair commands whose own ZMP leaves the feet, all from ``run``'s summary, and wall time.
 
-Writes ``DIR/bench_standup.json`` (cases and aggregate) and each case's retarget folder under ``DIR/cases/``.
+Writes ``DIR/bench_standup.json`` (cases and aggregate), the batch's table (``DIR/results.parquet``, ``.csv``) and each
+case's retarget folder under ``DIR/cases/``.
 """
 
 from __future__ import annotations
@@ -30,20 +28,15 @@ import argparse
 import dataclasses
 import json
 import math
-import shutil
 import sys
-import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
 
+from .batch.engine import run_jobs
+from .batch.standup import RISE_S, STYLES, Case, Setting, sample_population, standup_jobs, synthesise  # noqa: F401
 from .demo import robot_identification
-from .human.demonstration_bag import write_demonstration_bag
-from .human.synth import SynthConfig, synthesize
-from .retarget import offline
 from .robot.model import DEFAULT_ROBOT
 from .robot.plant import CONTROLLERS, DEFAULT_CONTROLLER
 
@@ -56,113 +49,20 @@ def demo_params(robot: str) -> Path:
     run = "demo" if robot == DEFAULT_ROBOT else f"demo_{robot}"
     return ROOT / "runs" / run / "robot" / "identified_full.yaml"
 
-STYLES = ("natural", "elderly", "fast")
-RISE_S = {"natural": (1.4, 1.8), "elderly": (2.6, 3.4), "fast": (0.9, 1.2)}
-"""Rise duration range [s] per style (the synthesiser's defaults: natural 1.6 s, elderly 3.0 s)."""
-SYNTH_STYLE = {"natural": "natural", "elderly": "elderly", "fast": "natural"}
-HEIGHT_M = (1.5, 1.95)
-MASS_KG = (50.0, 110.0)
-BMI = (17.0, 38.0)
-SEAT_OFFSET_M = 0.05
-SEAT_FRACTION = 0.26            # the synthesiser's default seat height / stature
-SYNTH_ATTEMPTS = 20            # seeds tried per case (the synthesiser refused 9 of 30 first draws at seed 0)
 TARGET_TIME_SCALE = 1.5         # issue 15: at least 90 % stand with time_scale at most 1.5
 QP_TARGET_MS = 1.0              # issue 15: the torque controller's QP p99 at most 1 ms per step
+CASE_FIELDS = tuple(f.name for f in dataclasses.fields(Case))
 
 
-@dataclasses.dataclass(frozen=True)
-class Case:
-    """One digital human of the population."""
-
-    index: int
-    style: str
-    height_m: float
-    mass_kg: float
-    sex: str
-    seat_height_m: float
-    rise_s: float
-    seed: int
-    marker_rate_hz: float = 100.0       # the capture's
-
-    def config(self):
-        """The synthesiser's configuration of this case."""
-        return SynthConfig(style=SYNTH_STYLE[self.style], height_m=self.height_m, mass_kg=self.mass_kg, sex=self.sex,
-                           seat_height_m=self.seat_height_m, duration_s=self.rise_s, seed=self.seed,
-                           marker_rate_hz=self.marker_rate_hz)
-
-    @property
-    def name(self) -> str:
-        return f"{self.index:02d}_{self.style}"
-
-
-def sample_population(n: int, seed: int = 0, styles: tuple[str, ...] = STYLES,
-                      marker_rate_hz: float = 100.0) -> list[Case]:
-    """``n`` cases drawn from one RNG seeded with ``seed``; styles in turn, captured at ``marker_rate_hz``. The bodies
-    do not depend on ``styles`` nor on the rate (every draw is made for every case), so ``--only-style`` and
-    ``--marker-rate`` run the same people in another style or captured otherwise."""
-    if n < 1:
-        raise ValueError(f"the population needs at least 1 case, not {n}")
-    unknown = [s for s in styles if s not in STYLES]
-    if unknown or not styles:
-        raise ValueError(f"styles must be among {', '.join(STYLES)}, not {', '.join(unknown) or 'none'}")
-    rng = np.random.default_rng(seed)
-    cases = []
-    for i in range(n):
-        height = float(rng.uniform(*HEIGHT_M))
-        lo, hi = max(MASS_KG[0], BMI[0] * height**2), min(MASS_KG[1], BMI[1] * height**2)
-        mass = float(rng.uniform(lo, hi))
-        sex = "male" if rng.random() < 0.5 else "female"
-        seat = SEAT_FRACTION * height + float(rng.uniform(-SEAT_OFFSET_M, SEAT_OFFSET_M))
-        u_rise, case_seed = float(rng.random()), int(rng.integers(0, 2**31 - 1))
-        style = styles[i % len(styles)]
-        rise = RISE_S[style][0] + u_rise * (RISE_S[style][1] - RISE_S[style][0])
-        cases.append(Case(i, style, round(height, 3), round(mass, 1), sex, round(seat, 3), round(rise, 2), case_seed,
-                          marker_rate_hz))
-    return cases
-
-
-def synthesise(case: Case, attempts: int = SYNTH_ATTEMPTS):
-    """The case's demonstration and the seed that made it. The synthesiser refuses some random segment proportions
-    (``ValueError``, e.g. a joint angle out of its range; with ``vary_subject`` off every stature, seat and style
-    here synthesises); those are redrawn with the next seeds, the same stature, mass, seat and style."""
-    for k in range(attempts):
-        try:
-            return synthesize(dataclasses.replace(case.config(), seed=case.seed + k)), case.seed + k
-        except ValueError as exc:
-            last = exc
-    raise ValueError(f"no demonstration in {attempts} seeds from {case.seed}: {last}")
-
-
-def run_case(case: Case, out: Path, params: Path | None, controller: str = DEFAULT_CONTROLLER,
-             robot: str = DEFAULT_ROBOT) -> dict:
-    """Synthesise, bag, retarget and simulate one case; its figures (an ``error`` where a stage raised, and
-    ``stage: synthesis`` where the synthesiser refused every seed: no robot run to judge)."""
-    t0 = time.monotonic()
-    row: dict = {"case": dataclasses.asdict(case), "stood_up": False}
-    shutil.rmtree(out / case.name, ignore_errors=True)     # the retarget bag inside is never overwritten
-    try:
-        with tempfile.TemporaryDirectory(prefix="sit2stand-bench-") as tmp:
-            demo, row["synth_seed"] = synthesise(case)
-            write_demonstration_bag(demo, Path(tmp) / case.name)
-            summary = offline.run(Path(tmp) / case.name, out / case.name, params=params,
-                                  plant="default", simulate=True, controller=controller, robot=robot)
-        row.update(_figures(summary, demo.rise_end_s - demo.rise_start_s))
-    except Exception as exc:  # noqa: BLE001 - a case that breaks is a result too: recorded, the population goes on
-        row["error"] = f"{type(exc).__name__}: {exc}"
-        row["stage"] = "synthesis" if "synth_seed" not in row else "robot"
-    row["wall_s"] = round(time.monotonic() - t0, 1)
-    return row
-
-
-def _figures(summary: dict, human_rise_s: float) -> dict:
-    """The summary's figures this benchmark reports."""
-    keys = ("stood_up", "fall", "time_scale", "time_scale_peak", "duration_ratio", "plan_duration_s",
-            "com_tracking_rms_m", "com_deviation_rms_m", "com_deviation_max_m", "torque_demand_peak_ratio",
-            "torque_demand_peak_joint", "torque_saturated_share", "infeasible_frames", "frames",
-            "min_zmp_margin_on_feet_m", "zmp_outside_feet_share", "parameters", "controller_qp_ms_p99",
-            "controller_qp_cpu_ms_p99", "final_knee_flexion_deg_robot", "final_knee_flexion_deg_human",
-            "final_pelvis_height_ratio", "standing_knees_match")
-    return {"human_rise_s": round(human_rise_s, 3), **{k: summary.get(k) for k in keys}}
+def bench_row(row: dict) -> dict:
+    """A batch table row as this benchmark's row: the body under ``case``, a failed case's ``stage``."""
+    out = {k: v for k, v in row.items() if k not in CASE_FIELDS}
+    out["case"] = {k: row[k] for k in CASE_FIELDS}
+    if row.get("stage") == "synthesis":
+        out["error"] = row.get("synthesis_error")
+    elif row["status"] == "failed":
+        out.update(stood_up=False, stage="robot")
+    return out
 
 
 def _pct(values: list[float], q: float) -> float | None:
@@ -230,7 +130,7 @@ def _fmt(v, scale: float = 1.0, spec: str = ".2f") -> str:
 def case_line(r: dict) -> str:
     """One table row: the body, the outcome, the figures."""
     c = r["case"]
-    outcome = ("NOSYN" if r.get("stage") == "synthesis" else "ERROR") if "error" in r else \
+    outcome = ("NOSYN" if r.get("stage") == "synthesis" else "ERROR") if r.get("error") else \
         ("stood" if r["stood_up"] else "FELL")
     redrawn = "*" if r.get("synth_seed") not in (None, c["seed"]) else " "
     return (f"{c['index']:>3} {c['style']:<7}{redrawn} {c['height_m']:5.2f} {c['mass_kg']:5.1f} {c['sex'][0]} "
@@ -241,7 +141,7 @@ def case_line(r: dict) -> str:
             f"{_fmt(r.get('final_pelvis_height_ratio'), 100, '.0f'):>4} "
             f"{_fmt(r.get('final_knee_flexion_deg_robot'), 1, '.0f'):>4}/"
             f"{_fmt(r.get('final_knee_flexion_deg_human'), 1, '.0f'):<3} {r['wall_s']:6.1f}"
-            + (f"  {r['error'][:80]}" if "error" in r else ""))
+            + (f"  {r['error'][:80]}" if r.get("error") else ""))
 
 
 TABLE_HEAD = ("  # style    H [m] m[kg] s seat  rise | out   scale ratio dvRMS dvMax trkRMS tauPk  sat% pel% knees   "
@@ -291,21 +191,15 @@ def resolve_params(args: argparse.Namespace) -> tuple[Path | None, str]:
 
 
 def run_population(cases: list[Case], out: Path, params: Path | None, jobs: int,
-                   controller: str = DEFAULT_CONTROLLER, robot: str = DEFAULT_ROBOT) -> list[dict]:
-    """Every case, ``jobs`` at a time; one line per case as it finishes; rows in case order."""
-    rows = []
+                   controller: str = DEFAULT_CONTROLLER, robot: str = DEFAULT_ROBOT,
+                   address: str | None = None) -> list[dict]:
+    """Every case as a batch (:mod:`sit2stand.batch.engine`: ``jobs`` Ray workers here, or the cluster at
+    ``address``; 1: this process); one line per case as it finishes; rows in case order."""
+    setting = Setting(robot, "default", controller, str(params) if params else None)
     print(TABLE_HEAD, flush=True)
-    if jobs <= 1:
-        for case in cases:
-            rows.append(run_case(case, out / "cases", params, controller, robot))
-            print(case_line(rows[-1]), flush=True)
-    else:
-        with ProcessPoolExecutor(jobs, mp_context=get_context("spawn")) as pool:
-            futures = [pool.submit(run_case, c, out / "cases", params, controller, robot) for c in cases]
-            for fut in as_completed(futures):
-                rows.append(fut.result())
-                print(case_line(rows[-1]), flush=True)
-    return sorted(rows, key=lambda r: r["case"]["index"])
+    rows = run_jobs(standup_jobs([(c, setting) for c in cases]), out, address=address, workers=jobs, fresh=True,
+                    on_row=lambda r: print(case_line(bench_row(r)), flush=True), label="bench-standup")
+    return [bench_row(r) for r in rows]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -313,7 +207,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sit2stand-bench-standup", description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", type=int, default=30, help="digital humans (default 30)")
     parser.add_argument("--seed", type=int, default=0, help="the population's RNG seed")
-    parser.add_argument("--jobs", type=int, default=1, help="cases in parallel (processes)")
+    parser.add_argument("--jobs", type=int, default=1, help="cases in parallel (Ray workers; 1: this process)")
+    parser.add_argument("--address", help="a Ray cluster to run on (ray start --head ...); default: this machine")
     parser.add_argument("--only-style", choices=STYLES, help="every case in this style")
     parser.add_argument("--params", type=Path, help="identified parameters (default: make demo's)")
     parser.add_argument("--cad", action="store_true", help="plan and control with the CAD model")
@@ -333,7 +228,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"bench-standup: {len(cases)} digital humans (seed {args.seed}, captured at {args.marker_rate:g} Hz), "
           f"robot {args.robot}, default plant, parameters {source}, controller {args.controller}", flush=True)
     t0 = time.monotonic()
-    rows = run_population(cases, args.out, params, args.jobs, args.controller, args.robot)
+    rows = run_population(cases, args.out, params, args.jobs, args.controller, args.robot, args.address)
     agg = aggregate(rows)
     print("\n" + summary_text(agg))
     args.out.mkdir(parents=True, exist_ok=True)

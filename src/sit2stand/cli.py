@@ -15,6 +15,7 @@
     sit2stand robot check ROBOT | robot list                  (a robot profile: check it; the packaged ones)
     sit2stand export RUN --format csv|npz [--rate HZ] --out FILE   (a simulated stand-up as a motion file)
     sit2stand view RUN|BAG [--save FILE.rrd | --web | --screenshot FILE.png [--at S]]   (a run in Rerun)
+    sit2stand batch standup|gap|gap-human [--cases N | --grid F.yaml] [--address A] --out DIR   (batches on Ray)
     sit2stand bag info|recover|merge ...
     sit2stand launch GRAPH [NAME:=VALUE ...] [--timeout S]   (a graph file, or a packaged graph's name: standup)
     sit2stand replay BAG [--rate R] [--loop] [--topics T ...]   (the replayer node)
@@ -35,7 +36,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .commands import capture, graph, human, robot, view
+from .commands import batch, capture, graph, human, robot, view
 
 COMMANDS = [
     human.add_import_c3d,
@@ -52,6 +53,7 @@ COMMANDS = [
     robot.add_robot,
     robot.add_export,
     view.add_view,
+    batch.add_batch,
     human.add_gap_human,
     graph.add_bag,
     graph.add_launch,
