@@ -4,6 +4,7 @@ effect hidden by seed, their excitation bags recorded, the workflow run on the b
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from concurrent.futures import ProcessPoolExecutor
@@ -176,6 +177,9 @@ def test_gap_command_report_and_augmented_model(tmp_path):
     for f in ("report.md", "gap.json", "augmented_model.yaml", "gap_channels.png", "gap_residuals.png", "gap_cop.png",
               "gap_replay.png"):
         assert (out / f).stat().st_size > 0, f
+    report = (out / "report.md").read_text()
+    cop = [float(x) for x in re.findall(r"model COP error \(recording \d\): ([\d.]+) cm", report)]
+    assert cop and max(cop) < 20, f"COP errors {cop} cm: only rows that carry load count"
     summary = json.loads((out / "gap.json").read_text())
     assert summary["gap_shrink"] >= 0.7
     replay = summary["replay"][0]       # the commands replayed: the named effects bring the simulation closer

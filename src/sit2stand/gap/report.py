@@ -23,6 +23,7 @@ import matplotlib
 import matplotlib.pyplot as plt
 import numpy as np
 
+from ..io.forceplate import DEFAULT_COP_THRESHOLD_N
 from .resimulate import compare
 from .naming import describe
 from .augmented import plain_data, write_augmented
@@ -106,15 +107,25 @@ def residuals_figure(result: GapResult, png: Path, n: int = 4) -> None:
 
 def model_cop_x(result: GapResult, r: int, after: bool) -> tuple[np.ndarray, np.ndarray]:
     """Measured COP x and the COP x the model predicts from the measured motion [m] (recording ``r``): the measured
-    external wrench minus the residual of the base rows (world axes, about the mid-soles on the floor)."""
+    external wrench minus the residual of the base rows (world axes, about the mid-soles on the floor). NaN where
+    the feet (measured, or in the model) carry less than a plate's COP threshold: no load, no COP."""
     ds = result.dataset
     rec, ev = ds.recordings[r], ds.evaluations[r]
     e = result.after[r] if after else ev.e
     fz = sum(w[:, 2] for w in rec.wrench.values())
+    fz_model = fz - e[:, 2]
     my = _moment_about_centre(rec, ev)[:, 1]
-    cop_meas = ev.centre_m[:, 0] - my / np.maximum(fz, 1e-6)
-    cop_model = ev.centre_m[:, 0] - (my - e[:, 4]) / np.maximum(fz - e[:, 2], 1e-6)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cop_meas = np.where(fz > DEFAULT_COP_THRESHOLD_N, ev.centre_m[:, 0] - my / fz, np.nan)
+        cop_model = np.where(fz_model > DEFAULT_COP_THRESHOLD_N, ev.centre_m[:, 0] - (my - e[:, 4]) / fz_model,
+                             np.nan)
     return cop_meas, cop_model
+
+
+def _cop_rms(meas: np.ndarray, model: np.ndarray, valid: np.ndarray) -> float:
+    """RMS [m] of model - measured COP over the valid rows where both are defined (NaN: no such row)."""
+    ok = valid & np.isfinite(meas) & np.isfinite(model)
+    return float(np.sqrt(np.mean((model - meas)[ok] ** 2))) if ok.any() else float("nan")
 
 
 def _moment_about_centre(rec, ev) -> np.ndarray:
@@ -137,13 +148,12 @@ def cop_figure(result: GapResult, png: Path) -> None:
         ok = ev.valid[:, 4]
         meas, before = model_cop_x(result, r, after=False)
         _, after = model_cop_x(result, r, after=True)
+        rms_b, rms_a = 100 * _cop_rms(meas, before, ok), 100 * _cop_rms(meas, after, ok)
         _shade(ax, t, ds.labels[r])
         style = ".-" if rec.static else "-"
         ax.plot(t[ok], 100 * meas[ok], style, color="k", lw=1.2, ms=3, label="measured (feet F/T)")
         ax.plot(t[ok], 100 * before[ok], style, color="#c0504d", lw=1, ms=3, label="nominal model")
         ax.plot(t[ok], 100 * after[ok], style, color="#4f81bd", lw=1, ms=3, label="with the named effects")
-        rms_b = 100 * np.sqrt(np.mean((before - meas)[ok] ** 2)) if ok.any() else np.nan
-        rms_a = 100 * np.sqrt(np.mean((after - meas)[ok] ** 2)) if ok.any() else np.nan
         ax.set_ylabel("COP x [cm]")
         ax.set_title(f"{Path(rec.source).name}: model COP error RMS {rms_b:.2f} cm -> {rms_a:.2f} cm", fontsize=9)
         ax.grid(alpha=0.3)
@@ -155,14 +165,14 @@ def cop_figure(result: GapResult, png: Path) -> None:
 
 
 def cop_rms(result: GapResult) -> list[tuple[float, float]]:
-    """(before, after) RMS [m] of the model COP x against the measured one, per recording (valid base rows)."""
+    """(before, after) RMS [m] of the model COP x against the measured one, per recording (valid base rows where both
+    carry load; NaN: none does)."""
     out = []
     for r, ev in enumerate(result.dataset.evaluations):
         ok = ev.valid[:, 4]
         meas, before = model_cop_x(result, r, after=False)
         _, after = model_cop_x(result, r, after=True)
-        out.append((float(np.sqrt(np.mean((before - meas)[ok] ** 2))) if ok.any() else float("nan"),
-                    float(np.sqrt(np.mean((after - meas)[ok] ** 2))) if ok.any() else float("nan")))
+        out.append((_cop_rms(meas, before, ok), _cop_rms(meas, after, ok)))
     return out
 
 
@@ -176,7 +186,8 @@ def markdown(result: GapResult) -> str:
              f"- the re-simulation's gap on its channels that disagreed (COP x, feet force, joint positions): "
              f"{result.replay_gap_before:.2f} -> {result.replay_gap_after:.2f}", ""]
     for r, (b, a) in enumerate(cop_rms(result)):
-        lines.append(f"- model COP error (recording {r}): {100 * b:.2f} cm -> {100 * a:.2f} cm RMS")
+        lines.append(f"- model COP error (recording {r}): {100 * b:.2f} cm -> {100 * a:.2f} cm RMS" if np.isfinite(b)
+                     else f"- model COP error (recording {r}): none (no row where the model's feet carry load)")
     lines += ["", "## Verdict", ""]
     if result.effects:
         lines += [f"{len(result.effects)} effect(s) named:", ""]
