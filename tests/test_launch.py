@@ -268,7 +268,7 @@ def test_every_node_module_launches_as_a_sit2stand_node(tmp_path):
 
 
 def test_a_node_that_said_its_result_and_died_in_teardown_is_judged_by_what_it_said(tmp_path):
-    """A node prints its result before DDS teardown (launch.NODE_RESULT); teardown may hang and the process end by a
+    """A node prints its result before DDS teardown (io.topics.NODE_RESULT); teardown may hang and the process end by a
     signal or exit 1 (two CI runs: a good stand-up failed by the driver's exit -15). The job is judged by the result
     said; a node that said a failure still fails it."""
     said = tmp_path / "said.py"

@@ -1,4 +1,4 @@
-"""`make bench-live`: the live stand-up's latency over several runs on one machine (issue 19's figures; not a test).
+"""`make bench-live`: the live stand-up's latency over several runs on one machine (not a test).
 
     python -m sit2stand.bench_live [--runs 5] [--protocol qtm|natnet] [--marker-rate 200] [--out FILE.json]
 
@@ -10,7 +10,7 @@ both in real time above the graph where permitted (a capture PC and an observer 
 on a shared one, their lateness would count as the graph's). Latencies are from each frame's capture time (serve-c3d's
 clock origin + frame / rate) to DDS's reception at the probe (:mod:`sit2stand.capture.latency`) of the frame's
 ``/mocap/markers``, its ``/human/com`` and its IK pose on ``/robot/retarget/ik``, published right after the frame's
-joint command. Targets (issue 19): capture -> markers p99 2 ms, capture -> joint command p99 10 ms.
+joint command. Targets: capture -> markers p99 2 ms, capture -> joint command p99 10 ms.
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ import numpy as np
 
 from .capture.latency import PROBE_READY, capture_origin_ns, latencies_ms, p50_p99
 from .data import folder
+from .errors import Sit2StandError
 from .io.topics import HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_RETARGET_IK_TOPIC
 from .retarget.pacing import READY_LINE
 from .retarget.report import analyse
@@ -42,11 +43,11 @@ PROTOCOL_ARGS = {"qtm": (), "natnet": ("up:=+Y", "plates:=[]")}
 is told so and the estimator expects no plates (its seat-off and the retargeter's from the pelvis markers)."""
 MARKERS_P99_TARGET_MS = 2.0
 COMMAND_P99_TARGET_MS = 10.0
-"""Issue 19's targets [ms]: capture -> ``/mocap/markers`` p99, and capture -> joint command p99 on one machine."""
+"""The targets [ms]: capture -> ``/mocap/markers`` p99, and capture -> joint command p99 on one machine."""
 TOPICS = (MARKERS_TOPIC, HUMAN_COM_TOPIC, ROBOT_RETARGET_IK_TOPIC)
 
 
-class LiveRunError(RuntimeError):
+class LiveRunError(Sit2StandError, RuntimeError):
     """A live run that did not get as far as its figures; the message ends with the logs' tails."""
 
 

@@ -38,7 +38,6 @@ import matplotlib
 import matplotlib.pyplot as plt
 import numpy as np
 
-from .nodes.driver import FELL_EXIT_CODE
 from .data import graph_path
 from .gap.excite import excite
 from .gap.report import cop_rms, gap_command
@@ -47,7 +46,7 @@ from .human.offline import calibrate_from_bag
 from .human.offline import run as human_com_offline
 from .io import messages as M
 from .io.bag import BagReader
-from .io.topics import GROUND_TRUTH_COM_TOPIC, HUMAN_COM_TOPIC
+from .io.topics import FELL_EXIT_CODE, GROUND_TRUTH_COM_TOPIC, HUMAN_COM_TOPIC
 from .retarget.report import RunAnalysis, analyse, figure_6, figure_7, render_strip
 from .robot.figures import com_path_figure, posture_figure
 from .robot.identify import identify, read_postures, write_yaml

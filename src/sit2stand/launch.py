@@ -75,7 +75,7 @@ from .data import DataFileNotFound, graph_path
 from .data import folder as data_folder
 from .data import names as data_names
 from .errors import Sit2StandError
-from .io.topics import RUN_ID_ENV
+from .io.topics import NODE_RESULT, RUN_ID_ENV
 from .scheduling import POLICIES, Scheduling
 
 OUR_NODES = {"replayer", "recorder", "human_com", "driver", "identification", "retargeter", "mocap_bridge",
@@ -287,17 +287,6 @@ def _set_parent_death_signal() -> None:
         libc.prctl(1, signal.SIGTERM, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
     except OSError:
         pass
-
-
-# A node's last words before its DDS teardown (``nodes.runtime``): its result. Teardown can hang inside the middleware
-# holding Python's lock (two CI runs: a driver whose stand-up was good, killed by SIGTERM after its grace); a node
-# that said its result and then died in teardown is judged by what it said.
-NODE_RESULT = re.compile(r"^\[(?P<name>[\w.-]+)\] result: exit (?P<code>-?\d+); tearing down DDS$")
-
-
-def node_result_line(name: str, code: int) -> str:
-    """The line a node prints with its result, just before its DDS teardown (``NODE_RESULT``)."""
-    return f"[{name}] result: exit {code}; tearing down DDS"
 
 
 def _child_setup(scheduling: Scheduling | None) -> None:

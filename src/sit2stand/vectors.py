@@ -28,3 +28,8 @@ def skew_rows(r: np.ndarray) -> np.ndarray:
     S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -r[:, 2], r[:, 1], -r[:, 0]
     S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = r[:, 2], -r[:, 1], r[:, 0]
     return S
+
+
+def xyzw_from_wxyz(q_wxyz: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) in MuJoCo's order (w, x, y, z) as Pinocchio's and ROS's (x, y, z, w)."""
+    return np.asarray(q_wxyz, dtype=float)[..., [1, 2, 3, 0]]

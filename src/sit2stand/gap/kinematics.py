@@ -33,6 +33,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..robot.profile import SIDES, Sole, load_profile, profile_of
+from ..vectors import xyzw_from_wxyz
 from .candidates import stack_rows
 from .dataset import Dataset
 from .effects import tilted_axis
@@ -179,7 +180,7 @@ def _pin_q(model: pin.Model, names: list[str], base: np.ndarray, q: np.ndarray) 
     """Pinocchio configuration: base x y z qw qx qy qz (MuJoCo order) and the joints by name."""
     out = pin.neutral(model)
     out[:3] = base[:3]
-    out[3:7] = [base[4], base[5], base[6], base[3]]
+    out[3:7] = xyzw_from_wxyz(base[3:7])
     for name, v in zip(names, q):
         if model.existJointName(name):
             out[model.joints[model.getJointId(name)].idx_q] = v

@@ -41,6 +41,7 @@ import pinocchio as pin
 from ..errors import InputError
 from ..robot.model import SIDES
 from ..robot.profile import profile_of
+from ..vectors import xyzw_from_wxyz
 from .control import ControlLaw
 from .recording import Recording, _joint_index
 
@@ -113,7 +114,7 @@ def _pin_q(model: pin.Model, rec: Recording, k: int, idx_v: np.ndarray) -> np.nd
     q = pin.neutral(model)
     b = rec.base_pose[k]
     q[:3] = b[:3]
-    q[3:7] = [b[4], b[5], b[6], b[3]]
+    q[3:7] = xyzw_from_wxyz(b[3:7])
     q[idx_v + 1] = rec.q[k]
     return q
 

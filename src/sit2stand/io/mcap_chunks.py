@@ -15,8 +15,10 @@ from mcap.reader import make_reader
 from mcap.records import Chunk, McapRecord, Message
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 
+from ..errors import Sit2StandError
 
-class BadChunk(Exception):
+
+class BadChunk(Sit2StandError, ValueError):
     """A chunk whose data cannot be trusted; the message says why."""
 
 

@@ -12,6 +12,8 @@ forward, y left, z up). ``lab`` is the capture volume's frame, in which markers,
 
 from __future__ import annotations
 
+import re
+
 # --- frames -------------------------------------------------------------------------------------------------------
 LAB_FRAME = "lab"
 WORLD_FRAME = "world"
@@ -32,6 +34,17 @@ FORCE_PLATE_PREFIX = "/force_plate/"                 # + plate name: ForcePlateS
 CLOCK_TOPIC = "/clock"                               # rosgraph_msgs/Clock
 GRAPH_TOPIC = "/sit2stand/graph"                     # std_msgs/String (transient local, JSON): each node's run id
 RUN_ID_ENV = "SIT2STAND_RUN_ID"                      # the launcher's run id, given to every node of a graph
+FELL_EXIT_CODE = 3                                   # the driver's exit status when the robot fell: the graph failed
+# A node's last words before its DDS teardown (``nodes.runtime``), which the launcher reads: its result. Teardown can
+# hang inside the middleware holding Python's lock; a node that said its result and then died in teardown is judged
+# by what it said.
+NODE_RESULT = re.compile(r"^\[(?P<name>[\w.-]+)\] result: exit (?P<code>-?\d+); tearing down DDS$")
+
+
+def node_result_line(name: str, code: int) -> str:
+    """The line a node prints with its result, just before its DDS teardown (:data:`NODE_RESULT`)."""
+    return f"[{name}] result: exit {code}; tearing down DDS"
+
 
 # --- human COM estimator ------------------------------------------------------------------------------------------
 HUMAN_COM_TOPIC = "/human/com"                       # CenterOfMass, lab frame

@@ -68,7 +68,7 @@ from trajectory_msgs.msg import JointTrajectory
 from ..io.messages import stamp_ns
 from ..io.stream_messages import JointStateEncoder, StampedNumbersEncoder
 from ..io.tf_message import TfEncoder
-from ..io.topics import (CLOCK_TOPIC, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_DESCRIPTION_TOPIC,
+from ..io.topics import (CLOCK_TOPIC, FELL_EXIT_CODE, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_DESCRIPTION_TOPIC,
                          ROBOT_JOINT_COMMAND_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_JOINT_STATE_COMMAND_TOPIC,
                          ROBOT_STATUS_TOPIC, TF_STATIC_TOPIC, TF_TOPIC, WORLD_FRAME, ft_topic, ros_name,
                          sole_world_aligned_frame)
@@ -77,12 +77,12 @@ from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
 from ..robot.profile import ProfileError, RobotProfile
 from ..robot.plant import CONTROLLERS, Plant
+from ..vectors import xyzw_from_wxyz
 from .runtime import (LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, NodeError, declare, node_main, publish_depth,
                       robot_state_qos, steady_timer)
 
 DEFAULT_PLANT = "default"
 SIM_EPOCH_S = 100.0      # simulated time starts here when the driver is the time source (0 reads as "unset")
-FELL_EXIT_CODE = 3
 MAX_COMMAND_LEAD_S = 0.5
 MAX_STEP_PER_TICK_S = 0.02
 """The driver's exit status after the robot fell (a graph with it then exits 1)."""
@@ -335,7 +335,7 @@ class Driver(Node):
             self.ft_pubs[side].publish(enc[side].encode(t_ns, s.wrench_world[side][:6]))
         self.cop_pub.publish(enc["cop"].encode(t_ns, s.cop_m if s.cop_valid else np.full(3, np.nan)))
         b = s.base_pose            # x y z, then the quaternion w x y z (MuJoCo's order); the message's is x y z w
-        self.base_pub.publish(enc["base"].encode(t_ns, [b[0], b[1], b[2], b[4], b[5], b[6], b[3]]))
+        self.base_pub.publish(enc["base"].encode(t_ns, [*b[:3], *xyzw_from_wxyz(b[3:7])]))
         self._samples += 1
         if self.tf_every and (self._samples - 1) % self.tf_every == 0:     # from the first sample on
             self._publish_tf(s)

@@ -33,8 +33,7 @@ from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, Qo
 
 from ..errors import InputError, Sit2StandError
 from ..io.frame_rate import FrameRateCheck
-from ..io.topics import GRAPH_TOPIC, MARKERS_TOPIC, RUN_ID_ENV
-from ..launch import node_result_line
+from ..io.topics import GRAPH_TOPIC, MARKERS_TOPIC, RUN_ID_ENV, node_result_line
 
 
 class NodeError(Sit2StandError, RuntimeError):
@@ -350,7 +349,7 @@ def node_main(factory: Callable[[], Node]) -> Callable[[list[str] | None], int]:
 TEARDOWN_LIMIT_S = 5.0
 # a teardown blocked in the middleware holding Python's lock stops every Python thread, the bound's too: faulthandler's
 # native thread then prints where it hangs and ends the process (exit 1); the launcher judges the node by its result
-# line (launch.NODE_RESULT)
+# line (io.topics.NODE_RESULT)
 TEARDOWN_HARD_LIMIT_S = TEARDOWN_LIMIT_S + 2.0
 
 

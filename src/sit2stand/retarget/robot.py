@@ -18,6 +18,7 @@ from ..robot.identify import read_link_parameters
 from ..robot.model import SIDES, PlantConfig, add_seat_frame, build_spec, controller_model, sole_corners_world
 from ..robot.plant import seat_top_height, seated_configuration
 from ..robot.profile import profile_of
+from ..vectors import xyzw_from_wxyz
 from .feasibility import support_polygon
 
 
@@ -55,7 +56,7 @@ def robot_model(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
     qpos = seated_configuration(probe, cfg)
     add_seat_frame(model, seat_top_height(probe, qpos, cfg), float(qpos[2]))
     q = qpos.copy()
-    q[3:7] = [qpos[4], qpos[5], qpos[6], qpos[3]]
+    q[3:7] = xyzw_from_wxyz(qpos[3:7])
     return model, q, label
 
 

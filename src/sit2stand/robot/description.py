@@ -38,6 +38,7 @@ import pinocchio as pin
 
 from ..errors import Sit2StandError
 from ..io.topics import LAB_FRAME, WORLD_FRAME, sole_world_aligned_frame
+from ..vectors import xyzw_from_wxyz
 from .model import floating_base_removed
 from .profile import SIDES, RobotProfile, load_profile, mesh_uris_to_files
 
@@ -217,7 +218,7 @@ class FrameTree:
         x = self._q.copy()
         b = np.asarray(base_pose, float)
         x[:3] = b[:3]
-        x[3:7] = b[4], b[5], b[6], b[3]
+        x[3:7] = xyzw_from_wxyz(b[3:7])
         x[self.q_index] = q
         return x
 

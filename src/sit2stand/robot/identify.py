@@ -35,6 +35,7 @@ from ..io.bag import BagError, BagReader
 from ..io.topics import (ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC,
                          ROBOT_JOINT_STATES_TOPIC, ft_topic)
 from ..optim import constrained_lsq
+from ..vectors import xyzw_from_wxyz
 from .model import DEFAULT_ROBOT, SIDES, PlantConfig, controller_model
 from .profile import profile_of
 
@@ -150,7 +151,7 @@ def _pin_q(model: pin.Model, data: PostureData, k: int) -> np.ndarray:
     b = data.base_pose[k]
     q = pin.neutral(model)
     q[:3] = b[:3]
-    q[3:7] = [b[4], b[5], b[6], b[3]]
+    q[3:7] = xyzw_from_wxyz(b[3:7])
     idx = {n: model.joints[model.getJointId(n)].idx_q for n in data.joint_names}
     for j, name in enumerate(data.joint_names):
         q[idx[name]] = data.q[k, j]

@@ -29,7 +29,7 @@ import pinocchio as pin
 from ..dynamics import G
 from ..errors import InputError
 from ..io.forceplate import DEFAULT_COP_THRESHOLD_N
-from ..vectors import cross
+from ..vectors import cross, xyzw_from_wxyz
 from .torque_control import WholeBodyController
 from .model import (SEAT_CLEARANCE_BELOW_M, SIDES, PlantConfig, PlantConfigError, add_chair, add_seat_frame, build_spec,
                     controller_model, expand)
@@ -43,7 +43,7 @@ DEFAULT_CONTROLLER = "wbc"
 ``make bench-standup``, the stand-up and live graphs): whole-body torque control. With the plan's hips lifted clear of
 the seat at its seat-off (``RetargetConfig.seat_clearance_m``), joint PD, which had leaned on the seat it still
 touched, tracks the population about twice as far from the plan and asks several times its torque limits
-(docs/results.md, session 20). The driver and retargeter nodes' own defaults stay joint PD: the identification and
+(docs/results.md). The driver and retargeter nodes' own defaults stay joint PD: the identification and
 replay graphs pose the robot with it."""
 WBC_RATE_HZ = 500.0          # the whole-body torque controller's rate (tsid's TALOS examples run at 1 kHz)
 EXTRAPOLATE_MAX_S = 0.05      # a reference is followed along its velocity for at most this long after its message
@@ -276,7 +276,7 @@ class Plant:
     def pin_configuration(self, qpos: np.ndarray) -> np.ndarray:
         """MuJoCo qpos -> Pinocchio q (quaternion w x y z -> x y z w)."""
         q = qpos.copy()
-        q[3:7] = [qpos[4], qpos[5], qpos[6], qpos[3]]
+        q[3:7] = xyzw_from_wxyz(qpos[3:7])
         return q
 
     def _feedforward(self) -> np.ndarray:
