@@ -58,7 +58,7 @@ bench-standup: setup  ## 30 digital humans (stature, mass, seat, natural/elderly
 bench-batch: setup  ## a stand-up batch (40 G1 digital humans, CAD) in one process, on Ray with 1 and with 2 workers: throughput and ratios; bench/results/batch.json
 	@$(PY) -m sit2stand.bench_batch --out bench/results/batch.json
 
-bench-faults: setup  ## fault campaign (corrupt/cut files, NaN/missing/mm markers, bad identification, killed recorder, second graph) + a SOAK_MIN-minute soak (default 2; the issue's: SOAK_MIN=30); bench/results/faults.json
+bench-faults: setup  ## fault campaign (corrupt/cut files, NaN/missing/mm markers, bad identification, killed recorder, second graph) + a SOAK_MIN-minute soak (default 2; the full soak: SOAK_MIN=30); bench/results/faults.json
 	@$(PY) -m sit2stand.bench_faults --soak-min $(SOAK_MIN) --out bench/results/faults.json
 
 lock:             ## re-pin constraints.txt from the current .venv (after changing requirements.txt)

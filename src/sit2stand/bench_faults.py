@@ -1,9 +1,9 @@
-"""Benchmark (not a test): a fault campaign and a soak. Every fault of issue 16 is injected into real files and real
+"""Benchmark (not a test): a fault campaign and a soak. Every fault of the campaign is injected into real files and real
 node processes, and its outcome recorded; the soak runs the simulated robot and a recorder for minutes.
 
     python -m sit2stand.bench_faults [--soak-min 2] [--only CASE,...] [--out bench/results/faults.json]
     make bench-faults                       (the campaign and a 2-minute soak)
-    make bench-faults SOAK_MIN=30           (the issue's 30-minute soak)
+    make bench-faults SOAK_MIN=30           (the 30-minute soak)
 
 Outcomes: ``clear error`` (exit 2 or a refusal, one line naming the file, topic or field), ``flagged`` (a result
 marked invalid or warned about), ``recovered`` (what was lost is said), ``robot ran on`` (a node failure that did
@@ -432,7 +432,7 @@ def run(only: list[str] | None, soak_min: float, work: Path) -> dict[str, object
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sit2stand-bench-faults", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--soak-min", type=float, default=2.0, help="soak minutes (the issue's target: 30; 0: none)")
+    parser.add_argument("--soak-min", type=float, default=2.0, help="soak minutes (the target: 30; 0: none)")
     parser.add_argument("--only", default="", help=f"comma-separated cases: {', '.join(CASES)}, soak")
     parser.add_argument("--out", type=Path, default=Path("bench/results/faults.json"))
     args = parser.parse_args(argv)

@@ -1,4 +1,4 @@
-"""Benchmark (not a test): the human-side hit rate of the model-gap workflow (issue 17, item 5).
+"""Benchmark (not a test): the human-side hit rate of the model-gap workflow.
 
     python -m sit2stand.bench --only gap_human [--gap-human-n 20] [--gap-human-cases hand,none] (make bench-gap-human)
 
@@ -61,7 +61,7 @@ SCALE_DEVIATION = (0.05, 0.12)
 CASES = tuple(GROUPS) + ("scale", "none")
 SIZE_TOLERANCE = 0.2
 TARGETS = {"hit_rate": 0.9, "clean_rate": 0.9, "none_no_alarm_rate": 0.95}
-"""Issue 17: in-library effects named fully right in 90 %, nothing spurious in 90 %; nothing hidden: no alarm 95 %."""
+"""Targets: in-library effects named fully right in 90 %, nothing spurious in 90 %; nothing hidden: no alarm 95 %."""
 SPARE_BODIES = 3
 """Spare bodies tried for a digital human the synthesiser refuses at every seed."""
 
@@ -265,7 +265,7 @@ def bench_gap_human(n: int = 20, cases: tuple[str, ...] = CASES, workers: int = 
                     address: str | None = None) -> dict:
     """The human-side hit rates (see the module docstring): the rows as a batch (:mod:`sit2stand.batch.engine`:
     ``workers`` Ray workers, or the cluster at ``address``; 1: this process; its table in ``out``, default a
-    temporary folder), figures per case and overall against the issue's targets (``vary_subject`` False: bodies of
+    temporary folder), figures per case and overall against the targets (``vary_subject`` False: bodies of
     de Leva's proportions, a diagnosis)."""
     todo = draw_cases(n, cases, seed, vary_subject)
     t0 = time.perf_counter()

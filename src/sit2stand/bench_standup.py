@@ -49,8 +49,8 @@ def demo_params(robot: str) -> Path:
     run = "demo" if robot == DEFAULT_ROBOT else f"demo_{robot}"
     return ROOT / "runs" / run / "robot" / "identified_full.yaml"
 
-TARGET_TIME_SCALE = 1.5         # issue 15: at least 90 % stand with time_scale at most 1.5
-QP_TARGET_MS = 1.0              # issue 15: the torque controller's QP p99 at most 1 ms per step
+TARGET_TIME_SCALE = 1.5         # the target: at least 90 % stand with time_scale at most 1.5
+QP_TARGET_MS = 1.0              # the target: the torque controller's QP p99 at most 1 ms per step
 CASE_FIELDS = tuple(f.name for f in dataclasses.fields(Case))
 
 

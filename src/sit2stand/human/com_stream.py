@@ -29,11 +29,11 @@ STREAM_FIT_STEPS = 2
 """Gauss-Newton steps per streamed frame, warm-started from the last two fits (the first fit gets 40). A third step
 moved the COM by at most 0.002 mm on the real Vicon child trial and by less than 0.01 mm on 10 digital humans at 100
 and 200 Hz, and cost 12 % of a frame: at 200 Hz on 2 cores the live estimator then fell 30 ms behind in 2 of 3 runs,
-in none of 3 without it (docs/results.md, session 21)."""
+in none of 3 without it (docs/results.md, human COM)."""
 FIRST_RESCALE_S = 1.0
 """The first mass scaling is solved once this much time [s] of supported frames (one row each) has come in: a time,
 not a frame count, so that a faster capture does not solve on less of the trial (at 200 Hz, 100 frames put the
-natural rise's COM up to 40 mm off the truth; docs/results.md, session 21)."""
+natural rise's COM up to 40 mm off the truth; docs/results.md)."""
 MIN_SCALE_S = 0.3
 """No mass scaling from less than this much time [s] of supported frames (the last solve at exit included)."""
 RESCALE_EVERY_S = 2.5

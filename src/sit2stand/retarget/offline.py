@@ -161,7 +161,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         "infeasible_frames": int((~feasible).sum()),
         "com_equality_max_error_mm_feasible": float(com_err[feasible].max() * 1e3) if feasible.any() else None,
         "ik_ms_p50": float(np.percentile(ik_ms, 50)), "ik_ms_p99": float(np.percentile(ik_ms, 99)),
-        # time_scale: the robot's duration over the human's (issue 15's measure); the peak local factor beside it
+        # time_scale: the robot's duration over the human's; the peak local factor beside it
         "time_scale": len(cmds) / max(1, len(frames)), "time_scale_peak": max(c.time_scale for c in cmds),
         "retiming": "fixed" if time_scale else retiming, "commands": len(cmds), "plan_duration_s": len(cmds) * dt,
         "duration_ratio": len(cmds) / max(1, len(frames)), **_filter_summary(cmds),

@@ -1,16 +1,16 @@
 """The plan player: the dynamic-feasibility stage between the per-frame IK and the robot's joint commands.
 
-It smooths the poses (Savitzky-Golay on the tangent coordinates, ``smooth_s`` wide), computes each pose's ZMP
-from the centroidal dynamics, and plays the plan back ``time_scale`` times slower, where ``time_scale`` is a local
+It smooths the poses (Savitzky-Golay on the tangent coordinates, ``smooth_s`` wide), computes each pose's ZMP from
+the centroidal dynamics, and plays the plan back ``time_scale`` times slower, where ``time_scale`` is a local
 factor. Each frame has its own smallest factor (:meth:`PlanPlayer.frame_scale`): its ZMP ``margin_m`` inside the
-feet wherever the robot is off the chair, its joint speeds under ``max_joint_speed`` and its inverse-dynamics torques
-within the URDF's limits (played s x slower, velocities scale by 1/s and accelerations and velocity products by
-1/s^2). With ``retiming="local"`` (the default) the factor rises just in time for each frame that needs more than 1,
-at a bounded rate, and comes back down once it is played: the human's timing is kept wherever the robot can follow
-it. With ``retiming="uniform"`` it is one factor that only grows, up to ``max_time_scale`` (the first round's
-player). At the robot's seat-off the player can dwell ``seat_off_dwell_s``. Each command carries positions,
-velocities and accelerations (time-warp included). Live, the commands lag the human by ``lookahead_s`` plus half the
-smoothing window, plus the stretching.
+feet wherever the robot is off the chair, its joint speeds under ``max_joint_speed`` and its inverse-dynamics
+torques within the URDF's limits (played s x slower, velocities scale by 1/s and accelerations and velocity products
+by 1/s^2). With ``retiming="local"`` (the default) the factor rises just in time for each frame that needs more than
+1, at a bounded rate, and comes back down once it is played: the human's timing is kept wherever the robot can
+follow it. With ``retiming="uniform"`` it is one factor that only grows, up to ``max_time_scale``. At the robot's
+seat-off the player can dwell ``seat_off_dwell_s``. Each command carries positions, velocities and accelerations
+(time-warp included). Live, the commands lag the human by ``lookahead_s`` plus half the smoothing window, plus the
+stretching.
 
 Units SI; world frame REP-103 (x forward, y left, z up).
 """
@@ -35,11 +35,11 @@ DEFAULT_MAX_TIME_SCALE = 4.0
 ``sit2stand retarget`` command."""
 DEFAULT_MAX_JOINT_SPEED = 4.0
 """The plan's joint speed limit [rad/s]: the IK's own (:class:`~sit2stand.retarget.stream.RetargetConfig`), so that
-by default the torques, not a speed, decide where time is stretched. The uniform player of the first round needed
-0.6 to stand the robot up."""
+by default the torques, not a speed, decide where time is stretched. The uniform player needs 0.6 to stand the
+robot up."""
 SEAT_OFF_DWELL_S = 0.0
 """The player's fixed wait at the robot's seat-off [s]; none by default: the lag of the robot behind the plan slows
-the plan instead (``pull(lag_m=...)``). The first round's uniform player waited 1 s."""
+the plan instead (``pull(lag_m=...)``). The uniform player needs 1 s."""
 LAG_DEADBAND_M = 0.01
 LAG_GAIN_PER_M = 100.0
 """Off the chair, a robot whose COM trails the plan's by more than ``LAG_DEADBAND_M`` slows the plan to at least

@@ -10,7 +10,7 @@ is sent, is therefore moved so that its COM moves by
 with both feet where the plan has them: the same QP as the retargeting IK (:class:`sit2stand.retarget.ik.ComIk`)
 with no markers, the COM shifted by ``delta`` as its hard equality, the feet hard, the joint limits, the pelvis no
 lower than the command's, and a posture pull to the command itself (arms and head held). The pelvis bound: a shift
-made by bending the knees would lower the hips the plan has just lifted off the seat (docs/results.md, session 20).
+made by bending the knees would lower the hips the plan has just lifted off the seat (docs/results.md).
 This is the COM-admittance outer loop of position-controlled humanoid stabilisers (e.g. Kajita et al., "Biped
 walking stabilization based on linear inverted pendulum tracking", IROS 2010), here on the COM position and velocity
 only: the driver's joint PD and inverse-dynamics feed-forward stay as they are. ``de/dt`` is low-passed

@@ -22,7 +22,7 @@
    stays at least that high (hard) until the human sits back down: the markers alone can keep the hips at the
    seat's height, or dip them into it, after the plan has the robot on its feet, and the robot's hips then bounce on
    the seat. 2 cm because over the seat's front edge a thigh rises only about a quarter as much as the pelvis (it
-   turns about the knee). Measured in docs/results.md (session 20).
+   turns about the knee). Measured in docs/results.md.
 3. **IK** (:class:`sit2stand.retarget.ik.ComIk`): markers soft (weights by body part; their targets the human's
    scaled by leg length, vertically by the robot's rise to its stance over the human's), COM and feet hard, joint
    and speed limits; after seat-off both knees pulled toward the human's as it stands; warm-started from the
