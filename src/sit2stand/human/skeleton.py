@@ -32,10 +32,11 @@ from .marker_sets import DEFAULT_MARKER_SET, MarkerSet, MarkerSetError, load_mar
 SIDES = ("l", "r")
 KNEE_JOINTS = tuple(f"knee_{s}_y" for s in SIDES)
 """The knees' flexion joints (positive flexion) of the skeleton, as ``/human/joint_states`` names them."""
-HIP_FLEXION_JOINTS = tuple(f"hip_{s}_y" for s in SIDES)
-"""The hips' flexion/extension joints (negative flexion, see above)."""
-TRUNK_FLEXION_JOINT = "lumbar_y"
-"""The trunk's flexion joint (positive flexion), the lumbar joint between pelvis and torso."""
+SAGITTAL_FLEXION = {"trunk": (("lumbar_y",), 1.0), "hip": (tuple(f"hip_{s}_y" for s in SIDES), -1.0),
+                    "knee": (KNEE_JOINTS, 1.0), "ankle": (tuple(f"ankle_{s}_y" for s in SIDES), -1.0)}
+"""The sagittal flexions (trunk on the pelvis, hip, knee, ankle dorsiflexion): label -> (the skeleton's joints, the
+sign that makes flexion positive; see above). :meth:`~sit2stand.robot.profile.RobotProfile.sagittal_flexion` is the
+robot's counterpart."""
 SEGMENTS = ["pelvis", "torso", "head"] + [f"{s}_{side}" for side in SIDES for s in
                                          ("upper_arm", "forearm", "hand", "thigh", "shank", "foot", "toes")]
 LENGTH_GROUPS = ("pelvis", "torso", "head", "upper_arm", "forearm", "hand", "thigh", "shank", "foot")

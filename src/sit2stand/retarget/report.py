@@ -39,7 +39,7 @@ from ..io.bag import BagReader
 from ..io.messages import stamp_ns
 from ..robot.identify import read_link_parameters
 from ..robot.model import DEFAULT_ROBOT, PlantConfig, controller_model, sole_corners_world
-from ..human.skeleton import KNEE_JOINTS
+from ..human.skeleton import KNEE_JOINTS, SAGITTAL_FLEXION
 from ..robot.plant import Plant
 from ..robot.postures import standing_pelvis_height_m
 from ..robot.profile import SIDES
@@ -130,6 +130,7 @@ def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | N
     seat_off = float(t[rise[0]]) if len(rise) else None
     fallen, stood, sat_down = _stood_up(cfg, t, z, hold_s, stand_fraction)
     posture = _end_posture(cfg, cad, q, msgs.human_joints)
+    posture["posture_rms_deg"] = _posture_rms(cfg, msgs, t_js, com)
     stood = stood and posture.get("standing_knees_match", True)
     shift = msgs.com_feedback_shift_m
     summary = {"stood_up": bool(stood), "sat_down": sat_down, "fallen": fallen, "pelvis_start_m": float(z[0]),
@@ -173,6 +174,22 @@ def _end_posture(cfg: PlantConfig, model: pin.Model, q: np.ndarray, human_joints
     return out
 
 
+def _posture_rms(cfg: PlantConfig, msgs: _RunMessages, t_js: np.ndarray, com: np.ndarray) -> dict | None:
+    """:func:`posture_rms_deg` of a stand-up run: the human skeleton's flexions (``/human/joint_states``) against the
+    robot's (its sensed joints); None without the human's joints or COM."""
+    if not msgs.human_joints or not msgs.human_com:
+        return None
+    js = [m for _, m in msgs.human_joints]
+    names = list(js[0].name)
+    t_h = _stamps(msgs.human_joints)
+    z_h = np.interp(t_h, _stamps(msgs.human_com), _xyz(msgs.human_com, "position")[:, 2])
+    human = flexion_deg(names, np.array([m.position for m in js]), SAGITTAL_FLEXION)
+    robot_names = list(msgs.joint_states[0][1].name)
+    robot = flexion_deg(robot_names, np.array([m.position for _, m in msgs.joint_states]),
+                        cfg.profile.sagittal_flexion())
+    return posture_rms_deg((t_h, z_h, human), (t_js, com[:, 2], robot))
+
+
 def _read_run(run: Path, every: int) -> _RunMessages:
     """Read the run's topics (every ``every``-th joint state); ValueError if it is not a stand-up run."""
     with BagReader(run) as bag:
@@ -189,7 +206,7 @@ def _read_run(run: Path, every: int) -> _RunMessages:
             bag.read(CHAIR_PLATE_TOPIC) if CHAIR_PLATE_TOPIC in topics else [],
             [np.hypot(m.vector.x, m.vector.y) for _, m in bag.read(ROBOT_COM_FEEDBACK_TOPIC)]
             if ROBOT_COM_FEEDBACK_TOPIC in topics else [],
-            bag.read(HUMAN_JOINTS_TOPIC)[-1:] if HUMAN_JOINTS_TOPIC in topics else [])
+            bag.read(HUMAN_JOINTS_TOPIC) if HUMAN_JOINTS_TOPIC in topics else [])
 
 
 def _measured_configurations(msgs: _RunMessages, t_js: np.ndarray, cad: pin.Model) -> np.ndarray:
@@ -367,3 +384,54 @@ def _render(qs: np.ndarray, ts: np.ndarray, name: str, plant_yaml: Path | None, 
     fig.tight_layout()
     fig.savefig(png, dpi=100)
     plt.close(fig)
+
+
+RISE_WINDOW = (0.05, 0.95)
+"""A rise, for comparing postures, runs from the COM's first 5 % to its 95 % of the way up (from its lowest point
+before its highest to its highest), each body's own: the two bodies compared at the same share of their rise."""
+POSTURE_SAMPLES = 51
+
+
+def flexion_deg(names: list[str], q: np.ndarray, groups: dict[str, tuple[tuple[str, ...], float]]
+                ) -> dict[str, np.ndarray]:
+    """(N,) flexion [deg] of each group present in ``names`` (the mean of its joints, times its sign) from joint
+    angles ``q`` (N, len(names)) [rad]: ``SAGITTAL_FLEXION`` for the human, ``profile.sagittal_flexion()`` for a
+    robot."""
+    out = {}
+    for label, (joints, sign) in groups.items():
+        cols = [names.index(j) for j in joints if j in names]
+        if cols:
+            out[label] = sign * np.degrees(np.asarray(q, float)[:, cols].mean(axis=1))
+    return out
+
+
+def rise_window(t: np.ndarray, com_z: np.ndarray) -> tuple[float, float] | None:
+    """Start and end [s] of a rise (:data:`RISE_WINDOW`) from COM heights; None when the COM does not rise."""
+    top = int(np.nanargmax(com_z))
+    low = int(np.nanargmin(com_z[:top + 1]))
+    span = com_z[top] - com_z[low]
+    if not span > 0.05:
+        return None
+    share = (com_z[low:top + 1] - com_z[low]) / span
+    start = low + int(np.argmax(share >= RISE_WINDOW[0]))
+    end = low + int(np.argmax(share >= RISE_WINDOW[1]))
+    return float(t[start]), float(t[end])
+
+
+def posture_rms_deg(human: tuple[np.ndarray, np.ndarray, dict], robot: tuple[np.ndarray, np.ndarray, dict]
+                    ) -> dict[str, float] | None:
+    """RMS [deg] of robot minus human sagittal flexion over the rise, per joint, each body's rise normalised to
+    :data:`POSTURE_SAMPLES` instants (the robot's rise may last longer: its shape is what is compared). ``human``,
+    ``robot``: (times [s], COM heights [m] at them, label -> flexion [deg] at them). None when either does not
+    rise."""
+    windows = [rise_window(t, z) for t, z, _ in (human, robot)]
+    if None in windows:
+        return None
+    phase = np.linspace(0.0, 1.0, POSTURE_SAMPLES)
+    on = [(lo + phase * (hi - lo)) for lo, hi in windows]
+    out = {}
+    for label in human[2].keys() & robot[2].keys():
+        h = np.interp(on[0], human[0], human[2][label])
+        r = np.interp(on[1], robot[0], robot[2][label])
+        out[label] = float(np.sqrt(np.mean((r - h) ** 2)))
+    return {k: out[k] for k in ("trunk", "hip", "knee", "ankle") if k in out}

@@ -123,6 +123,15 @@ class RobotProfile:
     def trunk_pitch(self) -> str:
         return self.trunk["pitch"]
 
+    def sagittal_flexion(self) -> dict[str, tuple[tuple[str, ...], float]]:
+        """The sagittal flexions as :data:`sit2stand.human.skeleton.SAGITTAL_FLEXION` names them for the human:
+        label -> (joints, sign that makes flexion positive: the trunk forward, hip and knee flexion, ankle
+        dorsiflexion). Sagittal joints turn about +y (see :data:`LEG_ROLES`)."""
+        return {"trunk": ((self.trunk_pitch,), 1.0),
+                "hip": (tuple(self.leg(s, "hip_pitch") for s in SIDES), -1.0),
+                "knee": (tuple(self.leg(s, "knee") for s in SIDES), 1.0),
+                "ankle": (tuple(self.leg(s, "ankle_pitch") for s in SIDES), -1.0)}
+
     def lateral_joints(self) -> list[str]:
         """Trunk yaw and roll, hip yaw and roll, ankle roll: the joints a sagittal rise holds near its seated
         posture."""

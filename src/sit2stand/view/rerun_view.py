@@ -10,8 +10,8 @@ to set up. Entities:
   ``robot/cop``, ``robot/support`` (the soles' convex hull).
 * ``/world/human``: the human's side, :data:`HUMAN_BESIDE_M` to the robot's left unless overlaid: ``skeleton``,
   ``markers``, ``com`` and ``com_floor``, ``cop``, ``plates/<name>`` (outline) and ``plates/<name>/force``.
-* ``/plots``: time series, human against robot: COM forward and height, COP and ZMP forward, knee, hip and trunk
-  flexion.
+* ``/plots``: time series, human against robot: COM forward and height, COP and ZMP forward, knee, hip, trunk
+  flexion and ankle dorsiflexion.
 
 Time is the bag's own (timeline ``time``, seconds of bag time).
 """
@@ -48,7 +48,8 @@ HUMAN_BESIDE_M = 1.0
 FORCE_SCALE_M_PER_N = 1e-3
 """Plate forces are drawn as arrows this long per newton [m/N] (a 700 N body weight: 0.7 m)."""
 PLOTS = {"com_x": "COM forward [m]", "com_z": "COM height [m]", "cop_x": "COP / ZMP forward [m]",
-         "knee": "knee flexion [deg]", "hip": "hip flexion [deg]", "trunk": "trunk flexion [deg]"}
+         "knee": "knee flexion [deg]", "hip": "hip flexion [deg]", "trunk": "trunk flexion [deg]",
+         "ankle": "ankle dorsiflexion [deg]"}
 """The time-series views: entity under ``/plots`` -> title."""
 COLOURS = {"human": (220, 120, 40), "robot": (40, 110, 220), "plan": (120, 200, 255), "zmp": (150, 60, 200),
            "cop": (200, 30, 30), "chair": (140, 90, 50), "floor": (200, 200, 200), "plate": (90, 90, 90)}

@@ -22,7 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import InputError
-from ..human.skeleton import HIP_FLEXION_JOINTS, KNEE_JOINTS, TRUNK_FLEXION_JOINT
+from ..human.skeleton import SAGITTAL_FLEXION
 from ..io.bag import BagReader
 from ..io.forceplate import plate_corners_from
 from ..io.messages import stamp_ns
@@ -31,6 +31,7 @@ from ..io.topics import (CHAIR_PLATE_TOPIC, FEET_PLATE_TOPIC, HUMAN_COM_TOPIC, H
                          ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_PLANNED_COM_TOPIC,
                          ROBOT_PLANNED_ZMP_TOPIC)
 from ..retarget.export import StateSeries, read_states, resample, robot_of
+from ..retarget.report import flexion_deg
 from ..robot.model import SIDES, PlantConfig, sole_corners_local
 from ..robot.plant import Plant
 from ..robot.profile import RobotProfile, package_share
@@ -310,9 +311,7 @@ def _robot_motion(states: StateSeries, robot: str | None) -> tuple[RobotMotion, 
     meshes = [Visual(g.name, Path(g.meshPath), np.asarray(g.meshScale, float), np.asarray(g.meshColor, float),
                      place[i, :, :3, 3], place[i, :, :3, :3])
               for i, g in enumerate(visuals.geometryObjects) if g.meshPath and Path(g.meshPath).is_file()]
-    angles = _flexion(s.joint_names, s.q, {"knee": [profile.leg(side, "knee") for side in SIDES],
-                                           "hip": [profile.leg(side, "hip_pitch") for side in SIDES],
-                                           "trunk": [profile.trunk_pitch]}, negate=("hip",))
+    angles = flexion_deg(s.joint_names, s.q, profile.sagittal_flexion())
     return RobotMotion(profile, t, meshes, com, soles, angles), _chair(robot or profile.name, profile)
 
 
@@ -326,17 +325,6 @@ def _chair(robot: str, profile: RobotProfile) -> Chair:
     plant = Plant(PlantConfig(robot=robot), with_chair=False)
     half = np.array([profile.chair["depth_m"] / 2, profile.chair["width_m"] / 2, plant.seat_height_m / 2])
     return Chair(np.array([plant.chair_front_x - half[0], 0.0, half[2]]), half)
-
-
-def _flexion(names: list[str], q: np.ndarray, joints: dict[str, list[str]],
-             negate: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
-    """Mean angle [deg] of each group of ``joints`` present in ``names`` (sign flipped for ``negate``)."""
-    out = {}
-    for label, group in joints.items():
-        cols = [names.index(j) for j in group if j in names]
-        if cols:
-            out[label] = np.degrees(q[:, cols].mean(axis=1)) * (-1.0 if label in negate else 1.0)
-    return out
 
 
 def _human_motion(urdf: str, joint_msgs: list, pelvis_msgs: list) -> HumanMotion:
@@ -362,6 +350,5 @@ def _human_motion(urdf: str, joint_msgs: list, pelvis_msgs: list) -> HumanMotion
         bones.append([[data.oMi[model.parents[j]].translation.copy(), data.oMi[j].translation.copy()]
                       for j in range(2, model.njoints)
                       if np.linalg.norm(model.jointPlacements[j].translation) > 1e-6])
-    angles = _flexion(names, q_all, {"knee": list(KNEE_JOINTS), "hip": list(HIP_FLEXION_JOINTS),
-                                     "trunk": [TRUNK_FLEXION_JOINT]}, negate=("hip",))
+    angles = flexion_deg(names, q_all, SAGITTAL_FLEXION)
     return HumanMotion(t, np.array(bones, float), angles)
