@@ -205,6 +205,7 @@ class RetargeterNode(Node):
         if robot and self._com_found and not self._ready:
             self._ready = True
             self.get_logger().info(f"{READY_LINE} ({time.monotonic() - self._t_init:.2f} s after start)")
+            self._process()     # frames that came before the robot's state: a short trial may send no more
 
     def _on_chair(self, data: bytes) -> None:
         # 1 kHz, in the real-time process: read the stamp and Fz from the CDR bytes instead of building messages
