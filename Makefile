@@ -47,19 +47,19 @@ bench-human: setup  ## the human COM on the real lab recordings of ../shared/dat
 	@$(PY) -m sit2stand.bench --only human --out bench/results/bench.json
 
 bench-capture: setup  ## the mocap bridge 10 min at 200 Hz against serve-c3d: frames lost, memory growth, latency; merged into bench.json
-	@$(PY) -m sit2stand.bench_capture --out bench/results/bench.json
+	@$(PY) -m sit2stand.bench.capture --out bench/results/bench.json
 
 bench-live: setup     ## the live stand-up (serve-c3d -> bridge -> estimator -> retargeter -> robot) 5 times: capture -> markers / COM / joint command p50, p99; bench/results/live.json
-	@$(PY) -m sit2stand.bench_live --out bench/results/live.json
+	@$(PY) -m sit2stand.bench.live --out bench/results/live.json
 
 bench-standup: setup  ## 30 digital humans (stature, mass, seat, natural/elderly/fast) retargeted and simulated: success, time scale, COM, torque; bench/results/standup/ (BENCH_STANDUP_ARGS="--robot g1": standup_g1/)
-	@$(PY) -m sit2stand.bench_standup $(BENCH_STANDUP_ARGS)
+	@$(PY) -m sit2stand.bench.standup $(BENCH_STANDUP_ARGS)
 
 bench-batch: setup  ## a stand-up batch (40 G1 digital humans, CAD) in one process, on Ray with 1 and with 2 workers: throughput and ratios; bench/results/batch.json
-	@$(PY) -m sit2stand.bench_batch --out bench/results/batch.json
+	@$(PY) -m sit2stand.bench.batch --out bench/results/batch.json
 
 bench-faults: setup  ## fault campaign (corrupt/cut files, NaN/missing/mm markers, bad identification, killed recorder, second graph) + a SOAK_MIN-minute soak (default 2; the full soak: SOAK_MIN=30); bench/results/faults.json
-	@$(PY) -m sit2stand.bench_faults --soak-min $(SOAK_MIN) --out bench/results/faults.json
+	@$(PY) -m sit2stand.bench.faults --soak-min $(SOAK_MIN) --out bench/results/faults.json
 
 lock:             ## re-pin constraints.txt from the current .venv (after changing requirements.txt)
 	@(echo "# Full pinned closure of ros_ws/requirements.txt (pip freeze on Python 3.11, Linux x86_64). Regenerate with: make lock"; \

@@ -1,10 +1,10 @@
-"""sit2stand.bench_standup: the population is drawn in range, reproducibly, and aggregated right (nothing simulated)."""
+"""sit2stand.bench.standup: the population is drawn in range, reproducibly, and aggregated right (nothing simulated)."""
 
 import dataclasses
 
 import pytest
 
-from sit2stand import bench_standup as B
+from sit2stand.bench import standup as B
 from sit2stand.human.synth import SynthConfig
 
 

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from sit2stand.bench_live import summary
+from sit2stand.bench.live import summary
 from sit2stand.capture.latency import capture_origin_ns, latencies_ms, p50_p99
 
 

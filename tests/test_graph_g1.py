@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from sit2stand.bench_live import LiveRunError, run_live
+from sit2stand.bench.live import LiveRunError, run_live
 from sit2stand.io.bag import BagReader
 
 pytestmark = pytest.mark.graph

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from sit2stand.bench_live import PROTOCOL_ARGS, TOPICS, LiveRunError, run_live
+from sit2stand.bench.live import PROTOCOL_ARGS, TOPICS, LiveRunError, run_live
 from sit2stand.capture.latency import p50_p99
 from sit2stand.io.topics import MARKERS_TOPIC
 

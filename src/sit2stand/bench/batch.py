@@ -1,6 +1,6 @@
 """Benchmark (not a test): what Ray costs and gives a stand-up batch (make bench-batch).
 
-    python -m sit2stand.bench_batch [--cases 40] [--robot g1] [--out bench/results/batch.json]
+    python -m sit2stand.bench.batch [--cases 40] [--robot g1] [--out bench/results/batch.json]
 
 The same population (:func:`sit2stand.batch.standup.sample_population`, seed 0; CAD parameters, so that nothing
 depends on ``make demo``) is run three times through :func:`sit2stand.batch.engine.run_jobs`: in this process (no
@@ -23,10 +23,9 @@ from pathlib import Path
 
 import ray
 
-from .batch.engine import run_jobs, start_ray
-from .batch.standup import Setting, sample_population, standup_jobs
+from ..batch.engine import run_jobs, start_ray
+from ..batch.standup import Setting, sample_population, standup_jobs
 
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def timed_batch(cases: int, robot: str, workers: int, on_ray: bool) -> dict:
@@ -49,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sit2stand-bench-batch", description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", type=int, default=40)
     parser.add_argument("--robot", default="g1")
-    parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "batch.json")
+    parser.add_argument("--out", type=Path, default=Path("bench") / "results" / "batch.json")
     args = parser.parse_args(argv)
     single = timed_batch(args.cases, args.robot, 1, on_ray=False)
     print(f"single process: {single}", flush=True)

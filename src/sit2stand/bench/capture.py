@@ -1,6 +1,6 @@
 """Benchmark (not a test): the mocap bridge streaming for a long time at 200 Hz: frames lost, memory growth, latency.
 
-    python -m sit2stand.bench_capture [--duration-s 600] [--out bench/results/bench.json]   (make bench-capture)
+    python -m sit2stand.bench.capture [--duration-s 600] [--out bench/results/bench.json]   (make bench-capture)
 
 The QTM stand-in (``sit2stand serve-c3d bags/elderly --protocol qtm --rate 2 --loop``: markers at 200 Hz, two
 plates at 2 kHz) and the ``mocap_bridge`` node run as processes of their own, as the capture PC and the bridge would;
@@ -37,9 +37,10 @@ import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sit2stand_msgs.msg import MocapFrame
 
-from .capture.recording import load_recording
-from .launch import load_graph
-from .scheduling import Scheduling
+from . import project_folder
+from ..capture.recording import load_recording
+from ..launch import load_graph
+from ..scheduling import Scheduling
 
 RATE_HZ = 200.0
 
@@ -151,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration-s", type=float, default=600.0, help="how long to stream (the target: 600 s)")
     parser.add_argument("--out", type=Path, default=Path("bench/results/bench.json"))
     args = parser.parse_args(argv)
-    figures = run(args.duration_s, Path(__file__).resolve().parents[2])
+    figures = run(args.duration_s, project_folder())
     for key, value in figures.items():
         print(f"{key:42s} {value}")
     results = json.loads(args.out.read_text()) if args.out.exists() else {}

@@ -1,7 +1,7 @@
 """Benchmark (not a test): a fault campaign and a soak. Every fault of the campaign is injected into real files and real
 node processes, and its outcome recorded; the soak runs the simulated robot and a recorder for minutes.
 
-    python -m sit2stand.bench_faults [--soak-min 2] [--only CASE,...] [--out bench/results/faults.json]
+    python -m sit2stand.bench.faults [--soak-min 2] [--only CASE,...] [--out bench/results/faults.json]
     make bench-faults                       (the campaign and a 2-minute soak)
     make bench-faults SOAK_MIN=30           (the 30-minute soak)
 
@@ -38,16 +38,22 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from .io.bag import BagError, BagReader, BagWriter
-from .io.messages import cdr_header_stamp_ns
-from .robot.identify import (IdentificationError, check_postures, check_result, controller_model, identify_full,
+from . import project_folder
+from ..io.bag import BagError, BagReader, BagWriter
+from ..io.messages import cdr_header_stamp_ns
+from ..robot.identify import (IdentificationError, check_postures, check_result, controller_model, identify_full,
                              read_postures, write_yaml)
-from .robot.model import PlantConfig
-from .robot.postures import collect_postures
+from ..robot.model import PlantConfig
+from ..robot.postures import collect_postures
 
-ROOT = Path(__file__).resolve().parents[2]
-NATURAL = ROOT / "bags" / "natural"
-REAL_C3D = (ROOT / ".." / "shared" / "data" / "real" / "sts_child_vicon_01.c3d").resolve()
+
+
+def _natural() -> Path:
+    return project_folder() / "bags" / "natural"
+
+
+def _real_c3d() -> Path:
+    return (project_folder() / ".." / "shared" / "data" / "real" / "sts_child_vicon_01.c3d").resolve()
 MARKERS = "/mocap/markers"
 
 
@@ -59,7 +65,7 @@ def _env(domain: int) -> dict[str, str]:
 def _cli(*args: str, timeout: float = 300, domain: int = 61) -> tuple[int, str]:
     """Run ``sit2stand ARGS``; its exit code and output."""
     result = subprocess.run([sys.executable, "-m", "sit2stand.cli", *map(str, args)], capture_output=True, text=True,
-                            timeout=timeout, env=_env(domain), cwd=ROOT)
+                            timeout=timeout, env=_env(domain), cwd=project_folder())
     return result.returncode, result.stdout + result.stderr
 
 
@@ -98,7 +104,7 @@ def _recover(bag: Path) -> tuple[str, str]:
 
 
 def case_corrupt_chunk(work: Path) -> list[tuple[str, str, str]]:
-    bag = _copy(NATURAL, work, "corrupt")
+    bag = _copy(_natural(), work, "corrupt")
     data = bytearray(_mcap(bag).read_bytes())
     at = len(data) // 3
     data[at:at + 256] = random.Random(0).randbytes(256)
@@ -108,7 +114,7 @@ def case_corrupt_chunk(work: Path) -> list[tuple[str, str, str]]:
 
 
 def case_cut_bag(work: Path) -> list[tuple[str, str, str]]:
-    bag = _copy(NATURAL, work, "cut")
+    bag = _copy(_natural(), work, "cut")
     data = _mcap(bag).read_bytes()
     _mcap(bag).write_bytes(data[:len(data) // 2])
     (bag / "metadata.yaml").unlink()                     # as a recorder killed mid-run leaves it
@@ -117,10 +123,10 @@ def case_cut_bag(work: Path) -> list[tuple[str, str, str]]:
 
 
 def case_cut_c3d(work: Path) -> list[tuple[str, str, str]]:
-    if not REAL_C3D.is_file():
-        return [("cut C3D: import-c3d", "skipped", f"{REAL_C3D} is not on this machine")]
+    if not _real_c3d().is_file():
+        return [("cut C3D: import-c3d", "skipped", f"{_real_c3d()} is not on this machine")]
     cut = work / "cut.c3d"
-    data = REAL_C3D.read_bytes()
+    data = _real_c3d().read_bytes()
     cut.write_bytes(data[:len(data) // 2])
     rc, out = _cli("import-c3d", cut, "--out", work / "cut_c3d")
     return [("cut C3D: import-c3d", *_judge(rc, out))]
@@ -170,7 +176,7 @@ def case_markers(work: Path) -> list[tuple[str, str, str]]:
     rows = []
     for label, edit in (("NaN markers (50 frames)", _nan_stretch), ("missing marker RASI", _without("RASI")),
                         ("markers in mm", _in_mm)):
-        bag = _edit_markers(NATURAL, work / re.sub(r"\W+", "_", label), edit)
+        bag = _edit_markers(_natural(), work / re.sub(r"\W+", "_", label), edit)
         rc, out = _cli("human-com", bag, "--out", work / f"{bag.name}_com")
         rows.append((f"{label}: human-com", *_human_com_outcome(rc, out, work / f"{bag.name}_com")))
     return rows
@@ -190,10 +196,10 @@ def _human_com_outcome(rc: int, out: str, out_dir: Path) -> tuple[str, str]:
 
 
 def case_empty_and_wrong_type(work: Path) -> list[tuple[str, str, str]]:
-    empty = _edit_markers(NATURAL, work / "empty_markers", lambda _i, _m: None)
+    empty = _edit_markers(_natural(), work / "empty_markers", lambda _i, _m: None)
     rc, out = _cli("human-com", empty, "--out", work / "empty_com")
     rows = [("topic without messages: human-com", *_judge(rc, out))]
-    wrong = _copy(NATURAL, work, "wrong_type")
+    wrong = _copy(_natural(), work, "wrong_type")
     meta = wrong / "metadata.yaml"
     meta.write_text(meta.read_text().replace("sit2stand_msgs/msg/MocapFrame", "sit2stand_msgs/msg/CenterOfMass"))
     rc, out = _cli("human-com", wrong, "--out", work / "wrong_com")
@@ -231,11 +237,12 @@ def _refused(call: Callable[[], object], error: type[Exception]) -> tuple[str, s
 # --- node processes -----------------------------------------------------------------------------------------------
 def case_second_graph(work: Path) -> list[tuple[str, str, str]]:
     env = _env(62)
-    first = subprocess.Popen([sys.executable, "-m", "sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={NATURAL}",
-                              "-p", "loop:=true"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    first = subprocess.Popen([sys.executable, "-m", "sit2stand.nodes.replayer", "--ros-args", "-p",
+                              f"bag:={_natural()}", "-p", "loop:=true"], env=env, stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT, text=True)
     try:
         time.sleep(4.0)
-        rc, out = _cli("replay", NATURAL, domain=62, timeout=60)
+        rc, out = _cli("replay", _natural(), domain=62, timeout=60)
     finally:
         first.send_signal(signal.SIGINT)
         first_out = first.communicate(timeout=30)[0]
@@ -261,10 +268,10 @@ def case_killed_recorder(work: Path) -> list[tuple[str, str, str]]:
 def _standup_killing_the_recorder(out_dir: Path, params: Path, at_percent: float) -> tuple[int, str]:
     """The stand-up graph on the natural rise, its recorder killed once the replay is ``at_percent`` through."""
     if not params.is_file():
-        params = ROOT / "runs" / "demo" / "robot" / "identified_full.yaml"
-    proc = subprocess.Popen([sys.executable, "-m", "sit2stand.cli", "launch", "standup", f"bag:={NATURAL}",
+        params = project_folder() / "runs" / "demo" / "robot" / "identified_full.yaml"
+    proc = subprocess.Popen([sys.executable, "-m", "sit2stand.cli", "launch", "standup", f"bag:={_natural()}",
                              f"out:={out_dir}", f"params:={params}", "height:=1.75", "mass:=75"], env=_env(63),
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT)
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=project_folder())
     lines, recorder_pid = [], 0
     for line in proc.stdout:
         lines.append(line)
@@ -349,7 +356,7 @@ def _run_graph(minutes: float, out: Path, domain: int) -> tuple[int, str, dict[s
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     proc = subprocess.Popen([sys.executable, "-m", "sit2stand.cli", "launch", "robot_seated", f"out:={out}",
                              "--timeout", f"{minutes * 60.0 + 1.0:g}"], env=_env(domain), stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, cwd=ROOT)
+                            stderr=subprocess.STDOUT, text=True, cwd=project_folder())
     lines: list[str] = []
     reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
     reader.start()

@@ -37,12 +37,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .batch.engine import Job, run_jobs
-from .batch.standup import Case, sample_population, synthesise
-from .gap.human import WITHIN_VARIATION, human_gap
-from .gap.workflow import NO_DISCREPANCY
-from .human.demonstration_bag import write_demonstration_bag
-from .human.skeleton import SEGMENTS, ExtraMass, Subject, build_human
+from ..batch.engine import Job, run_jobs
+from ..batch.standup import Case, sample_population, synthesise
+from ..gap.human import WITHIN_VARIATION, human_gap
+from ..gap.workflow import NO_DISCREPANCY
+from ..human.demonstration_bag import write_demonstration_bag
+from ..human.skeleton import SEGMENTS, ExtraMass, Subject, build_human
 
 GROUPS = {
     # segment group -> hidden mass range [kg], offset half-range from the segment's COM per axis [m]

@@ -5,7 +5,7 @@ and without (the anthropometric table alone), and the capture software's own COM
 ``CentreOfMass``). Each is scored by the residual of Newton's law for the whole body, F_plates - m (a_com + g z), RMS
 per axis [N] over the frames whose whole weight is on the plates (the same frames for every COM of a trial), a_com by
 a Savitzky-Golay second derivative (0.3 s, order 4). On subject01, also OpenSim's own COM: the generic Gait2392
-model scaled on ``subject01_static.trc`` and fitted by OpenSim's IK (:mod:`sit2stand.bench_opensim`; PyPI ``opensim``
+model scaled on ``subject01_static.trc`` and fitted by OpenSim's IK (:mod:`sit2stand.bench.opensim`; PyPI ``opensim``
 4.6 in a venv of its own, made on demand, and a checkout of opensim-models named by ``SIT2STAND_OPENSIM_MODELS``);
 without them the table says why. Printed as a table and written to JSON.
 """
@@ -18,15 +18,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench_opensim import opensim_com
-from .human.com import estimate_com
-from .human.marker_sets import choose_marker_set
-from .human.offline import Trial, newton_residual, read_trial
-from .human.skeleton import Subject
-from .io.c3d import read_c3d, write_trial_bag
-from .io.trc import read_opensim_trial
+from . import project_folder
+from .opensim import opensim_com
+from ..human.com import estimate_com
+from ..human.marker_sets import choose_marker_set
+from ..human.offline import Trial, newton_residual, read_trial
+from ..human.skeleton import Subject
+from ..io.c3d import read_c3d, write_trial_bag
+from ..io.trc import read_opensim_trial
 
-REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "real"
+
+
+def _real() -> Path:
+    """The real recordings of other labs, beside the project (``../shared/data/real``)."""
+    return project_folder().parent / "shared" / "data" / "real"
 
 
 @dataclass
@@ -50,7 +55,7 @@ TRIALS = [
 
 def _import(trial: RealTrial, out: Path) -> Path:
     """The trial as a bag, as `sit2stand import-c3d` / `import-trc` write it."""
-    paths = [REAL / f for f in trial.files]
+    paths = [_real() / f for f in trial.files]
     if paths[0].suffix == ".c3d":
         lab = read_c3d(paths[0], feet_plate=trial.feet_plate)
     else:
@@ -80,8 +85,9 @@ def score(bag: Path, real: RealTrial | None = None) -> dict:
         coms["the capture software's own"] = np.stack([np.interp(res.t_s, t[ok], com[ok, i]) for i in range(3)], 1)
     extra = {}
     if real is not None and real.opensim_static:
-        com, extra["opensim"] = opensim_com(REAL / real.opensim_static, REAL / real.files[0], mass, subject.height_m,
-                                            res.t_s)
+        folder = _real()
+        com, extra["opensim"] = opensim_com(folder / real.opensim_static, folder / real.files[0], mass,
+                                            subject.height_m, res.t_s)
         if com is not None:
             coms["OpenSim, scaled Gait2392"] = com
     residuals = {k: newton_residual(res.t_s, c, trial.plates, mass) for k, c in coms.items()}
@@ -95,8 +101,8 @@ def bench_human_real(trials: list[RealTrial] = TRIALS) -> dict:
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         for i, trial in enumerate(trials):
-            if not all((REAL / f).is_file() for f in trial.files):
-                out[trial.name] = {"skipped": f"not on this machine ({REAL})"}
+            if not all((_real() / f).is_file() for f in trial.files):
+                out[trial.name] = {"skipped": f"not on this machine ({_real()})"}
                 continue
             print(f"  {trial.name} ...", flush=True)
             out[trial.name] = score(_import(trial, Path(tmp) / f"trial{i}"), trial)

@@ -1,6 +1,6 @@
 """`make bench-live`: the live stand-up's latency over several runs on one machine (not a test).
 
-    python -m sit2stand.bench_live [--runs 5] [--protocol qtm|natnet] [--marker-rate 200] [--out FILE.json]
+    python -m sit2stand.bench.live [--runs 5] [--protocol qtm|natnet] [--marker-rate 200] [--out FILE.json]
 
 Each run is :func:`run_live`: the live graph (``live.yaml``: mocap_bridge -> human_com -> retargeter -> driver ->
 recorder; CAD plant; the skeleton calibrated beforehand with ``human-calibrate``, so the estimator runs in real time
@@ -29,15 +29,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .capture.latency import PROBE_READY, capture_origin_ns, latencies_ms, p50_p99
-from .data import folder
-from .errors import Sit2StandError
-from .io.topics import HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_RETARGET_IK_TOPIC
-from .retarget.pacing import READY_LINE
-from .retarget.report import analyse
-from .scheduling import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY, Scheduling
+from . import project_folder
+from ..capture.latency import PROBE_READY, capture_origin_ns, latencies_ms, p50_p99
+from ..data import folder
+from ..errors import Sit2StandError
+from ..io.topics import HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_RETARGET_IK_TOPIC
+from ..retarget.pacing import READY_LINE
+from ..retarget.report import analyse
+from ..scheduling import CAPTURE_STAND_IN_PRIORITY, OBSERVER_PRIORITY, Scheduling
 
-ROOT = Path(__file__).resolve().parents[2]
 PROTOCOL_ARGS = {"qtm": (), "natnet": ("up:=+Y", "plates:=[]")}
 """The live graph's arguments for each protocol: NatNet serves markers only, y up (Motive's default), so the bridge
 is told so and the estimator expects no plates (its seat-off and the retargeter's from the pelvis markers)."""
@@ -151,7 +151,7 @@ def run_live(work: Path, env: dict[str, str], calibration: Path, demonstration: 
     Raises:
         LiveRunError: a process did not start, hung or failed before the figures (the logs' tails attached).
     """
-    demonstration = demonstration or ROOT / "bags" / "elderly"
+    demonstration = demonstration or project_folder() / "bags" / "elderly"
     port = _free_port(protocol)
     logs = {name: work / f"{name}.log" for name in ("launch", "probe", "serve")}
     record = work / "latency.json"
@@ -238,7 +238,7 @@ def _cli(args: list[str], env: dict[str, str]) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="sit2stand.bench_live", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="sit2stand.bench.live", description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--out", type=Path, default=Path("bench/results/live.json"))
     parser.add_argument("--protocol", default="qtm", choices=["qtm", "natnet"],
@@ -250,7 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     env = bench_env()
     runs: list[dict[str, float]] = []
     with tempfile.TemporaryDirectory() as tmp:
-        demonstration, calibration = ROOT / "bags" / "elderly", Path(tmp) / "calibration.yaml"
+        demonstration, calibration = project_folder() / "bags" / "elderly", Path(tmp) / "calibration.yaml"
         if args.marker_rate != 100.0:
             demonstration = Path(tmp) / "demonstration"
             if not _cli(["synth-human", "--style", "elderly", "--marker-rate", f"{args.marker_rate:g}", "--out",

@@ -17,11 +17,18 @@ from pathlib import Path
 
 import numpy as np
 
-from .io.trc import OPENSIM_AXES
+from . import project_folder
+from ..io.trc import OPENSIM_AXES
 
-ROOT = Path(__file__).resolve().parents[2]
-VENV = ROOT / ".venv-opensim"
-WORKER = ROOT / "bench" / "opensim_gait2392.py"
+
+
+def _venv() -> Path:
+    """OpenSim's own environment (make bench-human makes it)."""
+    return project_folder() / ".venv-opensim"
+
+
+def _worker() -> Path:
+    return project_folder() / "bench" / "opensim_gait2392.py"
 MODELS_ENV = "SIT2STAND_OPENSIM_MODELS"
 REQUIREMENT = "opensim==4.6"
 GENERIC = Path("Models/Gait2392_Simbody/gait2392_thelen2003muscle.osim")
@@ -40,11 +47,11 @@ def models_dir() -> tuple[Path | None, str]:
 
 def opensim_python() -> tuple[Path | None, str]:
     """The Python of ``.venv-opensim`` with ``opensim`` importable, made on demand; or None and why not."""
-    python = VENV / "bin" / "python"
+    python = _venv() / "bin" / "python"
     if python.is_file() and _run([str(python), "-c", "import opensim"]).returncode == 0:
         return python, ""
-    print(f"  installing {REQUIREMENT} into {VENV} (once; ~400 MB) ...", flush=True)
-    steps = ([sys.executable, "-m", "venv", "--clear", str(VENV)],
+    print(f"  installing {REQUIREMENT} into {_venv()} (once; ~400 MB) ...", flush=True)
+    steps = ([sys.executable, "-m", "venv", "--clear", str(_venv())],
              [str(python), "-m", "pip", "install", "-q", REQUIREMENT])
     for step in steps:
         done = _run(step, timeout_s=1800)
@@ -79,11 +86,11 @@ def opensim_com(static: Path, trial: Path, mass_kg: float, height_m: float,
         return None, {"skipped": why}
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "com.csv"
-        done = _run([str(python), str(WORKER), str(models), str(static), str(trial), f"{mass_kg:.6g}",
+        done = _run([str(python), str(_worker()), str(models), str(static), str(trial), f"{mass_kg:.6g}",
                      f"{height_m:.6g}", str(out)], timeout_s=600, cwd=tmp)   # OpenSim logs into its cwd
         if done.returncode != 0 or not out.is_file():
             tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or ["no output"]
-            return None, {"skipped": f"{WORKER.name} failed: {tail[0][:160]}"}
+            return None, {"skipped": f"{_worker().name} failed: {tail[0][:160]}"}
         t, com, figures = read_worker_csv(out)
     at = np.stack([np.interp(t_s, t, com[:, i]) for i in range(3)], axis=1)
     return at, {"ik_marker_rms_mm": round(figures["marker_rms_m"] * 1e3, 1),

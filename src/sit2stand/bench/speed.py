@@ -27,28 +27,29 @@ from pathlib import Path
 import numpy as np
 from rosbags.rosbag2 import Reader
 
-from .batch.engine import Job, run_jobs
-from .bench_gap_human import CASES as GAP_HUMAN_CASES, bench_gap_human, summary_table
-from .bench_human import bench_human_real, print_table
-from .bench_live import COMMAND_P99_TARGET_MS
-from .data import graph_path, plant_path
-from .gap.hidden import KINDS, OUT_OF_LIBRARY, draw, run_case
-from .human.com import estimate_com
-from .human.com_stream import StreamingComEstimator
-from .human.offline import calibrate_from_bag, read_trial
-from .human.offline import run as human_com_offline
-from .human.skeleton import Subject
-from .io import messages as M
-from .io.bag import BagReader, BagWriter, merge_bags
-from .io.topics import MARKERS_TOPIC, MOCAP_TYPE, PLATE_TYPE, plate_topic
-from .retarget.player import PlanPlayer
-from .retarget.report import analyse
-from .retarget.robot import robot_setup
-from .retarget.stream import Retargeter
-from .robot.identify import identify
-from .robot.model import DEFAULT_ROBOT, PlantConfig
-from .robot.plant import Plant
-from .robot.postures import collect_postures
+from . import project_folder
+from ..batch.engine import Job, run_jobs
+from .gap_human import CASES as GAP_HUMAN_CASES, bench_gap_human, summary_table
+from .human import bench_human_real, print_table
+from .live import COMMAND_P99_TARGET_MS
+from ..data import graph_path, plant_path
+from ..gap.hidden import KINDS, OUT_OF_LIBRARY, draw, run_case
+from ..human.com import estimate_com
+from ..human.com_stream import StreamingComEstimator
+from ..human.offline import calibrate_from_bag, read_trial
+from ..human.offline import run as human_com_offline
+from ..human.skeleton import Subject
+from ..io import messages as M
+from ..io.bag import BagReader, BagWriter, merge_bags
+from ..io.topics import MARKERS_TOPIC, MOCAP_TYPE, PLATE_TYPE, plate_topic
+from ..retarget.player import PlanPlayer
+from ..retarget.report import analyse
+from ..retarget.robot import robot_setup
+from ..retarget.stream import Retargeter
+from ..robot.identify import identify
+from ..robot.model import DEFAULT_ROBOT, PlantConfig
+from ..robot.plant import Plant
+from ..robot.postures import collect_postures
 
 
 def _rate(n: int, seconds: float) -> float:
@@ -448,7 +449,7 @@ def main(argv: list[str] | None = None) -> int:
                         "proportions exactly (no random segment factors), to tell the workflow's misses from the "
                         "population's own mass differences")
     args = parser.parse_args(argv)
-    root = Path(__file__).resolve().parents[2]
+    root = project_folder()
     env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "91"),
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     if args.only:

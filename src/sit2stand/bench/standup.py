@@ -1,6 +1,6 @@
 """Benchmark (not a test): a population of digital humans stood up by a simulated robot (TALOS, or ``--robot``).
 
-    python -m sit2stand.bench_standup [--cases 30] [--seed 0] [--jobs 1] [--address RAY] [--only-style S]
+    python -m sit2stand.bench.standup [--cases 30] [--seed 0] [--jobs 1] [--address RAY] [--only-style S]
                                       [--marker-rate 100] [--controller wbc|inverse_dynamics] [--robot g1] [--out DIR]
                                                                                            (make bench-standup)
 
@@ -34,20 +34,21 @@ from pathlib import Path
 
 import numpy as np
 
-from .batch.engine import run_jobs
-from .batch.standup import RISE_S, STYLES, Case, Setting, sample_population, standup_jobs, synthesise  # noqa: F401
-from .demo import robot_identification
-from .robot.model import DEFAULT_ROBOT
-from .robot.plant import CONTROLLERS, DEFAULT_CONTROLLER
+from . import project_folder
+from ..batch.engine import run_jobs
+from ..batch.standup import RISE_S, STYLES, Case, Setting, sample_population, standup_jobs, synthesise  # noqa: F401
+from ..demo import robot_identification
+from ..robot.model import DEFAULT_ROBOT
+from ..robot.plant import CONTROLLERS, DEFAULT_CONTROLLER
 
-ROOT = Path(__file__).resolve().parents[2]
-DEFAULT_OUT = ROOT / "bench" / "results" / "standup"
+DEFAULT_OUT = Path("bench") / "results" / "standup"
+"""Under the project folder (:func:`~sit2stand.bench.project_folder`)."""
 
 
 def demo_params(robot: str) -> Path:
     """Where ``make demo`` leaves ``robot``'s identified parameters."""
     run = "demo" if robot == DEFAULT_ROBOT else f"demo_{robot}"
-    return ROOT / "runs" / run / "robot" / "identified_full.yaml"
+    return project_folder() / "runs" / run / "robot" / "identified_full.yaml"
 
 TARGET_TIME_SCALE = 1.5         # the target: at least 90 % stand with time_scale at most 1.5
 QP_TARGET_MS = 1.0              # the target: the torque controller's QP p99 at most 1 ms per step
@@ -185,7 +186,7 @@ def resolve_params(args: argparse.Namespace) -> tuple[Path | None, str]:
         return args.params, f"identified: {args.params}"
     demo = demo_params(args.robot)
     if demo.exists():
-        return demo, f"identified: {demo.relative_to(ROOT)} (make demo)"
+        return demo, f"identified: {demo.relative_to(project_folder())} (make demo)"
     robot_identification(args.out / "robot", 88, args.robot)        # as make demo does
     return args.out / "robot" / "identified_full.yaml", f"identified here: {args.out / 'robot'}"
 
@@ -220,8 +221,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--robot", default=DEFAULT_ROBOT, help="robot profile: talos (default), g1 or a file")
     parser.add_argument("--out", type=Path, default=None, help="default: bench/results/standup (G1: standup_g1)")
     args = parser.parse_args(argv)
-    args.out = args.out or (DEFAULT_OUT if args.robot == DEFAULT_ROBOT else
-                            DEFAULT_OUT.with_name(f"standup_{args.robot}"))
+    args.out = args.out or project_folder() / (DEFAULT_OUT if args.robot == DEFAULT_ROBOT else
+                                               DEFAULT_OUT.with_name(f"standup_{args.robot}"))
     cases = sample_population(args.cases, args.seed, (args.only_style,) if args.only_style else STYLES,
                               args.marker_rate)
     params, source = resolve_params(args)

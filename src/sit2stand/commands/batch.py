@@ -10,13 +10,24 @@ from .robot import CONTROLLER_CHOICES, DEFAULT_CONTROLLER, ROBOT_HELP
 KINDS = ("standup", "gap", "gap-human")
 
 
+def _demo_params(robot: str) -> str | None:
+    """``make demo``'s identified parameters of ``robot`` when run from the project that has them, else None."""
+    from ..bench.standup import demo_params
+    from ..errors import InputError
+
+    try:
+        path = demo_params(robot)
+    except InputError:          # not in the project folder: no demo to take them from
+        return None
+    return str(path) if path.exists() else None
+
+
 def _jobs(args: argparse.Namespace) -> list:
     """The batch's jobs for its kind and options."""
     if args.kind == "standup":
         from ..batch.standup import Setting, grid_cases, sample_population, standup_jobs
-        from ..bench_standup import demo_params
 
-        params = None if args.cad else args.params or (str(p) if (p := demo_params(args.robot)).exists() else None)
+        params = None if args.cad else args.params or _demo_params(args.robot)
         print(f"batch standup: robot {args.robot}, plant {args.plant}, controller {args.controller}, parameters "
               f"{params or 'CAD'}")
         setting = Setting(args.robot, args.plant, args.controller, params)
@@ -24,10 +35,10 @@ def _jobs(args: argparse.Namespace) -> list:
             [(c, setting) for c in sample_population(args.cases, args.seed)]
         return standup_jobs(cases)
     if args.kind == "gap":
-        from ..bench import gap_cases, gap_jobs
+        from ..bench.speed import gap_cases, gap_jobs
 
         return gap_jobs(gap_cases(args.cases, args.cases // 2, robot=args.robot), args.robot)
-    from ..bench_gap_human import draw_cases, gap_human_jobs
+    from ..bench.gap_human import draw_cases, gap_human_jobs
 
     return gap_human_jobs(draw_cases(args.cases, seed=args.seed))
 
