@@ -15,7 +15,7 @@ from websockets.sync.client import connect
 from sit2stand.data import folder
 from sit2stand.io.live_view import SUBPROTOCOL, LiveView, standup_layout
 from sit2stand.io.typestore import typestore
-from sit2stand.robot.profile import package_asset
+from sit2stand.robot.packages import package_asset
 
 ROOT = Path(__file__).resolve().parents[1]
 MESSAGE_DATA = 0x01          # Foxglove WebSocket protocol: binary opcode of a message

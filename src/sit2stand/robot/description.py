@@ -40,7 +40,8 @@ from ..errors import Sit2StandError
 from ..io.topics import LAB_FRAME, WORLD_FRAME, sole_world_aligned_frame
 from ..vectors import xyzw_from_wxyz
 from .model import floating_base_removed
-from .profile import SIDES, RobotProfile, load_profile, mesh_uris_to_files
+from .packages import mesh_uris_to_files
+from .profile import SIDES, RobotProfile, load_profile
 
 
 class DescriptionError(Sit2StandError, ValueError):

@@ -27,7 +27,8 @@ import yaml
 
 from ..data import DataFileNotFound, plant_path
 from ..errors import Sit2StandError
-from .profile import SIDES, RobotProfile, load_profile, mesh_uris_to_files, profile_of
+from .packages import mesh_uris_to_files
+from .profile import SIDES, RobotProfile, load_profile, profile_of
 
 DEFAULT_ROBOT = "talos"
 """The robot of a plant that names none, and of commands not told ``--robot``: the paper's closest public analog."""

@@ -34,7 +34,8 @@ from ..retarget.export import StateSeries, read_states, resample, robot_of
 from ..retarget.report import flexion_deg
 from ..robot.model import SIDES, PlantConfig, sole_corners_local
 from ..robot.plant import Plant
-from ..robot.profile import RobotProfile, package_share
+from ..robot.packages import package_share
+from ..robot.profile import RobotProfile
 
 VIEW_RATE_HZ = 50.0
 """Bodies are posed at this rate [Hz] (a 500 Hz driver's states would cost ten times the time for no visible
