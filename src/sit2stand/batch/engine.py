@@ -194,12 +194,11 @@ def _in_process(job: Job, workdir: Path) -> dict:
         try:
             figures = job.run(job.arg, workdir)
         except Exception as err:  # noqa: BLE001 - a case that raises is retried, then recorded as failed
-            if attempt == ATTEMPTS:
-                return _failed(job, attempt, err)
+            error = err
             continue
         return _row(job, attempt, {"figures": figures, "node": "local", "host": socket.gethostname(),
                                    "pid": os.getpid(), "wall_s": round(time.monotonic() - t0, 2)})
-    raise AssertionError("unreachable")
+    return _failed(job, ATTEMPTS, error)
 
 
 def _row(job: Job, attempt: int, result: dict) -> dict:

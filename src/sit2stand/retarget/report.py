@@ -39,7 +39,7 @@ from ..io.bag import BagReader
 from ..io.messages import stamp_ns
 from ..robot.identify import read_link_parameters
 from ..robot.model import DEFAULT_ROBOT, PlantConfig, controller_model, sole_corners_world
-from ..human.skeleton import KNEE_JOINTS, SAGITTAL_FLEXION
+from ..human.skeleton import SAGITTAL_FLEXION
 from ..robot.plant import Plant
 from ..robot.postures import standing_pelvis_height_m
 from ..robot.profile import SIDES
@@ -166,9 +166,9 @@ def _end_posture(cfg: PlantConfig, model: pin.Model, q: np.ndarray, human_joints
            "final_pelvis_height_ratio": float(q[-1, 2] / standing_pelvis_height_m(Plant(cfg, with_chair=False)))}
     if human_joints:
         msg = human_joints[-1][1]
-        names = list(msg.name)
-        if all(k in names for k in KNEE_JOINTS):
-            human = float(np.degrees(np.mean([msg.position[names.index(k)] for k in KNEE_JOINTS])))
+        knee = flexion_deg(list(msg.name), np.array([msg.position]), {"knee": SAGITTAL_FLEXION["knee"]}).get("knee")
+        if knee is not None:
+            human = float(knee[0])
             out["final_knee_flexion_deg_human"] = human
             out["standing_knees_match"] = bool(abs(out["final_knee_flexion_deg_robot"] - human) <= KNEE_TOLERANCE_DEG)
     return out
