@@ -8,7 +8,7 @@ from conftest import real_file
 from sit2stand.io.topics import MARKERS_TOPIC, REFERENCE_COM_TOPIC, SUBJECT_TOPIC, plate_topic
 from sit2stand.io.bag import BagReader
 from sit2stand.io.c3d import C3DError, read_c3d, write_trial_bag
-from sit2stand.io.forceplate import point_in_polygon
+from sit2stand.forceplate import point_in_polygon
 
 
 G = 9.81

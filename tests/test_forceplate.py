@@ -1,9 +1,9 @@
-"""sit2stand.io.forceplate: COP and wrench algebra against hand-built wrenches with known answers."""
+"""sit2stand.forceplate: COP and wrench algebra against hand-built wrenches with known answers."""
 
 import numpy as np
 import pytest
 
-from sit2stand.io.forceplate import center_of_pressure, combined_cop, plate_surface, point_in_polygon, shift_moment
+from sit2stand.forceplate import center_of_pressure, combined_cop, plate_surface, point_in_polygon, shift_moment
 
 Z = np.array([0.0, 0.0, 1.0])
 

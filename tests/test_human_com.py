@@ -13,7 +13,7 @@ from sit2stand.human.offline import read_trial
 from sit2stand.human.support import plate_wrench_at
 from sit2stand.io.bag import BagError, BagWriter
 from sit2stand.io.topics import MARKERS_TOPIC, MOCAP_TYPE
-from sit2stand.io.forceplate import PlateSeries
+from sit2stand.forceplate import PlateSeries
 from sit2stand.human.skeleton import ExtraMass, Subject, build_human
 from sit2stand.human.synth import SynthConfig, synthesize
 

@@ -8,7 +8,7 @@ from sit2stand.human.demonstration_bag import write_demonstration_bag
 from sit2stand.human.synth import SynthConfig, synthesize
 from sit2stand.io.topics import GROUND_TRUTH_COM_TOPIC, GROUND_TRUTH_PARAMETERS_TOPIC, MARKERS_TOPIC, plate_topic
 from sit2stand.io.bag import BagReader
-from sit2stand.io.forceplate import point_in_polygon
+from sit2stand.forceplate import point_in_polygon
 
 
 G = 9.81

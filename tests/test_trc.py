@@ -10,7 +10,7 @@ from conftest import real_file
 from sit2stand.cli import main
 from sit2stand.human.offline import read_trial
 from sit2stand.io.bag import BagReader
-from sit2stand.io.forceplate import center_of_pressure, shift_moment
+from sit2stand.forceplate import center_of_pressure, shift_moment
 from sit2stand.io.topics import SUBJECT_TOPIC
 from sit2stand.io.trc import OPENSIM_AXES, TrcError, read_grf_mot, read_opensim_trial, read_trc
 

@@ -10,7 +10,7 @@ from conftest import rerun_entities
 from sit2stand.cli import main as sit2stand
 from sit2stand.errors import InputError
 from sit2stand.io.bag import BagReader
-from sit2stand.io.forceplate import PLATE_CORNERS_KEY
+from sit2stand.forceplate import PLATE_CORNERS_KEY
 from sit2stand.robot.description import robot_description
 from sit2stand.robot.packages import package_asset, package_share, package_uris
 from sit2stand.view.scene import load_scene, rise_time_s, run_bags

@@ -12,7 +12,7 @@ from scipy.signal import savgol_filter
 import pinocchio as pin
 
 from .errors import InputError
-from .io.forceplate import center_of_pressure
+from .forceplate import center_of_pressure
 from .vectors import cross
 
 G = 9.81

@@ -2,7 +2,7 @@
 
 The arithmetic is ``import-c3d``'s, shared with it: markers [mm] -> [m] rotated by the lab axes (``forward``,
 ``up``: signed capture axes, :class:`sit2stand.io.c3d.LabAxes`), a marker invalid where it is NaN, exactly zero or
-has a negative residual; plates through :func:`sit2stand.io.forceplate.wrench_in_lab` (moment moved to the lab
+has a negative residual; plates through :func:`sit2stand.forceplate.wrench_in_lab` (moment moved to the lab
 origin, COP on the plate surface, invalid below the threshold). A stream and an import of the same trial
 therefore agree to the float32 resolution of the wire (QTM sends single precision: 1e-7 m at 1.5 m).
 
@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..io.c3d import LabAxes
-from ..io.forceplate import DEFAULT_COP_THRESHOLD_N, wrench_in_lab
+from ..forceplate import DEFAULT_COP_THRESHOLD_N, wrench_in_lab
 from .qtm_protocol import DataFrame, PlateInfo
 
 

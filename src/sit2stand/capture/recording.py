@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import InputError
 from ..io.bag import BagReader
 from ..io.c3d import read_c3d
-from ..io.forceplate import PlateSeries, shift_moment
+from ..forceplate import PlateSeries, shift_moment
 from ..io.messages import mocap_arrays, plate_series
 from ..io.topics import FORCE_PLATE_PREFIX, MARKERS_TOPIC
 from .qtm_protocol import DataFrame, PlateChunk, PlateInfo

@@ -23,7 +23,7 @@ import matplotlib
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..io.forceplate import DEFAULT_COP_THRESHOLD_N
+from ..forceplate import DEFAULT_COP_THRESHOLD_N
 from .resimulate import compare
 from .naming import describe
 from .augmented import plain_data, write_augmented

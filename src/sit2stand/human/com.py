@@ -25,7 +25,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..dynamics import G, model_cop, savgol_frames, savgol_series, smooth_motion
-from ..io.forceplate import PlateSeries, center_of_pressure
+from ..forceplate import PlateSeries, center_of_pressure
 from .anthropometry import anthropometric_set
 from .calibration import StreamCalibration, calibrate_lengths, calibrate_markers
 from .marker_ik import MarkerIK, TooFewMarkers, bridge_skipped, check_marker_units, fit_sequence

@@ -15,7 +15,7 @@ import pinocchio as pin
 from scipy.signal import savgol_coeffs   # at import time: the first frame must not pay for it
 
 from ..dynamics import G, model_cop, savgol_frames
-from ..io.forceplate import PlateSeries, center_of_pressure
+from ..forceplate import PlateSeries, center_of_pressure
 from ..vectors import cross
 from .calibration import CALIBRATION_MIN_MARKERS, StreamCalibration, calibrate_stream
 from .com import WINDOW_S

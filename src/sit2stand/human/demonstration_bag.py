@@ -8,7 +8,7 @@ import numpy as np
 
 from ..io import messages as M
 from ..io.bag import BagWriter, reliable_qos
-from ..io.forceplate import PLATE_CORNERS_KEY, plate_corners_json
+from ..forceplate import PLATE_CORNERS_KEY, plate_corners_json
 from ..io.topics import (COM_TYPE, GROUND_TRUTH_COM_TOPIC, GROUND_TRUTH_JOINTS_TOPIC, GROUND_TRUTH_PARAMETERS_TOPIC,
                          MARKERS_TOPIC, MOCAP_TYPE, PLATE_TYPE, SUBJECT_TOPIC, SUBJECT_TYPE, plate_topic)
 from ..io.typestore import typestore

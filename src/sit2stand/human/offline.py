@@ -28,7 +28,7 @@ import numpy as np
 from ..errors import InputError
 from ..io import messages as M
 from ..io.bag import BagError, BagReader, BagWriter
-from ..io.forceplate import PlateSeries
+from ..forceplate import PlateSeries
 from ..io.topics import (COM_TYPE, FORCE_PLATE_PREFIX, GROUND_TRUTH_COM_TOPIC, HUMAN_COM_TOPIC, HUMAN_JOINTS_TOPIC,
                          HUMAN_MODEL_COP_TOPIC, HUMAN_SCALING_TOPIC, MARKERS_TOPIC, REFERENCE_COM_TOPIC,
                          SUBJECT_TOPIC)

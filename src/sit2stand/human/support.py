@@ -13,7 +13,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..dynamics import G
-from ..io.forceplate import PlateSeries
+from ..forceplate import PlateSeries
 from .skeleton import HumanModel
 
 MIN_SUPPORT_WEIGHT_FRACTION = 0.3

@@ -27,7 +27,7 @@ import pinocchio as pin
 from ..dynamics import G, plan_derivatives
 from ..errors import InputError
 from ..io.frame_rate import MIN_RATE_HZ
-from ..io.forceplate import PlateSeries
+from ..forceplate import PlateSeries
 from .anthropometry import ankle_height_m
 from .skeleton import (LENGTH_GROUPS, REFERENCE_STATURE_M, SEGMENT_MASS_SD, SEGMENTS, ExtraMass, HumanModel, Subject,
                        build_human)

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..io.forceplate import PlateSeries, center_of_pressure, point_in_polygon
+from ..forceplate import PlateSeries, center_of_pressure, point_in_polygon
 from .skeleton import REFERENCE_STATURE_M, HumanModel
 
 if TYPE_CHECKING:

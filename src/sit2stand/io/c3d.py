@@ -29,7 +29,7 @@ from .topics import (COM_TYPE, MARKERS_TOPIC, MOCAP_TYPE, MODEL_POINTS_TOPIC, PL
                      SUBJECT_TOPIC, SUBJECT_TYPE, plate_topic)
 from ..errors import Sit2StandError
 from .bag import BagWriter, reliable_qos
-from .forceplate import DEFAULT_COP_THRESHOLD_N, PLATE_CORNERS_KEY, PlateSeries, plate_corners_json, wrench_in_lab
+from ..forceplate import DEFAULT_COP_THRESHOLD_N, PLATE_CORNERS_KEY, PlateSeries, plate_corners_json, wrench_in_lab
 from .messages import center_of_mass, mocap_frame, plate_messages, subject
 
 LENGTH_SCALE = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "dm": 0.1}

@@ -14,7 +14,7 @@ import numpy as np
 from .topics import (COM_TYPE, LAB_FRAME, MOCAP_TYPE, PLATE_TYPE, ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC,
                      ROBOT_FT_LEFT_TOPIC, ROBOT_FT_RIGHT_TOPIC, ROBOT_JOINT_STATES_TOPIC, SUBJECT_TYPE, WORLD_FRAME,
                      ft_topic, sole_world_aligned_frame)
-from .forceplate import PlateSeries
+from ..forceplate import PlateSeries
 from .typestore import typestore
 
 
@@ -124,7 +124,7 @@ def plate_messages(plate: PlateSeries, offset_s: float = 0.0) -> Iterator[tuple[
 
 
 def plate_series(name: str, stamped: list[tuple[int, Any]]) -> PlateSeries:
-    """A :class:`~sit2stand.io.forceplate.PlateSeries` from (log time [ns], ForcePlateSample) pairs: force (K, 3)
+    """A :class:`~sit2stand.forceplate.PlateSeries` from (log time [ns], ForcePlateSample) pairs: force (K, 3)
     [N], moment about the lab origin (K, 3) [N m], COP (K, 3) [m] and its validity, free moment (K,) [N m]."""
     msgs = [m for _, m in stamped]
     force = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z] for m in msgs], float).reshape(-1, 3)

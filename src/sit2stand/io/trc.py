@@ -11,7 +11,7 @@ column names and rows of numbers): one plate per column prefix, each with ``<p>g
 the body [N]), ``<p>ground_force_p{x,y,z}`` (its point of application [m]) and ``<p>ground_torque_{x,y,z}`` (the free
 torque about that point [N m]); e.g. the prefixes ``""`` and ``"1_"`` of OpenSim's Gait2392 example. The wrench
 about the lab origin is ``M_O = p x F + T`` and the COP follows from it on the horizontal plane through ``p``
-(:func:`~sit2stand.io.forceplate.center_of_pressure`; it equals ``p`` when the torque is vertical). Plates are named
+(:func:`~sit2stand.forceplate.center_of_pressure`; it equals ``p`` when the torque is vertical). Plates are named
 ``plate0``, ``plate1``... in the file's order (a walking trial has no chair).
 
 **Lab frame.** OpenSim's ground is x forward, y up, z right; REP-103 is x forward, y left, z up, so a vector
@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import Sit2StandError
 from .c3d import LENGTH_SCALE, C3DTrial, LabAxes, PointSeries
-from .forceplate import DEFAULT_COP_THRESHOLD_N, PlateSeries, center_of_pressure
+from ..forceplate import DEFAULT_COP_THRESHOLD_N, PlateSeries, center_of_pressure
 
 OPENSIM_AXES = LabAxes("+X", "+Y", "OpenSim's ground frame (x forward, y up, z right): lab (x, y, z) = file (x, -z, y)")
 """The lab axes of an OpenSim file: file x is lab x (forward), file y is lab z (up)."""

@@ -28,7 +28,7 @@ import pinocchio as pin
 
 from ..dynamics import G
 from ..errors import InputError
-from ..io.forceplate import DEFAULT_COP_THRESHOLD_N
+from ..forceplate import DEFAULT_COP_THRESHOLD_N
 from ..vectors import cross, xyzw_from_wxyz
 from .torque_control import WholeBodyController
 from .model import (SEAT_CLEARANCE_BELOW_M, SIDES, PlantConfig, PlantConfigError, add_chair, add_seat_frame, build_spec,

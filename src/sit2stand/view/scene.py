@@ -3,7 +3,7 @@
 A *run* is a bag or a folder of bags: a stand-up graph's run (its ``standup`` bag), a ``retarget --simulate``
 output (its ``retarget`` and ``robot`` bags) or an imported or synthesised demonstration. A folder's
 ``summary.json`` may name the demonstration it came from (``bag``); that bag adds the markers and plates a run
-lacks, and the plates' corners (:data:`~sit2stand.io.forceplate.PLATE_CORNERS_KEY`). A topic found in several bags
+lacks, and the plates' corners (:data:`~sit2stand.forceplate.PLATE_CORNERS_KEY`). A topic found in several bags
 is read from the first.
 
 Bodies are posed by forward kinematics of their URDF (Pinocchio) from the states the bags carry: the robot from
@@ -24,7 +24,7 @@ import pinocchio as pin
 from ..errors import InputError
 from ..human.skeleton import SAGITTAL_FLEXION
 from ..io.bag import BagReader
-from ..io.forceplate import plate_corners_from
+from ..forceplate import plate_corners_from
 from ..io.messages import stamp_ns
 from ..io.topics import (CHAIR_PLATE_TOPIC, FEET_PLATE_TOPIC, HUMAN_COM_TOPIC, HUMAN_DESCRIPTION_TOPIC,
                          HUMAN_JOINTS_TOPIC, HUMAN_MEASURED_COP_TOPIC, HUMAN_PELVIS_POSE_TOPIC, MARKERS_TOPIC,

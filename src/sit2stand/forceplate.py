@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
-from ..vectors import cross
+from .errors import InputError
+from .vectors import cross
 
 DEFAULT_COP_THRESHOLD_N = 20.0
 """Normal force below which a plate counts as unloaded and its COP as undefined (Vicon Nexus' default)."""
