@@ -6,6 +6,7 @@ PY    := $(VENV)/bin/python
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export RCUTILS_COLORIZED_OUTPUT ?= 0
 SOAK_MIN ?= 2
+BATCH_CASES ?= 40
 
 .PHONY: setup demo figures test test-fast lint bench bench-gap bench-gap-human bench-retarget bench-human bench-capture bench-live bench-standup bench-batch bench-faults lock clean
 
@@ -55,8 +56,8 @@ bench-live: setup     ## the live stand-up (serve-c3d -> bridge -> estimator -> 
 bench-standup: setup  ## 30 digital humans (stature, mass, seat, natural/elderly/fast) retargeted and simulated: success, time scale, COM, torque; bench/results/standup/ (BENCH_STANDUP_ARGS="--robot g1": standup_g1/)
 	@$(PY) -m sit2stand.bench.standup $(BENCH_STANDUP_ARGS)
 
-bench-batch: setup  ## a stand-up batch (40 G1 digital humans, CAD) in one process, on Ray with 1 and with 2 workers: throughput and ratios; bench/results/batch.json
-	@$(PY) -m sit2stand.bench.batch --out bench/results/batch.json
+bench-batch: setup  ## a stand-up batch (BATCH_CASES G1 digital humans, default 40; CAD) in one process, on Ray with 1 and with 2 workers: throughput and ratios; bench/results/batch.json
+	@$(PY) -m sit2stand.bench.batch --cases $(BATCH_CASES) --out bench/results/batch.json
 
 bench-faults: setup  ## fault campaign (corrupt/cut files, NaN/missing/mm markers, bad identification, killed recorder, second graph) + a SOAK_MIN-minute soak (default 2; the full soak: SOAK_MIN=30); bench/results/faults.json
 	@$(PY) -m sit2stand.bench.faults --soak-min $(SOAK_MIN) --out bench/results/faults.json

@@ -5,7 +5,7 @@
 The same population (:func:`sit2stand.batch.standup.sample_population`, seed 0; CAD parameters, so that nothing
 depends on ``make demo``) is run three times through :func:`sit2stand.batch.engine.run_jobs`: in this process (no
 Ray), on Ray with one worker, and on Ray with two. Per run: wall time from the first case submitted to the last row
-written (the workers' start included, Ray's own not), cases per minute, and the ratios the batch issue asks for:
+written (the workers' start included, Ray's own not), cases per minute, and the ratios against their targets:
 throughput per worker against the single process (target: within 10 %), and two workers against one (target: at
 least 1.8x). The host's CPU count bounds the second: two workers on two cores share them with the driver and Ray's
 own processes.

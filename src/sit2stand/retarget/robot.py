@@ -15,7 +15,7 @@ import pinocchio as pin
 
 from ..errors import InputError
 from ..robot.identify import read_link_parameters
-from ..robot.model import SIDES, PlantConfig, add_seat_frame, build_spec, controller_model, sole_corners_world
+from ..robot.model import SIDES, PlantConfig, add_seat_frame, compiled_robot, controller_model, sole_corners_world
 from ..robot.plant import seat_top_height, seated_configuration
 from ..robot.profile import profile_of
 from ..vectors import xyzw_from_wxyz
@@ -52,7 +52,7 @@ def robot_model(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
     links = link_parameters or (read_link_parameters(params_yaml) if params_yaml else None)
     model = controller_model(cfg, links)
     label = str(params_yaml) if params_yaml else "CAD"
-    probe = build_spec(cfg, plant=False).compile()
+    probe, _ = compiled_robot(cfg, plant=False)
     qpos = seated_configuration(probe, cfg)
     add_seat_frame(model, seat_top_height(probe, qpos, cfg), float(qpos[2]))
     q = qpos.copy()

@@ -32,7 +32,7 @@ from ..forceplate import DEFAULT_COP_THRESHOLD_N
 from ..vectors import cross, xyzw_from_wxyz
 from .torque_control import WholeBodyController
 from .model import (SEAT_CLEARANCE_BELOW_M, SIDES, PlantConfig, PlantConfigError, add_chair, add_seat_frame, build_spec,
-                    controller_model, expand)
+                    compiled_robot, controller_model, expand)
 
 CONTROLLERS = ("inverse_dynamics", "wbc")
 """The simulated robot's on-board controllers (``Plant.command``'s ``feedforward`` for a planned motion): joint PD
@@ -146,8 +146,7 @@ class Plant:
     def __init__(self, cfg: PlantConfig | None = None, controller_params: dict | None = None,
                  with_chair: bool = True) -> None:
         self.cfg = cfg = cfg or PlantConfig()
-        spec = build_spec(cfg, plant=True)
-        probe = spec.compile()
+        probe, _ = compiled_robot(cfg, plant=True)
         self.q_seated = seated_configuration(probe, cfg)
         pd = mujoco.MjData(probe)
         pd.qpos[:] = self.q_seated
@@ -156,6 +155,7 @@ class Plant:
         heel_x = min(pd.site(f"sole_{s}").xpos[0] for s in SIDES) + sole.centre_x_m - sole.half_size_m[0]
         self.seat_height_m = seat_top_height(probe, self.q_seated, cfg)
         self.chair_front_x = heel_x - cfg.chair("front_gap_m")
+        spec = build_spec(cfg, plant=True)
         if with_chair:
             add_chair(spec, cfg, self.seat_height_m, self.chair_front_x)
         self.model = spec.compile()
