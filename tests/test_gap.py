@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 import yaml
 
-from sit2stand.bench.gap_human import CASES as HUMAN_CASES
-from sit2stand.bench.gap_human import GROUPS, bench_gap_human, draw_cases, gap_human_rates, run_one, score_run
+from sit2stand.batch.gap import CASES as HUMAN_CASES
+from sit2stand.batch.gap import GROUPS, draw_cases, run_one, score_run
+from sit2stand.bench.gap_human import bench_gap_human, gap_human_rates
 from sit2stand.gap.bounds import Limits
 from sit2stand.gap.excite import excite
 from sit2stand.gap.hidden import Hidden, draw, plant_with, run_case, score

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from sit2stand.bench.live import LiveRunError, run_live
+from sit2stand.capture.rehearsal import LiveRunError, run_live
 from sit2stand.io.bag import BagReader
 
 pytestmark = pytest.mark.graph
@@ -19,7 +19,7 @@ def test_g1_stands_up_live_and_its_bag_carries_its_urdf_and_frames(tmp_path, ros
     subprocess.run([sys.executable, "-m", "sit2stand.cli", "human-calibrate", str(ROOT / "bags" / "elderly"),
                     "--out", str(calibration)], check=True, env=ros_env, capture_output=True, timeout=120)
     try:
-        run = run_live(tmp_path, ros_env, calibration, robot="g1")
+        run = run_live(tmp_path, ros_env, calibration, ROOT / "bags" / "elderly", robot="g1")
     except LiveRunError as err:
         pytest.fail(str(err))
     assert "Unitree G1 (29 DoF) seated on a 0.231 m chair; plant g1_cad" in run.log, run.log[-4000:]

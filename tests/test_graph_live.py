@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from sit2stand.bench.live import PROTOCOL_ARGS, TOPICS, LiveRunError, run_live
 from sit2stand.capture.latency import p50_p99
+from sit2stand.capture.rehearsal import PROTOCOL_ARGS, TOPICS, LiveRunError, run_live
 from sit2stand.io.topics import MARKERS_TOPIC
 
 pytestmark = pytest.mark.graph
@@ -27,7 +27,8 @@ def test_the_robot_stands_up_from_a_live_stream_of_the_shipped_elderly_demonstra
     subprocess.run([sys.executable, "-m", "sit2stand.cli", "human-calibrate", str(ROOT / "bags" / "elderly"),
                     "--out", str(calibration)], check=True, env=ros_env, capture_output=True, timeout=120)
     try:
-        run = run_live(tmp_path, ros_env, calibration, graph_args=PROTOCOL_ARGS[protocol], protocol=protocol)
+        run = run_live(tmp_path, ros_env, calibration, ROOT / "bags" / "elderly", graph_args=PROTOCOL_ARGS[protocol],
+                       protocol=protocol)
     except LiveRunError as err:
         pytest.fail(str(err))
     log = run.log

@@ -8,7 +8,7 @@ import sys
 import pytest
 
 from conftest import GRAPHS, real_file
-from sit2stand.bench.live import LiveRunError, run_live
+from sit2stand.capture.rehearsal import LiveRunError, run_live
 from sit2stand.cli import main as sit2stand
 from sit2stand.retarget.report import analyse
 

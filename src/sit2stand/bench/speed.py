@@ -28,12 +28,14 @@ import numpy as np
 from rosbags.rosbag2 import Reader
 
 from . import project_folder
-from ..batch.engine import Job, run_jobs
-from .gap_human import CASES as GAP_HUMAN_CASES, bench_gap_human, summary_table
+from ..batch.engine import run_jobs
+from ..batch.gap import gap_cases, gap_jobs
+from ..batch.gap import CASES as GAP_HUMAN_CASES
+from .gap_human import bench_gap_human, summary_table
 from .human import bench_human_real, print_table
 from .live import COMMAND_P99_TARGET_MS
 from ..data import graph_path, plant_path
-from ..gap.hidden import KINDS, OUT_OF_LIBRARY, draw, run_case
+from ..gap.hidden import KINDS, OUT_OF_LIBRARY
 from ..human.com import estimate_com
 from ..human.com_stream import StreamingComEstimator
 from ..human.offline import calibrate_from_bag, read_trial
@@ -47,7 +49,7 @@ from ..retarget.report import analyse
 from ..retarget.robot import robot_setup
 from ..retarget.stream import Retargeter
 from ..robot.identify import identify
-from ..robot.model import DEFAULT_ROBOT, PlantConfig
+from ..robot.model import PlantConfig
 from ..robot.plant import Plant
 from ..robot.postures import collect_postures
 
@@ -290,32 +292,6 @@ def _print_sections(results: dict, sections: list[str]) -> None:
             else:
                 text = f"{value:>12,.2f}" if isinstance(value, float) else f"{value:>12}"
                 print(f"  {key:<{width}}  {text}")
-
-
-def gap_cases(n_per_kind: int, n_two: int, kinds: tuple[str, ...] = KINDS + OUT_OF_LIBRARY,
-              robot: str = DEFAULT_ROBOT) -> list[tuple]:
-    """(kind, hidden effects, seed) of the model-gap benchmark on ``robot``: ``n_per_kind`` seeds per kind in
-    ``kinds`` (in the library and outside it), as many plants with nothing hidden, and ``n_two`` with two in-library
-    kinds."""
-    cases = [(kind, [draw(kind, seed, robot)], seed) for kind in kinds for seed in range(n_per_kind)]
-    cases += [("none", [], seed) for seed in range(n_per_kind)]
-    rng = np.random.default_rng(7)
-    for seed in range(n_two):
-        a, b = rng.choice(len(KINDS), 2, replace=False)
-        cases.append(("two", [draw(KINDS[a], 100 + seed, robot), draw(KINDS[b], 200 + seed, robot)], 100 + seed))
-    return cases
-
-
-def run_gap_case(arg: tuple[list, int, str], workdir: Path) -> dict:
-    """One hidden-effect plant as a batch case (:class:`~sit2stand.batch.engine.Job`'s ``run``): its scores."""
-    hidden, seed, robot = arg
-    return run_case(hidden, seed, str(workdir), robot=robot)
-
-
-def gap_jobs(cases: list[tuple], robot: str = DEFAULT_ROBOT) -> list[Job]:
-    """One batch job per hidden-effect plant of :func:`gap_cases`."""
-    return [Job("gap", f"{kind}_{seed}", {"hidden_kind": kind, "seed": seed, "robot": robot}, run_gap_case,
-                (hidden, seed, robot)) for kind, hidden, seed in cases]
 
 
 def bench_gap(n_per_kind: int = 10, n_two: int = 5, workers: int = 2, progress: bool = True,

@@ -12,13 +12,9 @@ KINDS = ("standup", "gap", "gap-human")
 
 def _demo_params(robot: str) -> str | None:
     """``make demo``'s identified parameters of ``robot`` when run from the project that has them, else None."""
-    from ..bench.standup import demo_params
-    from ..errors import InputError
+    from ..demo import demo_params
 
-    try:
-        path = demo_params(robot)
-    except InputError:          # not in the project folder: no demo to take them from
-        return None
+    path = demo_params(robot)
     return str(path) if path.exists() else None
 
 
@@ -35,10 +31,10 @@ def _jobs(args: argparse.Namespace) -> list:
             [(c, setting) for c in sample_population(args.cases, args.seed)]
         return standup_jobs(cases)
     if args.kind == "gap":
-        from ..bench.speed import gap_cases, gap_jobs
+        from ..batch.gap import gap_cases, gap_jobs
 
         return gap_jobs(gap_cases(args.cases, args.cases // 2, robot=args.robot), args.robot)
-    from ..bench.gap_human import draw_cases, gap_human_jobs
+    from ..batch.gap import draw_cases, gap_human_jobs
 
     return gap_human_jobs(draw_cases(args.cases, seed=args.seed))
 
