@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from sit2stand.human.skeleton import SAGITTAL_FLEXION
-from sit2stand.retarget.report import flexion_deg, posture_rms_deg, rise_window
+from sit2stand.retarget.report import flexion_deg, matched_times, posture_rms_deg, rise_window, strip_indices
 from sit2stand.robot.profile import load_profile
 
 
@@ -46,3 +46,16 @@ def test_the_same_motion_played_slower_matches_and_a_constant_offset_is_its_rms(
     assert rms["knee"] == pytest.approx(0.0, abs=0.5)
     assert rms["hip"] == pytest.approx(10.0, abs=0.5)
     assert posture_rms_deg((t_h, np.full_like(t_h, 0.6), human), (t_r, 0.5 + 0.4 * s_r, robot)) is None
+
+
+def test_frames_of_a_slower_robot_meet_the_human_at_the_same_share_of_its_rise():
+    t_h, t_r = np.linspace(0, 4, 401), np.linspace(10, 18, 801)      # the robot on another clock, twice as slow
+    z_h, z_r = 0.6 + 0.4 * _rise(1.0, 1.6, t_h), 0.5 + 0.4 * _rise(12.0, 3.2, t_r)
+    (h0, h1), (r0, r1) = rise_window(t_h, z_h), rise_window(t_r, z_r)
+    at = np.array([10.0, r0, (r0 + r1) / 2, r1, r1 + 0.5, 30.0])
+    got = matched_times((t_r, z_r), (t_h, z_h), at)
+    assert got[1:4] == pytest.approx([h0, (h0 + h1) / 2, h1], abs=1e-9)
+    assert got[4] == pytest.approx(h1 + 0.5)                       # after the rise: second for second
+    assert got[0] == pytest.approx(max(0.0, h0 - (r0 - 10.0)))     # before it, within the recording
+    assert got[5] == pytest.approx(4.0)                            # clipped to the human's end
+    assert list(strip_indices(801, 6)) == [0, 160, 320, 480, 640, 800]

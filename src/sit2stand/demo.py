@@ -47,11 +47,12 @@ from .human.offline import run as human_com_offline
 from .io import messages as M
 from .io.bag import BagReader
 from .io.topics import FELL_EXIT_CODE, GROUND_TRUTH_COM_TOPIC, HUMAN_COM_TOPIC
-from .retarget.report import RunAnalysis, analyse, figure_6, figure_7, render_strip
+from .retarget.report import RunAnalysis, analyse, figure_6, figure_7, render_strip, strip_indices
 from .robot.figures import com_path_figure, posture_figure
 from .robot.identify import identify, read_postures, write_yaml
 from .robot.model import DEFAULT_ROBOT, PlantConfig
 from .robot.postures import collect_postures
+from .view.scene import human_frames, load_scene
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_BAGS = [ROOT / "bags" / "natural", ROOT / "bags" / "elderly"]
@@ -115,7 +116,7 @@ def standup(bag: Path, out: Path, params: Path, robot: str = DEFAULT_ROBOT) -> d
                       r"COM->command p50 ([\d.]+) ms p99 ([\d.]+) ms", proc.stdout)
     a = analyse(out / "standup", bag.name, params, plant, robot=robot)
     figure_6(a, out / "fig6_com.png")
-    why = render_strip(a, plant, out / "standup_frames.png")
+    why = render_strip(a, plant, out / "standup_frames.png", **_human_beside(out / "standup", bag, a))
     if why:
         print(f"      no rendered frames ({why})", flush=True)
     res = dict(a.summary, wall_s=round(time.monotonic() - t0, 1))
@@ -124,6 +125,25 @@ def standup(bag: Path, out: Path, params: Path, robot: str = DEFAULT_ROBOT) -> d
                 "latency_p99_ms", "com_to_command_p50_ms", "com_to_command_p99_ms")
         res.update({k: float(v) for k, v in zip(keys, stats.groups())})
     return res, a
+
+
+def _human_beside(run: Path, demonstration: Path, a: RunAnalysis, frames: int = 6) -> dict:
+    """:func:`render_strip`'s human row: the skeleton at the frames' matched instants, and the human's chair (from
+    the demonstration's metadata and plates)."""
+    scene = load_scene(run, a.robot)
+    at = a.t[strip_indices(len(a.t), frames)]
+    bones = human_frames(scene, a.t, a.com[:, 2], at)
+    if bones is None:
+        return {}
+    chair = load_scene(demonstration).human_chair
+    return {"human_bones": bones, "human_chair": None if chair is None else (chair.centre, chair.half_size)}
+
+
+def demo_params(robot: str, project: Path | None = None) -> Path:
+    """Where ``make demo`` leaves ``robot``'s identified parameters (``runs/demo`` for the default robot,
+    ``runs/demo_<robot>`` for another) under ``project`` (default: the working directory, where ``make`` runs)."""
+    run = "demo" if robot == DEFAULT_ROBOT else f"demo_{robot}"
+    return (project or Path.cwd()) / "runs" / run / "robot" / "identified_full.yaml"
 
 
 def robot_identification(out: Path, n_postures: int, robot: str = DEFAULT_ROBOT) -> dict:

@@ -37,19 +37,13 @@ import numpy as np
 from . import project_folder
 from ..batch.engine import run_jobs
 from ..batch.standup import RISE_S, STYLES, Case, Setting, sample_population, standup_jobs, synthesise  # noqa: F401
-from ..demo import robot_identification
+from ..demo import demo_params, robot_identification
 from ..robot.model import DEFAULT_ROBOT
+from ..retarget.report import KNEE_TOLERANCE_DEG
 from ..robot.plant import CONTROLLERS, DEFAULT_CONTROLLER
 
 DEFAULT_OUT = Path("bench") / "results" / "standup"
 """Under the project folder (:func:`~sit2stand.bench.project_folder`)."""
-
-
-def demo_params(robot: str) -> Path:
-    """Where ``make demo`` leaves ``robot``'s identified parameters."""
-    run = "demo" if robot == DEFAULT_ROBOT else f"demo_{robot}"
-    return project_folder() / "runs" / run / "robot" / "identified_full.yaml"
-
 TARGET_TIME_SCALE = 1.5         # the target: at least 90 % stand with time_scale at most 1.5
 QP_TARGET_MS = 1.0              # the target: the torque controller's QP p99 at most 1 ms per step
 CASE_FIELDS = tuple(f.name for f in dataclasses.fields(Case))
@@ -102,6 +96,9 @@ def aggregate(rows: list[dict]) -> dict:
         "final_knee_gap_deg": _spread([abs(r["final_knee_flexion_deg_robot"] - r["final_knee_flexion_deg_human"])
                                        for r in rows if r.get("final_knee_flexion_deg_human") is not None
                                        and r.get("final_knee_flexion_deg_robot") is not None]),
+        "share_knees_match": _share_ge([float(v) for v in col("standing_knees_match")], 1.0),
+        "posture_rms_deg": {j: _spread(v) for j, v in _posture(rows).items()},
+        "marker_rms_mm": _spread(col("marker_rms_mm")),
         "com_deviation_rms_m": _spread(col("com_deviation_rms_m")),
         "com_deviation_max_m": _spread(col("com_deviation_max_m")),
         "torque_demand_peak_ratio": _spread(col("torque_demand_peak_ratio")),
@@ -113,6 +110,16 @@ def aggregate(rows: list[dict]) -> dict:
         "controller_qp_cpu_ms_p99": _spread(col("controller_qp_cpu_ms_p99")),
         "share_qp_p99_le_1_ms": _share(col("controller_qp_ms_p99"), QP_TARGET_MS),
     }
+
+
+def _posture(rows: list[dict]) -> dict[str, list[float]]:
+    """Each joint's posture RMS [deg] over the cases that have one (a table read back holds it as JSON text)."""
+    out: dict[str, list[float]] = {}
+    for r in rows:
+        rms = r.get("posture_rms_deg")
+        for joint, value in (json.loads(rms) if isinstance(rms, str) else rms or {}).items():
+            out.setdefault(joint, []).append(value)
+    return out
 
 
 def _share_ge(values: list[float], bound: float) -> float | None:
@@ -168,6 +175,11 @@ def summary_text(agg: dict) -> str:
         f"end posture: pelvis / straight stance [%]  {s(agg['final_pelvis_height_ratio'], 100, '.0f')} (at >= 95 %: "
         f"{_fmt(agg['share_pelvis_ge_95'], 100, '.0f')} % of cases); |robot - human knee| [deg]  "
         f"{s(agg['final_knee_gap_deg'], 1, '.0f')}",
+        f"knees within {KNEE_TOLERANCE_DEG:g} deg of the human's at the end: "
+        f"{_fmt(agg['share_knees_match'], 100, '.0f')} % of cases",
+        "posture RMS over the rise, robot - human [deg]: " + "; ".join(
+            f"{j} {s(v, 1, '.0f')}" for j, v in agg["posture_rms_deg"].items()),
+        f"marker RMS, plan vs mapped human [mm]  {s(agg['marker_rms_mm'], 1, '.0f')}",
         f"COM plan vs mapped human, RMS [cm]  {s(agg['com_deviation_rms_m'], 100)}",
         f"peak torque demand / limit  {s(agg['torque_demand_peak_ratio'])}; a joint clamped at its limit in "
         f"{agg['torque_saturated_cases']} cases; share of commands clamped "
@@ -184,7 +196,7 @@ def resolve_params(args: argparse.Namespace) -> tuple[Path | None, str]:
         return None, "CAD (--cad)"
     if args.params is not None:
         return args.params, f"identified: {args.params}"
-    demo = demo_params(args.robot)
+    demo = demo_params(args.robot, project_folder())
     if demo.exists():
         return demo, f"identified: {demo.relative_to(project_folder())} (make demo)"
     robot_identification(args.out / "robot", 88, args.robot)        # as make demo does

@@ -9,7 +9,7 @@ plan, and the paper's figures.
 * :func:`figure_7`: sagittal COM paths, natural against elderly-like, measured robot COM with identified against CAD
   parameters (Fig. 7).
 * :func:`render_strip`: frames of the robot standing up, rendered offscreen by MuJoCo (``MUJOCO_GL=egl`` or
-  ``osmesa``; Fig. 4/5).
+  ``osmesa``; Fig. 4/5), the human's skeleton below at the same share of its rise.
 
 Stood up: not fallen (the pelvis never below the plant's fall height), the pelvis 20 cm or more above where it sat,
 and above ``stand_fraction`` of the highest it reached for ``hold_s`` seconds on end (the last ones, unless it sat
@@ -326,13 +326,42 @@ SEATED_PELVIS_FRAMED_M = 0.627
 """The frames' camera is framed for a robot whose seated pelvis is this high (TALOS) and scaled for others."""
 
 
-def render_strip(a: RunAnalysis, plant_yaml: Path | None, png: Path, frames: int = 6) -> str | None:
-    """A strip of offscreen-rendered frames of the run; returns None, or why nothing was rendered. MuJoCo picks its GL
-    backend when it is imported, so each backend (``MUJOCO_GL`` if set, else egl then osmesa) is tried in a process
-    of its own."""
+def strip_indices(n: int, frames: int) -> np.ndarray:
+    """The ``frames`` evenly spaced states of ``n`` that :func:`render_strip` shows."""
+    return np.linspace(0, n - 1, frames).astype(int)
+
+
+def matched_times(robot: tuple[np.ndarray, np.ndarray], human: tuple[np.ndarray, np.ndarray],
+                  robot_t_s: np.ndarray) -> np.ndarray:
+    """The human's time [s] matched to each of ``robot_t_s``: at the same share of each body's own rise
+    (:func:`rise_window`), one second for one second before and after it, within the human's recording. ``robot``,
+    ``human``: (times [s], COM heights [m]), each on its own clock. Without a rise on either side, the same offset
+    from each one's start."""
+    (tr, zr), (th, zh) = robot, human
+    wr, wh = rise_window(tr, zr), rise_window(th, zh)
+    t = np.asarray(robot_t_s, float)
+    if wr is None or wh is None:
+        out = th[0] + (t - tr[0])
+    else:
+        rate = (wh[1] - wh[0]) / (wr[1] - wr[0])
+        out = np.where(t < wr[0], wh[0] + (t - wr[0]),
+                       np.where(t > wr[1], wh[1] + (t - wr[1]), wh[0] + (t - wr[0]) * rate))
+    return np.clip(out, th[0], th[-1])
+
+
+def render_strip(a: RunAnalysis, plant_yaml: Path | None, png: Path, frames: int = 6,
+                 human_bones: np.ndarray | None = None, human_chair: tuple | None = None) -> str | None:
+    """A strip of offscreen-rendered frames of the run (the states of :func:`strip_indices`); returns None, or why
+    nothing was rendered. ``human_bones`` (frames, B, 2, 3) [m]: the human skeleton's bones (from, to) at the
+    matched instants (:func:`matched_times`), drawn as a side view under each robot frame, on the human's chair
+    ``human_chair`` (centre, half size [m]). MuJoCo picks its GL backend when it is imported, so each backend
+    (``MUJOCO_GL`` if set, else egl then osmesa) is tried in a process of its own."""
     with tempfile.TemporaryDirectory() as tmp:
         states = Path(tmp) / "states.npz"
-        np.savez(states, q=a.q, t=a.t, name=a.name, robot=a.robot)
+        extra = {} if human_bones is None else {"bones": human_bones}
+        if human_chair is not None:
+            extra["chair"] = np.array(human_chair, float)
+        np.savez(states, q=a.q, t=a.t, name=a.name, robot=a.robot, **extra)
         reason = "no GL backend"
         for gl in ([os.environ["MUJOCO_GL"]] if os.environ.get("MUJOCO_GL") else ["egl", "osmesa"]):
             code = ("import sys; from pathlib import Path; from sit2stand.retarget.report import _render_file; "
@@ -350,12 +379,13 @@ def _render_file(states: str, plant_yaml: str, png: str, frames: str) -> None:
     """:func:`_render` of the states saved by :func:`render_strip` (command-line arguments as strings)."""
     d = np.load(states)
     _render(d["q"], d["t"], str(d["name"]), Path(plant_yaml) if plant_yaml else None, Path(png), int(frames),
-            str(d["robot"]))
+            str(d["robot"]), d["bones"] if "bones" in d else None, d["chair"] if "chair" in d else None)
 
 
 def _render(qs: np.ndarray, ts: np.ndarray, name: str, plant_yaml: Path | None, png: Path, frames: int,
-            robot: str = DEFAULT_ROBOT) -> None:
-    """Render ``frames`` evenly spaced configurations of the run in MuJoCo, side by side, into ``png``."""
+            robot: str = DEFAULT_ROBOT, bones: np.ndarray | None = None, chair: np.ndarray | None = None) -> None:
+    """Render ``frames`` evenly spaced configurations of the run in MuJoCo, side by side, into ``png``; with
+    ``bones``, the human's skeleton at the matched instants in a row below."""
     matplotlib.use("Agg")
     plant = Plant(PlantConfig.load(plant_yaml, robot))
     model, data = plant.model, plant.data
@@ -364,7 +394,7 @@ def _render(qs: np.ndarray, ts: np.ndarray, name: str, plant_yaml: Path | None, 
     size = plant.q_seated[2] / SEATED_PELVIS_FRAMED_M     # the robot's size: TALOS's seated pelvis is 0.627 m
     cam.lookat[:] = [0.0, 0.0, 0.8 * size]        # the whole robot, seated and standing straight
     cam.distance, cam.azimuth, cam.elevation = 3.7 * size, 90.0, -10.0    # from the robot's left side
-    idx = np.linspace(0, len(qs) - 1, frames).astype(int)
+    idx = strip_indices(len(qs), frames)
     images = []
     for k in idx:
         q = qs[k]
@@ -375,15 +405,38 @@ def _render(qs: np.ndarray, ts: np.ndarray, name: str, plant_yaml: Path | None, 
         renderer.update_scene(data, cam)
         images.append(renderer.render().copy())
     renderer.close()
-    fig, ax = plt.subplots(1, frames, figsize=(2.2 * frames, 3))
-    for x, img, k in zip(ax, images, idx):
+    rows = 1 if bones is None else 2
+    fig, ax = plt.subplots(rows, frames, figsize=(2.2 * frames, 3 * rows), squeeze=False)
+    for x, img, k in zip(ax[0], images, idx):
         x.imshow(img)
         x.set_title(f"{ts[k]:.1f} s", fontsize=9)
         x.axis("off")
-    fig.suptitle(f"{name}: {plant.cfg.profile.title or robot} standing up (simulated, side view)")
+    if bones is not None:
+        _skeleton_row(ax[1], bones, chair)
+    title = f"{name}: {plant.cfg.profile.title or robot} standing up (simulated, side view)"
+    fig.suptitle(title + ("; below, the human at the same share of its rise" if bones is not None else ""),
+                 fontsize=10)
     fig.tight_layout()
     fig.savefig(png, dpi=100)
     plt.close(fig)
+
+
+def _skeleton_row(axes, bones: np.ndarray, chair: np.ndarray | None) -> None:
+    """The human skeleton seen from its left (x forward, z up) in each of ``axes``, on one scale, with its chair."""
+    lo = np.nanmin(bones[..., 0]) - 0.3
+    hi = np.nanmax(bones[..., 0]) + 0.3
+    top = max(np.nanmax(bones[..., 2]) + 0.1, 1.0)
+    for x, frame in zip(axes, bones):
+        if chair is not None:
+            (cx, _, cz), (hx, _, hz) = chair
+            x.add_patch(plt.Rectangle((cx - hx, cz - hz), 2 * hx, 2 * hz, color="#8c5a33", alpha=0.8))
+        x.plot([lo, hi], [0, 0], color="0.5", lw=1)
+        for start, end in frame:
+            x.plot([start[0], end[0]], [start[2], end[2]], color="#1f77b4", lw=2, solid_capstyle="round")
+        x.set_xlim(lo, hi)
+        x.set_ylim(-0.05, top)
+        x.set_aspect("equal")
+        x.axis("off")
 
 
 RISE_WINDOW = (0.05, 0.95)

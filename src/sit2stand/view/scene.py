@@ -31,7 +31,7 @@ from ..io.topics import (CHAIR_PLATE_TOPIC, FEET_PLATE_TOPIC, HUMAN_COM_TOPIC, H
                          ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_PLANNED_COM_TOPIC,
                          ROBOT_PLANNED_ZMP_TOPIC)
 from ..retarget.export import StateSeries, read_states, resample, robot_of
-from ..retarget.report import flexion_deg
+from ..retarget.report import flexion_deg, matched_times
 from ..robot.model import SIDES, PlantConfig, sole_corners_local
 from ..robot.plant import Plant
 from ..robot.packages import package_share
@@ -264,6 +264,19 @@ def rise_time_s(scene: Scene) -> float:
     low = int(np.argmin(z[: int(np.argmax(z)) + 1]))
     above = np.nonzero(z[low:] >= (z[low] + z.max()) / 2)[0]
     return float(t[low + above[0]]) if len(above) else float(t[0])
+
+
+def human_frames(scene: Scene, robot_t_s: np.ndarray, robot_com_z_m: np.ndarray,
+                 at_robot_t_s: np.ndarray) -> np.ndarray | None:
+    """The human skeleton's bones (len(at), B, 2, 3) [m] at the instants matched to the robot's ``at_robot_t_s``
+    (:func:`~sit2stand.retarget.report.matched_times`: the same share of each body's rise; the robot's times and
+    COM heights on its own clock); None without a skeleton and COM in the scene."""
+    if scene.human is None or "human COM" not in scene.points:
+        return None
+    com = scene.points["human COM"]
+    t_h = matched_times((robot_t_s, robot_com_z_m), (com.t_s, com.xyz[:, 2]), at_robot_t_s)
+    k = np.clip(np.searchsorted(scene.human.t_s, t_h), 0, len(scene.human.t_s) - 1)
+    return scene.human.bones[k]
 
 
 def _stamps(msgs: list) -> np.ndarray:
