@@ -23,12 +23,12 @@ from ..human.com import estimate_com
 from ..human.calibration import StreamCalibration
 from ..human.marker_sets import choose_marker_set
 from ..human.offline import Trial, calibrate_subject, read_trial
-from ..human.skeleton import Subject
+from ..human.skeleton import SAGITTAL_FLEXION, Subject
 from ..io import messages as M
 from ..io.bag import BagReader, BagWriter, refuse_existing_bag
 from ..io.messages import stamp_ns
-from ..io.topics import (HUMAN_COM_TOPIC, ROBOT_JOINT_COMMAND_TOPIC, ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC,
-                         WORLD_FRAME)
+from ..io.topics import (HUMAN_COM_TOPIC, HUMAN_JOINTS_TOPIC, ROBOT_JOINT_COMMAND_TOPIC, ROBOT_PLANNED_COM_TOPIC,
+                         ROBOT_PLANNED_ZMP_TOPIC, WORLD_FRAME)
 from ..io.typestore import typestore
 from ..robot.identify import read_link_parameters
 from ..robot.model import SIDES, PlantConfig
@@ -38,17 +38,23 @@ from ..robot.profile import profile_of
 from ..robot.wbc import WbcGains
 from .dynamic import DynamicsFilter
 from .phases import Phases, find_phases
-from .report import KNEE_TOLERANCE_DEG, SAT_DOWN_TOLERANCE_M, STOOD_RISE_M
+from .report import KNEE_TOLERANCE_DEG, SAT_DOWN_TOLERANCE_M, STOOD_RISE_M, flexion_deg, posture_rms_deg
 from .player import DEFAULT_MARGIN_M, DEFAULT_MAX_TIME_SCALE, SEAT_OFF_DWELL_S, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig, com_feedback_applies, com_lag_m
 from .calibration import map_frame
 from .robot import robot_model, robot_setup
 from .stream import RetargetConfig, Retargeter, retarget_sequence
 
+HumanPosture = tuple[np.ndarray, np.ndarray, dict]
+"""The human over the trial as :func:`~sit2stand.retarget.report.posture_rms_deg` compares it: times [s], COM
+heights [m] and label -> sagittal flexion [deg]."""
+
+
 def human_com_series(bag: Path, human_com_bag: Path | None, trial, calibration: StreamCalibration | None = None,
-                     marker_set: str | None = None) -> np.ndarray:
+                     marker_set: str | None = None) -> tuple[np.ndarray, HumanPosture | None]:
     """(N, 3) human COM at the marker frames: ``/human/com`` of a bag, or the offline estimator (with a skeleton
-    ``calibration`` made beforehand, if given)."""
+    ``calibration`` made beforehand, if given); and the human's sagittal posture, from that bag's
+    ``/human/joint_states`` or the estimator's skeleton fit (None when the bag has a COM but no joints)."""
     for source in (human_com_bag, bag):
         if source is None:
             continue
@@ -57,12 +63,23 @@ def human_com_series(bag: Path, human_com_bag: Path | None, trial, calibration: 
                 msgs = b.read(HUMAN_COM_TOPIC)
                 t = np.array([stamp_ns(m.header) for _, m in msgs]) * 1e-9     # the markers' own time
                 c = np.array([[m.position.x, m.position.y, m.position.z] for _, m in msgs])
-                return np.stack([np.interp(trial.marker_t_s, t, c[:, i]) for i in range(3)], axis=1)
+                joints = b.read(HUMAN_JOINTS_TOPIC) if HUMAN_JOINTS_TOPIC in b.topics() else []
+                com = np.stack([np.interp(trial.marker_t_s, t, c[:, i]) for i in range(3)], axis=1)
+                if not joints:
+                    return com, None
+                t_j = np.array([stamp_ns(m.header) for _, m in joints]) * 1e-9
+                flex = flexion_deg(list(joints[0][1].name), np.array([m.position for _, m in joints]),
+                                   SAGITTAL_FLEXION)
+                return com, (t_j, np.interp(t_j, t, c[:, 2]), flex)
 
     subject = Subject(trial.height_m or 1.75, trial.mass_kg or 75.0, trial.sex,
                       marker_set=choose_marker_set(trial.marker_names, marker_set))
-    return estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,
-                        subject, calibration=calibration).com_m
+    fit = estimate_com(trial.marker_t_s, trial.marker_names, trial.positions, trial.valid, trial.plates,
+                       subject, calibration=calibration)
+    posture = None
+    if fit.q is not None and fit.model is not None:
+        posture = (fit.t_s, fit.com_m[:, 2], flexion_deg(list(fit.model.names[2:]), fit.q[:, 7:], SAGITTAL_FLEXION))
+    return fit.com_m, posture
 
 
 def trial_phases(trial: Trial, com_h: np.ndarray, chair_fz_n: np.ndarray | None,
@@ -115,7 +132,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     trial = read_trial(bag)
     config = config or RetargetConfig()
     skeleton = _static_calibration(trial, static, config.marker_set) if static is not None else None
-    com_h = human_com_series(bag, human_com_bag, trial, skeleton, config.marker_set)
+    com_h, human_posture = human_com_series(bag, human_com_bag, trial, skeleton, config.marker_set)
     chair = next((p for p in trial.plates if p.name == "chair"), None)
     fz = None if chair is None else np.interp(trial.marker_t_s, chair.t_s, chair.force_n[:, 2])
     phases = trial_phases(trial, com_h, fz, config.marker_set)
@@ -149,7 +166,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         com_feedback = com_feedback_applies(com_feedback, controller)
         stab = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, stabiliser) if com_feedback else None
         cmds, simulated = _simulate(sim, player, dt, out, stabiliser=stab, controller=controller,
-                                    t0_s=float(trial.marker_t_s[0]))
+                                    t0_s=float(trial.marker_t_s[0]), human_posture=human_posture)
         simulated = {"com_feedback": bool(com_feedback), "controller": controller, **simulated}
     ik_ms = np.array([f.ik.seconds for f in frames]) * 1e3
     feasible = np.array([f.ik.feasible for f in frames])
@@ -164,7 +181,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         # time_scale: the robot's duration over the human's; the peak local factor beside it
         "time_scale": len(cmds) / max(1, len(frames)), "time_scale_peak": max(c.time_scale for c in cmds),
         "retiming": "fixed" if time_scale else retiming, "commands": len(cmds), "plan_duration_s": len(cmds) * dt,
-        "duration_ratio": len(cmds) / max(1, len(frames)), **_filter_summary(cmds),
+        "duration_ratio": len(cmds) / max(1, len(frames)), **_filter_summary(cmds), **_marker_fit(frames),
         **_zmp_summary(on_feet), **_com_deviation(frames, cmds),
         "human_seat_off_frame": next((i for i, f in enumerate(frames) if f.human_seat_off), None),
         "robot_seat_off_frame": next((i for i, f in enumerate(frames) if not f.seated), None),
@@ -183,6 +200,17 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         _timing_figure(trial, com_h, frames, cmds, np.load(out / "simulation.npy"), out / "timing.png", summary)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
+
+
+def _marker_fit(frames) -> dict:
+    """How far the plan's robot is from the human's markers: the distance [mm] between each robot marker site and
+    its human marker mapped onto the robot (the calibration's similarity), RMS over every frame and marker, and the
+    worst frame's RMS."""
+    rms = np.array([f.ik.marker_rms_m for f in frames], float)
+    rms = rms[np.isfinite(rms)]
+    if not len(rms):
+        return {}
+    return {"marker_rms_mm": float(np.sqrt(np.mean(rms**2)) * 1e3), "marker_rms_mm_worst_frame": float(rms.max() * 1e3)}
 
 
 def _com_deviation(frames, cmds) -> dict:
@@ -264,7 +292,8 @@ def physics_steps_due(commands: int, dt: float, timestep_s: float, taken: int) -
 
 
 def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3.0,
-              stabiliser: ComStabiliser | None = None, *, controller: str, t0_s: float = 0.0) -> tuple[list, dict]:
+              stabiliser: ComStabiliser | None = None, *, controller: str, t0_s: float = 0.0,
+              human_posture: HumanPosture | None = None) -> tuple[list, dict]:
     """Drive the plant with the player's commands (PD + inverse-dynamics feed-forward), pulled one per frame period
     with the robot's lag behind the plan (the COM feedback's error), then hold the last one. Returns (commands,
     figures). Writes ``simulation.npy``: t, true COM (3), planned COM (3), COP (3), pelvis z, pelvis x, planned
@@ -273,7 +302,8 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
     :class:`~sit2stand.retarget.stabiliser.ComStabiliser` correcting each command for the plant's measured state
     (None: the commands as planned). Writes the robot's sensed state once per command period into the bag
     ``robot`` (the driver's topics, stamped from ``t0_s`` on the commands' clock): what ``sit2stand export``
-    reads."""
+    reads. ``human_posture``: the human's, to give the simulated robot's posture RMS against it
+    (:func:`~sit2stand.retarget.report.posture_rms_deg`)."""
     ticks = taken = 0
     sensed = []
     rows, cmds, torque = [], [], []
@@ -329,7 +359,17 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
                   "final_pelvis_height_ratio": float(arr[up, 10] / standing_pelvis_height_m(plant)),
                   "com_tracking_rms_m": float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))),
                   "com_feedback_max_offset_m": float(np.abs(arr[:, 19:21]).max()), **_torques(plant, np.array(torque)),
-                  **_qp_times(plant)}
+                  **_qp_times(plant), **_robot_posture_rms(plant, arr, sensed, human_posture)}
+
+
+def _robot_posture_rms(plant, arr: np.ndarray, sensed: list, human: HumanPosture | None) -> dict:
+    """``posture_rms_deg`` of the simulated robot (its sensed joints, its true COM) against the human's posture
+    (nothing without it, or when either body does not rise)."""
+    if human is None:
+        return {}
+    robot = flexion_deg(plant.joint_names, np.array([x.q for x in sensed]), plant.cfg.profile.sagittal_flexion())
+    rms = posture_rms_deg(human, (arr[:, 0], arr[:, 3], robot))
+    return {} if rms is None else {"posture_rms_deg": rms}
 
 
 def end_posture_verdict(summary: dict, frames: list) -> dict:
