@@ -61,6 +61,10 @@ def _synth_human(args: argparse.Namespace) -> int:
                       seat_height_m=args.seat_height, duration_s=args.duration, seed=args.seed,
                       extra=[ExtraMass.parse(e) for e in args.extra_mass], marker_rate_hz=args.marker_rate)
     demo = synthesize(cfg)
+    if args.cycles > 1:
+        from ..human.cycles import cycled
+
+        demo = cycled(demo, args.cycles, args.seated)
     for warning in demo.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     counts = write_demonstration_bag(demo, args.out)
@@ -68,6 +72,8 @@ def _synth_human(args: argparse.Namespace) -> int:
     print(f"{cfg.style} rise of a {cfg.height_m:g} m, {demo.human.total_mass:.1f} kg {cfg.sex}: seat-off at "
           f"{demo.seat_off_s - demo.rise_start_s:.2f} s into a {demo.rise_end_s - demo.rise_start_s:.2f} s rise; "
           f"COM height {c[i0, 2]:.3f} -> min {c[i0:, 2].min():.3f} -> {c[-1, 2]:.3f} m")
+    if args.cycles > 1:
+        print(f"{args.cycles} sit-stand-sit cycles, {args.seated:g} s on the seat between them: {demo.t_s[-1]:.1f} s")
     print(f"wrote {args.out}: " + ", ".join(f"{t} ({n})" for t, n in counts.items()))
     return 0
 
@@ -199,6 +205,11 @@ def add_synth_human(sub) -> None:
                    help="capture rate [Hz] (default 100; divides the plates' 1000 Hz)")
     p.add_argument("--extra-mass", action="append", default=[], metavar="SEGMENT:KG[:x,y,z]",
                    help="hidden rigid mass on a segment, offset from its COM in segment axes (repeatable)")
+    p.add_argument("--cycles", type=int, default=1,
+                   help="sit-stand-sit cycles (default 1: one rise; 5: a five-times sit-to-stand test), each sit-down "
+                   "the rise mirrored in time")
+    p.add_argument("--seated", type=float, default=1.0,
+                   help="seconds on the seat between cycles (default 1.0; ~0.1: a brief touch)")
     p.add_argument("--out", type=Path, required=True)
     p.set_defaults(func=_synth_human)
 
