@@ -49,6 +49,11 @@ def _retarget(args: argparse.Namespace) -> int:
         else:
             print("stood up and sat back down" if ok else f"stood up, did not sit back down: "
                   f"{summary['fall'] or 'pelvis not on the seat'}")
+        cycles = summary.get("cycles") or []
+        if len(cycles) > 1:         # a trial of several sit-stand-sit cycles: each one counts
+            stood, sat = sum(c["stood"] for c in cycles), sum(c["sat"] for c in cycles)
+            print(f"{len(cycles)} cycles: stood up in {stood}, sat back down in {sat}")
+            ok = ok and stood == sat == len(cycles)
         return 0 if ok else 1
     return 0
 

@@ -20,6 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..human.com import estimate_com
+from ..human.cycles import find_cycles
 from ..human.calibration import StreamCalibration
 from ..human.marker_sets import choose_marker_set
 from ..human.offline import Trial, calibrate_subject, read_trial
@@ -82,13 +83,33 @@ def human_com_series(bag: Path, human_com_bag: Path | None, trial, calibration: 
     return fit.com_m, posture
 
 
+def pelvis_height(trial: Trial, marker_set: str | None = None) -> np.ndarray:
+    """(N,) the pelvis markers' mean height [m] per marker frame (NaN where none is seen)."""
+    pelvis = choose_marker_set(trial.marker_names, marker_set).pelvis.markers
+    pel = [trial.marker_names.index(n) for n in pelvis if n in trial.marker_names]
+    return np.nanmean(np.where(trial.valid[:, pel], trial.positions[:, pel, 2], np.nan), axis=1)
+
+
 def trial_phases(trial: Trial, com_h: np.ndarray, chair_fz_n: np.ndarray | None,
                  marker_set: str | None = None) -> Phases:
     """The trial's phases from its pelvis markers, the human COM and the chair plate (if any)."""
-    pelvis = choose_marker_set(trial.marker_names, marker_set).pelvis.markers
-    pel = [trial.marker_names.index(n) for n in pelvis if n in trial.marker_names]
-    pelvis_z = np.nanmean(np.where(trial.valid[:, pel], trial.positions[:, pel, 2], np.nan), axis=1)
-    return find_phases(trial.marker_t_s, pelvis_z, com_h[:, 0], trial.height_m or 1.75, chair_fz_n)
+    return find_phases(trial.marker_t_s, pelvis_height(trial, marker_set), com_h[:, 0], trial.height_m or 1.75,
+                       chair_fz_n)
+
+
+def cycle_rows(human_t_s: np.ndarray, human_pelvis_z_m: np.ndarray, robot_t_s: np.ndarray,
+               robot_pelvis_z_m: np.ndarray) -> list[dict]:
+    """One row per sit-stand-sit cycle of the human (:func:`~sit2stand.human.cycles.find_cycles`): the human's and
+    the simulated robot's rise and sit-down durations [s] (seated to standing, standing to seated), and whether the
+    robot stood and sat in that cycle (its own k-th cycle reached standing, and seated again)."""
+    robot = find_cycles(robot_t_s, robot_pelvis_z_m)
+    rows = []
+    for k, h in enumerate(find_cycles(human_t_s, human_pelvis_z_m)):
+        r = robot[k] if k < len(robot) else None
+        rows.append({"cycle": k + 1, "human_rise_s": h.rise_s, "human_sit_s": h.sit_s,
+                     "robot_rise_s": None if r is None else r.rise_s, "robot_sit_s": None if r is None else r.sit_s,
+                     "stood": r is not None, "sat": r is not None and r.seated_s is not None})
+    return rows
 
 
 def _static_calibration(trial: Trial, static: Path, marker_set: str | None) -> StreamCalibration:
@@ -193,6 +214,9 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     summary.update(simulated)
     if simulated:
         summary.update(end_posture_verdict(summary, frames))
+        sim_rows = np.load(out / "simulation.npy")
+        summary["cycles"] = cycle_rows(trial.marker_t_s, pelvis_height(trial, config.marker_set), sim_rows[:, 0],
+                                       sim_rows[:, 10])
     _write_bag(out / "retarget", cmds, robot.joint_names, float(trial.marker_t_s[0]), dt,
                profile_of(robot.model).root_link)
     _figure(trial, com_h, frames, cmds, dt, out / "retarget.png", summary)

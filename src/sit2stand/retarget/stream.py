@@ -61,6 +61,11 @@ MIN_LEAD_IN_S = 0.5
 RISE_SCALE_RANGE = (0.8, 1.5)
 """The markers' vertical scale stays within these multiples of the leg-length scale (see ``Retargeter._rise_scale``).
 """
+REARM_ABOVE_SEAT_M = 0.01
+"""After a sit-down, a plan whose pelvis is back within this of its seated height is seated again, its hips held on
+the seat and its COM target no further back than there: the next rise plays as the first (a trial of several
+sit-stand-sit cycles). Left to follow the human's COM back with the hips held, TALOS tipped backward; seated again
+only once the human's COM stopped, G1 sank off its seat."""
 KNEE_RELEASE_DROP_M = 0.05
 """Once the human's pelvis is this far below its highest, the human is sitting back down: the knee task lets go and
 the markers' vertical scale returns to the leg-length one as the pelvis comes down (at the rise's scale all the
@@ -153,6 +158,8 @@ class Retargeter:
         pin.centerOfMass(self.model, self.data, self.q)
         self.com_seated = self.data.com[0].copy()
         self.base_seated = self.q[:3].copy()
+        self.seat_z_m = float(self.q[2])       # the plan's pelvis height seated on the chair [m]
+        self._com_x_floor: float | None = None  # seated again after a sit-down: the COM target goes no further back
         R = pin.Quaternion(self.q[3:7]).toRotationMatrix()
         self.pitch_seated = float(np.arctan2(R[0, 2], R[2, 2]))
 
@@ -315,8 +322,14 @@ class Retargeter:
         self._pelvis_last = pelvis_now
         if not self.seated and not self.sat_down:
             self.sat_down = self._human_touched_down(pelvis_now, chair_force_n)
+        elif self.sat_down and self.q[2] < self.seat_z_m + REARM_ABOVE_SEAT_M:
+            self._seated_again()
+            self._com_x_floor = float(target[0])
+        if self._com_x_floor is not None:        # seated again: the COM stays where the hips landed, or ahead
+            target[0] = max(target[0], self._com_x_floor)
         if self.seated and self.human_seat_off and target[0] >= robot.ankle_left[0] + self.knots_r[1] - 1e-3:
             self.seated = False
+            self._com_x_floor = None
             self._t_off = t_s
             pin.centerOfMass(self.model, self.data, self.q)
             self._y_off = float(self.data.com[0][1])
@@ -397,6 +410,18 @@ class Retargeter:
     def _since_seat_off(self, t_s: float, duration_s: float) -> float:
         """A 0 -> 1 smoothstep over ``duration_s`` [s] from the robot's seat-off."""
         return smoothstep((t_s - self._t_off) / max(duration_s, 1e-9))
+
+    def _seated_again(self) -> None:
+        """After a sit-down, the plan's pelvis back within ``REARM_ABOVE_SEAT_M`` of the seat: the next rise starts
+        as the first (hips held on the seat where they are, the human's seat-off awaited, then the robot's), so a
+        trial of several cycles plays each one."""
+        self.seated, self.sat_down, self.human_seat_off = True, False, False
+        self._chair_loaded = True         # the sit-down loaded the chair (with a plate): its unloading is the seat-off
+        self._pelvis_rise_peak_m = 0.0
+        self._t_off = None
+        self.base_seated = np.array([self.q[0], self.q[1], self.seat_z_m])    # where it is, on the seat
+        R = pin.Quaternion(self.q[3:7]).toRotationMatrix()
+        self.pitch_seated = min(self.pitch_seated, float(np.arctan2(R[0, 2], R[2, 2])))
 
     def _human_touched_down(self, pelvis_m: np.ndarray, chair_force_n: float | None) -> bool:
         """After the rise, has the human sat back down? The chair plate loaded again (over twice the seat-off
