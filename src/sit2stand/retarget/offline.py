@@ -20,7 +20,6 @@ import numpy as np
 import pinocchio as pin
 
 from ..human.com import estimate_com
-from ..human.cycles import find_cycles
 from ..human.calibration import StreamCalibration
 from ..human.marker_sets import choose_marker_set
 from ..human.offline import Trial, calibrate_subject, read_trial
@@ -39,7 +38,8 @@ from ..robot.profile import profile_of
 from ..robot.wbc import WbcGains
 from .dynamic import DynamicsFilter
 from .phases import Phases, find_phases
-from .report import KNEE_TOLERANCE_DEG, SAT_DOWN_TOLERANCE_M, STOOD_RISE_M, flexion_deg, posture_rms_deg
+from .report import (KNEE_TOLERANCE_DEG, SAT_DOWN_TOLERANCE_M, STOOD_RISE_M, cycle_rows, flexion_deg,
+                     posture_rms_deg)
 from .player import DEFAULT_MARGIN_M, DEFAULT_MAX_TIME_SCALE, SEAT_OFF_DWELL_S, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig, com_feedback_applies, com_lag_m
 from .calibration import map_frame
@@ -95,21 +95,6 @@ def trial_phases(trial: Trial, com_h: np.ndarray, chair_fz_n: np.ndarray | None,
     """The trial's phases from its pelvis markers, the human COM and the chair plate (if any)."""
     return find_phases(trial.marker_t_s, pelvis_height(trial, marker_set), com_h[:, 0], trial.height_m or 1.75,
                        chair_fz_n)
-
-
-def cycle_rows(human_t_s: np.ndarray, human_pelvis_z_m: np.ndarray, robot_t_s: np.ndarray,
-               robot_pelvis_z_m: np.ndarray) -> list[dict]:
-    """One row per sit-stand-sit cycle of the human (:func:`~sit2stand.human.cycles.find_cycles`): the human's and
-    the simulated robot's rise and sit-down durations [s] (seated to standing, standing to seated), and whether the
-    robot stood and sat in that cycle (its own k-th cycle reached standing, and seated again)."""
-    robot = find_cycles(robot_t_s, robot_pelvis_z_m)
-    rows = []
-    for k, h in enumerate(find_cycles(human_t_s, human_pelvis_z_m)):
-        r = robot[k] if k < len(robot) else None
-        rows.append({"cycle": k + 1, "human_rise_s": h.rise_s, "human_sit_s": h.sit_s,
-                     "robot_rise_s": None if r is None else r.rise_s, "robot_sit_s": None if r is None else r.sit_s,
-                     "stood": r is not None, "sat": r is not None and r.seated_s is not None})
-    return rows
 
 
 def _static_calibration(trial: Trial, static: Path, marker_set: str | None) -> StreamCalibration:

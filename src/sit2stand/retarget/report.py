@@ -32,13 +32,14 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
-from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, HUMAN_JOINTS_TOPIC, ROBOT_BASE_POSE_TOPIC,
-                         ROBOT_COM_FEEDBACK_TOPIC, ROBOT_COP_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_PLANNED_COM_TOPIC,
-                         ROBOT_PLANNED_ZMP_TOPIC)
+from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, HUMAN_JOINTS_TOPIC, HUMAN_PELVIS_POSE_TOPIC,
+                         ROBOT_BASE_POSE_TOPIC, ROBOT_COM_FEEDBACK_TOPIC, ROBOT_COP_TOPIC, ROBOT_JOINT_STATES_TOPIC,
+                         ROBOT_PLANNED_COM_TOPIC, ROBOT_PLANNED_ZMP_TOPIC)
 from ..io.bag import BagReader
 from ..io.messages import stamp_ns
 from ..robot.identify import read_link_parameters
 from ..robot.model import DEFAULT_ROBOT, PlantConfig, controller_model, sole_corners_world
+from ..human.cycles import find_cycles
 from ..human.skeleton import SAGITTAL_FLEXION
 from ..robot.plant import Plant
 from ..robot.postures import standing_pelvis_height_m
@@ -89,6 +90,7 @@ class _RunMessages:
     chair: list
     com_feedback_shift_m: list[float]     # horizontal size of each COM feedback correction
     human_joints: list = field(default_factory=list)   # the fitted skeleton's joint states (the last few)
+    human_pelvis: list = field(default_factory=list)   # the fitted skeleton's pelvis poses
 
 
 def _stamps(msgs) -> np.ndarray:
@@ -129,7 +131,7 @@ def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | N
     rise = np.flatnonzero(z > z[0] + 0.02)
     seat_off = float(t[rise[0]]) if len(rise) else None
     fallen, stood, sat_down = _stood_up(cfg, t, z, hold_s, stand_fraction)
-    posture = _end_posture(cfg, cad, q, msgs.human_joints)
+    posture = _end_posture(cfg, cad, q, msgs.human_joints, sat_down)
     posture["posture_rms_deg"] = _posture_rms(cfg, msgs, t_js, com)
     stood = stood and posture.get("standing_knees_match", True)
     shift = msgs.com_feedback_shift_m
@@ -141,6 +143,9 @@ def analyse(run: Path, name: str, params_yaml: Path | None, plant_yaml: Path | N
                "duration_s": float(t[-1]),
                "com_feedback_max_shift_m": float(max(shift)) if shift else None,
                "cad_vs_identified_com_rms_m": float(np.sqrt(np.mean(np.sum((com - com_cad)[:, [0, 2]] ** 2, axis=1))))}
+    if msgs.human_pelvis:       # a row per sit-stand-sit cycle of the human, the robot's beside it
+        summary["cycles"] = cycle_rows(_stamps(msgs.human_pelvis),
+                                       np.array([m.pose.position.z for _, m in msgs.human_pelvis]), t, z)
     zmp_t = _stamps(msgs.planned_zmp) - t0 if msgs.planned_zmp else np.zeros(0)
     zmp = _xyz(msgs.planned_zmp, "point").reshape(-1, 3)
     return RunAnalysis(name, t, q, com, com_cad, plan_t, plan_com, _stamps(msgs.cop) - t0, _xyz(msgs.cop, "point"),
@@ -156,19 +161,23 @@ def _support_x(model: pin.Model, q: np.ndarray) -> tuple[float, float]:
     return float(x.min()), float(x.max())
 
 
-def _end_posture(cfg: PlantConfig, model: pin.Model, q: np.ndarray, human_joints: list) -> dict:
+def _end_posture(cfg: PlantConfig, model: pin.Model, q: np.ndarray, human_joints: list, sat_down: bool | None
+                 ) -> dict:
     """The robot's final knee flexion [deg] and pelvis height over its straight-legged stance's, beside the human's
     last knee flexion (its skeleton's, when the run has ``/human/joint_states``), and whether the knees match within
-    ``KNEE_TOLERANCE_DEG``."""
+    ``KNEE_TOLERANCE_DEG``. A run that sat back down is judged standing: the robot where its pelvis was highest, the
+    human at its most extended knee."""
     profile = cfg.profile
     knees = [model.joints[model.getJointId(profile.leg(s, "knee"))].idx_q for s in SIDES]
-    out = {"final_knee_flexion_deg_robot": float(np.degrees(np.mean(q[-1, knees]))),
-           "final_pelvis_height_ratio": float(q[-1, 2] / standing_pelvis_height_m(Plant(cfg, with_chair=False)))}
+    up = int(np.argmax(q[:, 2])) if sat_down else -1
+    out = {"final_knee_flexion_deg_robot": float(np.degrees(np.mean(q[up, knees]))),
+           "final_pelvis_height_ratio": float(q[up, 2] / standing_pelvis_height_m(Plant(cfg, with_chair=False)))}
     if human_joints:
-        msg = human_joints[-1][1]
-        knee = flexion_deg(list(msg.name), np.array([msg.position]), {"knee": SAGITTAL_FLEXION["knee"]}).get("knee")
-        if knee is not None:
-            human = float(knee[0])
+        judged = human_joints if sat_down else human_joints[-1:]
+        flexion = flexion_deg(list(judged[0][1].name), np.array([m.position for _, m in judged]),
+                              {"knee": SAGITTAL_FLEXION["knee"]}).get("knee")
+        if flexion is not None:
+            human = float(np.min(flexion))
             out["final_knee_flexion_deg_human"] = human
             out["standing_knees_match"] = bool(abs(out["final_knee_flexion_deg_robot"] - human) <= KNEE_TOLERANCE_DEG)
     return out
@@ -206,7 +215,8 @@ def _read_run(run: Path, every: int) -> _RunMessages:
             bag.read(CHAIR_PLATE_TOPIC) if CHAIR_PLATE_TOPIC in topics else [],
             [np.hypot(m.vector.x, m.vector.y) for _, m in bag.read(ROBOT_COM_FEEDBACK_TOPIC)]
             if ROBOT_COM_FEEDBACK_TOPIC in topics else [],
-            bag.read(HUMAN_JOINTS_TOPIC) if HUMAN_JOINTS_TOPIC in topics else [])
+            bag.read(HUMAN_JOINTS_TOPIC) if HUMAN_JOINTS_TOPIC in topics else [],
+            bag.read(HUMAN_PELVIS_POSE_TOPIC) if HUMAN_PELVIS_POSE_TOPIC in topics else [])
 
 
 def _measured_configurations(msgs: _RunMessages, t_js: np.ndarray, cad: pin.Model) -> np.ndarray:
@@ -456,6 +466,21 @@ def flexion_deg(names: list[str], q: np.ndarray, groups: dict[str, tuple[tuple[s
         if cols:
             out[label] = sign * np.degrees(np.asarray(q, float)[:, cols].mean(axis=1))
     return out
+
+
+def cycle_rows(human_t_s: np.ndarray, human_pelvis_z_m: np.ndarray, robot_t_s: np.ndarray,
+               robot_pelvis_z_m: np.ndarray) -> list[dict]:
+    """One row per sit-stand-sit cycle of the human (:func:`~sit2stand.human.cycles.find_cycles`): the human's and
+    the simulated robot's rise and sit-down durations [s] (seated to standing, standing to seated), and whether the
+    robot stood and sat in that cycle (its own k-th cycle reached standing, and seated again)."""
+    robot = find_cycles(robot_t_s, robot_pelvis_z_m)
+    rows = []
+    for k, h in enumerate(find_cycles(human_t_s, human_pelvis_z_m)):
+        r = robot[k] if k < len(robot) else None
+        rows.append({"cycle": k + 1, "human_rise_s": h.rise_s, "human_sit_s": h.sit_s,
+                     "robot_rise_s": None if r is None else r.rise_s, "robot_sit_s": None if r is None else r.sit_s,
+                     "stood": r is not None, "sat": r is not None and r.seated_s is not None})
+    return rows
 
 
 def rise_window(t: np.ndarray, com_z: np.ndarray) -> tuple[float, float] | None:
