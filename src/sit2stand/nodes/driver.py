@@ -14,11 +14,9 @@ Subscribes:
   (joints not named keep their last reference);
 * ``/robot/joint_state_command`` (sensor_msgs/JointState): positions and optional velocities by joint name.
 
-A command is applied when the simulation reaches its header stamp (at once when the stamp is 0 or already past):
-a simulation held up by a loaded machine catches up with each command at its own time, not with the newest one
-over the whole gap (which lurched the robot forward). A stamp more than ``MAX_COMMAND_LEAD_S`` ahead of the graph's
-clock (the simulated time with ``publish_clock``, else the driver's ROS clock; e.g. two machines' clocks apart, or a
-wall-time stamp to a simulated-time driver) is applied at once, with a warning.
+A command is applied when the simulation reaches its header stamp (at once when the stamp is 0, already past, or
+too far ahead, with a warning): the time bases, the command queue and the fall policy are
+:mod:`sit2stand.robot.driver_timing`'s.
 
 Publishes: ``/robot/joint_states`` (position, velocity, measured torque as effort) at ``state_rate_hz`` (500) of
 simulated time, ``/robot/ft/left`` and ``/robot/ft/right`` (geometry_msgs/WrenchStamped: ground reaction in world
@@ -50,7 +48,6 @@ tilted past ``fall_tilt_rad``) is published on the status and the robot goes lim
 from __future__ import annotations
 
 import time
-from collections import deque
 
 import numpy as np
 from builtin_interfaces.msg import Time as BuiltinTime
@@ -73,6 +70,7 @@ from ..io.topics import (CLOCK_TOPIC, FELL_EXIT_CODE, ROBOT_BASE_POSE_TOPIC, ROB
                          ROBOT_STATUS_TOPIC, TF_STATIC_TOPIC, TF_TOPIC, WORLD_FRAME, ft_topic, ros_name,
                          sole_world_aligned_frame)
 from ..robot.description import DESCRIPTION_MESHES, DescriptionError, FrameTree, robot_description
+from ..robot.driver_timing import FALL_POLICIES, SIM_EPOCH_S, CommandQueue, SimulationClock, respond_to_fall
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import SIDES, PlantConfig, PlantConfigError
 from ..robot.profile import ProfileError, RobotProfile
@@ -82,10 +80,6 @@ from .runtime import (LATCHED_QOS, PUBLISH_DEPTH, TF_QOS, NodeError, declare, no
                       robot_state_qos, steady_timer)
 
 DEFAULT_PLANT = "default"
-SIM_EPOCH_S = 100.0      # simulated time starts here when the driver is the time source (0 reads as "unset")
-MAX_COMMAND_LEAD_S = 0.5
-MAX_STEP_PER_TICK_S = 0.02
-"""The driver's exit status after the robot fell (a graph with it then exits 1)."""
 
 
 class Driver(Node):
@@ -107,7 +101,7 @@ class Driver(Node):
         self.state_period = 1.0 / declare(self, "state_rate_hz", 500.0, "joint state rate [Hz] of simulated time")
         self.publish_clock = declare(self, "publish_clock", False, "publish /clock (simulated time)")
         self.on_fall = declare(self, "on_fall", "limp", "limp | hold")
-        if self.ff_mode not in ("gravity", "inverse_dynamics", "none") or self.on_fall not in ("limp", "hold") or \
+        if self.ff_mode not in ("gravity", "inverse_dynamics", "none") or self.on_fall not in FALL_POLICIES or \
                 self.controller not in CONTROLLERS:
             raise NodeError(f"controller {self.controller!r}, feedforward {self.ff_mode!r} or on_fall "
                             f"{self.on_fall!r} not recognised (controller: {' | '.join(CONTROLLERS)})")
@@ -141,12 +135,10 @@ class Driver(Node):
         self.create_subscription(JointTrajectory, ros_name(ROBOT_JOINT_COMMAND_TOPIC), self._on_trajectory, 10)
         self.create_subscription(JointState, ros_name(ROBOT_JOINT_STATE_COMMAND_TOPIC), self._on_command, 10)
         self.create_service(Trigger, "~/reset", self._on_reset)
-        self._wall0 = time.monotonic()
-        self._sim0 = self.plant.t_s
-        self._ros0_ns = self.get_clock().now().nanoseconds    # wall-clock mode: the ROS time of _sim0
-        self._pending: deque[tuple[int, tuple]] = deque()     # (stamp [ns], command) not yet due
         self.sim_time = bool(self.get_parameter("use_sim_time").value)
-        self._clock0_ns: int | None = None   # under use_sim_time: the /clock time the simulation started at _sim0
+        self.clock = SimulationClock(self.sim_time, self.publish_clock, self.rtf)
+        self.clock.start(self.plant.t_s, time.monotonic(), self.get_clock().now().nanoseconds)
+        self.commands = CommandQueue()
         self.steps_done = 0
         self._status_count, self._status_qp = 0, {}
         self._fall_reported = False
@@ -235,29 +227,24 @@ class Driver(Node):
         """Apply ``command`` (the arguments of :meth:`_apply`) when the simulation reaches ``stamp`` [ns]."""
         sim_ns = self._sim_ros_ns()
         # the graph's clock now: the simulated time where the driver publishes it, else this node's clock
-        now_ns = sim_ns if self.publish_clock else self.get_clock().now().nanoseconds
-        if sim_ns is not None and stamp > now_ns + MAX_COMMAND_LEAD_S * 1e9:
+        now_ns = None if sim_ns is None else sim_ns if self.publish_clock else self.get_clock().now().nanoseconds
+        if not self.commands.add(stamp, command, now_ns):
             self.get_logger().warning(f"a command stamped {(stamp - now_ns) * 1e-9:.2f} s ahead of the graph's clock "
                                       "(clocks not synchronised, or not on the simulated time?): applied at once",
                                       throttle_duration_sec=5.0)
-            stamp = 0
-        self._pending.append((stamp, command))
         self._apply_due()
 
     def _apply_due(self) -> None:
         """Apply the pending commands whose stamps the simulation has reached (in the order they came)."""
-        sim_ns = self._sim_ros_ns()
-        while self._pending and (sim_ns is None or self._pending[0][0] <= sim_ns):
-            self._apply(*self._pending.popleft()[1])
+        for command in self.commands.due(self._sim_ros_ns()):
+            self._apply(*command)
 
     def _on_reset(self, _req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
         self.plant.reset()
         self.plant.feedforward = self.ff_mode
         self.plant.settle(self.settle_s)
-        self._pending.clear()
-        self._wall0, self._sim0, self._ros0_ns = time.monotonic(), self.plant.t_s, self.get_clock().now().nanoseconds
-        if self._clock0_ns is not None:       # under use_sim_time: from the clock's time now
-            self._clock0_ns = self.get_clock().now().nanoseconds
+        self.commands.clear()
+        self.clock.start(self.plant.t_s, time.monotonic(), self.get_clock().now().nanoseconds)
         self._fall_reported = False
         self.exit_code = 0
         res.success, res.message = True, "reset: seated on the chair"
@@ -266,26 +253,18 @@ class Driver(Node):
     # -- simulation ----------------------------------------------------------------------------------------------
     def _tick(self) -> None:
         plant = self.plant
-        if self.sim_time:
-            now_ns = self.get_clock().now().nanoseconds
-            if now_ns == 0:                  # no /clock yet: wait seated
-                return
-            if self._clock0_ns is None:
-                self._clock0_ns, self._sim0 = now_ns, plant.t_s
-                self._publish_latched()
-                # the seated state at once, at the clock's time: a clock held for the first command (the replayer's
-                # lockstep) would otherwise hold this driver's first state too, and the retargeter waits for it
-                self._publish_state()
-            target = self._sim0 + (now_ns - self._clock0_ns) * 1e-9
-        elif self.rtf > 0:
-            target = self._sim0 + (time.monotonic() - self._wall0) * self.rtf
-        else:
-            target = plant.t_s + 0.25      # as fast as it can: 250 ms of simulation per tick
+        clock_ns = self.get_clock().now().nanoseconds if self.sim_time else None
+        if clock_ns and self.clock.follow(clock_ns, plant.t_s):
+            self._publish_latched()
+            # the seated state at once, at the clock's time: a clock held for the first command (the replayer's
+            # lockstep) would otherwise hold this driver's first state too, and the retargeter waits for it
+            self._publish_state()
+        target = self.clock.target_s(plant.t_s, clock_ns, time.monotonic())
+        if target is None:                   # no /clock yet: wait seated
+            return
         chunk = max(1, int(round(self.state_period / plant.cfg.timestep_s)))
-        # behind (a held-up tick): catch up a slice at a time, so that the commands sent meanwhile are taken in
+        # behind (a held-up tick): the target is a slice ahead, so that the commands sent meanwhile are taken in
         # between and applied at their stamps; the next tick comes at once
-        if self.sim_time or self.rtf > 0:
-            target = min(target, plant.t_s + MAX_STEP_PER_TICK_S)
         while plant.t_s + 0.5 * plant.cfg.timestep_s < target:
             self._apply_due()
             plant.step(chunk)
@@ -296,22 +275,11 @@ class Driver(Node):
                 self.exit_code = FELL_EXIT_CODE        # the graph's job failed: the launcher says so
                 self.get_logger().error(f"robot {plant.status_text} at {plant.t_s:.2f} s of simulated time; "
                                         f"going {self.on_fall}")
-                if self.on_fall == "limp":
-                    plant.set_limp(True)
-                else:
-                    plant.command(plant.data.qpos[plant.qadr].copy())
+                respond_to_fall(plant, self.on_fall)
 
     def _sim_ros_ns(self) -> int | None:
-        """The ROS time [ns] of the simulated state now: the /clock time it simulates, the published simulated
-        time, or in wall-clock mode the time it stands for; None when running as fast as it can."""
-        elapsed_s = self.plant.t_s - self._sim0
-        if self._clock0_ns is not None:
-            return self._clock0_ns + int(round(elapsed_s * 1e9))
-        if self.publish_clock:
-            return int(round((SIM_EPOCH_S + self.plant.t_s) * 1e9))
-        if self.sim_time or self.rtf <= 0:     # waiting for /clock, or not paced
-            return None
-        return self._ros0_ns + int(round(elapsed_s / self.rtf * 1e9))
+        """The ROS time [ns] of the simulated state now (:meth:`SimulationClock.ros_ns`)."""
+        return self.clock.ros_ns(self.plant.t_s)
 
     def _now_ns(self) -> int:
         ns = self._sim_ros_ns()
@@ -357,7 +325,6 @@ class Driver(Node):
 
     def _publish_status(self) -> None:
         plant = self.plant
-        wall = time.monotonic() - self._wall0
         self._status_count += 1
         if self._status_count % 10 == 1:     # percentiles of up to 60,000 QP times: once a second, not at 10 Hz
             self._status_qp = self._qp_figures()
@@ -367,15 +334,15 @@ class Driver(Node):
                                   message=plant.status_text if plant.fallen else ("limp" if plant.limp else "ok"))
         status.values = [KeyValue(key=k, value=v) for k, v in (
             ("sim_time_s", f"{plant.t_s:.3f}"),
-            ("real_time_factor", f"{(plant.t_s - self._sim0) / max(wall, 1e-9):.2f}"),
+            ("real_time_factor", f"{self.clock.real_time_factor(plant.t_s, time.monotonic()):.2f}"),
             ("pelvis_height_m", f"{plant.data.qpos[2]:.3f}"), ("feedforward", plant.feedforward),
             ("controller", self.controller), *self._status_qp.items())]
         self.status_pub.publish(status)
 
     def close(self) -> None:
-        wall = time.monotonic() - self._wall0
-        print(f"[driver] simulated {self.plant.t_s - self._sim0:.2f} s in {wall:.2f} s "
-              f"(real-time factor {(self.plant.t_s - self._sim0) / max(wall, 1e-9):.2f}); "
+        now = time.monotonic()
+        print(f"[driver] simulated {self.plant.t_s - self.clock.sim0_s:.2f} s in {now - self.clock.wall0_s:.2f} s "
+              f"(real-time factor {self.clock.real_time_factor(self.plant.t_s, now):.2f}); "
               f"{'FALLEN: ' + self.plant.status_text if self.plant.fallen else 'upright'}; {self._tf_cost_text()}"
               f"{self._qp_text()}", flush=True)
 
