@@ -206,7 +206,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
                profile_of(robot.model).root_link)
     _figure(trial, com_h, frames, cmds, dt, out / "retarget.png", summary)
     if simulated:
-        _timing_figure(trial, com_h, frames, cmds, np.load(out / "simulation.npy"), out / "timing.png", summary)
+        _timing_figure(trial, com_h, frames, cmds, sim_rows, out / "timing.png", summary)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
 
