@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from sit2stand.human.skeleton import SAGITTAL_FLEXION
-from sit2stand.retarget.report import flexion_deg, matched_times, posture_rms_deg, rise_window, strip_indices
+from sit2stand.retarget.compare import flexion_deg, matched_times, posture_rms_deg, rise_window
+from sit2stand.retarget.report import strip_indices
 from sit2stand.robot.profile import load_profile
 
 

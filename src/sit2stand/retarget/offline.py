@@ -38,8 +38,8 @@ from ..robot.profile import profile_of
 from ..robot.wbc import WbcGains
 from .dynamic import DynamicsFilter
 from .phases import Phases, find_phases
-from .report import (KNEE_TOLERANCE_DEG, SAT_DOWN_TOLERANCE_M, STOOD_RISE_M, cycle_rows, flexion_deg,
-                     posture_rms_deg)
+from .compare import cycle_rows, flexion_deg, posture_rms_deg
+from .report import KNEE_TOLERANCE_DEG, SAT_DOWN_TOLERANCE_M, STOOD_RISE_M
 from .player import DEFAULT_MARGIN_M, DEFAULT_MAX_TIME_SCALE, SEAT_OFF_DWELL_S, PlanPlayer
 from .stabiliser import ComStabiliser, StabiliserConfig, com_feedback_applies, com_lag_m
 from .calibration import map_frame
@@ -47,7 +47,7 @@ from .robot import robot_model, robot_setup
 from .stream import RetargetConfig, Retargeter, retarget_sequence
 
 HumanPosture = tuple[np.ndarray, np.ndarray, dict]
-"""The human over the trial as :func:`~sit2stand.retarget.report.posture_rms_deg` compares it: times [s], COM
+"""The human over the trial as :func:`~sit2stand.retarget.compare.posture_rms_deg` compares it: times [s], COM
 heights [m] and label -> sagittal flexion [deg]."""
 
 
@@ -312,7 +312,7 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
     (None: the commands as planned). Writes the robot's sensed state once per command period into the bag
     ``robot`` (the driver's topics, stamped from ``t0_s`` on the commands' clock): what ``sit2stand export``
     reads. ``human_posture``: the human's, to give the simulated robot's posture RMS against it
-    (:func:`~sit2stand.retarget.report.posture_rms_deg`)."""
+    (:func:`~sit2stand.retarget.compare.posture_rms_deg`)."""
     ticks = taken = 0
     sensed = []
     rows, cmds, torque = [], [], []

@@ -31,7 +31,7 @@ from ..io.topics import (CHAIR_PLATE_TOPIC, FEET_PLATE_TOPIC, HUMAN_COM_TOPIC, H
                          ROBOT_BASE_POSE_TOPIC, ROBOT_COP_TOPIC, ROBOT_JOINT_STATES_TOPIC, ROBOT_PLANNED_COM_TOPIC,
                          ROBOT_PLANNED_ZMP_TOPIC)
 from ..retarget.export import StateSeries, read_states, resample, robot_of
-from ..retarget.report import flexion_deg, matched_times
+from ..retarget.compare import flexion_deg, matched_times
 from ..robot.model import SIDES, PlantConfig, sole_corners_local
 from ..robot.plant import Plant
 from ..robot.packages import package_share
@@ -269,7 +269,7 @@ def rise_time_s(scene: Scene) -> float:
 def human_frames(scene: Scene, robot_t_s: np.ndarray, robot_com_z_m: np.ndarray,
                  at_robot_t_s: np.ndarray) -> np.ndarray | None:
     """The human skeleton's bones (len(at), B, 2, 3) [m] at the instants matched to the robot's ``at_robot_t_s``
-    (:func:`~sit2stand.retarget.report.matched_times`: the same share of each body's rise; the robot's times and
+    (:func:`~sit2stand.retarget.compare.matched_times`: the same share of each body's rise; the robot's times and
     COM heights on its own clock); None without a skeleton and COM in the scene."""
     if scene.human is None or "human COM" not in scene.points:
         return None
