@@ -79,9 +79,25 @@ def _plate(p: PlateSeries, idx: np.ndarray, t: np.ndarray) -> PlateSeries:
 
 
 SEATED_FRACTION = 0.1
+"""The pelvis within this share of its range above its lowest: seated (or about to be)."""
 STANDING_FRACTION = 0.9
-"""The pelvis within 10 % of its range above its lowest: seated; above 90 %: standing (as in
-:mod:`sit2stand.retarget.phases`)."""
+"""... above this share: standing."""
+
+
+def pelvis_bands(t_s: np.ndarray, pelvis_z_m: np.ndarray) -> tuple[np.ndarray, float, float, np.ndarray, np.ndarray]:
+    """The pelvis height [m] with its gaps (NaN) interpolated, its 5th and 95th percentiles, and the frames where it
+    is seated and standing (:data:`SEATED_FRACTION`, :data:`STANDING_FRACTION`)."""
+    t = np.asarray(t_s, float)
+    ok = np.isfinite(pelvis_z_m)
+    z = np.interp(t, t[ok], np.asarray(pelvis_z_m, float)[ok])
+    lo, hi = float(np.percentile(z, 5)), float(np.percentile(z, 95))
+    return z, lo, hi, z <= lo + SEATED_FRACTION * (hi - lo), z >= lo + STANDING_FRACTION * (hi - lo)
+
+
+def first(mask: np.ndarray, start: int = 0) -> int | None:
+    """The first index at or after ``start`` where ``mask`` holds (None: nowhere)."""
+    hits = np.flatnonzero(mask[start:])
+    return int(hits[0]) + start if len(hits) else None
 
 
 @dataclass(frozen=True)
@@ -109,30 +125,20 @@ def find_cycles(t_s: np.ndarray, pelvis_z_m: np.ndarray) -> list[Cycle]:
     """The rises of a trial (each from seated to standing) and the sit-downs after them, from the pelvis height
     (NaN where unseen); an empty list when the pelvis never goes from seated to standing."""
     t = np.asarray(t_s, float)
-    z = np.asarray(pelvis_z_m, float)
-    ok = np.isfinite(z)
-    if ok.sum() < 2:
+    if np.isfinite(pelvis_z_m).sum() < 2:
         return []
-    z = np.interp(t, t[ok], z[ok])
-    lo, hi = np.percentile(z, 5), np.percentile(z, 95)
-    seated = z <= lo + SEATED_FRACTION * (hi - lo)
-    standing = z >= lo + STANDING_FRACTION * (hi - lo)
+    _, _, _, seated, standing = pelvis_bands(t, pelvis_z_m)
     out, k = [], 0
     while True:
-        s0 = _next(seated, k)
-        up = None if s0 is None else _next(standing, s0)
+        s0 = first(seated, k)
+        up = None if s0 is None else first(standing, s0)
         if up is None:
             return out
         last_seated = up - 1 - int(np.argmax(seated[:up][::-1]))
-        down = _next(~standing, up)
-        back = None if down is None else _next(seated, down)
+        down = first(~standing, up)
+        back = None if down is None else first(seated, down)
         out.append(Cycle(float(t[last_seated]), float(t[up]), None if down is None else float(t[down]),
                          None if back is None else float(t[back])))
         if back is None:
             return out
         k = back
-
-
-def _next(mask: np.ndarray, start: int) -> int | None:
-    hits = np.flatnonzero(mask[start:])
-    return int(hits[0]) + start if len(hits) else None

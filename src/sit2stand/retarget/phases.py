@@ -15,11 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..human.cycles import first, pelvis_bands
 
-SEATED_FRACTION = 0.1
-"""The pelvis within this share of its rise above its lowest height: seated (or about to be)."""
-STANDING_FRACTION = 0.9
-"""... above this share: standing."""
 MIN_RISE_STATURES = 0.1
 """A pelvis rise below this share of the stature is no sit-to-stand."""
 FLEXION_SPEED_MPS = 0.05
@@ -52,11 +49,6 @@ class Phases:
         return np.asarray(t_s) < (self.sit_down_s if self.sit_down_s is not None else np.inf)
 
 
-def _first(mask: np.ndarray, start: int = 0) -> int | None:
-    hits = np.flatnonzero(mask[start:])
-    return int(hits[0]) + start if len(hits) else None
-
-
 def find_phases(t_s: np.ndarray, pelvis_z_m: np.ndarray, com_x_m: np.ndarray, stature_m: float,
                 chair_force_n: np.ndarray | None = None) -> Phases:
     """The phases of one trial (see the module docstring).
@@ -70,24 +62,20 @@ def find_phases(t_s: np.ndarray, pelvis_z_m: np.ndarray, com_x_m: np.ndarray, st
         InputError: the pelvis does not rise by :data:`MIN_RISE_STATURES` of the stature: no sit-to-stand.
     """
     t = np.asarray(t_s, float)
-    ok = np.isfinite(pelvis_z_m)
-    z = np.interp(t, t[ok], np.asarray(pelvis_z_m, float)[ok])
-    lo, hi = np.percentile(z, 5), np.percentile(z, 95)
+    z, lo, hi, low, standing = pelvis_bands(t, pelvis_z_m)
     if hi - lo < MIN_RISE_STATURES * stature_m:
         raise InputError(f"the pelvis rises {100 * (hi - lo):.1f} cm in this recording, less than "
                          f"{100 * MIN_RISE_STATURES:.0f} % of the stature: not a sit-to-stand")
-    standing = z >= lo + STANDING_FRACTION * (hi - lo)
-    low = z <= lo + SEATED_FRACTION * (hi - lo)
-    k_stand = _first(standing)
-    k_seated_last = _first(low[:k_stand][::-1])        # the last low frame before standing, counted backwards
+    k_stand = first(standing)
+    k_seated_last = first(low[:k_stand][::-1])        # the last low frame before standing, counted backwards
     k_seated_last = None if k_seated_last is None else k_stand - 1 - k_seated_last
-    k_sit = _first(~standing, k_stand)
+    k_sit = first(~standing, k_stand)
     k_sit = k_sit if k_sit is not None and low[k_sit:].any() else None
     k_off = _seat_off(z, lo, k_stand, chair_force_n)
     vx = np.gradient(np.asarray(com_x_m, float), t)
     k_flex = None
     if k_seated_last is not None:          # the COM's first forward movement before seat-off (or standing)
-        k_flex = _first(vx[:(k_off if k_off is not None else k_stand)] > FLEXION_SPEED_MPS)
+        k_flex = first(vx[:(k_off if k_off is not None else k_stand)] > FLEXION_SPEED_MPS)
     labels = np.full(len(t), "extension", dtype=object)
     labels[:k_flex if k_flex is not None else 0] = "seated"
     if k_flex is not None:
@@ -106,8 +94,8 @@ def _seat_off(z: np.ndarray, z_seated: float, k_stand: int, chair_force_n: np.nd
     """Seat-off frame before ``k_stand``: the chair plate unloading after it was loaded, else the pelvis rising
     :data:`SEAT_OFF_RISE_M`; None if the recording starts after it."""
     if chair_force_n is not None and np.any(chair_force_n[:k_stand] > 2 * CHAIR_UNLOADED_N):
-        loaded = _first(chair_force_n > 2 * CHAIR_UNLOADED_N)
-        return _first(chair_force_n < CHAIR_UNLOADED_N, loaded)
+        loaded = first(chair_force_n > 2 * CHAIR_UNLOADED_N)
+        return first(chair_force_n < CHAIR_UNLOADED_N, loaded)
     risen = z[:k_stand + 1] > z_seated + SEAT_OFF_RISE_M
-    k = _first(risen)
+    k = first(risen)
     return None if k in (None, 0) else k
