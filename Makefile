@@ -8,7 +8,7 @@ export RCUTILS_COLORIZED_OUTPUT ?= 0
 SOAK_MIN ?= 2
 BATCH_CASES ?= 40
 
-.PHONY: setup demo figures test test-fast lint bench bench-gap bench-gap-human bench-retarget bench-human bench-capture bench-live bench-standup bench-batch bench-faults lock clean
+.PHONY: setup demo figures test test-fast lint bench bench-gap bench-gap-human bench-retarget bench-human bench-capture bench-live bench-ik bench-standup bench-batch bench-faults lock clean
 
 setup:            ## create .venv (pinned wheels, ROS 2 Jazzy), build msgs/, install src/ (idempotent)
 	@ros_ws/bootstrap.sh
@@ -53,6 +53,9 @@ bench-capture: setup  ## the mocap bridge 10 min at 200 Hz against serve-c3d: fr
 bench-live: setup     ## the live stand-up (serve-c3d -> bridge -> estimator -> retargeter -> robot) 5 times: capture -> markers / COM / joint command p50, p99; bench/results/live.json
 	@$(PY) -m sit2stand.bench.live --out bench/results/live.json
 
+bench-ik: setup       ## the per-frame IK against mink and pink (DAQP, ProxQP) on the identical problems of a bags/natural run, in .venv-ik: p50, p99, ratios, agreement; bench/results/ik.json
+	@$(PY) -m sit2stand.bench.ik --out bench/results/ik.json
+
 bench-standup: setup  ## 30 digital humans (stature, mass, seat, natural/elderly/fast) retargeted and simulated: success, time scale, COM, torque; bench/results/standup/ (BENCH_STANDUP_ARGS="--robot g1": standup_g1/)
 	@$(PY) -m sit2stand.bench.standup $(BENCH_STANDUP_ARGS)
 
@@ -67,4 +70,4 @@ lock:             ## re-pin constraints.txt from the current .venv (after changi
 	  $(PY) -m pip freeze --exclude-editable | sort) > ros_ws/constraints.txt
 
 clean:            ## remove the venv, colcon build folders and generated runs (shipped bags stay)
-	rm -rf $(VENV) ros_ws/build ros_ws/log ros_ws/install runs bags/generated bench/results
+	rm -rf $(VENV) .venv-ik ros_ws/build ros_ws/log ros_ws/install runs bags/generated bench/results

@@ -33,3 +33,8 @@ def skew_rows(r: np.ndarray) -> np.ndarray:
 def xyzw_from_wxyz(q_wxyz: np.ndarray) -> np.ndarray:
     """Quaternions (..., 4) in MuJoCo's order (w, x, y, z) as Pinocchio's and ROS's (x, y, z, w)."""
     return np.asarray(q_wxyz, dtype=float)[..., [1, 2, 3, 0]]
+
+
+def wxyz_from_xyzw(q_xyzw: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) in Pinocchio's and ROS's order (x, y, z, w) as MuJoCo's (w, x, y, z)."""
+    return np.asarray(q_xyzw, dtype=float)[..., [3, 0, 1, 2]]

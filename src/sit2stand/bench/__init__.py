@@ -7,7 +7,11 @@ demo``) from the project folder, :func:`project_folder`: the working directory, 
 
 from __future__ import annotations
 
+import datetime
+import json
 import os
+import platform
+import subprocess
 from pathlib import Path
 
 from ..errors import InputError
@@ -28,3 +32,24 @@ def project_folder() -> Path:
         raise InputError(f"{root}: not the sit2stand project (no bags/natural): run the benchmark from the "
                          f"repository (make bench-...), or set {PROJECT_ENV}")
     return root
+
+
+def provenance(command: str) -> dict:
+    """When, at which commit and by which command a benchmark's figures were made (each JSON carries it)."""
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                cwd=Path.cwd(), timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True,
+                               text=True, cwd=Path.cwd(), timeout=10).stdout.strip()
+    except (OSError, subprocess.TimeoutExpired):
+        commit, dirty = "", ""
+    return {"date": datetime.date.today().isoformat(), "commit": (commit or "unknown") + ("+" if dirty else ""),
+            "command": command, "host": f"{platform.machine()}, {os.cpu_count()} CPUs, Python "
+                                        f"{platform.python_version()}"}
+
+
+def write_result(out: Path, result: dict, command: str) -> None:
+    """Write a benchmark's ``result`` to ``out`` (JSON) under ``"measured"``: its :func:`provenance`."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"measured": provenance(command), **result}, indent=2) + "\n")
+    print(f"wrote {out}")

@@ -14,7 +14,6 @@ own processes.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import tempfile
@@ -23,6 +22,7 @@ from pathlib import Path
 
 import ray
 
+from . import write_result
 from ..batch.engine import run_jobs, start_ray
 from ..batch.standup import Setting, sample_population, standup_jobs
 
@@ -62,9 +62,7 @@ def main(argv: list[str] | None = None) -> int:
            "two_vs_one_worker": round(two["cases_per_min"] / one["cases_per_min"], 3)}
     print(f"throughput per Ray worker / single process: {doc['per_worker_vs_single']:.3f} (target >= 0.9); "
           f"2 workers / 1: {doc['two_vs_one_worker']:.2f}x (target >= 1.8)")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(doc, indent=2) + "\n")
-    print(f"wrote {args.out}")
+    write_result(args.out, doc, f"make bench-batch BATCH_CASES={args.cases}")
     return 0
 
 

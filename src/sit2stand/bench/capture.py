@@ -37,7 +37,7 @@ import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sit2stand_msgs.msg import MocapFrame
 
-from . import project_folder
+from . import project_folder, provenance
 from ..capture.recording import load_recording
 from ..launch import load_graph
 from ..scheduling import Scheduling
@@ -156,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     for key, value in figures.items():
         print(f"{key:42s} {value}")
     results = json.loads(args.out.read_text()) if args.out.exists() else {}
-    results["capture"] = figures
+    results["capture"] = {"measured": provenance("make bench-capture"), **figures}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=2) + "\n")
     print(f"\nmerged into {args.out}")

@@ -38,7 +38,7 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from . import project_folder
+from . import project_folder, write_result
 from ..io.bag import BagError, BagReader, BagWriter
 from ..io.messages import cdr_header_stamp_ns
 from ..robot.identify import (IdentificationError, check_postures, check_result, controller_model, identify_full,
@@ -449,8 +449,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"no case {', '.join(sorted(unknown))} (cases: {', '.join(CASES)}, soak)")
     with tempfile.TemporaryDirectory(prefix="sit2stand-faults-") as tmp:
         result = run(only, args.soak_min, Path(tmp))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    write_result(args.out, result, f"make bench-faults SOAK_MIN={args.soak_min:g}")
     print(f"\n{result['failures']} case(s) not clear, flagged or recovered; written to {args.out}")
     return 1 if result["failures"] else 0
 

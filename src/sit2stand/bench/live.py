@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import project_folder
+from . import project_folder, write_result
 from ..capture.latency import p50_p99
 from ..capture.rehearsal import PROTOCOL_ARGS, TOPICS, LiveRunError, run_live
 
@@ -105,9 +105,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     result = {"protocol": args.protocol, "marker_rate_hz": args.marker_rate, "runs": runs, "summary": summary(runs)}
     print(json.dumps(result["summary"], indent=2))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2))
-    print(f"written to {args.out}")
+    write_result(args.out, result, "make bench-live")
     return 0
 
 

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from rosbags.rosbag2 import Reader
 
-from . import project_folder
+from . import project_folder, provenance
 from ..batch.engine import run_jobs
 from ..batch.gap import gap_cases, gap_jobs
 from ..batch.gap import CASES as GAP_HUMAN_CASES
@@ -287,6 +287,8 @@ def _print_sections(results: dict, sections: list[str]) -> None:
     for section in sections:
         print(f"\n[{section}]")
         for key, value in results[section].items():
+            if key == "measured":
+                continue
             if isinstance(value, list | dict):
                 print(f"  {key:<{width}}  {len(value)} (see the JSON file)")
             else:
@@ -397,8 +399,11 @@ def _gap_human_section(n: int, cases: str | None = None, workers: int = 1, de_le
     return out
 
 
-def _write(results: dict, out: Path, sections: list[str]) -> None:
-    """Print ``sections`` of ``results`` and write all of it to ``out``."""
+def _write(results: dict, out: Path, sections: list[str], made: list[str], command: str) -> None:
+    """Print ``sections`` of ``results``, stamp the sections ``made`` by this run with their :func:`provenance`
+    (``command``), and write all of it to ``out``."""
+    for key in made:
+        results[key] = {"measured": provenance(command), **results[key]}
     _print_sections(results, sections)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=2))
@@ -438,7 +443,8 @@ def main(argv: list[str] | None = None) -> int:
         key = "human_real" if args.only == "human" else args.only
         key += "_de_leva" if args.only == "gap_human" and args.gap_human_de_leva else ""    # beside, not over it
         results[key] = sections[args.only]()
-        _write(results, args.out, [] if key == "human_real" else [key])     # human_real: printed as its table
+        _write(results, args.out, [] if key == "human_real" else [key], [key],  # human_real: printed as its table
+               f"make bench-{args.only.replace('_', '-')}")
         return 0
 
     results: dict[str, object] = {"machine": {"python": sys.version.split()[0], "cpu_count": os.cpu_count(),
@@ -468,7 +474,8 @@ def main(argv: list[str] | None = None) -> int:
     results["human_real"] = _human_real_section()
     results["retarget"] = _retarget_section(root, env)
     results["gap"] = _gap_section(args.gap_seeds, args.gap_two, args.gap_kinds)
-    _write(results, args.out, [s for s in ("bag", "replayer", "human_com", "robot", "retarget", "gap") if s in results])
+    shown = [s for s in ("bag", "replayer", "human_com", "robot", "retarget", "gap") if s in results]
+    _write(results, args.out, shown, [k for k in results if k != "machine"], "make bench")
     return 0
 
 

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import project_folder
+from . import project_folder, write_result
 from ..batch.engine import run_jobs
 from ..batch.standup import RISE_S, STYLES, Case, Setting, sample_population, standup_jobs, synthesise  # noqa: F401
 from ..demo import demo_params, robot_identification
@@ -249,8 +249,8 @@ def main(argv: list[str] | None = None) -> int:
            "plant": "default",
            "controller": args.controller,
            "jobs": args.jobs, "wall_s": round(time.monotonic() - t0, 1), "aggregate": agg, "cases": rows}
-    (args.out / "bench_standup.json").write_text(json.dumps(doc, indent=2) + "\n")
-    print(f"wrote {args.out / 'bench_standup.json'}")
+    write_result(args.out / "bench_standup.json", doc, "make bench-standup" + (
+        f' BENCH_STANDUP_ARGS="--robot {args.robot}"' if args.robot != DEFAULT_ROBOT else ""))
     return 1 if agg["errors"] else 0
 
 

@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import Sit2StandError
-from ..kinematics import PointJacobians, positions
+from ..kinematics import PointJacobians
 from .marker_sets import MIN_MARKERS, MarkerSetError, load_marker_set
 from .skeleton import HumanModel
 
@@ -125,8 +125,8 @@ class MarkerIK:
         return e
 
     def _marker_positions(self, q: np.ndarray) -> np.ndarray:
-        pin.framesForwardKinematics(self.model, self.data, q)
-        return positions(self.data, self.frames)
+        pin.forwardKinematics(self.model, self.data, q)
+        return self.points.positions(self.data, self.frames)
 
     def initial_guess(self, positions: np.ndarray, valid: np.ndarray) -> np.ndarray:
         """Pelvis pose by a Kabsch fit of the pelvis markers; the rest at the reference posture."""
@@ -164,7 +164,6 @@ class MarkerIK:
         best_q, best_cost, JtJ, grad = q, np.inf, eye, np.zeros(nv)
         for it in range(1, max_iter + 1):  # noqa: B007 (the count is reported after the loop)
             pin.computeJointJacobians(model, data, q)
-            pin.updateFramePlacements(model, data)
             P, Jm = self.points(data, self.frames)
             r = (P[ok] - pos[ok]).ravel()
             e_post = self._posture_error(q)

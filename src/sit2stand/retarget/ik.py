@@ -53,7 +53,8 @@ import numpy as np
 import pinocchio as pin
 import proxsuite   # at import (~0.1 s): a node imports this before its stream starts
 
-from ..kinematics import PointJacobians, positions
+from ..kinematics import PointJacobians
+from ..optim import ActiveSetQp
 from ..robot.profile import profile_of
 
 
@@ -120,6 +121,9 @@ class _Frame:
     lift_speed_prev: np.ndarray | None = None    # the trunk joints' speeds into the previous frame [rad/s]
     joint_targets: list[tuple[int, float, float]] = field(default_factory=list)   # (tangent index, rad, 1/rad^2)
 
+    def __post_init__(self) -> None:
+        self.root_weights = np.repeat(np.sqrt(self.weights), 3)     # per coordinate: H = (sqrt(W) J)' (sqrt(W) J)
+
 
 class ComIk:
     """QP inverse kinematics with a hard COM constraint (see the module docstring).
@@ -154,6 +158,7 @@ class ComIk:
         self.q_hi = model.upperPositionLimit[7:].copy()
         self._proxsuite = proxsuite
         self._qp: dict[tuple[int, int, int], object] = {}
+        self._active_set = ActiveSetQp()
         self.eps_abs = 1e-9
         self.points = PointJacobians(model)
         self.momentum_weight = momentum_weight
@@ -167,8 +172,12 @@ class ComIk:
         self._last_solve: tuple[np.ndarray, np.ndarray] | None = None    # (q_prev, solution) of the last frame
 
     def _solve_qp(self, H, g, A, b, lo, hi, C=None, d=None):
-        """min 1/2 dq' H dq + g' dq s.t. A dq = b, C dq >= d, lo <= dq <= hi (a warm QP per shape): dq, solved,
-        dual residual."""
+        """min 1/2 dq' H dq + g' dq s.t. A dq = b, C dq >= d, lo <= dq <= hi: dq, solved, dual residual. The exact
+        active set first (:class:`~sit2stand.optim.ActiveSetQp`: a KKT solve or two); where it cannot settle, a
+        warm proxsuite QP per shape, whose status also tells an infeasible problem."""
+        dq = self._active_set.solve(H, g, A, b, lo, hi, C, d)
+        if dq is not None:
+            return dq, True, 0.0
         n_in = 0 if C is None else C.shape[0]
         u = None if C is None else np.full(n_in, 1e20)
         key = (A.shape[0], n_in, len(lo))
@@ -226,8 +235,7 @@ class ComIk:
     def _step(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, bool, float]:
         """One Gauss-Newton step dq (tangent) from q; whether the COM equality was kept; the QP's dual residual."""
         model, data = self.model, self.data
-        pin.computeJointJacobians(model, data, q)
-        pin.updateFramePlacements(model, data)
+        pin.computeJointJacobians(model, data, q)          # with the joints' placements (the markers need no more)
         Jc = pin.jacobianCenterOfMass(model, data, False)
         com = data.com[0].copy()
         H, g = self._soft_tasks(q, f)
@@ -256,13 +264,12 @@ class ComIk:
         """Hessian and gradient of the markers, sum w ||J dq + e||^2 [m^2], and the posture prior, at q."""
         nv = self.nv
         P, J = self.points(self.data, f.fids)
-        Jr = J.reshape(-1, nv)
-        wr = np.repeat(f.weights, 3)
-        H = (Jr.T * wr) @ Jr
-        g = Jr.T @ (wr * (P - f.targets).ravel())
+        Jw = J.reshape(-1, nv) * f.root_weights[:, None]
+        H = Jw.T @ Jw
+        g = Jw.T @ (f.root_weights * (P - f.targets).ravel())
         post = pin.difference(self.model, f.q_ref, q)
         post[:6] = 0.0
-        H[np.diag_indices(nv)] += self.mu + self.damping
+        H.flat[::nv + 1] += self.mu + self.damping
         g += self.mu * post
         for i, angle, w in f.joint_targets:          # q's index of a 1-DoF joint is its tangent index + 1
             H[i, i] += w
@@ -283,7 +290,7 @@ class ComIk:
         data = self.data
         rows, rhs = [], []
         for fid, target in zip(self.soles, f.sole_targets):
-            err = pin.log6(target.actInv(data.oMf[fid])).vector
+            err = pin.log6(target.actInv(pin.updateFramePlacement(self.model, data, fid))).vector
             rows.append(pin.getFrameJacobian(self.model, data, fid, pin.LOCAL))
             rhs.append(-err)
         if f.base_xz is not None:     # base linear velocity is in the base frame: world rows are R[[0, 2]]
@@ -382,10 +389,9 @@ class ComIk:
         model, data = self.model, self.data
         if not np.all(np.isfinite(q)):
             raise FloatingPointError("IK produced a non-finite configuration")
-        pin.framesForwardKinematics(model, data, q)        # the result's errors (no Jacobians needed)
-        com = pin.centerOfMass(model, data, q, False)
-        marker_sq = np.sum((positions(data, f.fids) - f.targets) ** 2, axis=1)
-        sole_err = max(np.linalg.norm(pin.log6(t.actInv(data.oMf[fid])).vector)
+        com = pin.centerOfMass(model, data, q, False)       # with the joints' placements: no frame pass needed
+        marker_sq = np.sum((self.points.positions(data, f.fids) - f.targets) ** 2, axis=1)
+        sole_err = max(np.linalg.norm(pin.log6(t.actInv(pin.updateFramePlacement(model, data, fid))).vector)
                        for fid, t in zip(self.soles, f.sole_targets))
         com_err = float(np.linalg.norm((com - f.com_target)[f.axes]))
         return IkResult(q, feasible and com_err < 1e-3, com_err, float(sole_err),
