@@ -110,6 +110,46 @@ def apply_scaling(human: HumanModel, scaling: MassScaling) -> pin.Model:
     return model
 
 
+@dataclass
+class _SegmentMap:
+    """The unknowns theta laid onto a skeleton's segments, once per model: the streaming estimator makes both
+    kinds of rows every frame, and a loop over the segments cost most of its frame."""
+
+    model: pin.Model                 # the model it was made for
+    regressor_to_theta: np.ndarray   # (10 (njoints - 1), n_theta): Y @ it are the dynamic rows' A
+    joints: list[int]                # each segment's joint
+    levers: np.ndarray               # (segments, 4, 1): each segment's COM in its joint frame, homogeneous [m]
+    groups: np.ndarray               # (segments, n_theta): 1 at the segment's mass group
+    torso: int                       # the torso's index among the segments
+
+
+_MAPS: dict[int, _SegmentMap] = {}
+
+
+def _segment_map(human: HumanModel) -> _SegmentMap:
+    model = human.model
+    cached = _MAPS.get(id(model))
+    if cached is not None and cached.model is model:
+        return cached
+    n_theta = len(MASS_GROUPS) + 2
+    P = np.zeros((10 * (model.njoints - 1), n_theta))
+    groups = np.zeros((len(SEGMENTS), n_theta))
+    for i, seg in enumerate(SEGMENTS):
+        j = human.segment_joint[seg]
+        inertia = model.inertias[j]
+        P[10 * (j - 1): 10 * j, MASS_GROUPS.index(group_of(seg))] += inertia.toDynamicParameters() / inertia.mass
+        groups[i, MASS_GROUPS.index(group_of(seg))] = 1.0
+    torso = human.segment_joint["torso"]
+    P[10 * (torso - 1) + 1, -2] += 1.0    # first moment along torso x (forward)
+    P[10 * (torso - 1) + 2, -1] += 1.0    # first moment along torso y (left)
+    joints = [human.segment_joint[seg] for seg in SEGMENTS]
+    levers = np.array([[*model.inertias[j].lever, 1.0] for j in joints]).reshape(-1, 4, 1)
+    if len(_MAPS) >= 16:
+        _MAPS.pop(next(iter(_MAPS)))
+    _MAPS[id(model)] = out = _SegmentMap(model, P, joints, levers, groups, SEGMENTS.index("torso"))
+    return out
+
+
 def mass_scaling_rows(human: HumanModel, q: np.ndarray, v: np.ndarray, a: np.ndarray, force_n: np.ndarray,
                       moment_origin_nm: np.ndarray, data: pin.Data | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Six equations A theta = b of one frame; theta = (group masses [kg] ..., torso m*dx, m*dy [kg m]).
@@ -120,17 +160,7 @@ def mass_scaling_rows(human: HumanModel, q: np.ndarray, v: np.ndarray, a: np.nda
     model = human.model
     data = data or model.createData()
     Y = pin.computeJointTorqueRegressor(model, data, q, v, a)[:6]     # (6, 10 * (njoints - 1))
-    n_theta = len(MASS_GROUPS) + 2
-    A = np.zeros((6, n_theta))
-    for seg in SEGMENTS:
-        j = human.segment_joint[seg]
-        block = Y[:, 10 * (j - 1): 10 * j]
-        inertia = model.inertias[j]
-        pi_unit = inertia.toDynamicParameters() / inertia.mass
-        A[:, MASS_GROUPS.index(group_of(seg))] += block @ pi_unit
-        if seg == "torso":
-            A[:, -2] += block[:, 1]   # first moment along torso x (forward)
-            A[:, -1] += block[:, 2]   # first moment along torso y (left)
+    A = Y @ _segment_map(human).regressor_to_theta
     oMb = pin.SE3(pin.Quaternion(q[3:7]).normalized().matrix(), q[:3])
     w = pin.Force(np.asarray(force_n, float), np.asarray(moment_origin_nm, float))
     b = oMb.actInv(w).vector
@@ -145,15 +175,13 @@ def static_rows(human: HumanModel, q: np.ndarray, cop_xy: np.ndarray, body_mass_
     model = human.model
     data = data or model.createData()
     pin.forwardKinematics(model, data, q)
-    A = np.zeros((2, len(MASS_GROUPS) + 2))
-    for seg in SEGMENTS:
-        j = human.segment_joint[seg]
-        c = data.oMi[j].act(model.inertias[j].lever)
-        A[:, MASS_GROUPS.index(group_of(seg))] += G * c[:2]
-        if seg == "torso":
-            R = data.oMi[j].rotation
-            A[:, -2] += G * R[:2, 0]
-            A[:, -1] += G * R[:2, 1]
+    m = _segment_map(human)
+    oMi = data.oMi.tolist()
+    X = np.array([oMi[j].homogeneous for j in m.joints])
+    com = (X @ m.levers)[:, :2, 0]                      # each segment's COM, world x y [m]
+    A = G * com.T @ m.groups
+    A[:, -2] += G * X[m.torso, :2, 0]                   # the torso's x and y axes, world x y
+    A[:, -1] += G * X[m.torso, :2, 1]
     return A, G * body_mass_kg * np.asarray(cop_xy, float)[:2]
 
 

@@ -64,9 +64,13 @@ def plate_wrench_at(times_s: np.ndarray, plates: list[PlateSeries],
     for plate in plates:
         lo = np.searchsorted(plate.t_s, times_s - half_width_s)
         hi = np.searchsorted(plate.t_s, times_s + half_width_s, side="right")
-        csum_f = np.vstack([np.zeros(3), np.cumsum(np.nan_to_num(plate.force_n), axis=0)])
-        csum_m = np.vstack([np.zeros(3), np.cumsum(np.nan_to_num(plate.moment_origin_nm), axis=0)])
-        bad = np.concatenate([[0], np.cumsum(~np.all(np.isfinite(plate.force_n), axis=1))])
+        first = int(lo.min()) if n else 0     # sums over the span the windows cover only (a stream asks for one)
+        span = slice(first, int(hi.max()) if n else 0)
+        lo, hi = lo - first, hi - first
+        force_span = plate.force_n[span]
+        csum_f = np.vstack([np.zeros(3), np.cumsum(np.nan_to_num(force_span), axis=0)])
+        csum_m = np.vstack([np.zeros(3), np.cumsum(np.nan_to_num(plate.moment_origin_nm[span]), axis=0)])
+        bad = np.concatenate([[0], np.cumsum(~np.all(np.isfinite(force_span), axis=1))])
         count = hi - lo
         has = (count > 0) & (bad[hi] - bad[lo] == 0)
         covered &= has
