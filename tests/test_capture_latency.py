@@ -35,8 +35,9 @@ def test_the_benchmark_counts_the_runs_that_met_each_target():
            "capture_to_command_p50_ms": 4.0, "capture_to_markers_p99_ms": 1.2, "capture_to_human_com_p99_ms": 6.0,
            "capture_to_command_p99_ms": 7.0, "com_tracking_rms_cm": 0.8}
     late = {**run, "stood_up": 0.0, "capture_to_markers_p99_ms": 2.5, "capture_to_command_p99_ms": 19.0}
-    s = summary([run, run, late])
+    s = summary([run, run, late], rate_hz=200.0)
     assert s["runs"] == 3 and s["stood_up"] == 2
     assert s["runs_markers_p99_within_target"] == 2 and s["runs_command_p99_within_target"] == 2
     assert s["capture_to_command_p99_ms_median"] == 7.0 and s["capture_to_command_p99_ms_max"] == 19.0
-    assert s["command_p99_median_vs_10ms_target"] == pytest.approx(0.7)
+    assert s["command_p99_target_ms"] == 8.0 and s["command_p99_median_vs_target"] == pytest.approx(7.0 / 8.0)
+    assert summary([run], rate_hz=100.0)["runs_command_p99_within_target"] == 0, "7 ms misses 100 Hz's 5 ms"

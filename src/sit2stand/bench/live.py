@@ -4,7 +4,7 @@
 
 Each run is :func:`sit2stand.capture.rehearsal.run_live` (the live graph fed by ``serve-c3d bags/elderly``, QTM's
 protocol, 100 Hz, 531 frames; latencies from capture to the probe's reception). Targets: capture -> markers p99
-2 ms, capture -> joint command p99 10 ms.
+2 ms, capture -> joint command p99 5 ms at 100 Hz and 8 ms at 200 Hz (:func:`live_command_target_ms`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,12 @@ from ..capture.rehearsal import PROTOCOL_ARGS, TOPICS, LiveRunError, run_live
 
 MARKERS_P99_TARGET_MS = 2.0
 COMMAND_P99_TARGET_MS = 10.0
-"""The targets [ms]: capture -> ``/mocap/markers`` p99, and capture -> joint command p99 on one machine."""
+"""The targets [ms]: capture -> ``/mocap/markers`` p99, and marker -> joint command p99 in the replay graphs."""
+
+
+def live_command_target_ms(rate_hz: float) -> float:
+    """The live capture -> joint command p99 target on one 2-core machine [ms]: 5 at 100 Hz, 8 at 200 Hz."""
+    return 5.0 if rate_hz <= 100.0 else 8.0
 
 
 def bench_env() -> dict[str, str]:
@@ -35,8 +40,9 @@ def bench_env() -> dict[str, str]:
                 PYTHONUNBUFFERED="1")
 
 
-def summary(runs: list[dict[str, float]]) -> dict[str, float]:
-    """The runs' figures pooled: each p99's median and worst, how many runs met the targets, and the ratios."""
+def summary(runs: list[dict[str, float]], rate_hz: float = 100.0) -> dict[str, float]:
+    """The runs' figures pooled: each p99's median and worst, how many runs met the targets (the command's at the
+    capture's ``rate_hz``), and the ratios."""
     out: dict[str, float] = {"runs": float(len(runs)), "stood_up": float(sum(r["stood_up"] for r in runs))}
     for key in ("markers", "human_com", "command"):
         p99 = np.array([r[f"capture_to_{key}_p99_ms"] for r in runs])
@@ -49,8 +55,10 @@ def summary(runs: list[dict[str, float]]) -> dict[str, float]:
     marker_p99 = np.array([r["capture_to_markers_p99_ms"] for r in runs])
     command_p99 = np.array([r["capture_to_command_p99_ms"] for r in runs])
     out["runs_markers_p99_within_target"] = float((marker_p99 <= MARKERS_P99_TARGET_MS).sum())
-    out["runs_command_p99_within_target"] = float((command_p99 <= COMMAND_P99_TARGET_MS).sum())
-    out["command_p99_median_vs_10ms_target"] = float(np.median(command_p99)) / COMMAND_P99_TARGET_MS
+    target = live_command_target_ms(rate_hz)
+    out["command_p99_target_ms"] = target
+    out["runs_command_p99_within_target"] = float((command_p99 <= target).sum())
+    out["command_p99_median_vs_target"] = float(np.median(command_p99)) / target
     out["markers_p99_median_vs_2ms_target"] = float(np.median(marker_p99)) / MARKERS_P99_TARGET_MS
     return out
 
@@ -103,9 +111,13 @@ def main(argv: list[str] | None = None) -> int:
     if not runs:
         print("bench-live: no run got as far as its figures", file=sys.stderr)
         return 1
-    result = {"protocol": args.protocol, "marker_rate_hz": args.marker_rate, "runs": runs, "summary": summary(runs)}
+    result = {"protocol": args.protocol, "marker_rate_hz": args.marker_rate, "runs": runs,
+              "summary": summary(runs, args.marker_rate)}
     print(json.dumps(result["summary"], indent=2))
-    write_result(args.out, result, "make bench-live")
+    extra = ([f"--protocol {args.protocol}"] if args.protocol != "qtm" else []) + \
+        ([f"--marker-rate {args.marker_rate:g}"] if args.marker_rate != 100.0 else [])
+    write_result(args.out, result, f"python -m sit2stand.bench.live {' '.join(extra)} --out {args.out}" if extra
+                 else "make bench-live")
     return 0
 
 
