@@ -138,20 +138,22 @@ class ActiveSetQp:
 
     def _passes(self, H, g, A, b, lo, hi, C, d, at_lo, at_hi, rows) -> np.ndarray | None:
         """Working-set passes from (at_lo, at_hi, rows); x, and the settled set kept for the next call."""
+        t = self.tol
         for _ in range(self.max_passes):
             solved = self._kkt(H, g, A, b, lo, hi, C, d, at_lo, at_hi, rows)
             if solved is None:
                 return None
             x, r, sigma = solved
-            tol = self.tol * (1.0 + np.abs(x))
-            new_lo = np.where(at_lo, r >= -self.tol, x < lo - tol)
-            new_hi = np.where(at_hi, r <= self.tol, x > hi + tol)
-            new_rows = np.where(rows, sigma >= -self.tol, C @ x < d - self.tol)
-            if (np.array_equal(new_lo, at_lo) and np.array_equal(new_hi, at_hi)
-                    and np.array_equal(new_rows, rows)):
+            # a fixed variable sits on its bound exactly, and a free one has r = 0: one test covers both kinds
+            add_lo, add_hi = x < lo - t, x > hi + t
+            drop_lo, drop_hi = at_lo & (r < -t), at_hi & (r > t)
+            add_rows, drop_rows = (C @ x < d - t) & ~rows, rows & (sigma < -t)
+            if not (add_lo.any() or add_hi.any() or drop_lo.any() or drop_hi.any() or add_rows.any()
+                    or drop_rows.any()):
                 self._at_lo, self._at_hi, self._rows = at_lo, at_hi, rows
                 return x
-            at_lo, at_hi, rows = new_lo & ~new_hi, new_hi, new_rows
+            at_lo, at_hi = (at_lo & ~drop_lo) | add_lo, (at_hi & ~drop_hi) | add_hi
+            rows = (rows & ~drop_rows) | add_rows
         return None
 
     @staticmethod

@@ -170,6 +170,7 @@ class ComIk:
         self.lift_torque_nm = None if lift_torque_share is None else \
             lift_torque_share * model.effortLimit[self.lift_dofs]
         self._last_solve: tuple[np.ndarray, np.ndarray] | None = None    # (q_prev, solution) of the last frame
+        self._lift_inertia: np.ndarray | None = None
 
     def _solve_qp(self, H, g, A, b, lo, hi, C=None, d=None):
         """min 1/2 dq' H dq + g' dq s.t. A dq = b, C dq >= d, lo <= dq <= hi: dq, solved, dual residual. The exact
@@ -214,6 +215,7 @@ class ComIk:
                        q0 if q_ref is None else q_ref, q_prev, base_xz, base_weight, base_pitch_min, base_z_min,
                        joint_targets=list(joint_targets or ()))
         frame.lift_speed_prev = self._lift_speed_prev(q_prev)
+        self._lift_inertia = None        # the trunk's inertia about its joints, once per frame (see _bound_lift)
         q = q0.copy()
         feasible, dua = True, 0.0
         step = np.inf
@@ -365,8 +367,10 @@ class ComIk:
         about the joint's axis (the joint-space inertia's diagonal; the parent's motion left out). A joint moving
         with gravity may turn at once (the stop, or the motor's whole limit, catches it)."""
         j = self.lift_dofs - 6
-        pin.crba(self.model, self.data, q)
-        inertia = self.data.M[self.lift_dofs, self.lift_dofs]
+        if self._lift_inertia is None:      # one frame's steps move the trunk by a fraction of a degree
+            pin.crba(self.model, self.data, q)
+            self._lift_inertia = self.data.M[self.lift_dofs, self.lift_dofs].copy()
+        inertia = self._lift_inertia
         up = np.sign(tau)
         accel = np.maximum(self.lift_torque_nm - np.abs(tau), 0.0) / inertia
         speed = np.maximum(up * f.lift_speed_prev, 0.0) + accel * self.dt
