@@ -31,6 +31,7 @@ from . import project_folder, provenance
 from ..batch.engine import run_jobs
 from ..batch.gap import gap_cases, gap_jobs
 from ..batch.gap import CASES as GAP_HUMAN_CASES
+from .driver import bench_driver
 from .gap_human import bench_gap_human, summary_table
 from .human import bench_human_real, print_table
 from .live import COMMAND_P99_TARGET_MS
@@ -414,7 +415,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sit2stand-bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results/bench.json"))
     parser.add_argument("--messages", type=int, default=40_000)
-    parser.add_argument("--only", choices=["gap", "gap_human", "retarget", "human"],
+    parser.add_argument("--only", choices=["gap", "gap_human", "retarget", "human", "driver"],
                         help="run one section and merge it into the JSON file")
     # 10 seeds x (14 kinds + 2 outside), 10 clean, 5 with two: ~25 s a case with its replays, ~40 min on 2 cores
     parser.add_argument("--gap-seeds", type=int, default=10, help="hidden-effect cases per effect kind")
@@ -439,7 +440,7 @@ def main(argv: list[str] | None = None) -> int:
                     "gap_human": lambda: _gap_human_section(args.gap_human_n, args.gap_human_cases,
                                                             args.gap_human_workers, args.gap_human_de_leva),
                     "retarget": lambda: _retarget_section(root, env),
-                    "human": _human_real_section}
+                    "human": _human_real_section, "driver": lambda: bench_driver(env)}
         key = "human_real" if args.only == "human" else args.only
         key += "_de_leva" if args.only == "gap_human" and args.gap_human_de_leva else ""    # beside, not over it
         results[key] = sections[args.only]()
@@ -471,10 +472,12 @@ def main(argv: list[str] | None = None) -> int:
         results["human_com"].update(bench_human_com_graph(demo, env))
     print("robot: plant real-time factor, 88 postures, identification ...", flush=True)
     results["robot"] = bench_robot()
+    print("driver: plant step per controller against mj_step, the node's real-time factor ...", flush=True)
+    results["driver"] = bench_driver(env)
     results["human_real"] = _human_real_section()
     results["retarget"] = _retarget_section(root, env)
     results["gap"] = _gap_section(args.gap_seeds, args.gap_two, args.gap_kinds)
-    shown = [s for s in ("bag", "replayer", "human_com", "robot", "retarget", "gap") if s in results]
+    shown = [s for s in ("bag", "replayer", "human_com", "robot", "driver", "retarget", "gap") if s in results]
     _write(results, args.out, shown, [k for k in results if k != "machine"], "make bench")
     return 0
 
