@@ -8,7 +8,7 @@ export RCUTILS_COLORIZED_OUTPUT ?= 0
 SOAK_MIN ?= 2
 BATCH_CASES ?= 40
 
-.PHONY: setup demo figures test test-fast lint bench bench-gap bench-gap-human bench-retarget bench-human bench-capture bench-live bench-ik bench-driver bench-standup bench-batch bench-faults lock clean
+.PHONY: setup demo figures test test-fast lint bench bench-gap bench-gap-human bench-retarget bench-human bench-capture bench-live bench-ik bench-driver bench-estimator results bench-standup bench-batch bench-faults lock clean
 
 setup:            ## create .venv (pinned wheels, ROS 2 Jazzy), build msgs/, install src/ (idempotent)
 	@ros_ws/bootstrap.sh
@@ -58,6 +58,12 @@ bench-ik: setup       ## the per-frame IK against mink and pink (DAQP, ProxQP) o
 
 bench-driver: setup   ## the plant's step per on-board controller against a bare mj_step, and the driver node's real-time factor (joint PD, whole-body torque control), merged into bench.json
 	@$(PY) -m sit2stand.bench --only driver --out bench/results/bench.json
+
+bench-estimator: setup  ## the streaming human COM estimator per frame (no ROS, and its node in a real-time graph), merged into bench.json
+	@$(PY) -m sit2stand.bench --only estimator --out bench/results/bench.json
+
+results: setup       ## rewrite the generated tables of docs/results.md from bench/results/*.json (each with its date, commit, command)
+	@$(PY) -m sit2stand.bench.report
 
 bench-standup: setup  ## 30 digital humans (stature, mass, seat, natural/elderly/fast) retargeted and simulated: success, time scale, COM, torque; bench/results/standup/ (BENCH_STANDUP_ARGS="--robot g1": standup_g1/)
 	@$(PY) -m sit2stand.bench.standup $(BENCH_STANDUP_ARGS)

@@ -26,7 +26,8 @@ IMPORT_TO_DIST = {"numpy": "numpy", "scipy": "scipy", "matplotlib": "matplotlib"
                   "rosbags": "rosbags", "mcap": "mcap", "rclpy": "ros-jazzy-rclpy",
                   "zstandard": "mcap", "lz4": "mcap",   # mcap's own dependencies (MCAP chunk compressions)
                   "qtm_rt": "qtm-rt", "natnet": "natnet", "foxglove": "foxglove-sdk", "rerun": "rerun-sdk",
-                  "ray": "ray", "pandas": "pandas"}
+                  "ray": "ray", "pandas": "pandas",
+                  "mink": "mink", "pink": "pin-pink"}     # bench.ik_rivals: the bench-ik extra, in its own venv
 # ROS interface packages and where they come from on PyPI (sit2stand_msgs and tf2_msgs: msgs/, built with colcon)
 WITH_RCLPY = {"builtin_interfaces", "rcl_interfaces", "rosgraph_msgs"}
 COMMON_INTERFACES = {"std_msgs", "std_srvs", "sensor_msgs", "geometry_msgs", "trajectory_msgs", "diagnostic_msgs",
@@ -40,9 +41,13 @@ def _dist_name(requirement: str) -> str:
     return re.split(r"[\s<>=!~;\[]", requirement.strip(), maxsplit=1)[0].lower().replace("_", "-")
 
 
-def _top_level_imports() -> set[str]:
+RIVALS_SIDE = SRC / "sit2stand" / "bench" / "ik_rivals.py"
+"""Runs in the venv of `make bench-ik` only: it may also import the bench-ik extra."""
+
+
+def _top_level_imports(paths) -> set[str]:
     found = set()
-    for path in (SRC / "sit2stand").rglob("*.py"):
+    for path in paths:
         for node in ast.walk(ast.parse(path.read_text(), str(path))):
             if isinstance(node, ast.Import):
                 found |= {alias.name.split(".")[0] for alias in node.names}
@@ -89,8 +94,12 @@ def test_every_third_party_import_of_src_is_a_declared_dependency():
     tomllib = pytest.importorskip("tomllib")
     project = tomllib.loads((SRC / "pyproject.toml").read_text())["project"]
     declared = {_dist_name(r) for r in project["dependencies"]}
+    rivals = {_dist_name(r) for r in project["optional-dependencies"]["bench-ik"]}
+    main_side = [p for p in (SRC / "sit2stand").rglob("*.py") if p != RIVALS_SIDE]
     unknown, undeclared = [], []
-    for module in sorted(_top_level_imports()):
+    imports = [(m, declared) for m in sorted(_top_level_imports(main_side))]
+    imports += [(m, declared | rivals) for m in sorted(_top_level_imports([RIVALS_SIDE]))]
+    for module, allowed in imports:
         if module in WITH_RCLPY:
             dist = "ros-jazzy-rclpy"
         elif module in COMMON_INTERFACES:
@@ -102,7 +111,7 @@ def test_every_third_party_import_of_src_is_a_declared_dependency():
         else:
             unknown.append(module)
             continue
-        if dist not in declared:
+        if dist not in allowed:
             undeclared.append(f"{module} ({dist})")
     assert not unknown, f"imports with no known distribution (add them to pyproject.toml and this map): {unknown}"
     assert not undeclared, f"imported but not in pyproject.toml's dependencies: {undeclared}"
@@ -111,7 +120,8 @@ def test_every_third_party_import_of_src_is_a_declared_dependency():
 def test_package_xml_depends_on_every_ros_package_src_imports():
     xml = (SRC / "package.xml").read_text()
     exec_depends = set(re.findall(r"<exec_depend>([^<]+)</exec_depend>", xml))
-    ros_imports = {m for m in _top_level_imports() if m == "rclpy" or m.endswith(("_msgs", "_srvs", "_interfaces"))}
+    ros_imports = {m for m in _top_level_imports((SRC / "sit2stand").rglob("*.py"))
+                   if m == "rclpy" or m.endswith(("_msgs", "_srvs", "_interfaces"))}
     assert ros_imports, "no ROS imports found: the scan is broken"
     assert ros_imports <= exec_depends, f"package.xml lacks {sorted(ros_imports - exec_depends)}"
     for dep in ("python3-numpy", "python3-scipy", "python3-matplotlib", "python3-yaml", "pinocchio", "proxsuite"):

@@ -10,8 +10,8 @@ posture prior and the Levenberg-Marquardt damping of the retargeter; the COM on 
 retargeter's own extra rules (stops that hold, trunk lift-off, base holds, knee targets, angular momentum) are left
 out: mink and pink have no counterpart.
 
-mink 1.3.0 and pin-pink 4.4.0 (with DAQP 0.11.0, and ProxQP through qpsolvers) go into ``.venv-ik/`` beside
-``.venv/`` the first time, with the same pin, mujoco, proxsuite and numpy as sit2stand's.
+mink and pin-pink (DAQP, and ProxQP through qpsolvers), pinned in sit2stand's ``bench-ik`` extra, go into
+``.venv-ik/`` beside ``.venv/`` the first time, with the same pin, mujoco, proxsuite, daqp and numpy as sit2stand's.
 :mod:`sit2stand.bench.ik_rivals` runs there, frame by frame, the solvers interleaved in a rotating order so that
 the machine's state weighs on all alike, and writes its figures back; this module turns them into
 ``bench/results/ik.json``: per solver ``ms_p50``, ``ms_p99`` and their ratios to ours (``ratio_p50``,
@@ -43,9 +43,10 @@ from ..retarget.stream import Retargeter
 from ..robot.model import DEFAULT_ROBOT, PlantConfig, compiled_robot
 from ..vectors import wxyz_from_xyzw
 
-RIVALS = ("mink==1.3.0", "pin-pink==4.4.0", "daqp==0.11.0", "qpsolvers==4.13.0")
-SHARED = ("pin", "mujoco", "proxsuite", "numpy", "pyyaml")
-"""Installed in ``.venv-ik`` at sit2stand's own versions: the same Pinocchio and MuJoCo binaries on both sides."""
+RIVALS_EXTRA = "bench-ik"
+"""sit2stand's optional dependencies that name the rivals and their pins (``src/pyproject.toml``)."""
+SHARED = ("pin", "mujoco", "proxsuite", "daqp", "numpy", "pyyaml")
+"""Installed in ``.venv-ik`` at sit2stand's own versions: the same Pinocchio, MuJoCo and QP binaries on both sides."""
 TARGET_RATIO_P50 = 10.0     # mink (DAQP) p50 over ours: the target (floor 5)
 TARGET_RATIO_P99 = 5.0
 
@@ -54,11 +55,15 @@ def ik_python() -> tuple[Path | None, str]:
     """The Python of ``.venv-ik`` with mink and pink importable, made on demand; or None and why not."""
     venv = project_folder() / ".venv-ik"
     python = venv / "bin" / "python"
-    pins = [*RIVALS, *(f"{name}=={metadata.version(name)}" for name in SHARED)]
+    rivals = [r.split(";")[0].strip() for r in metadata.requires("sit2stand") or ()
+              if f'extra == "{RIVALS_EXTRA}"' in r]
+    if not rivals:
+        return None, f"sit2stand's metadata has no {RIVALS_EXTRA!r} extra: reinstall it (make setup)"
+    pins = [*rivals, *(f"{name}=={metadata.version(name)}" for name in SHARED)]
     stamp = venv / "sit2stand-pins.txt"
     if python.is_file() and stamp.is_file() and stamp.read_text() == "\n".join(pins):
         return python, ""
-    print(f"  installing {', '.join(RIVALS)} into {venv} (once) ...", flush=True)
+    print(f"  installing {', '.join(rivals)} into {venv} (once) ...", flush=True)
     for step in ([sys.executable, "-m", "venv", "--clear", str(venv)],
                  [str(python), "-m", "pip", "install", "-q", *pins]):
         done = _run(step, timeout_s=1800)

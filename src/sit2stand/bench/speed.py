@@ -364,6 +364,15 @@ def _gap_rates(rows: list[dict]) -> dict:
     return out
 
 
+def _estimator_section(root: Path, env: dict[str, str]) -> dict:
+    demo = root / "bags" / "natural"
+    print("human COM: streaming estimator and offline run on bags/natural ...", flush=True)
+    out = bench_human_com(demo)
+    print("human COM: the node in a real-time graph ...", flush=True)
+    out.update(bench_human_com_graph(demo, env))
+    return out
+
+
 def _retarget_section(root: Path, env: dict[str, str]) -> dict:
     print("retargeting: IK and plan player per frame on both demonstrations ...", flush=True)
     out = bench_retarget(root)
@@ -415,7 +424,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sit2stand-bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results/bench.json"))
     parser.add_argument("--messages", type=int, default=40_000)
-    parser.add_argument("--only", choices=["gap", "gap_human", "retarget", "human", "driver"],
+    parser.add_argument("--only", choices=["gap", "gap_human", "retarget", "human", "driver", "estimator"],
                         help="run one section and merge it into the JSON file")
     # 10 seeds x (14 kinds + 2 outside), 10 clean, 5 with two: ~25 s a case with its replays, ~40 min on 2 cores
     parser.add_argument("--gap-seeds", type=int, default=10, help="hidden-effect cases per effect kind")
@@ -440,8 +449,9 @@ def main(argv: list[str] | None = None) -> int:
                     "gap_human": lambda: _gap_human_section(args.gap_human_n, args.gap_human_cases,
                                                             args.gap_human_workers, args.gap_human_de_leva),
                     "retarget": lambda: _retarget_section(root, env),
-                    "human": _human_real_section, "driver": lambda: bench_driver(env)}
-        key = "human_real" if args.only == "human" else args.only
+                    "human": _human_real_section, "driver": lambda: bench_driver(env),
+                    "estimator": lambda: _estimator_section(root, env)}
+        key = {"human": "human_real", "estimator": "human_com"}.get(args.only, args.only)
         key += "_de_leva" if args.only == "gap_human" and args.gap_human_de_leva else ""    # beside, not over it
         results[key] = sections[args.only]()
         _write(results, args.out, [] if key == "human_real" else [key], [key],  # human_real: printed as its table
@@ -464,12 +474,7 @@ def main(argv: list[str] | None = None) -> int:
                                "into_recorder_msg_per_s": into_recorder,
                                "into_recorder_vs_bare_read": into_recorder / bare}
 
-    demo = root / "bags" / "natural"
-    if demo.exists():
-        print("human COM: streaming estimator and offline run on bags/natural ...", flush=True)
-        results["human_com"] = bench_human_com(demo)
-        print("human COM: the node in a real-time graph ...", flush=True)
-        results["human_com"].update(bench_human_com_graph(demo, env))
+    results["human_com"] = _estimator_section(root, env)
     print("robot: plant real-time factor, 88 postures, identification ...", flush=True)
     results["robot"] = bench_robot()
     print("driver: plant step per controller against mj_step, the node's real-time factor ...", flush=True)
