@@ -76,7 +76,7 @@ def test_two_stand_up_graphs_run_side_by_side_on_one_domain(tmp_path):
 
 def test_a_second_graph_with_the_same_node_names_stops_and_names_the_first(tmp_path, ros_env):
     """Same graph, same namespace, same domain: the second run's node stops with an error naming the first run's
-    (sit2stand.nodes.runtime.GraphGuard); the first goes on, and its bag carries its run id."""
+    (sit2stand.nodes.graph_guard.GraphGuard); the first goes on, and its bag carries its run id."""
     graph = tmp_path / "solo.yaml"
     graph.write_text("name: solo\narguments: {out: ''}\nnodes:\n  - name: recorder\n    executable: recorder\n"
                      "    parameters:\n      - {output: $(var out)}\n")

@@ -12,7 +12,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from sit2stand.io.bag import BagReader
-from sit2stand.nodes.runtime import ROBOT_STATE_READER_QOS
+from sit2stand.nodes.qos import ROBOT_STATE_READER_QOS
 from sit2stand.robot.model import PlantConfig
 from sit2stand.robot.postures import collect_postures
 from sit2stand_msgs.srv import IdentifyCom

@@ -5,7 +5,7 @@ import sys
 import textwrap
 from types import SimpleNamespace
 
-from sit2stand.nodes.runtime import publisher_names
+from sit2stand.nodes.qos import publisher_names
 
 # A node whose destroy_node never returns (the DDS teardown hang a CI run saw), bounded at 0.5 s
 BLOCKED_TEARDOWN = textwrap.dedent("""\

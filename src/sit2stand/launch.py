@@ -311,7 +311,7 @@ class Launcher:
         self._readers: list[threading.Thread] = []
         self.width = max(len(n.name) for n in graph.nodes)
         # one id for this run of the graph, given to every node: a node of another run with the same name (a second
-        # graph on the domain) stops itself (sit2stand.nodes.runtime.GraphGuard); the recorder stores it in the bag
+        # graph on the domain) stops itself (sit2stand.nodes.graph_guard.GraphGuard); the recorder stores it in the bag
         self.run_id = os.environ.get(RUN_ID_ENV) or uuid.uuid4().hex[:8]
 
     def _emit(self, name: str, line: str) -> None:

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io import messages as M
-from ..io.bag import BagError, BagReader, BagWriter
+from ..io.bag import BagError, BagReader, BagWriter, bag_subject
 from ..forceplate import PlateSeries
 from ..io.topics import (COM_TYPE, FORCE_PLATE_PREFIX, GROUND_TRUTH_COM_TOPIC, HUMAN_COM_TOPIC, HUMAN_JOINTS_TOPIC,
                          HUMAN_MODEL_COP_TOPIC, HUMAN_SCALING_TOPIC, MARKERS_TOPIC, REFERENCE_COM_TOPIC,
@@ -94,9 +94,9 @@ def read_trial(bag_path: str | Path) -> Trial:
             reference = (np.array([ts for ts, _ in msgs]) * 1e-9,
                          np.array([[m.position.x, m.position.y, m.position.z] for _, m in msgs]),
                          np.array([m.valid for _, m in msgs]))
-    num = lambda key: float(custom[key]) if key in custom else None  # noqa: E731
-    height_m, mass_kg, sex = num("height_m"), num("body_mass_kg"), custom.get("sex", "male")
-    if (height_m is None or mass_kg is None) and subject_msg is not None:     # custom_data lost (ROS 1, recorder)
+    named = bag_subject(custom)
+    height_m, mass_kg, sex = (named.height_m, named.mass_kg, named.sex) if named else (None, None, "male")
+    if named is None and subject_msg is not None:     # custom_data lost (ROS 1, recorder)
         height_m, mass_kg, sex = subject_msg.height_m, subject_msg.mass_kg, subject_msg.sex or sex
     return Trial(t, names, pos, valid, plates, height_m, mass_kg, sex, truth, reference)
 

@@ -241,6 +241,26 @@ def _check_bag_dir(path: Path) -> None:
         raise BagError(f"{path}: metadata.yaml is missing{hint}")
 
 
+@dataclass(frozen=True)
+class BagSubject:
+    """The subject a demonstration bag's ``custom_data`` names (``height_m``, ``body_mass_kg``, ``sex``)."""
+
+    height_m: float
+    mass_kg: float
+    sex: str
+
+
+def bag_subject(custom: dict[str, str]) -> BagSubject | None:
+    """The subject in a bag's ``custom_data``; None when it names none.
+
+    Raises:
+        ValueError: ``height_m`` or ``body_mass_kg`` is not a number.
+    """
+    if not {"height_m", "body_mass_kg"} <= set(custom):
+        return None
+    return BagSubject(float(custom["height_m"]), float(custom["body_mass_kg"]), custom.get("sex", "male"))
+
+
 class BagReader:
     """Read a rosbag2 bag (MCAP or SQLite3 storage) written by us, rosbag2 or rosbags.
 

@@ -198,6 +198,45 @@ class Lockstep:
         return min(bounds.values()) if bounds else None
 
 
+class LockstepGate:
+    """A :class:`Lockstep` applied to a :class:`PlaybackClock`: which followed topic holds /clock now (``holder``),
+    and what changed for a log (topics that hold it for the first time; topics let go for a stall). Which followed
+    topics some node offers is asked of the graph through ``offered_by_graph`` at most every ``ask_every_s``."""
+
+    def __init__(self, lockstep: Lockstep, offered_by_graph: Callable[[str], bool], ask_every_s: float = 0.2) -> None:
+        self.lockstep = lockstep
+        self.holder = ""
+        self._ask, self._every = offered_by_graph, ask_every_s
+        self._held_by: set[str] = set()
+        self._released: set[str] = set()
+        self._offered: tuple[float, frozenset[str]] = (0.0, frozenset())
+
+    def offered(self, wall_s: float) -> frozenset[str]:
+        if wall_s - self._offered[0] > self._every:
+            self._offered = (wall_s, frozenset(t for t in self.lockstep.topics if self._ask(t)))
+        return self._offered[1]
+
+    def hold(self, clock: PlaybackClock, wall_s: float) -> tuple[list[str], list[str]]:
+        """Hold ``clock`` where the followed topics allow now; (topics holding it for the first time, topics let
+        go since the last call)."""
+        bounds = self.lockstep.holding(clock.bag_now_ns(), wall_s, self.offered(wall_s))
+        self.holder, first = "", []
+        if clock.hold_at(min(bounds.values()) if bounds else None):
+            self.holder = min(bounds, key=bounds.get)
+            if self.holder not in self._held_by:
+                self._held_by.add(self.holder)
+                first.append(self.holder)
+        released = sorted(self.lockstep.released - self._released)
+        self._released = set(self.lockstep.released)
+        return first, released
+
+
+def markers_rate_hz(counts: dict[str, int], span_ns: int, topic: str) -> float:
+    """A topic's rate [Hz]: its message count over the bag's span (a bag's index does not time each topic)."""
+    n = counts.get(topic, 0)
+    return (n - 1) / (span_ns * 1e-9) if n > 1 and span_ns > 0 else 0.0
+
+
 def parse_wait_for(entries: list[str]) -> dict[str, int]:
     """``TOPIC:COUNT`` entries (the replayer's ``wait_for``) as {topic: subscribers to wait for}.
 

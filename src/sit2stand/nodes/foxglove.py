@@ -32,7 +32,8 @@ from std_msgs.msg import String
 from ..io.live_view import LiveView
 from ..io.topics import HUMAN_DESCRIPTION_TOPIC, ROBOT_DESCRIPTION_TOPIC, bag_name
 from ..robot.packages import package_asset, package_uris
-from .runtime import IdleDrain, NodeError, declare, message_class, node_main, qos_matching_publishers, steady_timer
+from .runtime import IdleDrain, NodeError, declare, message_class, node_main, steady_timer
+from .qos import qos_matching_publishers
 
 DEFAULT_REGEX = r"^/(mocap|force_plate|human|robot|viz)/|^/tf(_static)?$|^/robot_description$"
 

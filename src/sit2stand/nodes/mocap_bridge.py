@@ -42,7 +42,8 @@ from ..human.marker_sets import load_marker_set
 from ..io.c3d import LabAxes
 from ..io.stream_messages import MocapFrameEncoder, PlateSampleEncoder
 from ..io.topics import LAB_FRAME, MARKERS_TOPIC, plate_topic
-from .runtime import PLATE_PUBLISH_DEPTH, NodeError, declare, node_main, qos_from_bag
+from .runtime import NodeError, declare, node_main
+from .qos import PLATE_PUBLISH_DEPTH, qos_from_bag
 
 
 class MocapBridge(Node):

@@ -1,23 +1,7 @@
 """Recorder node: records topics into a rosbag2 MCAP bag with raw (undeserialized) subscriptions.
 
-Parameters:
-    output (str)                 bag directory to create (must not exist); default ``bags/generated/rec_<time>``.
-    topics (str[], [])           record these topics (also when they appear later) ...
-    regex (str, "")              ... and/or every topic whose name matches this regular expression;
-                                 with neither, every topic is recorded.
-    exclude (str)                regex of topics never recorded; default ``^/rosout$|^/parameter_events$``.
-    include_clock (bool, false)  also record /clock.
-    discovery_period_s (0.5)     how often to look for new topics (those of :data:`~sit2stand.io.topics.TOPIC_TYPES`
-                                 are subscribed to from the start).
-    flush_period_s (0.5)         how often the open chunk is written out: a recorder killed with SIGKILL loses at
-                                 most this much (rebuild the bag with ``sit2stand bag recover DIR``).
-    use_sim_time (bool)          standard: log messages at /clock time instead of the wall clock (one time base
-                                 with a replayed bag's stamps); what arrives before the first /clock is logged at
-                                 the first /clock time, never at 0.
-
-Topics are those of the recorder's namespace, written with their names relative to it (``/robot2/mocap/markers``
-is ``/mocap/markers`` in the bag of a recorder under ``__ns:=/robot2``; :func:`sit2stand.io.topics.bag_name`), so a
-bag replays into any namespace; ``topics``, ``regex`` and ``exclude`` match those bag names.
+Parameters: ``docs/nodes.md`` (recorder). Topics are written with their names relative to the recorder's namespace
+(:func:`sit2stand.io.topics.bag_name`), so a bag replays into any namespace.
 
 Every wanted topic of :data:`~sit2stand.io.topics.TOPIC_TYPES` is subscribed to at start-up, reliable (and transient
 local for the latched ones), so a topic whose publisher appears mid-run is recorded from its first message; a
@@ -26,15 +10,12 @@ subscribe anew. Other topics are found by polling the graph. Subscriptions take 
 (reliable only if all are, as rosbag2 does), and that QoS is stored in the bag. SIGINT or SIGTERM closes the bag
 cleanly (summary and metadata.yaml written).
 
-Losses are counted, never silent: each subscription keeps up to 100,000 samples not yet taken (recorder_fastdds.xml),
-and a sample a publisher dropped from its queue before the recorder had it (the DDS message-lost status) is counted
-per topic when the recorder closes, logged, stored in the bag's ``custom_data`` as ``lost_messages``, and makes the
-node exit 1. The status is read once, at close, not from the executor while messages flow: the pinned rmw_fastrtps
-(8.4.3) deadlocks when it takes that event while DDS reports a new loss (an AB-BA lock order between
-``rmw_take_event`` and ``on_sample_lost``, fixed upstream in ros2/rmw_fastrtps#890); a recorder that fell behind
-hung there, its bag unclosed, in 2 of ~8 full test runs. A latched
-state topic (depth 1: the subject, the scaling, the descriptions) keeps only its newest sample by design: a sample a
-newer one replaced is stored as ``superseded_latched_messages`` and is not an error.
+Losses are counted, never silent: each subscription keeps up to 100,000 samples not yet taken (recorder_fastdds.xml);
+a sample a publisher dropped before the recorder had it (DDS's message-lost status) is counted per topic at close,
+logged, stored in the bag's ``custom_data`` as ``lost_messages``, and makes the node exit 1. The status is read at
+close only: the pinned rmw_fastrtps (8.4.3) can deadlock taking that event while DDS reports a new loss (ros2/
+rmw_fastrtps#890). A latched state topic (depth 1) keeps only its newest sample by design: a replaced sample is
+stored as ``superseded_latched_messages``, not an error.
 """
 
 from __future__ import annotations
@@ -52,8 +33,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from ..io.topics import (CLOCK_TOPIC, ESTIMATE_TOPICS, GRAPH_TOPIC, LATCHED_TOPICS, RUN_ID_ENV, TOPIC_TYPES, bag_name,
                          ros_name)
 from ..io.bag import BagError, BagWriter
-from .runtime import (IdleDrain, NodeError, declare, message_class, node_main, qos_matching_publishers, qos_to_bag,
-                      steady_timer)
+from .runtime import IdleDrain, NodeError, declare, message_class, node_main, steady_timer
+from .qos import qos_matching_publishers, qos_to_bag
 
 # the deep reader queues (read when rclpy creates its DDS participant; a profile the user names wins)
 os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(Path(__file__).with_name("recorder_fastdds.xml")))

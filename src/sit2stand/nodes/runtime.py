@@ -1,4 +1,4 @@
-"""What every sit2stand node shares: start-up/shut-down, message classes by name, QoS conversions.
+"""What every sit2stand node shares: start-up/shut-down, message classes by name, parameters (QoS: :mod:`.qos`).
 
 A node module defines a ``rclpy.node.Node`` subclass and ``main = node_main(ThatNode)``; it then runs as a
 console script (``replayer --ros-args -p bag:=...``), as ``python -m sit2stand.nodes.replayer``, from
@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import faulthandler
 import importlib
-import json
-import math
 import os
 import signal
 import sys
@@ -26,14 +24,12 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
-from std_msgs.msg import String
-from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 
 from ..errors import InputError, Sit2StandError
 from ..io.frame_rate import FrameRateCheck
-from ..io.topics import GRAPH_TOPIC, MARKERS_TOPIC, RUN_ID_ENV, node_result_line
+from ..io.topics import MARKERS_TOPIC, node_result_line
+from .graph_guard import GraphGuard
 
 
 class NodeError(Sit2StandError, RuntimeError):
@@ -88,109 +84,6 @@ def declare(node: Node, name: str, default, description: str = ""):
     return value
 
 
-def qos_to_bag(profile: QoSProfile):
-    """rosbags Qos (for bag metadata) of an rclpy QoSProfile."""
-
-    def t(d) -> QosTime:
-        ns = d.nanoseconds
-        if ns <= 0 or ns >= 0x7FFFFFFF * 10**9:
-            return QosTime(sec=0x7FFFFFFF, nsec=0xFFFFFFFF)
-        return QosTime(sec=ns // 10**9, nsec=ns % 10**9)
-
-    return Qos(
-        history=QosHistory(int(profile.history)),
-        depth=int(profile.depth),
-        reliability=QosReliability(int(profile.reliability)),
-        durability=QosDurability(int(profile.durability)),
-        deadline=t(profile.deadline),
-        lifespan=t(profile.lifespan),
-        liveliness=QosLiveliness(int(profile.liveliness)),
-        liveliness_lease_duration=t(profile.liveliness_lease_duration),
-        avoid_ros_namespace_conventions=bool(profile.avoid_ros_namespace_conventions),
-    )
-
-
-# History depth of the publishers whose topics are recorded: a publisher that catches up after a stall (the
-# retargeter after waiting for the human COM, the simulated robot after a late tick) sends a burst, and a reliable
-# writer drops its oldest samples the recorder has not yet acknowledged beyond this depth (seen at 50 and 100:
-# 7-13 samples missing from a bag)
-PUBLISH_DEPTH = 1000
-READER_STALL_S = 5.0
-"""A recorded topic's publisher keeps at least this long of its samples [s] for a reader held up by a loaded
-machine: a live stand-up on 2 cores lost 133 force-plate samples (1 kHz, depth 1000) and 7 /tf messages (50 Hz,
-depth 100, as tf2_ros's) to a recorder held up for 1-2 s."""
-
-
-def publish_depth(rate_hz: float) -> int:
-    """History depth of a recorded topic's publisher at ``rate_hz``: ``READER_STALL_S`` of samples, at least
-    ``PUBLISH_DEPTH``."""
-    return max(PUBLISH_DEPTH, math.ceil(rate_hz * READER_STALL_S))
-
-
-PLATE_PUBLISH_DEPTH = publish_depth(1000.0)
-
-
-def robot_state_qos(rate_hz: float) -> QoSProfile:
-    """The robot's joint states and base pose as the driver publishes them: reliable, ``publish_depth`` deep, and
-    transient local, so that a node matched late still gets the latest state. In a graph held in lockstep the robot's
-    clock waits for the retargeter's first command, and the retargeter for a state to calibrate on: with two
-    stand-up graphs on 2 cores it matched the driver seconds after its first states, and in 2 of 4 runs never got
-    one (the driver's clock held, nothing newer came)."""
-    return QoSProfile(depth=publish_depth(rate_hz), reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-ROBOT_STATE_READER_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                                    durability=DurabilityPolicy.TRANSIENT_LOCAL)
-"""A reader of :func:`robot_state_qos` topics that wants the latest state on matching."""
-TF_QOS = QoSProfile(depth=publish_depth(50.0), reliability=ReliabilityPolicy.RELIABLE)     # /tf at 50 Hz
-# /tf_static, descriptions, the subject, parameters: the latest message reaches subscribers that come later
-LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-# a latched topic that many nodes publish once each: a late subscriber gets every node's message
-LATCHED_ALL_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-def qos_from_bag(profiles, depth: int = PUBLISH_DEPTH) -> QoSProfile:
-    """An rclpy QoSProfile to replay a topic with the reliability/durability it was recorded with."""
-    reliable, transient = True, False
-    if profiles:
-        reliable = all(int(getattr(p.reliability, "value", p.reliability)) != 2 for p in profiles)  # 2: best effort
-        transient = all(int(getattr(p.durability, "value", p.durability)) == 1 for p in profiles)
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=depth,
-        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)
-
-
-UNNAMED_BY_DDS = "_NODE_NAME_UNKNOWN_"   # rmw's name for a publisher whose node discovery has not named yet
-
-
-def publisher_names(infos) -> list[str]:
-    """The publishers of a topic as a person reads them: ``/ns/node`` where DDS has named the node, "another
-    publisher" (counted) where discovery has not yet brought its name (rmw's ``_NODE_NAME_UNKNOWN_``)."""
-    named = sorted({f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos if i.node_name != UNNAMED_BY_DDS})
-    unnamed = sum(1 for i in infos if i.node_name == UNNAMED_BY_DDS)
-    if unnamed:
-        named.append("another publisher" if unnamed == 1 else f"{unnamed} other publishers")
-    return named
-
-
-def qos_matching_publishers(node: Node, topic: str, keep_all: bool = True, depth: int = 1000) -> QoSProfile:
-    """A subscription QoS that connects to every current publisher of ``topic`` (as rosbag2 record does):
-    reliable only if all publishers are reliable, transient-local only if all are.
-
-    ``keep_all`` (a recorder's choice): a reliable reader never drops a sample it has acknowledged; when the
-    application falls behind it stops acknowledging, which is what lets a flow-controlled publisher slow down."""
-    infos = node.get_publishers_info_by_topic(topic)
-    reliable = bool(infos) and all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
-    transient = bool(infos) and all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_ALL if keep_all else HistoryPolicy.KEEP_LAST, depth=depth,
-        reliability=ReliabilityPolicy.RELIABLE if reliable or not infos else ReliabilityPolicy.BEST_EFFORT,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)
-
-
 def steady_timer(node: Node, period_s: float, callback: Callable[[], None]):
     """A timer on the monotonic clock: it runs under ``use_sim_time`` too, before the first /clock and after the
     last (a ROS-time timer would not: discovery waiting for the replayer, which waits for the discovery)."""
@@ -232,43 +125,6 @@ def _make_executor(kind: str):
 # there), so ``__ns`` moves a graph's time base with its topics. After the user's own arguments: a rule of theirs for
 # /clock comes first and wins.
 CLOCK_IN_NAMESPACE = ["--ros-args", "-r", "/clock:=clock"]
-
-
-class GraphGuard:
-    """One graph per name: a node announces its run (the launcher's ``SIT2STAND_RUN_ID``, else its own process) on
-    ``GRAPH_TOPIC`` (latched) and listens there. Another run's node with this node's fully qualified name means a
-    second graph on the domain: the one that started later stops with an error naming the other (the earlier one
-    logs a warning and goes on), before two graphs mix their data. Nodes in other namespaces never clash."""
-
-    def __init__(self, node: Node) -> None:
-        self.node, self.name = node, node.get_fully_qualified_name()
-        self.run = os.environ.get(RUN_ID_ENV) or f"pid{os.getpid()}"
-        self.started_ns = time.time_ns()
-        self.conflict: str | None = None
-        self._warned: set[str] = set()
-        pub = node.create_publisher(String, GRAPH_TOPIC, LATCHED_ALL_QOS)
-        pub.publish(String(data=json.dumps({"run": self.run, "node": self.name, "started_ns": self.started_ns,
-                                            "pid": os.getpid()})))
-        node.create_subscription(String, GRAPH_TOPIC, self._on_announce, LATCHED_ALL_QOS)
-
-    def _on_announce(self, msg) -> None:
-        try:
-            other = json.loads(msg.data)
-        except ValueError:
-            return
-        if other.get("node") != self.name or other.get("run") == self.run:
-            return
-        earlier = (other.get("started_ns", 0), other.get("pid", 0)) < (self.started_ns, os.getpid())
-        domain = os.environ.get("ROS_DOMAIN_ID", "0")
-        if earlier:
-            self.conflict = (f"another graph's {self.name} (run {other.get('run')}, pid {other.get('pid')}) is "
-                             f"running on ROS_DOMAIN_ID {domain}: this one (run {self.run}) stops before the two mix "
-                             "their data; run it on another ROS_DOMAIN_ID, or in a namespace (sit2stand launch "
-                             "--namespace NAME)")
-        elif other.get("run") not in self._warned:
-            self._warned.add(other.get("run"))
-            self.node.get_logger().warning(f"a second {self.name} (run {other.get('run')}) appeared on ROS_DOMAIN_ID "
-                                           f"{domain}; it was told to stop")
 
 
 def marker_rate_check(rate_hz: float) -> FrameRateCheck:
