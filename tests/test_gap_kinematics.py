@@ -10,9 +10,9 @@ import pytest
 
 from sit2stand.gap.effects import alter_model, tilted_axis
 from sit2stand.gap.kinematics import _pin_q, contact_points, kinematic_model
-from sit2stand.robot.profile import load_profile
 from sit2stand.robot.model import PlantConfig, controller_model
 from sit2stand.robot.plant import Plant
+from sit2stand.robot.profile import load_profile
 
 TALOS = load_profile("talos")
 

@@ -9,18 +9,14 @@ import numpy as np
 import pytest
 
 from sit2stand.errors import InputError
-from sit2stand.gap import contact
-from sit2stand.gap.bounds import Limits, refusal
-from sit2stand.gap.chain import cancelling_offsets
-from sit2stand.gap.constancy import INCONSTANT_Z, half_sizes
+from sit2stand.gap import validate as contact
 from sit2stand.gap.control import feedforward_rate
 from sit2stand.gap.effects import alter_model, unmodeled_from
+from sit2stand.gap.human import map_departures, within_spread
+from sit2stand.gap.plausibility import Limits, cancelling_offsets, lopsided, mirror, refusal, side_of
 from sit2stand.gap.residuals import coulomb_signature, fit_backlash_widths, fit_coulomb_widths, joint_columns
-from sit2stand.gap.select import Candidate, Selected
-from sit2stand.gap.symmetry import lopsided, mirror, side_of
-from sit2stand.gap.unexplained import where_and_shape
-from sit2stand.gap.validate import effect_theta
-from sit2stand.gap.variation import map_departures, within_spread
+from sit2stand.gap.select import Candidate, Selected, where_and_shape
+from sit2stand.gap.validate import INCONSTANT_Z, effect_theta, half_sizes
 from sit2stand.robot.model import PlantConfig, PlantConfigError, controller_model
 from sit2stand.robot.plant import Plant
 from sit2stand.robot.postures import standing_qpos

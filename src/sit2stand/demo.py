@@ -39,9 +39,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from .data import graph_path
-from .gap.excite import excite
+from .gap.candidates import describe
+from .gap.recording import excite
 from .gap.report import cop_rms, gap_command
-from .gap.naming import describe
 from .human.offline import calibrate_from_bag
 from .human.offline import run as human_com_offline
 from .io import messages as M

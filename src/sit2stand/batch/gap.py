@@ -16,7 +16,7 @@ bagged and run through :func:`sit2stand.gap.human.human_gap` on the bag alone.
   (:attr:`SynthConfig.declared_mass_factor`); the plates weigh the truth. The right answer is the ``mass_scale``
   effect with ``value`` = true / declared.
 * Nothing hidden: right when nothing is named and the verdict is "no significant discrepancy" or "no load beyond the
-  body's own proportions" (:mod:`sit2stand.gap.variation`).
+  body's own proportions" (:mod:`sit2stand.gap.human`).
 
 The synthesiser's bodies differ from de Leva's proportions by design (segment masses sd 8 %, ``vary_subject``): each
 row lists the largest of those differences (:func:`body_deviation`) beside what was named. A body the synthesiser
@@ -37,7 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..gap.hidden import KINDS, OUT_OF_LIBRARY, draw, run_case
+from ..gap.effects import KINDS, OUT_OF_LIBRARY
+from ..gap.hidden import draw, run_case
 from ..gap.human import WITHIN_VARIATION, human_gap
 from ..gap.workflow import NO_DISCREPANCY
 from ..human.demonstration_bag import write_demonstration_bag

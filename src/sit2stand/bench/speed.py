@@ -27,16 +27,11 @@ from pathlib import Path
 import numpy as np
 from rosbags.rosbag2 import Reader
 
-from . import project_folder, provenance
 from ..batch.engine import run_jobs
-from ..batch.gap import gap_cases, gap_jobs
 from ..batch.gap import CASES as GAP_HUMAN_CASES
-from .driver import bench_driver
-from .gap_human import bench_gap_human, summary_table
-from .human import bench_human_real, print_table
-from .live import COMMAND_P99_TARGET_MS
+from ..batch.gap import gap_cases, gap_jobs
 from ..data import graph_path, plant_path
-from ..gap.hidden import KINDS, OUT_OF_LIBRARY
+from ..gap.effects import KINDS, OUT_OF_LIBRARY
 from ..human.com import estimate_com
 from ..human.com_stream import StreamingComEstimator
 from ..human.offline import calibrate_from_bag, read_trial
@@ -53,6 +48,11 @@ from ..robot.identify import identify
 from ..robot.model import PlantConfig
 from ..robot.plant import Plant
 from ..robot.postures import collect_postures
+from . import project_folder, provenance
+from .driver import bench_driver
+from .gap_human import bench_gap_human, summary_table
+from .human import bench_human_real, print_table
+from .live import COMMAND_P99_TARGET_MS
 
 
 def _rate(n: int, seconds: float) -> float:

@@ -97,7 +97,7 @@ def _identify(args: argparse.Namespace) -> int:
 
 
 def _excite(args: argparse.Namespace) -> int:
-    from ..gap.excite import excite
+    from ..gap.recording import excite
     from ..robot.model import PlantConfig
 
     info = excite(PlantConfig.load(args.plant, args.robot), args.out, seed=args.seed, n_moves=args.moves, progress=True)
@@ -107,8 +107,8 @@ def _excite(args: argparse.Namespace) -> int:
 
 
 def _gap(args: argparse.Namespace) -> int:
-    from ..gap.report import cop_rms, gap_command
-    from ..gap.naming import describe
+    from ..gap.candidates import describe
+    from ..gap.report import cop_lines, gap_command
     from ..gap.workflow import progress_printer
 
     result = gap_command(args.bags, args.out, model=args.model, rate_hz=args.rate, progress=progress_printer,
@@ -127,8 +127,8 @@ def _gap(args: argparse.Namespace) -> int:
     print(f"gap above the noise on the disagreeing channels, the effects applied: {result.gap_before:.2f} -> "
           f"{result.gap_after:.2f} (shrink {100 * result.shrink:.0f} %; to first order "
           f"{100 * result.shrink_first_order:.0f} %)")
-    for r, (b, a) in enumerate(cop_rms(result)):
-        print(f"model COP error, {result.bags[r]}: {100 * b:.2f} -> {100 * a:.2f} cm RMS")
+    for line in cop_lines(result):
+        print(line)
     print(f"report: {args.out}/report.md (+ gap.json, augmented_model.yaml, gap_*.png)")
     return 0
 

@@ -1,6 +1,8 @@
 """The model-gap workflow's candidate effects: every effect of the library that a dataset can show, with its
 signature rows (the residual columns it would explain, weighted by each channel's noise floor) and its plausibility
-check (:mod:`sit2stand.gap.bounds`). Links joined by joints that did not move in the data are one rigid group.
+check (:mod:`sit2stand.gap.plausibility`). Links joined by joints that did not move in the data are one rigid group.
+
+Also the named effects in physical terms (:func:`describe`, :func:`effect_summary`).
 """
 
 from __future__ import annotations
@@ -9,16 +11,15 @@ import numpy as np
 import pinocchio as pin
 
 from ..robot.profile import SIDES, profile_of
-from .bounds import Limits, refusal
 from .dataset import MOVING_RADPS, Dataset
-from .effects import FT_AXES
+from .effects import EFFECT_KINDS, FT_AXES
+from .plausibility import Limits, refusal
 from .residuals import body_link_names, joint_columns
-from .select import Candidate
+from .select import Candidate, Selection
 
 MOVED_RAD = 0.1              # a joint whose range in the data is below this did not move: its links are one body
-UNITS = {"extra_mass": ("kg", "m"), "viscous_friction": "N m s/rad", "coulomb_friction": "N m",
-         "torque_bias": "N m", "torque_gain": "1", "joint_offset": "rad", "actuator_delay": "s",
-         "mass_scale": "true / model", "joint_spring": "N m/rad", "rotor_inertia": "kg m^2", "backlash": "rad"}
+UNITS = {**{name: kind.unit for name, kind in EFFECT_KINDS.items()}, "mass_scale": "true / model"}
+"""Each candidate kind's unit: the effect kinds' (gap.effects), and the human side's segment mass scale."""
 
 def moved_joints(ds: Dataset) -> np.ndarray:
     """(n,) joints whose range over the data exceeds MOVED_RAD."""
@@ -56,7 +57,7 @@ def _limits(model: pin.Model, links: list[str], kind: str, location: str) -> Lim
 
 
 def _bounded(model: pin.Model, links: list[str], kind: str, location: str):
-    """The candidate's plausibility check (gap.bounds): estimate -> why it is refused, or None."""
+    """The candidate's plausibility check (gap.plausibility): estimate -> why it is refused, or None."""
     limits = _limits(model, links, kind, location)
     return lambda theta: refusal(kind, location, theta, limits)
 
@@ -140,3 +141,66 @@ def _joint_candidates(model: pin.Model, links: list[str], ds: Dataset) -> list[C
             params = [f"{kind} [{UNITS[kind]}]"] + (["preload [N m]"] if kind == "joint_spring" else [])
             out.append(Candidate(kind, name, params, X, plausible=_bounded(model, links, kind, name)))
     return out
+
+
+# --- The named effects in physical terms: the selection's estimates as effect dicts with 95 % intervals, and one line
+# per effect for a person (the workflow's report, the verdict, ``sit2stand gap``).
+
+
+def effect_summary(sel: Selection) -> list[dict]:
+    """The chosen effects in physical terms with 95 % intervals (1.96 standard errors; position by the delta
+    method from the mass and first moment)."""
+    out = []
+    for s in sel.effects:
+        c = s.candidate
+        d = {"kind": c.kind, "location": c.location, "share_of_gap": s.gain, "delta_bic": s.delta_bic,
+             "alternatives": s.alternatives}
+        se = np.sqrt(np.clip(np.diag(s.cov), 0, None))
+        if c.kind == "extra_mass":
+            m, mc = float(s.theta[0]), s.theta[1:]
+            pos = mc / m if abs(m) > 1e-6 else np.full(3, np.nan)
+            J = np.zeros((3, 4))           # d(mc/m) / d(m, mc)
+            J[:, 0] = -mc / m ** 2
+            J[:, 1:] = np.eye(3) / m
+            pos_se = np.sqrt(np.clip(np.diag(J @ s.cov @ J.T), 0, None))
+            d.update({"members": c.members, "mass_kg": m, "mass_ci95_kg": 1.96 * float(se[0]),
+                      "pos_m": pos.tolist(), "pos_ci95_m": (1.96 * pos_se).tolist()})
+        else:
+            v = float(s.theta[0])
+            if c.kind in ("torque_gain", "mass_scale"):   # fitted as the departure from 1
+                d.update({"value": 1.0 + v, "ci95": 1.96 * float(se[0]),
+                          "unit": "measured / true" if c.kind == "torque_gain" else UNITS[c.kind]})
+            elif c.kind == "joint_spring":    # k and the preload -k q_rest
+                k = v
+                d.update({"value": k, "ci95": 1.96 * float(se[0]), "unit": UNITS[c.kind],
+                          "rest_rad": -float(s.theta[1]) / k if abs(k) > 1e-9 else 0.0})
+            elif c.kind == "ft_bias":
+                d.update({"value": v, "ci95": 1.96 * float(se[0]),
+                          "unit": "N" if c.location.endswith(("fx", "fy", "fz")) else "N m"})
+            else:
+                d.update({"value": v, "ci95": 1.96 * float(se[0]), "unit": UNITS[c.kind]})
+        out.append(d)
+    return out
+
+
+def describe(effect: dict) -> str:
+    """One line naming an effect for a person."""
+    k = effect["kind"]
+    if k == "extra_mass":
+        p = effect["pos_m"]
+        members = [m for m in effect["members"] if m != effect["location"]]
+        group = f" (rigid in these data with {', '.join(members)})" if members else ""
+        return (f"extra mass on {effect['location']}{group}: {effect['mass_kg']:.2f} +- {effect['mass_ci95_kg']:.2f} "
+                f"kg at ({p[0]:+.3f}, {p[1]:+.3f}, {p[2]:+.3f}) m in the link frame")
+    label = {"viscous_friction": "viscous friction", "coulomb_friction": "Coulomb friction",
+             "torque_bias": "torque-sensor bias", "torque_gain": "torque-sensor gain",
+             "joint_offset": "encoder offset", "ft_bias": "force/torque sensor bias (sensor axes)",
+             "actuator_delay": "actuator delay", "joint_spring": "joint spring", "rotor_inertia": "rotor inertia",
+             "backlash": "backlash (half the gear's play; the joint torque's dead zone is +-kp times it)",
+             "contact_softness": "soles' contact time constant (MuJoCo solref; the model's 0.02 s)",
+             "link_length": "link length (its offset from the parent joint, scaled)",
+             "joint_axis": "joint axis tilt (toward axis x z)"}[k]
+    text = f"{label} at {effect['location']}: {effect['value']:.4g} +- {effect['ci95']:.2g} {effect['unit']}"
+    if k == "joint_axis":
+        text += f", and {effect['value_2']:.4g} +- {effect['ci95_2']:.2g} rad toward the axis x (axis x z)"
+    return text

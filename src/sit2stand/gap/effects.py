@@ -1,5 +1,8 @@
-"""The named effects as a plant's ``unmodeled`` section, or as changes to the compiled MuJoCo model: one mapping for
-the hidden-effect plants, the augmented model file and the re-simulation.
+"""The effect kinds of the model gap, one typed entry each (:data:`EFFECT_KINDS`: where a kind acts, its unit and
+parameters, whether it alters the compiled model, the kinematics or only a sensor, whether only a replay sees it, and
+whether the hidden-effect suite draws it inside the workflow's library): adding a kind is one entry. And the named
+effects as a plant's ``unmodeled`` section, or as changes to the compiled MuJoCo model: one mapping for the
+hidden-effect plants, the augmented model file and the re-simulation.
 
 An effect is a dict as the workflow reports it: ``kind``, ``location`` (a link, a joint, ``ft_<side>/<axis>`` or
 "all joints"), and ``mass_kg`` + ``pos_m`` (extra mass) or ``value`` (the rest; a torque gain as measured / true;
@@ -12,7 +15,7 @@ stiffness): :func:`alter_model` applies those to a compiled model (``MODEL_KINDS
 
 from __future__ import annotations
 
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from fnmatch import fnmatchcase
 
 import mujoco
@@ -27,10 +30,54 @@ JOINT_TABLES = {"viscous_friction": "viscous_friction", "coulomb_friction": "cou
                 "backlash": "backlash_rad"}
 
 
-# joint spring [N m/rad] about rest_rad, rotor inertia [kg m^2] added to the armature, a link's offset from its
-# parent scaled by value, a joint axis tilted by value [rad] (and value_2: see tilted_axis), the soles' contact time
-# constant [s] (MuJoCo solref)
-MODEL_KINDS = ("joint_spring", "rotor_inertia", "link_length", "joint_axis", "contact_softness")
+@dataclass(frozen=True)
+class EffectKind:
+    """One kind of model-gap effect, and how each part of the workflow treats it: its one home."""
+
+    name: str
+    acts_on: str               # where: a link, a joint, an F/T axis, all joints, the soles, the model's kinematics
+    unit: str | tuple[str, ...]  # of its value (an extra mass: its mass and its position)
+    parameters: int = 1        # fitted per location (a joint spring: stiffness and rest angle)
+    in_model: bool = False     # applied to the compiled model (alter_model): no field of a plant's unmodeled section
+    kinematic: bool = False    # changes the kinematics: the soles' closure finds it (gap.kinematics)
+    torque_sensor: bool = False  # a joint torque sensor's fault: the motion and every other signal unchanged
+    replay_only: bool = False  # no inverse-dynamics signature (the measured forces carry it): only a replay sees it
+    reevaluated: bool = False  # non-linear in the residuals: evaluated again with it applied
+    library: bool = True       # in the workflow's library (False: the hidden-effect suite's cases outside it)
+
+
+EFFECT_KINDS = {k.name: k for k in (
+    EffectKind("extra_mass", "link", ("kg", "m"), reevaluated=True),
+    EffectKind("viscous_friction", "joint", "N m s/rad"),
+    EffectKind("coulomb_friction", "joint", "N m"),
+    EffectKind("torque_bias", "joint", "N m", torque_sensor=True),
+    EffectKind("torque_gain", "joint", "1", torque_sensor=True),                    # measured / true
+    EffectKind("joint_offset", "joint", "rad", reevaluated=True),
+    EffectKind("ft_bias", "F/T axis", "N or N m"),
+    EffectKind("actuator_delay", "all joints", "s"),
+    EffectKind("joint_spring", "joint", "N m/rad", parameters=2, in_model=True),     # about rest_rad
+    EffectKind("rotor_inertia", "joint", "kg m^2", in_model=True),                   # added to the armature
+    EffectKind("contact_softness", "soles", "s", in_model=True, replay_only=True),   # MuJoCo solref time constant
+    EffectKind("link_length", "link", "scale", in_model=True, kinematic=True, reevaluated=True),
+    EffectKind("joint_axis", "joint", "rad", in_model=True, kinematic=True, reevaluated=True),   # see tilted_axis
+    EffectKind("backlash", "joint", "rad"),
+    EffectKind("torso_axis", "joint", "rad", library=False),
+    EffectKind("ft_rotation", "F/T sensor", "rad", library=False))}
+"""Every kind, in the hidden-effect suite's order (its random draws are seeded by a kind's index)."""
+
+
+def kinds(**flags: bool) -> tuple[str, ...]:
+    """The names of the kinds with these :class:`EffectKind` flags, in the registry's order."""
+    return tuple(k.name for k in EFFECT_KINDS.values() if all(getattr(k, f) == v for f, v in flags.items()))
+
+
+KINDS = kinds(library=True)                 # the workflow's library: what the hidden-effect suite draws
+OUT_OF_LIBRARY = kinds(library=False)       # an honest answer flags these as unexplained
+MODEL_KINDS = kinds(in_model=True)
+KINEMATIC_KINDS = kinds(kinematic=True)
+SENSOR_KINDS = kinds(torque_sensor=True)
+REPLAY_ONLY_KINDS = kinds(replay_only=True)
+REEVALUATED_KINDS = kinds(reevaluated=True)
 DAMPING_RATIO = 1.0          # the soles' contact damping ratio (MuJoCo's default), kept when the stiffness changes
 
 

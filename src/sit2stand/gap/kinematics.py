@@ -38,10 +38,8 @@ from .candidates import stack_rows
 from .dataset import Dataset
 from .effects import tilted_axis
 from .residuals import body_link_names, evaluate
-from .select import Candidate
-from .unexplained import SIGNIFICANT_Z
+from .select import SIGNIFICANT_Z, Candidate
 
-KINEMATIC_KINDS = ("link_length", "joint_axis")
 CLOSURE_AXES = ("x", "y", "z")
 # the closure's RMS on excitation runs with nothing kinematic hidden (seed 1): x 0.32, y 0.06, z 0.03 mm; with soles
 # 3 x softer 0.72, 0.09, 0.12 mm. A kinematic error of a few percent gives millimetres (a 4.5 % longer shank: x 3.9,

@@ -12,6 +12,8 @@
 * ``gap_cop.png``: the measured centre of pressure against the one each model predicts from the measured motion;
 * ``gap_replay.png``: for runs that carry their commands, the commands replayed in simulation in the nominal model
   and with the named effects added (COP and feet force against the measured ones).
+
+Also the augmented model file (:func:`write_augmented`).
 """
 
 from __future__ import annotations
@@ -22,11 +24,14 @@ from pathlib import Path
 import matplotlib
 import matplotlib.pyplot as plt
 import numpy as np
+import pinocchio as pin
+import yaml
 
 from ..forceplate import DEFAULT_COP_THRESHOLD_N
+from .candidates import describe
+from .effects import unmodeled_dict, unmodeled_from
 from .resimulate import compare
-from .naming import describe
-from .augmented import plain_data, write_augmented
+from .validate import merged_model
 from .workflow import GapResult, load_nominal, run
 
 PHASE_COLOURS = {"seated": "#dde8f5", "seat-off": "#f5dcc8", "rising": "#f7f0c8", "standing": "#ddf2dd",
@@ -155,7 +160,8 @@ def cop_figure(result: GapResult, png: Path) -> None:
         ax.plot(t[ok], 100 * before[ok], style, color="#c0504d", lw=1, ms=3, label="nominal model")
         ax.plot(t[ok], 100 * after[ok], style, color="#4f81bd", lw=1, ms=3, label="with the named effects")
         ax.set_ylabel("COP x [cm]")
-        ax.set_title(f"{Path(rec.source).name}: model COP error RMS {rms_b:.2f} cm -> {rms_a:.2f} cm", fontsize=9)
+        error = f"{rms_b:.2f} cm -> {rms_a:.2f} cm" if np.isfinite(rms_b) else "none (the model's feet carry no load)"
+        ax.set_title(f"{Path(rec.source).name}: model COP error RMS {error}", fontsize=9)
         ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=8)
     axes[-1, 0].set_xlabel("time [s]")
@@ -176,6 +182,14 @@ def cop_rms(result: GapResult) -> list[tuple[float, float]]:
     return out
 
 
+def cop_lines(result: GapResult) -> list[str]:
+    """Per recording, the model COP error before and after the named effects, or why there is none (a figure that
+    cannot be computed says so: no row where the model's feet carry load)."""
+    return [f"model COP error, {result.bags[r]}: {100 * b:.2f} cm -> {100 * a:.2f} cm RMS" if np.isfinite(b) else
+            f"model COP error, {result.bags[r]}: none (no row where the model's feet carry load)"
+            for r, (b, a) in enumerate(cop_rms(result))]
+
+
 def markdown(result: GapResult) -> str:
     lines = ["# Model gap report", "",
              f"- nominal model: `{result.model_source}`",
@@ -185,9 +199,7 @@ def markdown(result: GapResult) -> str:
              f"order {result.gap_after_first_order:.2f}, {100 * result.shrink_first_order:.0f} %)",
              f"- the re-simulation's gap on its channels that disagreed (COP x, feet force, joint positions): "
              f"{result.replay_gap_before:.2f} -> {result.replay_gap_after:.2f}", ""]
-    for r, (b, a) in enumerate(cop_rms(result)):
-        lines.append(f"- model COP error (recording {r}): {100 * b:.2f} cm -> {100 * a:.2f} cm RMS" if np.isfinite(b)
-                     else f"- model COP error (recording {r}): none (no row where the model's feet carry load)")
+    lines[-1:-1] = [f"- {line}" for line in cop_lines(result)]
     lines += ["", "## Verdict", ""]
     if result.effects:
         lines += [f"{len(result.effects)} effect(s) named:", ""]
@@ -337,3 +349,42 @@ def summary(result: GapResult) -> dict:
 def write_json(result: GapResult, path: str | Path) -> None:
     """Write :func:`summary` as JSON to ``path``."""
     Path(path).write_text(json.dumps(summary(result), indent=1))
+
+
+# --- The model-gap workflow's augmented model file: the nominal links with the named masses merged, the joint and
+# sensor effects, and the same effects as a plant file's ``unmodeled`` section (:mod:`sit2stand.gap.workflow`, step 4).
+
+
+def augmented_model(result: GapResult, nominal: pin.Model) -> dict:
+    """The augmented model file's content (see :mod:`sit2stand.gap.workflow`, step 4)."""
+    effects = result.known + result.effects
+    model = merged_model(nominal, effects)
+    link_params = {model.names[j]: {"mass": float(model.inertias[j].mass),
+                                    "com": [float(v) for v in model.inertias[j].lever]}
+                   for j in range(1, model.njoints)}
+    return {"nominal": result.model_source, "bags": result.bags, "verdict": result.verdict,
+            "effects": effects, "links": link_params, "unmodeled": unmodeled_dict(unmodeled_from(effects))}
+
+
+def write_augmented(result: GapResult, nominal: pin.Model, path: str | Path) -> dict:
+    """Write :func:`augmented_model` as YAML to ``path``; the document written."""
+    doc = augmented_model(result, nominal)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text("# written by sit2stand gap: the nominal model plus the effects it named\n"
+                          + yaml.safe_dump(plain_data(doc), sort_keys=False))
+    return doc
+
+
+def plain_data(x):
+    """``x`` with NumPy scalars and arrays as plain Python numbers and lists (for JSON)."""
+    if isinstance(x, dict):
+        return {str(k): plain_data(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [plain_data(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return plain_data(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        return float(x)
+    if isinstance(x, (np.integer, int)) and not isinstance(x, bool):
+        return int(x)
+    return x

@@ -43,6 +43,7 @@ from ..robot.model import SIDES
 from ..robot.profile import profile_of
 from ..vectors import xyzw_from_wxyz
 from .control import ControlLaw
+from .effects import EFFECT_KINDS
 from .recording import Recording, _joint_index
 
 CONTROLLER_PREFIX = "ctrl/"    # the controller channels: measured torque - our control law (no physics in them)
@@ -324,14 +325,13 @@ def joints_at_limit(model: pin.Model, rec: Recording, idx_v: np.ndarray, margin_
     return (rec.q <= lo[None, :] + margin_rad) | (rec.q >= hi[None, :] - margin_rad)
 
 
-JOINT_EFFECT_PARAMS = {"joint_spring": 2}     # parameters of a single-joint effect (1 unless given here)
 
 
 def joint_columns(rec: Recording, ev: Evaluation, kind: str, j: int) -> np.ndarray:
     """(N, C, p) signature of a single-joint effect ``kind`` on joint ``j`` (see the module docstring); with
     ``actuator_delay`` (all joints, ``j`` ignored) the delay's signature on the controller channels."""
     N, C = ev.e.shape
-    col = np.zeros((N, C, JOINT_EFFECT_PARAMS.get(kind, 1)))
+    col = np.zeros((N, C, EFFECT_KINDS[kind].parameters))
     row = 6 + j
     ctrl = 6 + ev.n_joints + j if ev.ctrl_law is not None else None
     if kind == "actuator_delay":

@@ -35,22 +35,34 @@ import yaml
 
 from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import PlantConfig, controller_model
+from .candidates import build_candidates, describe, effect_summary, series_ids, stack_rows
 from .dataset import Dataset, GapError, evaluate_all, fast_part_floor, load_dataset
+from .effects import KINEMATIC_KINDS, REPLAY_ONLY_KINDS
+from .kinematics import corrected, correction_candidates, fit_kinematics, kinematic_model
+from .plausibility import RESIDUE, cancelling_offsets, lopsided
 from .recording import RecordingError
-from .residuals import (BACKLASH_GRID_RAD, COULOMB_V0_RADPS, body_link_names, fit_backlash_widths, fit_coulomb_widths,
-                        is_physics_channel)
-from .bounds import RESIDUE
-from .candidates import build_candidates, series_ids, stack_rows
-from .chain import cancelling_offsets
-from .constancy import inconstant
-from .contact import fit_contact
-from .kinematics import KINEMATIC_KINDS, correction_candidates, corrected, fit_kinematics, kinematic_model
-from .naming import describe, effect_summary
-from .select import MIN_SHARE, Candidate, Selection, select
-from .symmetry import lopsided
-from .unexplained import SIGNIFICANT_Z, contact_note, where_and_shape
-from .validate import (REPLAY_ONLY_KINDS, effect_columns, effect_theta, exact_residuals, gap_size, replay_effects,
-                       replay_floor, replay_gap, replay_residuals, replay_z)
+from .residuals import (
+    BACKLASH_GRID_RAD,
+    COULOMB_V0_RADPS,
+    body_link_names,
+    fit_backlash_widths,
+    fit_coulomb_widths,
+    is_physics_channel,
+)
+from .select import MIN_SHARE, SIGNIFICANT_Z, Candidate, Selection, contact_note, select, where_and_shape
+from .validate import (
+    effect_columns,
+    effect_theta,
+    exact_residuals,
+    fit_contact,
+    gap_size,
+    inconstant,
+    replay_effects,
+    replay_floor,
+    replay_gap,
+    replay_residuals,
+    replay_z,
+)
 
 NO_DISCREPANCY = "no significant discrepancy"
 """The verdict when no channel is above its noise floor (robot and human side)."""
@@ -221,9 +233,9 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
 
 
 def _select_checked(ds: Dataset, cands: list[Candidate], model: pin.Model, say) -> tuple[Selection, list[dict]]:
-    """Selection, re-run without each chosen effect whose joint estimate is past its bounds (gap.bounds), that is
-    lopsided where the evidence is symmetric (gap.symmetry) or an encoder offset cancelled along its chain
-    (gap.chain); the refused, with why."""
+    """Selection, re-run without each chosen effect whose joint estimate is past its bounds (gap.plausibility), that is
+    lopsided where the evidence is symmetric (gap.plausibility) or an encoder offset cancelled along its chain
+    (gap.plausibility); the refused, with why."""
     links = body_link_names(model)
     y = stack_rows(ds, [ev.e[:, :, None] for ev in ds.evaluations])[:, 0]
     sid = series_ids(ds)
@@ -426,8 +438,8 @@ def _static_floors(ds: Dataset, cands: list[Candidate]) -> None:
 
 def _unexplained(res: GapResult, proxies: list[dict]) -> list[dict]:
     """Channels still above SIGNIFICANT_Z floors with the named effects applied for real, and the re-simulation's,
-    each with when and what its shape suggests (gap.unexplained), and the residual ``proxies`` absorb (named
-    effects whose size changes along the run: gap.constancy); largest first."""
+    each with when and what its shape suggests (gap.select), and the residual ``proxies`` absorb (named
+    effects whose size changes along the run: gap.validate); largest first."""
     ds = res.dataset
     out = list(proxies)
     for r, (a, f) in enumerate(zip(res.rms_after, ds.floors)):

@@ -44,7 +44,7 @@ LENGTH_GROUPS = ("pelvis", "torso", "head", "upper_arm", "forearm", "hand", "thi
 SEGMENT_MASS_SD = 0.08
 """A person's segment mass relative to the table's (de Leva's, scaled to stature and mass), one standard deviation
 across people: an assumption of this project, the spread its synthesiser draws (``human.synth``) and the human side
-of the model gap allows a body (``gap.variation``)."""
+of the model gap allows a body (``gap.human``)."""
 ALIASES = {"trunk": "torso", "back": "torso", "abdomen": "torso"}
 REFERENCE_STATURE_M = 1.75
 """Marker offsets in millimetres (marker set files) are given for this stature [m] and scale with the subject's."""
