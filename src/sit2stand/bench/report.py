@@ -46,21 +46,25 @@ def ik(doc: dict) -> list[str]:
                            "COM residual max mm"], rows)
 
 
-def live(doc: dict) -> list[str]:
-    """`make bench-live`: capture -> markers, COM, joint command over several live stand-ups."""
-    s = doc["summary"]
-    target = s.get("command_p99_target_ms", 10.0)
-    row = [doc["protocol"], f"{doc['marker_rate_hz']:g} Hz", f"{s['stood_up']:.0f} of {s['runs']:.0f}",
-           f"{s['com_tracking_rms_cm_median']:.2f} cm ({s['com_tracking_rms_cm_max']:.2f})",
-           f"{s['capture_to_markers_p99_ms_median']:.2f} ms ({s['capture_to_markers_p99_ms_max']:.2f})",
-           f"{s['capture_to_human_com_p99_ms_median']:.2f} ms ({s['capture_to_human_com_p99_ms_max']:.2f})",
-           f"{s['capture_to_command_p50_ms_median']:.2f} ms",
-           f"{s['capture_to_command_p99_ms_median']:.2f} ms ({s['capture_to_command_p99_ms_max']:.2f})",
-           f"{s['runs_command_p99_within_target']:.0f} of {s['runs']:.0f} within {target:g} ms"]
-    return [_stamp(doc.get("measured")), ""] + _table(
+def live(docs: list[dict]) -> list[str]:
+    """`make bench-live` (and its other protocols and rates): capture -> markers, COM, joint command, pooled over
+    each setting's runs; one row per setting, each with its stamp."""
+    rows, stamps = [], []
+    for doc in docs:
+        s = doc["summary"]
+        target = s.get("command_p99_target_ms", 10.0)
+        stamps.append(f"- {doc['protocol']} at {doc['marker_rate_hz']:g} Hz: {_stamp(doc.get('measured'))}")
+        rows.append([doc["protocol"], f"{doc['marker_rate_hz']:g} Hz", f"{s['stood_up']:.0f} of {s['runs']:.0f}",
+                     f"{s['com_tracking_rms_cm_median']:.2f} cm ({s['com_tracking_rms_cm_max']:.2f})",
+                     f"{s['capture_to_markers_p99_ms_median']:.2f} ms ({s['capture_to_markers_p99_ms_max']:.2f})",
+                     f"{s['capture_to_human_com_p99_ms_median']:.2f} ms ({s['capture_to_human_com_p99_ms_max']:.2f})",
+                     f"{s['capture_to_command_p50_ms_median']:.2f} ms",
+                     f"{s['capture_to_command_p99_ms_median']:.2f} ms ({s['capture_to_command_p99_ms_max']:.2f})",
+                     f"{s['runs_command_p99_within_target']:.0f} of {s['runs']:.0f} within {target:g} ms"])
+    return stamps + [""] + _table(
         ["protocol", "capture", "stood", "COM tracking, median (max)", "-> markers p99, median (max)",
          "-> /human/com p99, median (max)", "-> joint command p50, median", "-> joint command p99, median (max)",
-         "command target"], [row])
+         "command target"], rows)
 
 
 def _figures(section: dict, labels: dict[str, str]) -> list[str]:
@@ -91,10 +95,11 @@ def estimator(doc: dict) -> list[str]:
         "offline_frames_per_s": "offline estimator [frames/s]"})
 
 
-RENDER: dict[str, tuple[str, Callable[[dict], list[str]]]] = {
-    "ik": ("ik.json", ik), "live": ("live.json", live), "driver": ("bench.json", driver),
+RENDER: dict[str, tuple[str, Callable]] = {
+    "ik": ("ik.json", ik), "live": ("live*.json", live), "driver": ("bench.json", driver),
     "estimator": ("bench.json", estimator)}
-"""Each generated table: its JSON under the results folder and how it is written."""
+"""Each generated table: its JSON under the results folder (a pattern: every match, in name order, to one table)
+and how it is written."""
 
 
 def rewrite(text: str, results: Path) -> tuple[str, list[str]]:
@@ -106,11 +111,15 @@ def rewrite(text: str, results: Path) -> tuple[str, list[str]]:
         if name not in RENDER:
             kept.append(f"{name}: no such table")
             return match.group(0)
-        path = results / RENDER[name][0]
+        pattern, render = RENDER[name]
+        paths = sorted(results.glob(pattern))
         try:
-            lines = RENDER[name][1](json.loads(path.read_text()))
+            if not paths:
+                raise FileNotFoundError(f"no {pattern}")
+            docs = [json.loads(p.read_text()) for p in paths]
+            lines = render(docs if "*" in pattern else docs[0])
         except (OSError, KeyError, ValueError) as err:
-            kept.append(f"{name}: {path}: {type(err).__name__} {err}")
+            kept.append(f"{name}: {results / pattern}: {type(err).__name__} {err}")
             return match.group(0)
         return f"<!-- generated: {name} -->\n" + "\n".join(lines) + f"\n<!-- end: {name} -->"
 
