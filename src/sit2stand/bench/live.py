@@ -115,7 +115,8 @@ def main(argv: list[str] | None = None) -> int:
               "summary": summary(runs, args.marker_rate)}
     print(json.dumps(result["summary"], indent=2))
     extra = ([f"--protocol {args.protocol}"] if args.protocol != "qtm" else []) + \
-        ([f"--marker-rate {args.marker_rate:g}"] if args.marker_rate != 100.0 else [])
+        ([f"--marker-rate {args.marker_rate:g}"] if args.marker_rate != 100.0 else []) + \
+        ([f"--runs {args.runs}"] if args.runs != 5 else [])
     write_result(args.out, result, f"python -m sit2stand.bench.live {' '.join(extra)} --out {args.out}" if extra
                  else "make bench-live")
     return 0

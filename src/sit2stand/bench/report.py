@@ -69,7 +69,7 @@ def live(docs: list[dict]) -> list[str]:
 
 def _figures(section: dict, labels: dict[str, str]) -> list[str]:
     return [_stamp(section.get("measured")), ""] + _table(
-        ["figure", "value"], [[label, f"{section[key]:g}"] for key, label in labels.items() if key in section])
+        ["figure", "value"], [[label, f"{section[key]:.3g}"] for key, label in labels.items() if key in section])
 
 
 def driver(doc: dict) -> list[str]:
