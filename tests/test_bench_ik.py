@@ -13,12 +13,12 @@ BAG = Path(__file__).resolve().parents[1] / "bags" / "natural"
 
 
 def test_every_frame_is_recorded_and_the_mjcf_sites_sit_on_the_pinocchio_frames():
-    rt, problems = recorded_problems(BAG, "talos")
+    rt, fids, problems = recorded_problems(BAG, "talos")
     assert len(problems) == 391
     p = problems[200]
-    assert p["targets"].shape == (len(rt.bench_frame_ids), 3) and (p["weights"] > 0).sum() >= 30
+    assert p["targets"].shape == (len(fids), 3) and (p["weights"] > 0).sum() >= 30
     assert p["axes"] == (0, 1) and p["q0"].shape == (rt.model.nq,)
-    frames = rt.bench_frame_ids + list(rt.robot.sole_frames)
+    frames = fids + list(rt.robot.sole_frames)
     mj = mujoco.MjModel.from_xml_string(frame_sites(rt.model, frames, "talos"))
     data, pdata = mujoco.MjData(mj), rt.model.createData()
     rng = np.random.default_rng(0)

@@ -112,7 +112,8 @@ class ActiveSetQp:
 
     :meth:`solve` returns x only where the KKT conditions hold to ``tol`` (then x is the optimum, to rounding);
     None where it cannot tell (a singular KKT system, e.g. equalities that the fixed variables make dependent or
-    infeasible, or no settled working set within ``max_passes``): the caller's general solver decides.
+    infeasible, or no settled working set within ``max_passes``): the caller's general solver decides. A working set
+    that fails is dropped: the pass starts again from an empty one.
     """
 
     def __init__(self, max_passes: int = 8, tol: float = 1e-9) -> None:
@@ -131,9 +132,9 @@ class ActiveSetQp:
         x = self._passes(H, g, A, b, lo, hi, C, d, self._at_lo & (lo > -1e19), self._at_hi & (hi < 1e19),
                          self._rows)
         if x is None and (self._at_lo.any() or self._at_hi.any() or self._rows.any()):
-            # the last working set does not fit this problem: from an empty one
-            none = np.zeros(n, bool)
-            x = self._passes(H, g, A, b, lo, hi, C, d, none, none, np.zeros(len(C), bool))
+            # the last working set does not fit this problem: from an empty one (kept for the next call if it fails)
+            self._at_lo, self._at_hi, self._rows = np.zeros(n, bool), np.zeros(n, bool), np.zeros(len(C), bool)
+            x = self._passes(H, g, A, b, lo, hi, C, d, self._at_lo, self._at_hi, self._rows)
         return x
 
     def _passes(self, H, g, A, b, lo, hi, C, d, at_lo, at_hi, rows) -> np.ndarray | None:

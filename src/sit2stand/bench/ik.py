@@ -81,9 +81,9 @@ def _see_sit2stand(python: Path) -> None:
     (Path(site) / "sit2stand-bench.pth").write_text(str(Path(__file__).resolve().parents[2]) + "\n")
 
 
-def recorded_problems(bag: Path, robot: str) -> tuple[Retargeter, list[dict]]:
-    """The retargeter after a run of ``bag`` (CAD parameters) and each frame's IK problem: start pose ``q0``
-    (Pinocchio order), marker ``targets`` (M, 3) [m] and ``weights`` (M,) over the retargeter's marker frames (0:
+def recorded_problems(bag: Path, robot: str) -> tuple[Retargeter, list[int], list[dict]]:
+    """The retargeter after a run of ``bag`` (CAD parameters), its marker frames (ids), and each frame's IK problem:
+    start pose ``q0`` (Pinocchio order), marker ``targets`` (M, 3) [m] and ``weights`` (M,) over those frames (0:
     not in that frame), ``com`` target [m] and its ``axes``, posture reference ``q_ref``."""
     setup = robot_setup(robot=robot)
     trial = read_trial(bag)
@@ -110,8 +110,7 @@ def recorded_problems(bag: Path, robot: str) -> tuple[Retargeter, list[dict]]:
     for k, tk in enumerate(trial.marker_t_s):
         rt.step(float(tk), trial.positions[k], trial.valid[k], com_h[k], None if fz is None else float(fz[k]))
     rt.ik.solve = solve
-    rt.bench_frame_ids = fids
-    return rt, problems
+    return rt, fids, problems
 
 
 SITE_PREFIX = "ik_"
@@ -144,12 +143,11 @@ def frame_sites(model: pin.Model, frame_ids: list[int], robot: str) -> str:
     return spec.to_xml()
 
 
-def problem_file(rt: Retargeter, problems: list[dict], robot: str, out: Path) -> None:
+def problem_file(rt: Retargeter, fids: list[int], problems: list[dict], robot: str, out: Path) -> None:
     """Everything the rival solvers' process needs, pickled: the model with its marker frames, the MJCF with the
     matching sites, the soles, the retargeter's weights, limits and damping, and the problems."""
     model, ik = rt.model, rt.ik
     soles = [model.frames[f].name for f in rt.robot.sole_frames]
-    fids = rt.bench_frame_ids
     payload = {"model": model, "mjcf": frame_sites(model, fids + list(rt.robot.sole_frames), robot),
                "markers": [model.frames[f].name for f in fids], "soles": soles, "site_prefix": SITE_PREFIX,
                "sole_targets": [X.homogeneous for X in rt.robot.sole_targets], "mu": ik.mu, "v_max": ik.v_max,
@@ -191,10 +189,10 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     _see_sit2stand(python)
     print(f"recording the IK problems of {bag} ({args.robot}) ...", flush=True)
-    rt, problems = recorded_problems(bag, args.robot)
+    rt, fids, problems = recorded_problems(bag, args.robot)
     with tempfile.TemporaryDirectory() as tmp:
         payload, figures = Path(tmp) / "problems.pkl", Path(tmp) / "figures.json"
-        problem_file(rt, problems, args.robot, payload)
+        problem_file(rt, fids, problems, args.robot, payload)
         done = subprocess.run([str(python), "-m", "sit2stand.bench.ik_rivals", str(payload), str(figures),
                                "--rounds", str(args.rounds)])
         if done.returncode != 0 or not figures.is_file():

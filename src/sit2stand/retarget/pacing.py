@@ -53,9 +53,8 @@ def robot_state_current(received_ago_s: float, stamped_ago_s: float, sim_time: b
     """Whether the robot's newest state is its state now: stamped at most ``ROBOT_STATE_MAX_DELAY_S`` before the
     graph's clock and, on a wall clock, received at most ``ROBOT_STATE_MAX_AGE_S`` ago. Under ``use_sim_time`` the
     time since it was received says nothing: a replayer's /clock held in lockstep holds the simulated robot and its
-    states with it. Judged on it, the retargeter waited for a newer state, which waited for the clock, which waited
-    for the first command, which waited for that state: a starved graph stopped on its input time-out before the
-    lockstep's released it (one of two graphs side by side on 2 cores, 2026-12-03)."""
+    states with it, and judging the state by it would make the retargeter wait for a newer state that waits for the
+    clock, which waits for the retargeter's first command."""
     return stamped_ago_s <= ROBOT_STATE_MAX_DELAY_S and (sim_time or received_ago_s <= ROBOT_STATE_MAX_AGE_S)
 
 
