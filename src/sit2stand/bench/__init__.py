@@ -12,6 +12,7 @@ import json
 import os
 import platform
 import subprocess
+import sys
 from pathlib import Path
 
 from ..errors import InputError
@@ -53,3 +54,31 @@ def write_result(out: Path, result: dict, command: str) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"measured": provenance(command), **result}, indent=2) + "\n")
     print(f"wrote {out}")
+
+
+def run_command(command: list[str], timeout_s: float = 120, cwd: str | None = None) -> subprocess.CompletedProcess:
+    """``command`` run with its output captured; a command that cannot start or times out is a failed one."""
+    try:
+        return subprocess.run(command, capture_output=True, text=True, timeout=timeout_s, cwd=cwd)
+    except (OSError, subprocess.TimeoutExpired) as err:
+        return subprocess.CompletedProcess(command, 1, "", str(err))
+
+
+def own_venv(folder: Path, requirements: list[str], ready: list[str] | None = None) -> tuple[Path | None, str]:
+    """A venv of a benchmark's own (never sit2stand's) at ``folder`` with ``requirements`` installed, made once and
+    kept while the requirements it was made with are these (or, made without that record, while its Python runs
+    ``ready``). Its Python, or None and why not."""
+    python, stamp = folder / "bin" / "python", folder / "sit2stand-requirements.txt"
+    wanted = "\n".join(requirements)
+    if python.is_file() and ((stamp.is_file() and stamp.read_text() == wanted) or
+                             (not stamp.is_file() and ready and run_command([str(python), *ready]).returncode == 0)):
+        return python, ""
+    print(f"  installing {', '.join(requirements)} into {folder} (once) ...", flush=True)
+    for step in ([sys.executable, "-m", "venv", "--clear", str(folder)],
+                 [str(python), "-m", "pip", "install", "-q", *requirements]):
+        done = run_command(step, timeout_s=1800)
+        if done.returncode != 0:
+            last = (done.stderr or done.stdout).strip().splitlines()[-1:] or ["no output"]
+            return None, f"{' '.join(step[:4])} ... failed: {last[0][:160]}"
+    stamp.write_text(wanted)
+    return python, ""

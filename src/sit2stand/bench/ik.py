@@ -35,8 +35,7 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
-from . import project_folder, write_result
-from .opensim import _run
+from . import own_venv, project_folder, write_result
 from ..human.offline import read_trial
 from ..retarget.robot import robot_setup
 from ..retarget.stream import Retargeter
@@ -53,25 +52,12 @@ TARGET_RATIO_P99 = 5.0
 
 def ik_python() -> tuple[Path | None, str]:
     """The Python of ``.venv-ik`` with mink and pink importable, made on demand; or None and why not."""
-    venv = project_folder() / ".venv-ik"
-    python = venv / "bin" / "python"
     rivals = [r.split(";")[0].strip() for r in metadata.requires("sit2stand") or ()
               if f'extra == "{RIVALS_EXTRA}"' in r]
     if not rivals:
         return None, f"sit2stand's metadata has no {RIVALS_EXTRA!r} extra: reinstall it (make setup)"
-    pins = [*rivals, *(f"{name}=={metadata.version(name)}" for name in SHARED)]
-    stamp = venv / "sit2stand-pins.txt"
-    if python.is_file() and stamp.is_file() and stamp.read_text() == "\n".join(pins):
-        return python, ""
-    print(f"  installing {', '.join(rivals)} into {venv} (once) ...", flush=True)
-    for step in ([sys.executable, "-m", "venv", "--clear", str(venv)],
-                 [str(python), "-m", "pip", "install", "-q", *pins]):
-        done = _run(step, timeout_s=1800)
-        if done.returncode != 0:
-            last = (done.stderr or done.stdout).strip().splitlines()[-1:] or ["no output"]
-            return None, f"{' '.join(step[:4])} ... failed: {last[0][:160]}"
-    stamp.write_text("\n".join(pins))
-    return python, ""
+    return own_venv(project_folder() / ".venv-ik",
+                    [*rivals, *(f"{name}=={metadata.version(name)}" for name in SHARED)])
 
 
 def _see_sit2stand(python: Path) -> None:

@@ -29,6 +29,7 @@ import pinocchio as pin
 from pink.limits import ConfigurationLimit as PinkConfigurationLimit
 
 from sit2stand.retarget.ik import ComIk
+from sit2stand.vectors import wxyz_from_xyzw, xyzw_from_wxyz
 
 MODES = {"two_iterations": (2, 0.0), "converged": (20, 1e-6)}
 """Gauss-Newton iterations and the step norm that stops them: the retargeter's per-frame setting, and a
@@ -86,15 +87,12 @@ class _PinkCom(pink.tasks.ComTask):
 
 
 def _qpos(q: np.ndarray) -> np.ndarray:
-    out = q.copy()
-    out[3:7] = q[[6, 3, 4, 5]]
-    return out
+    """Pinocchio's configuration as MuJoCo's qpos (the free joint's quaternion w first)."""
+    return np.concatenate([q[:3], wxyz_from_xyzw(q[3:7]), q[7:]])
 
 
 def _q(qpos: np.ndarray) -> np.ndarray:
-    out = qpos.copy()
-    out[3:7] = qpos[[4, 5, 6, 3]]
-    return out
+    return np.concatenate([qpos[:3], xyzw_from_wxyz(qpos[3:7]), qpos[7:]])
 
 
 class Mink:

@@ -10,14 +10,12 @@ missing the result says what, in one line, and the bench goes on without OpenSim
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from . import project_folder
+from . import own_venv, project_folder, run_command
 from ..io.trc import OPENSIM_AXES
 
 
@@ -46,26 +44,8 @@ def models_dir() -> tuple[Path | None, str]:
 
 
 def opensim_python() -> tuple[Path | None, str]:
-    """The Python of ``.venv-opensim`` with ``opensim`` importable, made on demand; or None and why not."""
-    python = _venv() / "bin" / "python"
-    if python.is_file() and _run([str(python), "-c", "import opensim"]).returncode == 0:
-        return python, ""
-    print(f"  installing {REQUIREMENT} into {_venv()} (once; ~400 MB) ...", flush=True)
-    steps = ([sys.executable, "-m", "venv", "--clear", str(_venv())],
-             [str(python), "-m", "pip", "install", "-q", REQUIREMENT])
-    for step in steps:
-        done = _run(step, timeout_s=1800)
-        if done.returncode != 0:
-            last = (done.stderr or done.stdout).strip().splitlines()[-1:] or ["no output"]
-            return None, f"{' '.join(step[-3:])} failed: {last[0][:160]}"
-    return python, ""
-
-
-def _run(command: list[str], timeout_s: float = 120, cwd: str | None = None) -> subprocess.CompletedProcess:
-    try:
-        return subprocess.run(command, capture_output=True, text=True, timeout=timeout_s, cwd=cwd)
-    except (OSError, subprocess.TimeoutExpired) as err:
-        return subprocess.CompletedProcess(command, 1, "", str(err))
+    """The Python of ``.venv-opensim`` with ``opensim`` importable (~400 MB), made on demand; or None and why not."""
+    return own_venv(_venv(), [REQUIREMENT], ready=["-c", "import opensim"])
 
 
 def read_worker_csv(path: Path) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
@@ -86,7 +66,7 @@ def opensim_com(static: Path, trial: Path, mass_kg: float, height_m: float,
         return None, {"skipped": why}
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "com.csv"
-        done = _run([str(python), str(_worker()), str(models), str(static), str(trial), f"{mass_kg:.6g}",
+        done = run_command([str(python), str(_worker()), str(models), str(static), str(trial), f"{mass_kg:.6g}",
                      f"{height_m:.6g}", str(out)], timeout_s=600, cwd=tmp)   # OpenSim logs into its cwd
         if done.returncode != 0 or not out.is_file():
             tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or ["no output"]
