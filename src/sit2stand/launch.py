@@ -308,7 +308,7 @@ class Launcher:
         self.reported: dict[str, int] = {}       # node -> the result it said before its teardown (NODE_RESULT)
         self._stop = threading.Event()
         self._print_lock = threading.Lock()
-        self._readers: list[threading.Thread] = []
+        self._readers: dict[str, threading.Thread] = {}     # node -> the thread reading its output
         self.width = max(len(n.name) for n in graph.nodes)
         # one id for this run of the graph, given to every node: a node of another run with the same name (a second
         # graph on the domain) stops itself (sit2stand.nodes.graph_guard.GraphGuard); the recorder stores it in the bag
@@ -332,7 +332,9 @@ class Launcher:
 
     def _failed(self, name: str, returncode: int, sent_sigint: bool = False) -> bool:
         """Whether a node that ended with ``returncode`` failed: by its code, or, when it said its result and then
-        died in DDS teardown (killed, or its teardown bound expired), by what it said."""
+        died in DDS teardown (killed, or its teardown bound expired), by what it said. Its last lines may still be in
+        the pipe when it has ended: they are read first."""
+        self._readers[name].join(timeout=2.0)
         said = self.reported.get(name)
         if said is not None and returncode != said:
             self._emit("launch", f"{name} said exit {said}, then its DDS teardown ended it with {returncode}: "
@@ -352,7 +354,7 @@ class Launcher:
         self.procs[spec.name] = proc
         reader = threading.Thread(target=self._pump, args=(spec.name, proc.stdout), daemon=True)
         reader.start()
-        self._readers.append(reader)
+        self._readers[spec.name] = reader
         note = ""
         if spec.scheduling is not None:
             try:
@@ -390,7 +392,7 @@ class Launcher:
             failed += self._shutdown()
             for s, handler in old.items():
                 signal.signal(s, handler)
-            for reader in self._readers:
+            for reader in self._readers.values():
                 reader.join(timeout=2.0)
             if self.graph.tmpdir is not None:
                 shutil.rmtree(self.graph.tmpdir, ignore_errors=True)
