@@ -75,10 +75,11 @@ if [ ! -x "$VENV/bin/python" ]; then
 fi
 VPY="$VENV/bin/python"
 
-req_hash="$(hash_of "$ROOT/ros_ws/requirements.txt" "$ROOT/ros_ws/constraints.txt")"
+req_hash="$(hash_of "$ROOT/ros_ws/requirements.txt" "$ROOT/ros_ws/constraints.txt" "$ROOT/ros_ws/requirements-nodeps.txt")"
 if ! stamp_ok requirements "$req_hash"; then
   say "installing pinned wheels (ros_ws/requirements.txt, constraints.txt)"
   "$VPY" -m pip install -q --disable-pip-version-check -r "$ROOT/ros_ws/requirements.txt" -c "$ROOT/ros_ws/constraints.txt"
+  "$VPY" -m pip install -q --disable-pip-version-check --no-deps -r "$ROOT/ros_ws/requirements-nodeps.txt"
   "$VPY" "$ROOT/ros_ws/fix_wheel_paths.py"
   rm -f "$STAMPS/msgs"          # rebuilt interfaces against the new wheels
   stamp_set requirements "$req_hash"
