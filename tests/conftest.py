@@ -175,10 +175,11 @@ def elderly_standup(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess
 
 @pytest.fixture(scope="session")
 def g1_simulated_run(tmp_path_factory) -> Path:
-    """``sit2stand retarget bags/natural --robot g1 --simulate`` (once per session and worker): its output folder."""
+    """``sit2stand retarget bags/natural --robot g1 --simulate --plan frames`` (once per session and worker): its
+    output folder (the per-frame plan: what its users check is the run's files, not the planner)."""
     out = tmp_path_factory.mktemp("g1") / "rt"
-    assert sit2stand_main(["retarget", str(ROOT / "bags" / "natural"), "--robot", "g1", "--simulate", "--out",
-                      str(out)]) == 0
+    assert sit2stand_main(["retarget", str(ROOT / "bags" / "natural"), "--robot", "g1", "--simulate",
+                           "--plan", "frames", "--out", str(out)]) == 0
     return out
 
 

@@ -26,7 +26,7 @@ RAY = str(Path(sys.executable).parent / "ray")
 def test_a_grid_runs_in_process_each_case_a_row_and_a_failing_case_is_recorded_not_fatal(tmp_path):
     grid = tmp_path / "grid.yaml"
     grid.write_text("height_m: 1.7\nmass_kg: 65\nrobot: [g1, no_such_robot]\n")
-    jobs = standup_jobs(grid_cases(grid, seed=3, setting=Setting(plant="default")))
+    jobs = standup_jobs(grid_cases(grid, seed=3, setting=Setting(plant="default", plan="frames")))
     assert [j.key for j in jobs] == ["00_natural_g1_default", "01_natural_no_such_robot_default"]
     rows = run_jobs(jobs, tmp_path / "b", workers=1)
     ok, bad = rows

@@ -67,7 +67,7 @@ def test_the_robot_stands_and_sits_in_every_cycle_of_a_trial_with_brief_touches(
     the seat) and the second rise plays as the first; the summary has a row per cycle."""
     bag = tmp_path / "bag"
     assert sit2stand(["synth-human", "--cycles", "2", "--seated", "0.1", "--out", str(bag)]) == 0
-    assert sit2stand(["retarget", str(bag), "--whole", "--simulate", "--robot", "g1", "--out",
+    assert sit2stand(["retarget", str(bag), "--whole", "--simulate", "--robot", "g1", "--plan", "frames", "--out",
                       str(tmp_path / "rt")]) == 0
     summary = json.loads((tmp_path / "rt" / "summary.json").read_text())
     cycles = summary["cycles"]

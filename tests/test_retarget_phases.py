@@ -84,7 +84,7 @@ def up_and_down(tmp_path_factory) -> Path:
 
 def test_retarget_plays_rise_and_stand_of_a_trial_that_ends_seated(tmp_path, up_and_down):
     """By default the plan stops before the sit-down: it ends standing (the simulated stand-up: the test below)."""
-    assert sit2stand(["retarget", str(up_and_down), "--out", str(tmp_path / "rt")]) == 0
+    assert sit2stand(["retarget", str(up_and_down), "--plan", "frames", "--out", str(tmp_path / "rt")]) == 0
     summary = json.loads((tmp_path / "rt" / "summary.json").read_text())
     assert summary["phases"]["played"] == "rise and stand" and summary["phases"]["sit_down_s"] is not None
     assert summary["frames"] < 2 * 391 - 100, "the sit-down frames are left out"
@@ -102,7 +102,8 @@ def test_retarget_into_a_finished_run_is_refused_before_it_touches_its_files(tmp
 def test_retarget_whole_stands_up_and_sits_back_down_at_the_humans_timing(tmp_path, up_and_down):
     """--whole: the plan is seated again from the human's touch-down (the chair takes the load: no ZMP criterion
     that would hold a COM behind the heels at the cap), and the robot sits back down on the chair."""
-    assert sit2stand(["retarget", str(up_and_down), "--whole", "--simulate", "--out", str(tmp_path / "rt")]) == 0
+    assert sit2stand(["retarget", str(up_and_down), "--whole", "--simulate", "--plan", "frames",
+                      "--out", str(tmp_path / "rt")]) == 0
     summary = json.loads((tmp_path / "rt" / "summary.json").read_text())
     assert summary["phases"]["played"] == "whole trial"
     assert summary["stood_up"] and summary["sat_down"] and summary["fall"] is None

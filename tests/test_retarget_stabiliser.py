@@ -118,12 +118,12 @@ def test_the_shift_and_its_integral_are_bounded(standing):
 
 
 def test_closed_on_the_plant_the_feedback_brings_the_robot_com_onto_the_plan(tmp_path):
-    """The elderly demonstration on the CAD plant, as planned and with the feedback: both stand, and the measured
-    COM follows the plan several times closer with it (1.6 cm -> 0.3 cm when written)."""
+    """The elderly demonstration's per-frame plan on the CAD plant, as planned and with the feedback: both stand, and
+    the measured COM follows the plan several times closer with it (1.6 cm -> 0.3 cm when written)."""
     runs = {}
     for feedback in (False, True):
         s = run(ROOT / "bags" / "elderly", tmp_path / str(feedback), plant=plant_path("cad"),
-                simulate=True, com_feedback=feedback, controller="inverse_dynamics")
+                simulate=True, com_feedback=feedback, controller="inverse_dynamics", plan="frames")
         assert s["stood_up"], f"feedback {feedback}: {s['fall']}"
         assert json.loads((tmp_path / str(feedback) / "summary.json").read_text())["com_feedback"] is feedback
         runs[feedback] = s

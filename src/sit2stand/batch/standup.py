@@ -118,18 +118,21 @@ FIGURES = ("stood_up", "fall", "time_scale", "time_scale_peak", "duration_ratio"
            "torque_demand_peak_joint", "torque_saturated_share", "infeasible_frames", "frames",
            "min_zmp_margin_on_feet_m", "zmp_outside_feet_share", "parameters", "controller_qp_ms_p99",
            "controller_qp_cpu_ms_p99", "final_knee_flexion_deg_robot", "final_knee_flexion_deg_human",
-           "final_pelvis_height_ratio", "standing_knees_match", "posture_rms_deg", "marker_rms_mm")
+           "final_pelvis_height_ratio", "standing_knees_match", "posture_rms_deg", "marker_rms_mm", "plan",
+           "plan_ratio_whole", "plan_ratio_frames", "whole_rise_time_scale", "whole_rise_solve_s")
 """What a stand-up case reports, from the retarget run's summary (see ``sit2stand retarget``)."""
 
 
 @dataclasses.dataclass(frozen=True)
 class Setting:
-    """What a case runs on: the robot profile, the plant, the controller, identified parameters (None: CAD)."""
+    """What a case runs on: the robot profile, the plant, the controller, identified parameters (None: CAD), and how
+    ``sit2stand retarget`` plans (:data:`~sit2stand.retarget.offline.PLANS`)."""
 
     robot: str = DEFAULT_ROBOT
     plant: str = "default"
     controller: str = DEFAULT_CONTROLLER
     params: str | None = None
+    plan: str = offline.DEFAULT_PLAN
 
 
 def run_standup(arg: tuple[Case, Setting], workdir: Path) -> dict:
@@ -145,7 +148,7 @@ def run_standup(arg: tuple[Case, Setting], workdir: Path) -> dict:
     with tempfile.TemporaryDirectory(prefix="sit2stand-batch-") as tmp:
         write_demonstration_bag(demo, Path(tmp) / case.name)
         summary = offline.run(Path(tmp) / case.name, out, params=setting.params, plant=setting.plant,
-                              simulate=True, controller=setting.controller, robot=setting.robot)
+                              simulate=True, controller=setting.controller, robot=setting.robot, plan=setting.plan)
     return {"synth_seed": synth_seed, "human_rise_s": round(demo.rise_end_s - demo.rise_start_s, 3),
             **{k: summary.get(k) for k in FIGURES}}
 

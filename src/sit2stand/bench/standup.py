@@ -39,6 +39,7 @@ from ..batch.engine import run_jobs
 from ..batch.standup import RISE_S, STYLES, Case, Setting, sample_population, standup_jobs, synthesise  # noqa: F401
 from ..demo import demo_params, robot_identification
 from ..robot.model import DEFAULT_ROBOT
+from ..retarget.offline import DEFAULT_PLAN, PLANS
 from ..retarget.report import KNEE_TOLERANCE_DEG
 from ..robot.plant import CONTROLLERS, DEFAULT_CONTROLLER
 
@@ -205,10 +206,10 @@ def resolve_params(args: argparse.Namespace) -> tuple[Path | None, str]:
 
 def run_population(cases: list[Case], out: Path, params: Path | None, jobs: int,
                    controller: str = DEFAULT_CONTROLLER, robot: str = DEFAULT_ROBOT,
-                   address: str | None = None) -> list[dict]:
+                   address: str | None = None, plan: str = DEFAULT_PLAN) -> list[dict]:
     """Every case as a batch (:mod:`sit2stand.batch.engine`: ``jobs`` Ray workers here, or the cluster at
     ``address``; 1: this process); one line per case as it finishes; rows in case order."""
-    setting = Setting(robot, "default", controller, str(params) if params else None)
+    setting = Setting(robot, "default", controller, str(params) if params else None, plan)
     print(TABLE_HEAD, flush=True)
     rows = run_jobs(standup_jobs([(c, setting) for c in cases]), out, address=address, workers=jobs, fresh=True,
                     on_row=lambda r: print(case_line(bench_row(r)), flush=True), label="bench-standup")
@@ -231,6 +232,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--marker-rate", type=float, default=100.0,
                         help="the digital humans' capture rate [Hz] (default 100; divides the plates' 1000 Hz)")
     parser.add_argument("--robot", default=DEFAULT_ROBOT, help="robot profile: talos (default), g1 or a file")
+    parser.add_argument("--plan", choices=PLANS, default=DEFAULT_PLAN,
+                        help="how each case is planned (sit2stand retarget --plan; default whole)")
     parser.add_argument("--out", type=Path, default=None, help="default: bench/results/standup (G1: standup_g1)")
     args = parser.parse_args(argv)
     args.out = args.out or project_folder() / (DEFAULT_OUT if args.robot == DEFAULT_ROBOT else
@@ -239,14 +242,15 @@ def main(argv: list[str] | None = None) -> int:
                               args.marker_rate)
     params, source = resolve_params(args)
     print(f"bench-standup: {len(cases)} digital humans (seed {args.seed}, captured at {args.marker_rate:g} Hz), "
-          f"robot {args.robot}, default plant, parameters {source}, controller {args.controller}", flush=True)
+          f"robot {args.robot}, default plant, parameters {source}, controller {args.controller}, plan {args.plan}",
+          flush=True)
     t0 = time.monotonic()
-    rows = run_population(cases, args.out, params, args.jobs, args.controller, args.robot, args.address)
+    rows = run_population(cases, args.out, params, args.jobs, args.controller, args.robot, args.address, args.plan)
     agg = aggregate(rows)
     print("\n" + summary_text(agg))
     args.out.mkdir(parents=True, exist_ok=True)
     doc = {"robot": args.robot, "seed": args.seed, "marker_rate_hz": args.marker_rate, "parameters": source,
-           "plant": "default",
+           "plant": "default", "plan": args.plan,
            "controller": args.controller,
            "jobs": args.jobs, "wall_s": round(time.monotonic() - t0, 1), "aggregate": agg, "cases": rows}
     write_result(args.out / "bench_standup.json", doc, "make bench-standup" + (

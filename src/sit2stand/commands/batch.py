@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .robot import CONTROLLER_CHOICES, DEFAULT_CONTROLLER, ROBOT_HELP
+from .robot import CONTROLLER_CHOICES, DEFAULT_CONTROLLER, DEFAULT_PLAN, PLAN_CHOICES, ROBOT_HELP
 
 KINDS = ("standup", "gap", "gap-human")
 
@@ -25,8 +25,8 @@ def _jobs(args: argparse.Namespace) -> list:
 
         params = None if args.cad else args.params or _demo_params(args.robot)
         print(f"batch standup: robot {args.robot}, plant {args.plant}, controller {args.controller}, parameters "
-              f"{params or 'CAD'}")
-        setting = Setting(args.robot, args.plant, args.controller, params)
+              f"{params or 'CAD'}, plan {args.plan}")
+        setting = Setting(args.robot, args.plant, args.controller, params, args.plan)
         cases = grid_cases(Path(args.grid), args.seed, setting) if args.grid else \
             [(c, setting) for c in sample_population(args.cases, args.seed)]
         return standup_jobs(cases)
@@ -76,6 +76,8 @@ def add_batch(sub) -> None:
     p.add_argument("--controller", choices=CONTROLLER_CHOICES, default=DEFAULT_CONTROLLER)
     p.add_argument("--params", help="standup: identified parameters (default: make demo's, else CAD)")
     p.add_argument("--cad", action="store_true", help="standup: plan and control with the CAD model")
+    p.add_argument("--plan", choices=PLAN_CHOICES, default=DEFAULT_PLAN,
+                   help="standup: how each case is planned (sit2stand retarget --plan; default whole)")
     p.add_argument("--workers", type=int, help="Ray workers on this machine (default: one per CPU; 1: no Ray, "
                                                "this process)")
     p.add_argument("--address", help="join a Ray cluster (ray start --head on one machine, ray start --address on "

@@ -17,6 +17,8 @@ CONTROLLER_CHOICES = ("inverse_dynamics", "wbc")
 stack (a test keeps the two equal)."""
 DEFAULT_CONTROLLER = "wbc"
 """``robot.plant.DEFAULT_CONTROLLER``, spelled here for the same reason (the same test keeps them equal)."""
+PLAN_CHOICES, DEFAULT_PLAN = ("whole", "frames"), "whole"
+"""``retarget.offline.PLANS`` and ``DEFAULT_PLAN``, spelled here for the same reason (a test keeps them equal)."""
 
 
 ROBOT_HELP = "robot profile: a packaged one (talos, g1) or a YAML file (default: the plant's; TALOS)"
@@ -33,7 +35,7 @@ def _retarget(args: argparse.Namespace) -> int:
                   human_com_bag=args.human_com, margin_m=args.margin, time_scale=args.time_scale,
                   **({"max_time_scale": args.max_time_scale} if args.max_time_scale else {}),
                   simulate=args.simulate, com_feedback=not args.no_com_feedback, whole=args.whole,
-                  dynamic=args.dynamic, controller=args.controller, retiming=args.retiming,
+                  dynamic=args.dynamic, controller=args.controller, retiming=args.retiming, plan=args.plan,
                   **({"seat_off_dwell_s": args.seat_off_dwell} if args.seat_off_dwell is not None else {}))
     print(json.dumps(summary, indent=2))
     if args.simulate:
@@ -158,6 +160,10 @@ def add_retarget(sub) -> None:
                         "joint PD + inverse-dynamics feed-forward (inverse_dynamics)")
     p.add_argument("--seat-off-dwell", type=float, default=None,
                    help="the player's wait at the robot's seat-off [s] (default: retarget.player.SEAT_OFF_DWELL_S, 0)")
+    p.add_argument("--plan", choices=PLAN_CHOICES, default=DEFAULT_PLAN,
+                   help="whole: the rise optimised as one problem (contacts, friction and COP cones, torque limits) "
+                        "at the human's timing, slower only if it has no solution there (default); frames: the "
+                        "per-frame IK retimed frame by frame, as the live retargeter plans")
     p.add_argument("--retiming", choices=("local", "uniform"), default="local",
                    help="local: slower only where a frame needs it (default); uniform: one growing factor")
     p.add_argument("--marker-set", help="marker set: plug_in_gait, plug_in_gait_lower, gait2392 or a YAML file "

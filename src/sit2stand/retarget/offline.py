@@ -19,6 +19,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pinocchio as pin
 
+from ..errors import InputError
 from ..human.com import estimate_com
 from ..human.calibration import StreamCalibration
 from ..human.marker_sets import choose_marker_set
@@ -45,6 +46,12 @@ from .stabiliser import ComStabiliser, StabiliserConfig, com_feedback_applies, c
 from .calibration import map_frame
 from .robot import robot_model, robot_setup
 from .stream import RetargetConfig, Retargeter, retarget_sequence
+from .whole_rise import WholeRiseConfig, optimised_player
+
+PLANS = ("whole", "frames")
+DEFAULT_PLAN = "whole"
+"""How ``sit2stand retarget`` plans: the whole rise optimised (:mod:`sit2stand.retarget.whole_rise`), or the per-frame
+IK retimed by the player (what the live retargeter runs)."""
 
 HumanPosture = tuple[np.ndarray, np.ndarray, dict]
 """The human over the trial as :func:`~sit2stand.retarget.compare.posture_rms_deg` compares it: times [s], COM
@@ -116,7 +123,8 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         com_feedback: bool = True, stabiliser: StabiliserConfig | None = None, whole: bool = False,
         dynamic: bool = False, controller: str = DEFAULT_CONTROLLER, seat_off_dwell_s: float = SEAT_OFF_DWELL_S,
         gains: WbcGains | None = None, calibration_frame: int | None = None, static: Path | None = None,
-        retiming: str = "local", robot: str | None = None) -> dict:
+        retiming: str = "local", robot: str | None = None, plan: str = DEFAULT_PLAN,
+        whole_rise: WholeRiseConfig | None = None) -> dict:
     """Retarget ``bag`` into ``out`` (see the module docstring); returns the summary. ``com_feedback``: the
     simulated robot's commands are corrected by :class:`~sit2stand.retarget.stabiliser.ComStabiliser` (gains
     ``stabiliser``, default :class:`~sit2stand.retarget.stabiliser.StabiliserConfig`), as the node does.
@@ -132,7 +140,11 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     estimated here. ``plant``: None is a plant without unmodeled effects
     (:meth:`~sit2stand.robot.model.PlantConfig.load`), not the command's default (the packaged ``default`` plant,
     26 kg hidden); parameters identified on one and simulated on the other are a model error of 26 kg. ``robot``:
-    the robot profile (a packaged name or a file; None: the plant's, TALOS where it names none)."""
+    the robot profile (a packaged name or a file; None: the plant's, TALOS where it names none). ``plan``: "whole"
+    (the rise optimised as a whole, :mod:`sit2stand.retarget.whole_rise`, settings ``whole_rise``; the per-frame plan
+    where that has no solution) or "frames" (the per-frame plan, retimed by the player)."""
+    if plan not in PLANS:
+        raise InputError(f"plan {plan!r}: one of {', '.join(PLANS)}")
     refuse_existing_bag(out / "retarget")
     out.mkdir(parents=True, exist_ok=True)
     trial = read_trial(bag)
@@ -166,7 +178,13 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
                         max_time_scale=max_time_scale, seat_off_dwell_s=seat_off_dwell_s, dynamics=dynamics,
                         retiming=retiming)
     frames, cmds = retarget_sequence(rt, player, trial.marker_t_s, trial.positions, trial.valid, com_h, fz,
-                                     pull=sim is None)
+                                     pull=sim is None and plan == "frames")
+    optimised, chosen = None, {"plan": "frames"}
+    if plan == "whole":
+        optimised, player, chosen = optimised_player(rt.model, frames, player, config=whole_rise,
+                                                     first_scale=time_scale or 1.0)
+        while sim is None and not player.done:
+            cmds.append(player.pull())
     simulated = {}
     if sim is not None:      # the commands pulled as the robot moves: a robot that trails its plan slows it
         com_feedback = com_feedback_applies(com_feedback, controller)
@@ -187,6 +205,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         # time_scale: the robot's duration over the human's; the peak local factor beside it
         "time_scale": len(cmds) / max(1, len(frames)), "time_scale_peak": max(c.time_scale for c in cmds),
         "retiming": "fixed" if time_scale else retiming, "commands": len(cmds), "plan_duration_s": len(cmds) * dt,
+        **chosen, **(optimised.summary() if optimised is not None else {}),
         "duration_ratio": len(cmds) / max(1, len(frames)), **_filter_summary(cmds), **_marker_fit(frames),
         **_zmp_summary(on_feet), **_com_deviation(frames, cmds),
         "human_seat_off_frame": next((i for i, f in enumerate(frames) if f.human_seat_off), None),

@@ -109,14 +109,16 @@ class PlanPlayer:
     ``push`` one pose per human frame (period ``dt``); ``pull`` once per output tick (same period) returns the next
     command, or None while the look-ahead fills. ``fixed_time_scale`` set: no adaptation (1.0: the human's
     timing); ``max_time_scale`` caps the adaptation. ``torque_limited``: the torques count in each frame's factor
-    (the model's URDF effort limits)."""
+    (the model's URDF effort limits). ``planned_time_scale``: the plan is feasible at this scale already (the
+    whole-rise optimisation's): every frame needs it and no more, and only a robot trailing the plan slows it."""
 
     def __init__(self, model: pin.Model, dt: float, polygon_xy: np.ndarray, *, margin_m: float = DEFAULT_MARGIN_M,
                  lookahead_s: float = LOOKAHEAD_S, smooth_s: float = SMOOTH_S,
                  max_time_scale: float = DEFAULT_MAX_TIME_SCALE, max_time_scale_rate: float = MAX_TIME_SCALE_RATE,
                  fixed_time_scale: float | None = None,
                  max_joint_speed: float = DEFAULT_MAX_JOINT_SPEED, seat_off_dwell_s: float = SEAT_OFF_DWELL_S,
-                 dynamics: DynamicsFilter | None = None, retiming: str = "local", torque_limited: bool = True) -> None:
+                 dynamics: DynamicsFilter | None = None, retiming: str = "local", torque_limited: bool = True,
+                 planned_time_scale: float | None = None) -> None:
         if retiming not in RETIMING:
             raise InputError(f"retiming {retiming!r}: one of {', '.join(RETIMING)}")
         self.model, self.data = model, model.createData()
@@ -156,6 +158,16 @@ class PlanPlayer:
         self._room_floor = np.where(upper, TORQUE_ROOM_MIN * model.effortLimit[6:], 1e-9)
         self._q_index = np.array([model.joints[j].idx_q for j in range(2, model.njoints)])     # joint i -> its q
         self.pulled = 0.0             # periods played
+        self._settings = dict(margin_m=margin_m, lookahead_s=lookahead_s, smooth_s=smooth_s,
+                              max_time_scale=max_time_scale, max_time_scale_rate=max_time_scale_rate,
+                              fixed_time_scale=fixed_time_scale, max_joint_speed=max_joint_speed,
+                              seat_off_dwell_s=seat_off_dwell_s, dynamics=dynamics, retiming=retiming,
+                              torque_limited=torque_limited, planned_time_scale=planned_time_scale)
+        self.planned_time_scale = planned_time_scale
+
+    def like(self, **changes) -> PlanPlayer:
+        """A new, empty player with this one's model and settings, but ``changes``."""
+        return PlanPlayer(self.model, self.dt, self.polygon, **{**self._settings, **changes})
 
     # -- input -------------------------------------------------------------------------------------------------
     def push(self, q: np.ndarray, on_feet: bool) -> None:
@@ -183,16 +195,21 @@ class PlanPlayer:
                 q, v, a = pin.integrate(model, ref, c0 @ X), c1 @ X / dt, c2 @ X / dt**2
             else:        # the ends of a closed plan: at rest
                 q, v, a = ref, np.zeros(model.nv), np.zeros(model.nv)
-            self._q.append(q)
-            self._v.append(v)
-            self._a.append(a)
-            self._feet.append(self._raw_feet[k])
-            pin.centerOfMass(model, self.data, q, v, a)
-            com, acom = self.data.com[0].copy(), self.data.acom[0].copy()
-            pin.computeCentroidalMomentumTimeVariation(model, self.data, q, v, a)
-            # dL/dt's velocity-product and acceleration parts both scale with 1/s^2 when played s x slower
-            self._dyn.append((com, acom, self.data.dhg.angular.copy()))
-            self._s_req.append(self.frame_scale(len(self._dyn) - 1))
+            self._append(q, v, a, self._raw_feet[k])
+
+    def _append(self, q: np.ndarray, v: np.ndarray, a: np.ndarray, on_feet: bool) -> None:
+        """A frame of the plan (pose, velocity, acceleration) and its dynamics: COM, COM acceleration and angular
+        momentum rate, and the frame's own smallest time scale."""
+        self._q.append(q)
+        self._v.append(v)
+        self._a.append(a)
+        self._feet.append(on_feet)
+        pin.centerOfMass(self.model, self.data, q, v, a)
+        com, acom = self.data.com[0].copy(), self.data.acom[0].copy()
+        pin.computeCentroidalMomentumTimeVariation(self.model, self.data, q, v, a)
+        # dL/dt's velocity-product and acceleration parts both scale with 1/s^2 when played s x slower
+        self._dyn.append((com, acom, self.data.dhg.angular.copy()))
+        self._s_req.append(self.frame_scale(len(self._dyn) - 1))
 
     def _coefs(self, half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         c = self._coef_cache.get(half)
@@ -206,13 +223,14 @@ class PlanPlayer:
     def frame_scale(self, k: int) -> float:
         """Smallest time scale (grid of 0.02, at most ``max_scale``) keeping frame ``k``'s ZMP ``margin_m`` inside the
         feet (none while the robot is on the chair), its joint speeds under ``max_joint_speed`` [rad/s] and, when
-        ``torque_limited``, its inverse-dynamics torques within the URDF effort limits."""
+        ``torque_limited``, its inverse-dynamics torques within the URDF effort limits; ``planned_time_scale`` where the
+        plan's dynamics were made feasible beforehand (:mod:`sit2stand.retarget.whole_rise`)."""
         speed = float(np.abs(self._v[k][6:]).max()) / self.max_speed if self.max_speed > 0 else 1.0
         s = 1.0
         if self._feet[k]:
             com, acc, dl = self._dyn[k]
             s = float(frame_time_scales(com, acc, dl, self.mass, self.polygon, self.margin_m, self.max_time_scale)[0])
-        return min(max(s, speed, self._torque_scale(k)), self.max_time_scale)
+        return min(max(s, speed, self._torque_scale(k), self.planned_time_scale or 1.0), self.max_time_scale)
 
     def _torque_scale(self, k: int) -> float:
         """Smallest time scale keeping frame ``k``'s joint torques (contact-consistent inverse dynamics, the chair
@@ -333,6 +351,22 @@ class PlanPlayer:
         zmp = np.array([cop[0], cop[1], 0.0]) if np.all(np.isfinite(cop[:2])) else np.array([com[0], com[1], 0.0])
         return Command(cmd.t_plan_s, q, v, a, cmd.time_scale, com, zmp, dyn.margin(cop, cmd.on_feet), cmd.on_feet,
                        com_kinematic=cmd.com, filter=report)
+
+    def smoothed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The smoothed poses (N, nq) of the frames known so far, their velocities and accelerations (N, nv) at the
+        human's timing."""
+        return np.array(self._q), np.array(self._v), np.array(self._a)
+
+    def played_ratio(self) -> float:
+        """How many times longer than the human's the plan pushed so far plays for a robot that keeps up with it: a
+        copy of this player played out without lag (this one is left as it is)."""
+        dry = self.like()
+        for q, on_feet in zip(self._raw_q, self._raw_feet):
+            dry.push(q, on_feet)
+        dry.close()
+        while not dry.done:
+            dry.pull()
+        return dry.duration_ratio
 
     @property
     def duration_ratio(self) -> float:

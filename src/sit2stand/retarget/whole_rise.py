@@ -1,0 +1,339 @@
+"""Whole-rise optimal control: the per-frame IK plan made dynamically feasible as one problem, at the human's timing.
+
+The per-frame IK (Mistry et al. 2010) gives a pose per frame with the COM on the mapped human's; nothing in it knows
+forces, so played at the human's speed it can ask for torques past the motors' limits or a centre of pressure
+outside the soles. Here the whole rise is one multiple-shooting optimal-control problem (Crocoddyl's contact forward
+dynamics, solved by box-FDDP): a knot every ``knot_frames`` frames; while the plan is seated the feet and the seat
+carry the robot (6D contacts at the soles, a 3D contact at the ``seat`` frame under the buttocks), after the human's
+seat-off the feet alone. Every knot costs the COM's distance to the plan's (the mapped human COM), the markers'
+distances to the human's (the IK's marker tasks, with their weights), the posture's and velocity's distance to the
+IK's, and the torques over their limits; the contact wrenches are kept in their cones (friction, centre of pressure
+``cop_margin_m`` inside the soles, the seat's friction cone) by barriers; torques are boxed by the URDF's limits and
+joint speeds by ``max_joint_speed``. The last knot is the IK's standing end posture, at rest. The problem is
+warm-started from the IK's poses and finite-difference velocities, with quasi-static torques.
+
+The rise is played at the human's timing when the solution is one: dynamically consistent, the contact wrenches
+inside their cones, the COM within ``com_tolerance_m`` of the plan's. Otherwise the problem is solved again a little
+slower (``time_scale`` up by ``scale_step``, the knots' period with it) until one is, and the factor is reported.
+
+Units SI; world frame REP-103 (x forward, y left, z up).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import crocoddyl
+import numpy as np
+import pinocchio as pin
+
+from ..errors import Sit2StandError
+from ..robot.model import SIDES
+from ..robot.plant import contact_joint_torques
+from ..robot.profile import profile_of
+from .player import PlanPlayer
+
+FRICTION = 0.7
+"""The feet's and the seat's friction coefficient in the cones (rubber soles on the floor, cloth on a seat)."""
+ROOT_JOINT = "root_joint"
+"""Crocoddyl's floating-base actuation finds the free flyer by this name."""
+
+
+class WholeRiseError(Sit2StandError, RuntimeError):
+    """The optimal-control problem cannot be made for this robot model (a frame it needs is missing)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class WholeRiseConfig:
+    """The whole-rise problem's settings (weights are Crocoddyl's: cost = 0.5 w |r|^2)."""
+
+    knot_frames: int = 2                 # a knot every this many plan frames
+    threads: int = 1                     # Crocoddyl's OpenMP threads for the knots: 2 made a solve 1.4x faster
+    #                                      alone, and 10x slower beside another busy process on 2 cores (they spin)
+    iterations: int = 100                 # box-FDDP iterations per time scale tried
+    com_weight: float = 1e4              # per knot, on the COM [m]
+    marker_weight: float = 10.0          # per knot, times each marker task's own weight, on the position [m]
+    posture_weight: float = 1.0          # on the joints' distance to the IK's [rad]
+    velocity_weight: float = 0.1         # on the joints' speed's distance to the IK's [rad/s]
+    torque_weight: float = 1e-2          # on (tau / limit)^2
+    torque_share: float = 1.0            # the torques' box: this share of the URDF limits (the rest: the robot's
+    #                                      controller, which corrects what the model does not know)
+    cone_weight: float = 10.0            # the contact cones' barriers
+    end_weight: float = 100.0            # the last knot's posture (and rest) over ``posture_weight``
+    seat_friction: float = 0.1           # the seat's friction coefficient in its cone: the robot's controller
+    #                                      estimates the seat's force as the weight the feet do not carry (vertical)
+    cop_margin_m: float = 0.04           # the centre of pressure's margin inside each sole's edges (x) [m]
+    cop_side_margin_m: float = 0.02      # the same across the sole (y) [m]
+    max_joint_speed: float = 4.0         # [rad/s]
+    com_tolerance_m: float = 0.03        # a solution keeps every knot's COM this close to the plan's
+    force_tolerance_n: float = 5.0       # a solution's largest contact force outside its cone [N]
+    scale_step: float = 0.05             # how much slower each retry is played
+    max_time_scale: float = 1.5
+
+
+@dataclasses.dataclass
+class WholeRise:
+    """The optimised rise, resampled at the plan's frames; and how it was found."""
+
+    q: np.ndarray                  # (N, nq) per plan frame
+    tau: np.ndarray                # (K - 1, nq - 7) the joint torques [N m] between the K knots
+    knot_t_s: np.ndarray           # (K,) the knots' robot times from the first [s]
+    time_scale: float              # the plan played this many times slower than the human (1: the human's timing)
+    converged: bool                # the solver met its stopping criterion at that scale
+    feasible: bool                 # a solution (see the module docstring) at that scale
+    iterations: int
+    solve_s: float                 # wall time of all the solves [s]
+    knots: int
+    com_error_rms_m: float         # the knots' COM against the plan's
+    com_error_max_m: float
+    torque_saturated_share: float  # knots with a joint torque at its limit
+    cop_margin_min_m: float        # the smallest centre-of-pressure margin inside a sole on the feet
+    tries: list[tuple[float, bool]] = dataclasses.field(default_factory=list)   # (time scale, feasible)
+
+    def summary(self) -> dict:
+        """The figures for ``summary.json`` (``whole_rise_*``)."""
+        return {"whole_rise_time_scale": self.time_scale, "whole_rise_feasible": self.feasible,
+                "whole_rise_converged": self.converged, "whole_rise_iterations": self.iterations,
+                "whole_rise_solve_s": self.solve_s, "whole_rise_knots": self.knots,
+                "whole_rise_com_error_rms_m": self.com_error_rms_m, "whole_rise_com_error_max_m": self.com_error_max_m,
+                "whole_rise_torque_saturated_share": self.torque_saturated_share,
+                "whole_rise_cop_margin_min_m": self.cop_margin_min_m,
+                "whole_rise_tries": [[s, ok] for s, ok in self.tries]}
+
+
+@dataclasses.dataclass
+class RisePlan:
+    """The IK's plan the problem starts from: a pose per frame, its COM, whether it is seated, its marker tasks."""
+
+    q: np.ndarray                  # (N, nq)
+    com: np.ndarray                # (N, 3) [m]
+    seated: np.ndarray             # (N,) bool
+    markers: list                  # per frame: [(frame id, target (3,) [m], weight)]
+    dt: float                      # the frames' period [s]
+    v: np.ndarray | None = None    # (N, nv) the poses' velocities at the human's timing (None: differences)
+    a: np.ndarray | None = None    # (N, nv) their accelerations (None: the warm start's torques are static)
+
+    @classmethod
+    def of_frames(cls, frames, dt: float,
+                  smoothed: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> RisePlan:
+        """From :class:`~sit2stand.retarget.stream.RetargetFrame` s; ``smoothed``: their poses and velocities as the
+        plan player smooths them, with their velocities and accelerations
+        (:meth:`~sit2stand.retarget.player.PlanPlayer.smoothed`), which the problem then starts from and tracks (the
+        IK's raw poses carry the markers' noise into their velocities)."""
+        q, v, a = smoothed if smoothed is not None else (np.array([f.q for f in frames]), None, None)
+        return cls(q, np.array([f.com for f in frames]), np.array([f.seated for f in frames]),
+                   [f.markers for f in frames], dt, v, a)
+
+
+class WholeRiseProblem:
+    """The whole-rise problem for one robot model (with its ``sole_*``, ``seat`` and marker frames)."""
+
+    def __init__(self, model: pin.Model, config: WholeRiseConfig | None = None) -> None:
+        self.cr = crocoddyl
+        self.cfg = config or WholeRiseConfig()
+        self.model = pin.Model(model)
+        if self.model.names[1] != ROOT_JOINT:
+            self.model.names[1] = ROOT_JOINT
+        self.profile = profile_of(model)
+        sole = self.profile.sole
+        self.sole_ids = [self._sole_centre(s, sole.centre_x_m) for s in SIDES]
+        if not self.model.existFrame("seat"):
+            raise WholeRiseError("the robot model has no 'seat' frame (robot.model.add_seat_frame)")
+        self.seat_id = self.model.getFrameId("seat")
+        self.data = self.model.createData()
+        self.cop_box = 2.0 * np.array([sole.half_size_m[0] - self.cfg.cop_margin_m,
+                                       sole.half_size_m[1] - self.cfg.cop_side_margin_m])
+        self.state = self.cr.StateMultibody(self.model)
+        self.actuation = self.cr.ActuationModelFloatingBase(self.state)
+        self.nu = self.actuation.nu
+        self.limit = self.cfg.torque_share * self.model.effortLimit[6:]
+
+    def _sole_centre(self, side: str, centre_x_m: float) -> int:
+        """A frame at the middle of a sole (the wrench cone's centre of pressure box is centred on its frame)."""
+        f = self.model.frames[self.model.getFrameId(f"sole_{side}")]
+        at = f.placement * pin.SE3(np.eye(3), np.array([centre_x_m, 0.0, 0.0]))
+        return self.model.addFrame(pin.Frame(f"sole_centre_{side}", f.parentJoint, at, pin.FrameType.OP_FRAME))
+
+    # -- the problem -------------------------------------------------------------------------------------------
+    def solve(self, plan: RisePlan, first_scale: float = 1.0) -> WholeRise:
+        """The rise at the human's timing (``first_scale`` x slower) when it has a solution there, else at the least
+        slower scale that has one (see the module docstring); the last tried when none up to ``max_time_scale``
+        has."""
+        cfg, tries, spent, iters = self.cfg, [], 0.0, 0
+        scale = float(first_scale)
+        while True:
+            solver, knots, t = self._solve_at(plan, scale)
+            spent += t
+            iters += solver.iter
+            result = self._result(plan, solver, knots, scale)
+            tries.append((scale, result.feasible))
+            if result.feasible or scale + cfg.scale_step > cfg.max_time_scale + 1e-9:
+                return dataclasses.replace(result, iterations=iters, solve_s=spent, tries=tries)
+            scale = round(scale + cfg.scale_step, 6)
+
+    def _solve_at(self, plan: RisePlan, scale: float):
+        cr = self.cr
+        knots = list(range(0, len(plan.q), self.cfg.knot_frames))
+        if knots[-1] != len(plan.q) - 1:
+            knots.append(len(plan.q) - 1)
+        v = self._velocities(plan, knots, scale)
+        pin.framesForwardKinematics(self.model, self.data, plan.q[0])
+        feet = [self.data.oMf[i].copy() for i in self.sole_ids]
+        running = [self._knot(plan, knots[i], v[i], feet, (knots[i + 1] - knots[i]) * plan.dt * scale)
+                   for i in range(len(knots) - 1)]
+        terminal = self._knot(plan, knots[-1], np.zeros(self.model.nv), feet, 0.0, end=True)
+        x0 = np.concatenate([plan.q[0], np.zeros(self.model.nv)])
+        problem = cr.ShootingProblem(x0, running, terminal)
+        problem.nthreads = self.cfg.threads
+        xs = [np.concatenate([plan.q[k], v[i]]) for i, k in enumerate(knots)]
+        xs[0] = x0
+        us = self._warm_torques(plan, knots, v, scale) if plan.a is not None else list(problem.quasiStatic(xs[:-1]))
+        solver = self._solver(problem)
+        t0 = time.perf_counter()
+        solver.solve(xs, us, self.cfg.iterations, False)
+        return solver, knots, time.perf_counter() - t0
+
+    def _solver(self, problem):
+        solver = self.cr.SolverBoxFDDP(problem)
+        solver.th_stop = 1e-6
+        return solver
+
+    def _warm_torques(self, plan: RisePlan, knots: list[int], v: np.ndarray, scale: float) -> list[np.ndarray]:
+        """Each knot's joint torques for the plan's own motion, the contacts taking the base's wrench in the
+        least-squares sense (:func:`~sit2stand.robot.plant.contact_joint_torques`), inside the limits: the gaps
+        between the knots start small, where static torques leave the rise's accelerations, and the seat-off's
+        jump, to be closed."""
+        out = []
+        for i, k in enumerate(knots[:-1]):
+            tau = pin.rnea(self.model, self.data, plan.q[k], v[i], plan.a[k] / scale ** 2)
+            joints = contact_joint_torques(self.model, self.data, plan.q[k], tau, bool(plan.seated[k]))[0]
+            out.append(np.clip(joints, -self.limit, self.limit))
+        return out
+
+    def _velocities(self, plan: RisePlan, knots: list[int], scale: float) -> np.ndarray:
+        """The plan's velocities at the knots (its own, or central differences over the frames), played ``scale`` x
+        slower."""
+        if plan.v is not None:
+            return plan.v[knots] / scale
+        n, out = len(plan.q), np.zeros((len(knots), self.model.nv))
+        for i, k in enumerate(knots):
+            a, b = max(0, k - 1), min(n - 1, k + 1)
+            if b > a:
+                out[i] = pin.difference(self.model, plan.q[a], plan.q[b]) / ((b - a) * plan.dt * scale)
+        return out
+
+    def _knot(self, plan: RisePlan, k: int, v: np.ndarray, feet: list[pin.SE3], period_s: float, end: bool = False):
+        cr, cfg, state, nu = self.cr, self.cfg, self.state, self.nu
+        contacts, costs = cr.ContactModelMultiple(state, nu), cr.CostModelSum(state, nu)
+        for side, fid, placement in zip(SIDES, self.sole_ids, feet):
+            contacts.addContact(f"sole_{side}", cr.ContactModel6D(state, fid, placement, pin.LOCAL, nu,
+                                                                  np.array([0.0, 50.0])))
+            cone = cr.WrenchCone(np.eye(3), FRICTION, self.cop_box, 4, True, 0.0, 1e4)
+            costs.addCost(f"cone_{side}", self._barrier(cr.ResidualModelContactWrenchCone(state, fid, cone, nu),
+                                                        cone.lb, cone.ub), cfg.cone_weight)
+        if plan.seated[k]:
+            pin.framesForwardKinematics(self.model, self.data, plan.q[k])
+            contacts.addContact("seat", cr.ContactModel3D(state, self.seat_id, self.data.oMf[self.seat_id].translation,
+                                                          pin.LOCAL_WORLD_ALIGNED, nu, np.array([0.0, 50.0])))
+            cone = cr.FrictionCone(np.eye(3), cfg.seat_friction, 4, True)
+            costs.addCost("cone_seat", self._barrier(cr.ResidualModelContactFrictionCone(state, self.seat_id, cone, nu),
+                                                     cone.lb, cone.ub), cfg.cone_weight)
+        self._tracking_costs(costs, plan, k, v, end)
+        dam = cr.DifferentialActionModelContactFwdDynamics(state, self.actuation, contacts, costs, 0.0, True)
+        dam.u_lb, dam.u_ub = -self.limit, self.limit
+        return cr.IntegratedActionModelEuler(dam, period_s)
+
+    def _tracking_costs(self, costs, plan: RisePlan, k: int, v: np.ndarray, end: bool) -> None:
+        cr, cfg, state, nu, nv = self.cr, self.cfg, self.state, self.nu, self.model.nv
+        scale = 10.0 if end else 1.0
+        costs.addCost("com", cr.CostModelResidual(state, cr.ResidualModelCoMPosition(state, plan.com[k], nu)),
+                      cfg.com_weight * scale)
+        for fid, target, weight in plan.markers[k]:
+            costs.addCost(f"marker_{fid}", cr.CostModelResidual(
+                state, cr.ResidualModelFrameTranslation(state, fid, np.asarray(target, float), nu)),
+                cfg.marker_weight * float(weight))
+        w = np.concatenate([np.zeros(6), np.full(nv - 6, cfg.posture_weight), np.zeros(6),
+                            np.full(nv - 6, cfg.velocity_weight)])
+        if end:
+            w = np.concatenate([np.zeros(6), np.full(nv - 6, cfg.posture_weight), np.ones(nv)]) * cfg.end_weight
+        x_ref = np.concatenate([plan.q[k], v])
+        costs.addCost("posture", cr.CostModelResidual(state, cr.ActivationModelWeightedQuad(w ** 2),
+                                                      cr.ResidualModelState(state, x_ref, nu)), 1.0)
+        if end:
+            return
+        costs.addCost("torque", cr.CostModelResidual(state, cr.ActivationModelWeightedQuad(1.0 / self.limit ** 2),
+                                                     cr.ResidualModelControl(state, nu)), cfg.torque_weight)
+        big = np.full(nv, 1e9)
+        lb = np.concatenate([-big, -big[:6], np.full(nv - 6, -cfg.max_joint_speed)])
+        costs.addCost("joint_speed", self._barrier(cr.ResidualModelState(state, state.zero(), nu), lb, -lb),
+                      cfg.cone_weight)
+
+    def _barrier(self, residual, lb: np.ndarray, ub: np.ndarray):
+        cr = self.cr
+        return cr.CostModelResidual(self.state, cr.ActivationModelQuadraticBarrier(cr.ActivationBounds(lb, ub)),
+                                    residual)
+
+    # -- the outcome -------------------------------------------------------------------------------------------
+    def _result(self, plan: RisePlan, solver, knots: list[int], scale: float) -> WholeRise:
+        nq, cfg = self.model.nq, self.cfg
+        xs, us = np.array(solver.xs), np.array(solver.us)
+        com = np.array([pin.centerOfMass(self.model, self.data, x[:nq]) for x in xs])
+        err = np.linalg.norm(com - plan.com[knots], axis=1)
+        margins, violation = self._contact_figures(solver)
+        feasible = (solver.ffeas <= 1e-5 and violation <= cfg.force_tolerance_n
+                    and margins >= 0.5 * cfg.cop_side_margin_m and float(err.max()) <= cfg.com_tolerance_m)
+        return WholeRise(self._resampled(xs[:, :nq], knots, len(plan.q)), us, np.array(knots) * plan.dt * scale,
+                         scale, bool(solver.isFeasible and
+                         solver.stop <= solver.th_stop), bool(feasible), solver.iter, 0.0, len(knots),
+                         float(np.sqrt(np.mean(err ** 2))), float(err.max()),
+                         float(np.mean(np.any(np.abs(us) >= 0.999 * self.limit, axis=1))), margins)
+
+    def _contact_figures(self, solver) -> tuple[float, float]:
+        """(the smallest centre-of-pressure margin inside a sole over the knots [m], the largest force outside its
+        friction cone or pulling [N])."""
+        half = self.profile.sole.half_size_m
+        margin, violation = np.inf, 0.0
+        for d in solver.problem.runningDatas:
+            for name, c in d.differential.multibody.contacts.contacts.todict().items():
+                f = c.f.linear
+                fz = float(f[2])
+                mu = self.cfg.seat_friction if name == "seat" else FRICTION
+                violation = max(violation, -fz, float(np.hypot(f[0], f[1])) - mu * max(fz, 0.0))
+                if name != "seat" and fz > 1.0:
+                    cop = np.array([-c.f.angular[1], c.f.angular[0]]) / fz
+                    margin = min(margin, float(min(half[0] - abs(cop[0]), half[1] - abs(cop[1]))))
+        return margin, violation
+
+    def _resampled(self, qs: np.ndarray, knots: list[int], n: int) -> np.ndarray:
+        """The knots' poses at every plan frame (interpolated on the configuration space)."""
+        out = np.zeros((n, self.model.nq))
+        for i in range(len(knots) - 1):
+            lo, hi = knots[i], knots[i + 1]
+            for k in range(lo, hi):
+                out[k] = pin.interpolate(self.model, qs[i], qs[i + 1], (k - lo) / (hi - lo))
+        out[-1] = qs[-1]
+        return out
+
+
+def optimised_player(model: pin.Model, frames, player: PlanPlayer, *, config: WholeRiseConfig | None = None,
+                     first_scale: float = 1.0) -> tuple[WholeRise, PlanPlayer, dict]:
+    """The whole rise of ``frames`` (:class:`~sit2stand.retarget.stream.RetargetFrame` s, the retargeter's
+    ``model``) optimised, and the player to play: one of the optimised poses at their time scale, made like
+    ``player`` (which has had all the frames pushed and is closed), or ``player`` itself, the per-frame plan, where the
+    problem has no solution up to ``max_time_scale`` or the per-frame plan plays shorter. Both are checked by the
+    player's own criteria (ZMP margin, joint speeds, torques: :meth:`PlanPlayer.frame_scale`). Returns (the
+    optimisation's result, the player, ``plan`` and each plan's played ratio for the summary)."""
+    result = WholeRiseProblem(model, config).solve(RisePlan.of_frames(frames, player.dt, player.smoothed()),
+                                                   first_scale)
+    figures = {"plan_ratio_frames": player.played_ratio()}
+    if not result.feasible:
+        return result, player, {"plan": "frames", **figures}
+    played = player.like(planned_time_scale=result.time_scale)
+    for q, f in zip(result.q, frames):
+        played.push(q, not f.seated)
+    played.close()
+    figures["plan_ratio_whole"] = played.played_ratio()
+    if figures["plan_ratio_whole"] > figures["plan_ratio_frames"]:
+        return result, player, {"plan": "frames", **figures}
+    return result, played, {"plan": "whole", **figures}

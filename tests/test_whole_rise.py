@@ -1,0 +1,86 @@
+"""sit2stand.retarget.whole_rise: the rise optimised as one problem (Crocoddyl: contacts, cones, torque limits), at
+the human's timing unless it has no solution there."""
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from sit2stand.cli import main as sit2stand
+from sit2stand.commands.robot import DEFAULT_PLAN as CLI_DEFAULT_PLAN
+from sit2stand.commands.robot import PLAN_CHOICES as CLI_PLANS
+from sit2stand.errors import InputError
+from sit2stand.io.bag import BagReader
+from sit2stand.io.topics import ROBOT_JOINT_COMMAND_TOPIC
+from sit2stand.retarget import offline
+from sit2stand.robot.model import PlantConfig, controller_model
+from sit2stand.retarget.robot import robot_model
+from sit2stand.retarget.whole_rise import RisePlan, WholeRiseConfig, WholeRiseError, WholeRiseProblem
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def natural(tmp_path_factory):
+    """``sit2stand retarget bags/natural`` (the plan only): its summary and folder."""
+    out = tmp_path_factory.mktemp("whole_rise") / "rt"
+    return offline.run(ROOT / "bags" / "natural", out), out
+
+
+def test_the_natural_rise_has_a_solution_at_the_humans_timing_and_the_shorter_plan_is_played(natural):
+    summary, out = natural
+    assert summary["whole_rise_tries"] == [[1.0, True]]
+    # the optimised rise keeps the mapped human COM (the IK's) within the tolerance, its COP inside the soles
+    assert summary["whole_rise_com_error_rms_m"] < 0.01 and summary["whole_rise_com_error_max_m"] <= 0.03
+    assert summary["whole_rise_cop_margin_min_m"] >= 0.015
+    # both plans checked by the player; the one that plays shorter is played, and its commands are the bag's
+    ratios = {"whole": summary["plan_ratio_whole"], "frames": summary["plan_ratio_frames"]}
+    assert summary["plan"] == min(ratios, key=lambda p: (ratios[p], p != "whole"))
+    assert summary["time_scale"] == pytest.approx(ratios[summary["plan"]], abs=1e-9) and summary["time_scale"] < 1.15
+    with BagReader(out / "retarget") as bag:
+        commands = bag.read(ROBOT_JOINT_COMMAND_TOPIC)
+    assert len(commands) == summary["commands"]
+
+
+def test_a_rise_too_fast_for_the_motors_is_slowed_by_the_least_step_that_has_a_solution(tmp_path):
+    """A 0.8 s rise (the natural style's 1.6 s, twice as fast) has no solution at the human's timing on TALOS: each
+    try is a ``scale_step`` slower, and the first with a solution is played."""
+    bag = tmp_path / "fast"
+    assert sit2stand(["synth-human", "--duration", "0.8", "--out", str(bag)]) == 0
+    config = WholeRiseConfig(scale_step=0.25, max_time_scale=2.0)
+    summary = offline.run(bag, tmp_path / "rt", whole_rise=config)
+    tries = summary["whole_rise_tries"]
+    assert tries[0] == [1.0, False] and tries[-1][1] and not any(ok for _, ok in tries[:-1])
+    assert summary["whole_rise_time_scale"] == tries[-1][0] > 1.0
+    # played no faster than the optimisation found a solution for
+    assert summary["plan_ratio_whole"] >= summary["whole_rise_time_scale"] - 0.02
+
+
+def test_the_problem_keeps_torques_in_their_limits_and_ends_at_the_ik_standing_pose(natural):
+    """On a short plan (the IK's own poses: seated, then on the feet), every knot's torques inside the URDF limits,
+    the last pose the IK's at rest."""
+    model, q_seated, _ = robot_model(robot="talos")
+    n = 40
+    q = np.repeat(q_seated[None], n, axis=0)
+    data = model.createData()
+    com = np.array([pin.centerOfMass(model, data, x) for x in q])
+    seated = np.arange(n) < n // 2
+    problem = WholeRiseProblem(model, WholeRiseConfig(iterations=30))
+    result = problem.solve(RisePlan(q, com, seated, [[] for _ in range(n)], 0.01))
+    assert result.feasible and result.time_scale == 1.0
+    assert np.all(np.abs(result.tau) <= model.effortLimit[6:] + 1e-9)
+    assert np.abs(pin.difference(model, result.q[-1], q[-1])[6:]).max() < 0.02
+    assert result.knot_t_s[-1] == pytest.approx((n - 1) * 0.01)
+
+
+def test_the_cli_offers_the_plans_the_planner_has():
+    assert CLI_PLANS == offline.PLANS and CLI_DEFAULT_PLAN == offline.DEFAULT_PLAN
+
+
+def test_bad_plans_and_models_are_refused(tmp_path):
+    with pytest.raises(InputError, match="plan 'fast': one of whole, frames"):
+        offline.run(ROOT / "bags" / "natural", tmp_path / "rt", plan="fast")
+    bare = controller_model(PlantConfig.load(None, "talos"))        # the robot without the retargeter's seat frame
+    with pytest.raises(WholeRiseError, match="no 'seat' frame"):
+        WholeRiseProblem(bare)
