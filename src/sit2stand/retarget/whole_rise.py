@@ -10,17 +10,20 @@ distances to the human's (the IK's marker tasks, with their weights), the postur
 IK's, and the torques over their limits; the contact wrenches are kept in their cones (friction, centre of pressure
 ``cop_margin_m`` inside the soles, the seat's friction cone) by barriers; torques are boxed by the URDF's limits and
 joint speeds by ``max_joint_speed``. The last knot is the IK's standing end posture, at rest. The problem is
-warm-started from the IK's poses and finite-difference velocities, with quasi-static torques.
+warm-started from the plan player's smoothed poses and velocities, with contact-consistent inverse-dynamics torques.
 
-The rise is played at the human's timing when the solution is one: dynamically consistent, the contact wrenches
-inside their cones, the COM within ``com_tolerance_m`` of the plan's. Otherwise the problem is solved again a little
-slower (``time_scale`` up by ``scale_step``, the knots' period with it) until one is, and the factor is reported.
+The rise is played at the human's timing when the solution is one: dynamically consistent, the contact forces inside
+their cones, every centre of pressure at least half ``cop_side_margin_m`` inside its sole, the COM within
+``com_tolerance_m`` of the plan's. Otherwise the problem is solved again a little slower (``time_scale`` up by
+``scale_step``, the knots' period with it) until one is, and the factor is reported. :func:`optimised_player` then
+plays whichever of the optimised and the per-frame plan the player's own checks play shorter.
 
 Units SI; world frame REP-103 (x forward, y left, z up).
 """
 
 from __future__ import annotations
 
+import ctypes
 import dataclasses
 import time
 
@@ -40,6 +43,17 @@ ROOT_JOINT = "root_joint"
 """Crocoddyl's floating-base actuation finds the free flyer by this name."""
 
 
+def hold_openmp_threads(n: int) -> None:
+    """Hold the calling thread's OpenMP teams to ``n`` threads. Crocoddyl's library runs on OpenMP (libgomp), which
+    by default makes a team as large as the machine for its parallel work; beside another busy process on 2 cores
+    the teams' threads spin against each other: two solves at once took 310 s each, against 16 s alone and 15.5 s
+    each held to one thread. Crocoddyl's own parallel knots (``threads``) name their team's size themselves."""
+    try:
+        ctypes.CDLL("libgomp.so.1").omp_set_num_threads(max(1, int(n)))
+    except (OSError, AttributeError):      # no GNU OpenMP runtime: nothing spins
+        pass
+
+
 class WholeRiseError(Sit2StandError, RuntimeError):
     """The optimal-control problem cannot be made for this robot model (a frame it needs is missing)."""
 
@@ -49,8 +63,8 @@ class WholeRiseConfig:
     """The whole-rise problem's settings (weights are Crocoddyl's: cost = 0.5 w |r|^2)."""
 
     knot_frames: int = 2                 # a knot every this many plan frames
-    threads: int = 1                     # Crocoddyl's OpenMP threads for the knots: 2 made a solve 1.4x faster
-    #                                      alone, and 10x slower beside another busy process on 2 cores (they spin)
+    threads: int = 1                     # Crocoddyl's threads for the knots (2: a solve 1.4x faster alone, but
+    #                                      they spin against another busy process on 2 cores)
     iterations: int = 100                 # box-FDDP iterations per time scale tried
     com_weight: float = 1e4              # per knot, on the COM [m]
     marker_weight: float = 10.0          # per knot, times each marker task's own weight, on the position [m]
@@ -130,7 +144,6 @@ class WholeRiseProblem:
     """The whole-rise problem for one robot model (with its ``sole_*``, ``seat`` and marker frames)."""
 
     def __init__(self, model: pin.Model, config: WholeRiseConfig | None = None) -> None:
-        self.cr = crocoddyl
         self.cfg = config or WholeRiseConfig()
         self.model = pin.Model(model)
         if self.model.names[1] != ROOT_JOINT:
@@ -144,8 +157,8 @@ class WholeRiseProblem:
         self.data = self.model.createData()
         self.cop_box = 2.0 * np.array([sole.half_size_m[0] - self.cfg.cop_margin_m,
                                        sole.half_size_m[1] - self.cfg.cop_side_margin_m])
-        self.state = self.cr.StateMultibody(self.model)
-        self.actuation = self.cr.ActuationModelFloatingBase(self.state)
+        self.state = crocoddyl.StateMultibody(self.model)
+        self.actuation = crocoddyl.ActuationModelFloatingBase(self.state)
         self.nu = self.actuation.nu
         self.limit = self.cfg.torque_share * self.model.effortLimit[6:]
 
@@ -173,7 +186,8 @@ class WholeRiseProblem:
             scale = round(scale + cfg.scale_step, 6)
 
     def _solve_at(self, plan: RisePlan, scale: float):
-        cr = self.cr
+        cr = crocoddyl
+        hold_openmp_threads(1)
         knots = list(range(0, len(plan.q), self.cfg.knot_frames))
         if knots[-1] != len(plan.q) - 1:
             knots.append(len(plan.q) - 1)
@@ -195,7 +209,7 @@ class WholeRiseProblem:
         return solver, knots, time.perf_counter() - t0
 
     def _solver(self, problem):
-        solver = self.cr.SolverBoxFDDP(problem)
+        solver = crocoddyl.SolverBoxFDDP(problem)
         solver.th_stop = 1e-6
         return solver
 
@@ -224,7 +238,7 @@ class WholeRiseProblem:
         return out
 
     def _knot(self, plan: RisePlan, k: int, v: np.ndarray, feet: list[pin.SE3], period_s: float, end: bool = False):
-        cr, cfg, state, nu = self.cr, self.cfg, self.state, self.nu
+        cr, cfg, state, nu = crocoddyl, self.cfg, self.state, self.nu
         contacts, costs = cr.ContactModelMultiple(state, nu), cr.CostModelSum(state, nu)
         for side, fid, placement in zip(SIDES, self.sole_ids, feet):
             contacts.addContact(f"sole_{side}", cr.ContactModel6D(state, fid, placement, pin.LOCAL, nu,
@@ -245,7 +259,7 @@ class WholeRiseProblem:
         return cr.IntegratedActionModelEuler(dam, period_s)
 
     def _tracking_costs(self, costs, plan: RisePlan, k: int, v: np.ndarray, end: bool) -> None:
-        cr, cfg, state, nu, nv = self.cr, self.cfg, self.state, self.nu, self.model.nv
+        cr, cfg, state, nu, nv = crocoddyl, self.cfg, self.state, self.nu, self.model.nv
         scale = 10.0 if end else 1.0
         costs.addCost("com", cr.CostModelResidual(state, cr.ResidualModelCoMPosition(state, plan.com[k], nu)),
                       cfg.com_weight * scale)
@@ -270,7 +284,7 @@ class WholeRiseProblem:
                       cfg.cone_weight)
 
     def _barrier(self, residual, lb: np.ndarray, ub: np.ndarray):
-        cr = self.cr
+        cr = crocoddyl
         return cr.CostModelResidual(self.state, cr.ActivationModelQuadraticBarrier(cr.ActivationBounds(lb, ub)),
                                     residual)
 
