@@ -74,6 +74,13 @@ def test_the_problem_keeps_torques_in_their_limits_and_ends_at_the_ik_standing_p
     assert result.knot_t_s[-1] == pytest.approx((n - 1) * 0.01)
 
 
+def test_a_plan_longer_than_the_optimisation_is_given_is_played_frame_by_frame_and_says_so(tmp_path):
+    summary = offline.run(ROOT / "bags" / "natural", tmp_path / "rt", whole_rise=WholeRiseConfig(max_knots=50))
+    assert summary["plan"] == "frames" and "whole_rise_time_scale" not in summary
+    assert summary["whole_rise_skipped"] == "197 knots, over the 50 the optimisation is given (max_knots)"
+    assert summary["time_scale"] == pytest.approx(summary["plan_ratio_frames"], abs=1e-9)
+
+
 def test_the_cli_offers_the_plans_the_planner_has():
     assert CLI_PLANS == offline.PLANS and CLI_DEFAULT_PLAN == offline.DEFAULT_PLAN
 

@@ -84,6 +84,8 @@ class WholeRiseConfig:
     force_tolerance_n: float = 5.0       # a solution's largest contact force outside its cone [N]
     scale_step: float = 0.05             # how much slower each retry is played
     max_time_scale: float = 1.5
+    max_knots: int = 400                 # longer plans are not optimised: a knot holds ~8 MB (each cost term keeps
+    #                                      its own derivatives; 196 knots: 1.7 GB), and a five-cycle trial ran out
 
 
 @dataclasses.dataclass
@@ -183,6 +185,7 @@ class WholeRiseProblem:
             tries.append((scale, result.feasible))
             if result.feasible or scale + cfg.scale_step > cfg.max_time_scale + 1e-9:
                 return dataclasses.replace(result, iterations=iters, solve_s=spent, tries=tries)
+            del solver           # its problem's data (~8 MB a knot) before the next try's
             scale = round(scale + cfg.scale_step, 6)
 
     def _solve_at(self, plan: RisePlan, scale: float):
@@ -331,16 +334,21 @@ class WholeRiseProblem:
 
 
 def optimised_player(model: pin.Model, frames, player: PlanPlayer, *, config: WholeRiseConfig | None = None,
-                     first_scale: float = 1.0) -> tuple[WholeRise, PlanPlayer, dict]:
+                     first_scale: float = 1.0) -> tuple[WholeRise | None, PlanPlayer, dict]:
     """The whole rise of ``frames`` (:class:`~sit2stand.retarget.stream.RetargetFrame` s, the retargeter's
     ``model``) optimised, and the player to play: one of the optimised poses at their time scale, made like
     ``player`` (which has had all the frames pushed and is closed), or ``player`` itself, the per-frame plan, where the
-    problem has no solution up to ``max_time_scale`` or the per-frame plan plays shorter. Both are checked by the
-    player's own criteria (ZMP margin, joint speeds, torques: :meth:`PlanPlayer.frame_scale`). Returns (the
-    optimisation's result, the player, ``plan`` and each plan's played ratio for the summary)."""
-    result = WholeRiseProblem(model, config).solve(RisePlan.of_frames(frames, player.dt, player.smoothed()),
-                                                   first_scale)
+    problem has no solution up to ``max_time_scale``, the per-frame plan plays shorter, or the plan is longer than
+    ``max_knots`` (then not optimised: None). Both are checked by the player's own criteria (ZMP margin, joint speeds,
+    torques: :meth:`PlanPlayer.frame_scale`). Returns (the optimisation's result, the player, ``plan`` and each
+    plan's played ratio for the summary)."""
+    cfg = config or WholeRiseConfig()
     figures = {"plan_ratio_frames": player.played_ratio()}
+    knots = -(-len(frames) // cfg.knot_frames) + 1
+    if knots > cfg.max_knots:
+        return None, player, {"plan": "frames", **figures, "whole_rise_skipped":
+                              f"{knots} knots, over the {cfg.max_knots} the optimisation is given (max_knots)"}
+    result = WholeRiseProblem(model, cfg).solve(RisePlan.of_frames(frames, player.dt, player.smoothed()), first_scale)
     if not result.feasible:
         return result, player, {"plan": "frames", **figures}
     played = player.like(planned_time_scale=result.time_scale)
