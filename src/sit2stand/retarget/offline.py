@@ -141,8 +141,8 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     (:meth:`~sit2stand.robot.model.PlantConfig.load`), not the command's default (the packaged ``default`` plant,
     26 kg hidden); parameters identified on one and simulated on the other are a model error of 26 kg. ``robot``:
     the robot profile (a packaged name or a file; None: the plant's, TALOS where it names none). ``plan``: "whole"
-    (the rise optimised as a whole, :mod:`sit2stand.retarget.whole_rise`, settings ``whole_rise``; the per-frame plan
-    where that has no solution) or "frames" (the per-frame plan, retimed by the player)."""
+    (the rise also optimised as a whole, :mod:`sit2stand.retarget.whole_rise`, settings ``whole_rise``, and the plan
+    that plays shorter played) or "frames" (the per-frame plan, retimed by the player)."""
     if plan not in PLANS:
         raise InputError(f"plan {plan!r}: one of {', '.join(PLANS)}")
     refuse_existing_bag(out / "retarget")

@@ -109,8 +109,8 @@ class PlanPlayer:
     ``push`` one pose per human frame (period ``dt``); ``pull`` once per output tick (same period) returns the next
     command, or None while the look-ahead fills. ``fixed_time_scale`` set: no adaptation (1.0: the human's
     timing); ``max_time_scale`` caps the adaptation. ``torque_limited``: the torques count in each frame's factor
-    (the model's URDF effort limits). ``planned_time_scale``: the plan is feasible at this scale already (the
-    whole-rise optimisation's): every frame needs it and no more, and only a robot trailing the plan slows it."""
+    (the model's URDF effort limits). ``planned_time_scale``: the scale the plan was made at (a whole-rise
+    optimisation's, :mod:`sit2stand.retarget.whole_rise`): every frame needs at least it."""
 
     def __init__(self, model: pin.Model, dt: float, polygon_xy: np.ndarray, *, margin_m: float = DEFAULT_MARGIN_M,
                  lookahead_s: float = LOOKAHEAD_S, smooth_s: float = SMOOTH_S,
@@ -223,8 +223,8 @@ class PlanPlayer:
     def frame_scale(self, k: int) -> float:
         """Smallest time scale (grid of 0.02, at most ``max_scale``) keeping frame ``k``'s ZMP ``margin_m`` inside the
         feet (none while the robot is on the chair), its joint speeds under ``max_joint_speed`` [rad/s] and, when
-        ``torque_limited``, its inverse-dynamics torques within the URDF effort limits; ``planned_time_scale`` where the
-        plan's dynamics were made feasible beforehand (:mod:`sit2stand.retarget.whole_rise`)."""
+        ``torque_limited``, its inverse-dynamics torques within the URDF effort limits; at least
+        ``planned_time_scale``."""
         speed = float(np.abs(self._v[k][6:]).max()) / self.max_speed if self.max_speed > 0 else 1.0
         s = 1.0
         if self._feet[k]:
