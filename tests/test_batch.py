@@ -91,8 +91,8 @@ def two_nodes(tmp_path):
 def test_a_batch_runs_on_both_nodes_and_a_killed_worker_loses_no_case(two_nodes, tmp_path):
     address, env = two_nodes
     out = tmp_path / "batch"
-    cmd = [sys.executable, "-m", "sit2stand.cli", "batch", "standup", "--robot", "g1", "--cad", "--address", address,
-           "--out", str(out)]
+    cmd = [sys.executable, "-m", "sit2stand.cli", "batch", "standup", "--robot", "g1", "--cad", "--plan", "frames",
+           "--address", address, "--out", str(out)]
     proc = subprocess.Popen([*cmd, "--cases", "4"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True)
     killed = None
