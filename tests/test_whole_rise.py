@@ -23,9 +23,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def natural(tmp_path_factory):
-    """``sit2stand retarget bags/natural`` (the plan only): its summary and folder."""
+    """``sit2stand retarget bags/natural --plan whole`` (the plan only): its summary and folder."""
     out = tmp_path_factory.mktemp("whole_rise") / "rt"
-    return offline.run(ROOT / "bags" / "natural", out), out
+    return offline.run(ROOT / "bags" / "natural", out, plan="whole"), out
 
 
 def test_the_natural_rise_has_a_solution_at_the_humans_timing_and_the_shorter_plan_is_played(natural):
@@ -49,7 +49,7 @@ def test_a_rise_too_fast_for_the_motors_is_slowed_by_the_least_step_that_has_a_s
     bag = tmp_path / "fast"
     assert sit2stand(["synth-human", "--duration", "0.8", "--out", str(bag)]) == 0
     config = WholeRiseConfig(scale_step=0.25, max_time_scale=2.0)
-    summary = offline.run(bag, tmp_path / "rt", whole_rise=config)
+    summary = offline.run(bag, tmp_path / "rt", plan="whole", whole_rise=config)
     tries = summary["whole_rise_tries"]
     assert tries[0] == [1.0, False] and tries[-1][1] and not any(ok for _, ok in tries[:-1])
     assert summary["whole_rise_time_scale"] == tries[-1][0] > 1.0
@@ -75,7 +75,8 @@ def test_the_problem_keeps_torques_in_their_limits_and_ends_at_the_ik_standing_p
 
 
 def test_a_plan_longer_than_the_optimisation_is_given_is_played_frame_by_frame_and_says_so(tmp_path):
-    summary = offline.run(ROOT / "bags" / "natural", tmp_path / "rt", whole_rise=WholeRiseConfig(max_knots=50))
+    summary = offline.run(ROOT / "bags" / "natural", tmp_path / "rt", plan="whole",
+                          whole_rise=WholeRiseConfig(max_knots=50))
     assert summary["plan"] == "frames" and "whole_rise_time_scale" not in summary
     assert summary["whole_rise_skipped"] == "197 knots, over the 50 the optimisation is given (max_knots)"
     assert summary["time_scale"] == pytest.approx(summary["plan_ratio_frames"], abs=1e-9)
