@@ -54,6 +54,12 @@ def hold_openmp_threads(n: int) -> None:
         pass
 
 
+def knot_frames(n: int, every: int) -> list[int]:
+    """The plan frames (of ``n``) the problem has a knot at: every ``every``-th, and the last."""
+    knots = list(range(0, n, every))
+    return knots if knots[-1] == n - 1 else [*knots, n - 1]
+
+
 class WholeRiseError(Sit2StandError, RuntimeError):
     """The optimal-control problem cannot be made for this robot model (a frame it needs is missing)."""
 
@@ -191,9 +197,7 @@ class WholeRiseProblem:
     def _solve_at(self, plan: RisePlan, scale: float):
         cr = crocoddyl
         hold_openmp_threads(1)
-        knots = list(range(0, len(plan.q), self.cfg.knot_frames))
-        if knots[-1] != len(plan.q) - 1:
-            knots.append(len(plan.q) - 1)
+        knots = knot_frames(len(plan.q), self.cfg.knot_frames)
         v = self._velocities(plan, knots, scale)
         pin.framesForwardKinematics(self.model, self.data, plan.q[0])
         feet = [self.data.oMf[i].copy() for i in self.sole_ids]
@@ -344,7 +348,7 @@ def optimised_player(model: pin.Model, frames, player: PlanPlayer, *, config: Wh
     plan's played ratio for the summary)."""
     cfg = config or WholeRiseConfig()
     figures = {"plan_ratio_frames": player.played_ratio()}
-    knots = -(-len(frames) // cfg.knot_frames) + 1
+    knots = len(knot_frames(len(frames), cfg.knot_frames))
     if knots > cfg.max_knots:
         return None, player, {"plan": "frames", **figures, "whole_rise_skipped":
                               f"{knots} knots, over the {cfg.max_knots} the optimisation is given (max_knots)"}
