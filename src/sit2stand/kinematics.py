@@ -10,29 +10,51 @@ Units SI; world frame (REP-103).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pinocchio as pin
 
 
-_SKEW_AT = [1, 2, 5, 3, 6, 7]
-"""Entries of a row-major 3 x 3 matrix that -[p]x fills, from p's coordinates ``_SKEW_FROM`` with ``_SKEW_SIGN``."""
-_SKEW_FROM = [2, 1, 0, 2, 1, 0]
-_SKEW_SIGN = np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0])
+_CROSS_AT = [4, 5, 9, 11, 15, 16]
+"""Entries of a point's (3, 6) row-major block [I | -[p]x] that hold p's coordinates ``_CROSS_FROM`` with
+``_CROSS_SIGN``: v_p = v_O + omega x p = [I | -[p]x] (v_O, omega)."""
+_CROSS_FROM = [2, 1, 2, 0, 1, 0]
+_CROSS_SIGN = np.array([1.0, -1.0, -1.0, 1.0, 1.0, -1.0])
+
+
+@dataclass(frozen=True)
+class PointSet:
+    """What a set of M frames needs precomputed (:meth:`PointJacobians.point_set`): their distinct parent joints,
+    where each frame's position lies in the product of the joints' placements with all offsets, the offsets, the
+    rows' support masks and the blocks [I | -[p]x] (M * 3, 6) whose p-entries are refilled per call."""
+
+    size: int
+    joints: list[int]
+    take: np.ndarray          # (M, 3) flat indices into the (4 * joints, M) product
+    offsets: np.ndarray       # (4, M) homogeneous offsets in the parent joints' frames [m]
+    masks: np.ndarray         # (M * 3, nv)
+    blocks: np.ndarray        # (M * 3, 6)
+    fill: np.ndarray          # flat indices of the p-entries in ``blocks``
+    source: np.ndarray        # flat indices into P (M, 3) that fill them
+    sign: np.ndarray          # and their signs
 
 
 class PointJacobians:
     """Positions and world linear Jacobians of frame origins (markers), for any subset of frames.
 
     Call after ``pin.computeJointJacobians(model, data, q)``.
-    Equal to ``pin.getFrameJacobian(model, data, f, pin.LOCAL_WORLD_ALIGNED)[:3]`` frame by frame.
+    Equal to ``pin.getFrameJacobian(model, data, f, pin.LOCAL_WORLD_ALIGNED)[:3]`` frame by frame. Per call: one
+    product of the joints' placements with all offsets, and one (M * 3, 6) x (6, nv) product with ``data.J``; the
+    rest is precomputed per set of frames (Pinocchio's per-element accessors and small batched products, not the
+    arithmetic, dominate a per-frame loop).
     """
 
     def __init__(self, model: pin.Model) -> None:
         self.model = model
         self.nv = model.nv
         self._masks: dict[int, np.ndarray] = {}
-        self._mask_sets: dict[tuple[int, ...], np.ndarray] = {}
-        self._joints_of: dict[tuple[int, ...], tuple] = {}
+        self._layouts: dict[tuple[int, ...], PointSet] = {}
 
     def support_mask(self, frame_id: int) -> np.ndarray:
         """(nv,) 1 on the velocity coordinates that move this frame, 0 elsewhere."""
@@ -46,43 +68,51 @@ class PointJacobians:
             self._masks[frame_id] = mask
         return mask
 
-    def _on_joints(self, fids: tuple[int, ...]) -> tuple[list[int], np.ndarray, np.ndarray]:
-        """The distinct parent joints of ``fids``, each frame's index among them and its offset in its joint's
-        frame, homogeneous (M, 4, 1) [m]."""
-        model = self.model
-        joints = sorted({model.frames[f].parentJoint for f in fids})
-        column = {j: i for i, j in enumerate(joints)}
-        offsets = np.array([[*model.frames[f].placement.translation, 1.0] for f in fids]).reshape(-1, 4, 1)
-        return joints, np.array([column[model.frames[f].parentJoint] for f in fids], int), offsets
+    def point_set(self, frame_ids) -> PointSet:
+        """The precomputed layout of ``frame_ids`` (cached per set): pass it instead of the ids where one set is
+        asked for again and again (a tuple's hash costs as much as a small product)."""
+        if isinstance(frame_ids, PointSet):
+            return frame_ids
+        fids = tuple(frame_ids)
+        layout = self._layouts.get(fids)
+        if layout is None:
+            model, m = self.model, len(fids)
+            joints = sorted({model.frames[f].parentJoint for f in fids})
+            column = np.array([joints.index(model.frames[f].parentJoint) for f in fids], int)
+            take = ((4 * column[:, None] + np.arange(3)) * m + np.arange(m)[:, None])
+            offsets = np.array([[*model.frames[f].placement.translation, 1.0] for f in fids]).reshape(m, 4).T
+            masks = np.repeat(np.array([self.support_mask(f) for f in fids]).reshape(m, self.nv), 3, axis=0)
+            blocks = np.tile(np.hstack([np.eye(3), np.zeros((3, 3))]), (m, 1))
+            fill = (18 * np.arange(m)[:, None] + np.array(_CROSS_AT)).ravel()
+            source = (3 * np.arange(m)[:, None] + np.array(_CROSS_FROM)).ravel()
+            sign = np.tile(_CROSS_SIGN, m)
+            layout = self._layouts[fids] = PointSet(len(fids), joints, take, offsets, masks, blocks, fill, source, sign)
+        return layout
 
     def positions(self, data: pin.Data, frame_ids) -> np.ndarray:
-        """World positions (M, 3) [m] of ``frame_ids``, from their joints' placements (after
-        ``pin.forwardKinematics``; the frames' own placements need not be updated). Equal to :func:`positions`, at a
-        third of its cost: Pinocchio's per-element accessors, not the arithmetic, dominate."""
-        fids = tuple(frame_ids)
-        if not fids:
+        """World positions (M, 3) [m] of ``frame_ids`` (or their :class:`PointSet`), from their joints' placements
+        (after ``pin.forwardKinematics``; the frames' own placements need not be updated). Equal to
+        :func:`positions`, at a third of its cost."""
+        layout = self.point_set(frame_ids)
+        if not layout.size:
             return np.zeros((0, 3))
-        on = self._joints_of.get(fids)
-        if on is None:
-            on = self._joints_of[fids] = self._on_joints(fids)
-        joints, which, offsets = on
         oMi = data.oMi.tolist()          # one call: indexing Pinocchio's vector costs ~0.6 us per element
-        X = np.array([oMi[j].homogeneous for j in joints])
-        return (X[which] @ offsets)[:, :3, 0]
+        X = np.array([oMi[j].homogeneous for j in layout.joints])
+        return (X.reshape(-1, 4) @ layout.offsets).take(layout.take)
 
-    def __call__(self, data: pin.Data, frame_ids) -> tuple[np.ndarray, np.ndarray]:
-        """World positions (M, 3) [m] and linear Jacobians (M, 3, nv) [m per unit of v] of ``frame_ids``."""
-        fids = tuple(frame_ids)
-        P = self.positions(data, fids)
-        masks = self._mask_sets.get(fids)
-        if masks is None:
-            masks = self._mask_sets[fids] = np.array([self.support_mask(int(f)) for f in fids]).reshape(-1, self.nv)
-        # v_p = v_O + omega x p = v_O - [p]x omega, for all points in one batched product
-        S = np.zeros((len(P), 9))
-        S[:, _SKEW_AT] = P[:, _SKEW_FROM] * _SKEW_SIGN
-        J = data.J[:3] + S.reshape(-1, 3, 3) @ data.J[3:]
-        J *= masks[:, None, :]
-        return P, J
+    def __call__(self, data: pin.Data, frame_ids, row_weights: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """World positions (M, 3) [m] and linear Jacobians (M, 3, nv) [m per unit of v] of ``frame_ids`` (or their
+        :class:`PointSet`); with ``row_weights`` (M * 3,), each Jacobian row scaled by its weight."""
+        layout = self.point_set(frame_ids)
+        P = self.positions(data, layout)
+        blocks = layout.blocks
+        blocks.flat[layout.fill] = P.take(layout.source) * layout.sign
+        if row_weights is not None:
+            blocks = blocks * row_weights[:, None]
+        J = blocks @ data.J
+        J *= layout.masks
+        return P, J.reshape(layout.size, 3, self.nv)
 
 
 def positions(data: pin.Data, frame_ids) -> np.ndarray:

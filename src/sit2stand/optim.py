@@ -6,15 +6,17 @@
 Used for the human's segment-mass scaling and the robot's inertial identification. :func:`effective_fraction`
 counts the independent rows of a smooth, sampled residual. Also reports the condition
 number of the scaled, weighted problem, so that callers can refuse an ill-conditioned one with the number in hand.
+
+:class:`WarmQp`: a small dense QP warm-started from call to call (the retargeter's IK steps).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import daqp
 import numpy as np
 import proxsuite   # at import (~0.1 s), not inside a live node's first solve
-from scipy.linalg import lapack
 from .errors import InputError
 
 
@@ -99,88 +101,51 @@ def effective_fraction(r: np.ndarray, series_id: np.ndarray | None) -> float:
     return (1 - rho) / (1 + rho)
 
 
-class ActiveSetQp:
-    """A small dense QP solved exactly by a primal-dual active set on its bounds and inequality rows:
+class WarmQp:
+    """A small dense QP, warm-started from one call to the next:
 
         minimise  1/2 x' H x + g' x   subject to  A x = b,  C x >= d,  lo <= x <= hi      (H positive definite)
 
-    Each pass fixes the working set's variables at their bounds, makes its rows equalities and solves the reduced
-    KKT system; the next working set takes the free variables and rows that the answer violates and keeps the fixed
-    ones whose multipliers have the right sign. It starts from the last call's working set: between the
-    Gauss-Newton steps of one frame and the frames of a motion, the joints on their limits change little, and one
-    or two KKT solves (tens of microseconds) replace an interior-point or proximal solve.
-
-    :meth:`solve` returns x only where the KKT conditions hold to ``tol`` (then x is the optimum, to rounding);
-    None where it cannot tell (a singular KKT system, e.g. equalities that the fixed variables make dependent or
-    infeasible, or no settled working set within ``max_passes``): the caller's general solver decides. A working set
-    that fails is dropped: the pass starts again from an empty one.
+    One DAQP call (a dual active-set solver: Arnstrom, Bemporad, Axehill, IEEE TAC 2022; the bounds first, then the
+    rows, equalities as rows with equal bounds), started from the multipliers of the last solve of the same shape:
+    between the Gauss-Newton steps of one frame and the frames of a motion the bounds that hold change little, and
+    a solve takes ~20 us at 38 unknowns. A warm start that fails is solved again cold; a problem with no solution
+    (equalities the bounds cannot meet) gets None.
     """
 
-    def __init__(self, max_passes: int = 8, tol: float = 1e-9) -> None:
-        self.max_passes = max_passes
-        self.tol = tol
-        self._at_lo = self._at_hi = np.zeros(0, bool)
-        self._rows = np.zeros(0, bool)
+    def __init__(self) -> None:
+        self._multipliers: dict[tuple[int, int, int], np.ndarray] = {}     # the last solve's, per shape
+        self._sense: dict[tuple[int, int, int], np.ndarray] = {}
+        self._last: tuple | None = None     # H, g, rows, x, multipliers of the last solved problem
 
     def solve(self, H: np.ndarray, g: np.ndarray, A: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray,
               C: np.ndarray | None = None, d: np.ndarray | None = None) -> np.ndarray | None:
         n = len(g)
-        C = np.zeros((0, n)) if C is None else C
-        d = np.zeros(0) if d is None else d
-        if len(self._at_lo) != n or len(self._rows) != len(C):
-            self._at_lo, self._at_hi, self._rows = np.zeros(n, bool), np.zeros(n, bool), np.zeros(len(C), bool)
-        x = self._passes(H, g, A, b, lo, hi, C, d, self._at_lo & (lo > -1e19), self._at_hi & (hi < 1e19),
-                         self._rows)
-        if x is None and (self._at_lo.any() or self._at_hi.any() or self._rows.any()):
-            # the last working set does not fit this problem: from an empty one (kept for the next call if it fails)
-            self._at_lo, self._at_hi, self._rows = np.zeros(n, bool), np.zeros(n, bool), np.zeros(len(C), bool)
-            x = self._passes(H, g, A, b, lo, hi, C, d, self._at_lo, self._at_hi, self._rows)
+        key = (n, len(b), 0 if C is None else len(d))
+        sense = self._sense.get(key)
+        if sense is None:
+            sense = self._sense[key] = np.zeros(sum(key), np.int32)
+            sense[n:n + key[1]] = 5        # DAQP: an equality (active, immutable)
+        if C is None:
+            rows, upper, lower = A, np.concatenate((hi, b)), np.concatenate((lo, b))
+        else:
+            rows = np.vstack((A, C))
+            upper, lower = np.concatenate((hi, b, np.full(len(d), 1e30))), np.concatenate((lo, b, d))
+        start = self._multipliers.pop(key, None)
+        x, _, flag, info = daqp.solve(H, g, rows, upper, lower, sense, dual_start=start)
+        if flag != 1 and start is not None:
+            x, _, flag, info = daqp.solve(H, g, rows, upper, lower, sense)
+        if flag != 1:
+            self._last = None
+            return None
+        self._multipliers[key] = info["lam"]
+        self._last = (H, g, rows, x, info["lam"])
         return x
 
-    def _passes(self, H, g, A, b, lo, hi, C, d, at_lo, at_hi, rows) -> np.ndarray | None:
-        """Working-set passes from (at_lo, at_hi, rows); x, and the settled set kept for the next call."""
-        t = self.tol
-        for _ in range(self.max_passes):
-            solved = self._kkt(H, g, A, b, lo, hi, C, d, at_lo, at_hi, rows)
-            if solved is None:
-                return None
-            x, r, sigma = solved
-            # a fixed variable sits on its bound exactly, and a free one has r = 0: one test covers both kinds
-            add_lo, add_hi = x < lo - t, x > hi + t
-            drop_lo, drop_hi = at_lo & (r < -t), at_hi & (r > t)
-            add_rows, drop_rows = (C @ x < d - t) & ~rows, rows & (sigma < -t)
-            if not (add_lo.any() or add_hi.any() or drop_lo.any() or drop_hi.any() or add_rows.any()
-                    or drop_rows.any()):
-                self._at_lo, self._at_hi, self._rows = at_lo, at_hi, rows
-                return x
-            at_lo, at_hi = (at_lo & ~drop_lo) | add_lo, (at_hi & ~drop_hi) | add_hi
-            rows = (rows & ~drop_rows) | add_rows
-        return None
-
-    @staticmethod
-    def _kkt(H, g, A, b, lo, hi, C, d, at_lo, at_hi, rows):
-        """x with the working set held, the bound multipliers r (the Lagrangian's gradient on the fixed variables)
-        and the rows' multipliers sigma (>= 0 at the optimum on the active rows, 0 on the others); None when the
-        KKT system is singular."""
-        fixed = at_lo | at_hi
-        free = np.flatnonzero(~fixed)
-        x = np.where(at_lo, lo, np.where(at_hi, hi, 0.0))
-        E, e = (np.vstack([A, C[rows]]), np.concatenate([b, d[rows]])) if rows.any() else (A, b)
-        Ef = E.take(free, 1)
-        nf, m = len(free), len(E)
-        K = np.zeros((nf + m, nf + m))
-        K[:nf, :nf] = H.take(free, 0).take(free, 1)
-        K[:nf, nf:] = Ef.T
-        K[nf:, :nf] = Ef
-        rhs = np.empty(nf + m)
-        rhs[:nf] = -(g.take(free) + H.take(free, 0) @ x)      # x is 0 on the free variables
-        rhs[nf:] = e - E @ x
-        sol, info = lapack.dgesv(K, rhs)[2:]           # LAPACK directly: numpy's wrapper costs as much again
-        if info != 0 or not np.isfinite(sol).all() or np.abs(K @ sol - rhs).max() > 1e-8 * (1.0 + np.abs(rhs).max()):
-            return None
-        x[free] = sol[:nf]
-        nu = sol[nf:]
-        r = H @ x + g + E.T @ nu
-        sigma = np.zeros(len(C))
-        sigma[rows] = -nu[len(A):]
-        return x, r, sigma
+    def dual_residual(self) -> float:
+        """The last solve's stationarity residual max |H x + g + multipliers' forces| (inf if it found none)."""
+        if self._last is None:
+            return float("inf")
+        H, g, rows, x, lam = self._last
+        n = len(x)
+        return float(np.abs(H @ x + g + lam[:n] + rows.T @ lam[n:]).max())

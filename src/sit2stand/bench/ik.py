@@ -129,15 +129,26 @@ def frame_sites(model: pin.Model, frame_ids: list[int], robot: str) -> str:
     return spec.to_xml()
 
 
+def picklable(model: pin.Model) -> pin.Model:
+    """A copy of ``model`` whose infinite limits are +-1e300: Pinocchio 4.0's text archive writes ``inf`` but cannot
+    read it back ("input stream error")."""
+    out = pin.Model(model)
+    for name in dir(out):
+        value = getattr(out, name)
+        if name.endswith("Limit") and isinstance(value, np.ndarray) and np.isinf(value).any():
+            setattr(out, name, np.nan_to_num(value, posinf=1e300, neginf=-1e300))
+    return out
+
+
 def problem_file(rt: Retargeter, fids: list[int], problems: list[dict], robot: str, out: Path) -> None:
     """Everything the rival solvers' process needs, pickled: the model with its marker frames, the MJCF with the
     matching sites, the soles, the retargeter's weights, limits and damping, and the problems."""
     model, ik = rt.model, rt.ik
     soles = [model.frames[f].name for f in rt.robot.sole_frames]
-    payload = {"model": model, "mjcf": frame_sites(model, fids + list(rt.robot.sole_frames), robot),
+    payload = {"model": picklable(model), "mjcf": frame_sites(model, fids + list(rt.robot.sole_frames), robot),
                "markers": [model.frames[f].name for f in fids], "soles": soles, "site_prefix": SITE_PREFIX,
                "sole_targets": [X.homogeneous for X in rt.robot.sole_targets], "mu": ik.mu, "v_max": ik.v_max,
-               "dt": ik.dt, "damping": ik.damping, "qp_eps_abs": ik.eps_abs, "problems": problems}
+               "dt": ik.dt, "damping": ik.damping, "problems": problems}
     out.write_bytes(pickle.dumps(payload))
 
 

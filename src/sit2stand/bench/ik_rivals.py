@@ -52,7 +52,6 @@ class Ours:
         self.model = s["model"]
         self.ik = ComIk(self.model, [self.model.getFrameId(n) for n in s["soles"]], s["v_max"], s["dt"],
                         posture_weight=s["mu"], damping=s["damping"])
-        self.ik.eps_abs = s["qp_eps_abs"]
         self.fids = [self.model.getFrameId(n) for n in s["markers"]]
         self.soles = [pin.SE3(X) for X in s["sole_targets"]]
 

@@ -11,7 +11,8 @@ Each frame solves, by damped Gauss-Newton steps on the configuration q (Pinocchi
                 q_j accelerates against gravity within its motor's room               (trunk lift-off)
                 z_base(q) >= z_min                                                    (hips clear of the seat)
 
-with one dense QP (proxsuite) per step in the tangent step dq:
+with one dense QP (:class:`~sit2stand.optim.WarmQp`: DAQP, warm-started from the last step's multipliers) per step
+in the tangent step dq:
 ``min 1/2 dq' H dq + g' dq  s.t.  A dq = b,  C dq >= d,  l <= dq <= u`` built from the frame, COM and sole
 Jacobians.
 Iterations are warm-started from the previous frame's solution. If the COM target cannot be met with the feet
@@ -46,15 +47,15 @@ Units SI; frames by Pinocchio frame id; positions in the world frame (REP-103).
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
-import proxsuite   # at import (~0.1 s): a node imports this before its stream starts
 
-from ..kinematics import PointJacobians
-from ..optim import ActiveSetQp
+from ..kinematics import PointJacobians, PointSet
+from ..optim import WarmQp
 from ..robot.profile import profile_of
 
 
@@ -97,7 +98,7 @@ class IkResult:
     marker_rms_m: float        # RMS marker distance
     iterations: int
     step_norm: float           # size of the last Gauss-Newton step (small at a local optimum)
-    kkt_dual_residual: float   # dual (stationarity) residual of the last QP
+    kkt_dual_residual: float   # the last step's QP stationarity residual max |H dq + g + multipliers' forces|
     seconds: float
 
 
@@ -110,7 +111,7 @@ class _Frame:
     targets: np.ndarray
     weights: np.ndarray
     com_target: np.ndarray
-    axes: list[int]
+    axes: np.ndarray
     sole_targets: list[pin.SE3]
     q_ref: np.ndarray
     q_prev: np.ndarray | None
@@ -120,9 +121,13 @@ class _Frame:
     base_z_min: float | None = None              # the base's lowest world z [m] (hips off the seat)
     lift_speed_prev: np.ndarray | None = None    # the trunk joints' speeds into the previous frame [rad/s]
     joint_targets: list[tuple[int, float, float]] = field(default_factory=list)   # (tangent index, rad, 1/rad^2)
+    q_lo: np.ndarray | None = None    # the joints' box over this frame's steps: their limits, and the speed limits
+    q_hi: np.ndarray | None = None    # from the previous frame [rad] (nq - 7)
+    points: PointSet | None = None    # the markers' frames, laid out for :class:`PointJacobians`
 
     def __post_init__(self) -> None:
         self.root_weights = np.repeat(np.sqrt(self.weights), 3)     # per coordinate: H = (sqrt(W) J)' (sqrt(W) J)
+        self.axes = np.asarray(self.axes, int)
 
 
 class ComIk:
@@ -153,13 +158,13 @@ class ComIk:
         self.mu = np.broadcast_to(np.asarray(posture_weight, float), (model.nv,)).copy()
         self.mu[:6] = 0.0
         self.damping = damping
+        self._diagonal = self.mu + damping
         self.v_max = np.broadcast_to(np.asarray(velocity_limit, float), (model.nv - 6,)).copy()
         self.q_lo = model.lowerPositionLimit[7:].copy()
         self.q_hi = model.upperPositionLimit[7:].copy()
-        self._proxsuite = proxsuite
-        self._qp: dict[tuple[int, int, int], object] = {}
-        self._active_set = ActiveSetQp()
-        self.eps_abs = 1e-9
+        self._free_base_lo = np.full(model.nv, -1e20)     # step bounds: the base's six are free
+        self._free_base_hi = np.full(model.nv, 1e20)
+        self._qp = WarmQp()
         self.points = PointJacobians(model)
         self.momentum_weight = momentum_weight
         self._weight_g = float(pin.computeTotalMass(model)) * 9.81
@@ -172,28 +177,11 @@ class ComIk:
         self._last_solve: tuple[np.ndarray, np.ndarray] | None = None    # (q_prev, solution) of the last frame
         self._lift_inertia: np.ndarray | None = None
 
-    def _solve_qp(self, H, g, A, b, lo, hi, C=None, d=None):
-        """min 1/2 dq' H dq + g' dq s.t. A dq = b, C dq >= d, lo <= dq <= hi: dq, solved, dual residual. The exact
-        active set first (:class:`~sit2stand.optim.ActiveSetQp`: a KKT solve or two); where it cannot settle, a
-        warm proxsuite QP per shape, whose status also tells an infeasible problem."""
-        dq = self._active_set.solve(H, g, A, b, lo, hi, C, d)
-        if dq is not None:
-            return dq, True, 0.0
-        n_in = 0 if C is None else C.shape[0]
-        u = None if C is None else np.full(n_in, 1e20)
-        key = (A.shape[0], n_in, len(lo))
-        qp = self._qp.get(key)
-        if qp is None:
-            qp = self._proxsuite.proxqp.dense.QP(self.nv, A.shape[0], n_in, True)
-            qp.settings.eps_abs = self.eps_abs
-            qp.settings.verbose = False
-            qp.init(H, g, A, b, C, d, u, lo, hi)
-            self._qp[key] = qp
-        else:
-            qp.update(H, g, A, b, C, d, u, lo, hi)
-        qp.solve()
-        status = str(qp.results.info.status)
-        return qp.results.x.copy(), "SOLVED" in status and "INACCURATE" not in status, float(qp.results.info.dua_res)
+    def _solve_qp(self, H, g, A, b, lo, hi, C=None, d=None) -> tuple[np.ndarray, bool]:
+        """min 1/2 dq' H dq + g' dq s.t. A dq = b, C dq >= d, lo <= dq <= hi: dq (zero if it has no solution) and
+        whether it was solved (:class:`~sit2stand.optim.WarmQp`)."""
+        dq = self._qp.solve(H, g, A, b, lo, hi, C, d)
+        return (np.zeros(self.nv), False) if dq is None else (dq, True)
 
     def solve(self, q0: np.ndarray, markers: list[tuple[int, np.ndarray, float]], com_target: np.ndarray,
               sole_targets: list[pin.SE3], q_ref: np.ndarray | None = None, com_axes: tuple[int, ...] = (0, 1, 2),
@@ -214,65 +202,68 @@ class ComIk:
                        np.array([m[2] for m in markers], float), com_target, list(com_axes), sole_targets,
                        q0 if q_ref is None else q_ref, q_prev, base_xz, base_weight, base_pitch_min, base_z_min,
                        joint_targets=list(joint_targets or ()))
+        frame.points = self.points.point_set(frame.fids)
         frame.lift_speed_prev = self._lift_speed_prev(q_prev)
+        frame.q_lo, frame.q_hi = self.q_lo, self.q_hi
+        if q_prev is not None:      # speed limits: from the previous frame, over all of this frame's iterations
+            frame.q_lo = np.maximum(self.q_lo, q_prev[7:] - self.v_max * self.dt)
+            frame.q_hi = np.minimum(self.q_hi, q_prev[7:] + self.v_max * self.dt)
         self._lift_inertia = None        # the trunk's inertia about its joints, once per frame (see _bound_lift)
         q = q0.copy()
-        feasible, dua = True, 0.0
+        feasible = True
         step = np.inf
         it = 0
         while it < max_iterations:
             it += 1
-            dq, com_held, dua = self._step(q, frame)
+            dq, com_held = self._step(q, frame)
             feasible = feasible and com_held
-            q = self._integrate(q, dq, q_prev)
-            step = float(np.linalg.norm(dq))
+            q = self._integrate(q, dq, frame)
+            step = _norm(dq)
             if step < tol:
                 break
         self._last_solve = None if q_prev is None else (q_prev.copy(), q.copy())
         if self.momentum_weight > 0:
             self._L_prev = None if q_prev is None else \
                 pin.computeCentroidalMap(self.model, self.data, q)[3:] @ pin.difference(self.model, q_prev, q) / self.dt
-        return self._result(q, frame, feasible, it, step, dua, t0)
+        return self._result(q, frame, feasible, it, step, t0)
 
-    def _step(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, bool, float]:
-        """One Gauss-Newton step dq (tangent) from q; whether the COM equality was kept; the QP's dual residual."""
+    def _step(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, bool]:
+        """One Gauss-Newton step dq (tangent) from q (zero if no QP could be solved); whether the COM equality
+        was kept."""
         model, data = self.model, self.data
         pin.computeJointJacobians(model, data, q)          # with the joints' placements (the markers need no more)
-        Jc = pin.jacobianCenterOfMass(model, data, False)
-        com = data.com[0].copy()
+        Jc = pin.jacobianCenterOfMass(model, data, False).take(f.axes, 0)
+        e_com = (f.com_target - data.com[0]).take(f.axes)
         H, g = self._soft_tasks(q, f)
-        A_feet, b_feet = self._hard_rows(q, f, H, g)
-        A = np.vstack([A_feet, Jc[f.axes]])
-        b = np.concatenate([b_feet, (f.com_target - com)[f.axes]])
+        rows, rhs = self._hard_rows(q, f, H, g)
+        A, b = np.vstack((*rows, Jc)), np.concatenate((*rhs, e_com))
+        n_feet = len(b) - len(e_com)
+        A_feet, b_feet = A[:n_feet], b[:n_feet]
         lo, hi = self._bounds(q, f)
         C, d = self._base_height_row(q, f)
-        dq, ok, dua = self._solve_qp(H, g, A, b, lo, hi, C, d)
+        dq, ok = self._solve_qp(H, g, A, b, lo, hi, C, d)
         if ok:
-            return dq, True, dua
+            return dq, True
         # COM infeasible with the feet fixed and the limits: COM as a heavily weighted soft task
-        Hs = H + 1e4 * Jc[f.axes].T @ Jc[f.axes]
-        gs = g - 1e4 * Jc[f.axes].T @ (f.com_target - com)[f.axes]
-        dq, ok, dua = self._solve_qp(Hs, gs, A_feet, b_feet, lo, hi, C, d)
+        Hs = H + 1e4 * Jc.T @ Jc
+        gs = g - 1e4 * Jc.T @ e_com
+        dq, ok = self._solve_qp(Hs, gs, A_feet, b_feet, lo, hi, C, d)
         if not ok:     # not even the feet: everything soft; the box and the floor are always feasible (0 is inside
             #            the joints' box, and the floor's row has only the unbounded base translation)
             Hs += 1e6 * A_feet.T @ A_feet
             gs -= 1e6 * A_feet.T @ b_feet
-            dq, ok, dua = self._solve_qp(Hs, gs, np.zeros((0, self.nv)), np.zeros(0), lo, hi, C, d)
-            if not ok:
-                dq = np.zeros(self.nv)
-        return dq, False, dua
+            dq, ok = self._solve_qp(Hs, gs, np.zeros((0, self.nv)), np.zeros(0), lo, hi, C, d)
+        return dq, False
 
     def _soft_tasks(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, np.ndarray]:
         """Hessian and gradient of the markers, sum w ||J dq + e||^2 [m^2], and the posture prior, at q."""
         nv = self.nv
-        P, J = self.points(self.data, f.fids)
-        Jw = J.reshape(-1, nv) * f.root_weights[:, None]
+        P, Jw = self.points(self.data, f.points, f.root_weights)
+        Jw = Jw.reshape(-1, nv)
         H = Jw.T @ Jw
         g = Jw.T @ (f.root_weights * (P - f.targets).ravel())
-        post = pin.difference(self.model, f.q_ref, q)
-        post[:6] = 0.0
-        H.flat[::nv + 1] += self.mu + self.damping
-        g += self.mu * post
+        H.flat[::nv + 1] += self._diagonal
+        g += self.mu * pin.difference(self.model, f.q_ref, q)      # mu is 0 on the base
         for i, angle, w in f.joint_targets:          # q's index of a 1-DoF joint is its tangent index + 1
             H[i, i] += w
             g[i] += w * (q[i + 1] - angle)
@@ -286,9 +277,9 @@ class ComIk:
             g += self.momentum_weight * As.T @ e
         return H, g
 
-    def _hard_rows(self, q: np.ndarray, f: _Frame, H: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Equality rows A dq = b of the feet (J_sole dq = -log(X_target^-1 X)) and a held base x, z; a soft base
-        hold (``base_weight``) goes into H and g instead, in place."""
+    def _hard_rows(self, q: np.ndarray, f: _Frame, H: np.ndarray, g: np.ndarray) -> tuple[list, list]:
+        """Equality rows A dq = b of the feet (J_sole dq = -log(X_target^-1 X)) and a held base x, z, as blocks
+        to stack; a soft base hold (``base_weight``) goes into H and g instead, in place."""
         data = self.data
         rows, rhs = [], []
         for fid, target in zip(self.soles, f.sole_targets):
@@ -305,7 +296,7 @@ class ComIk:
             else:
                 H += f.base_weight * rb.T @ rb
                 g -= f.base_weight * rb.T @ eb
-        return np.vstack(rows), np.concatenate(rhs)
+        return rows, rhs
 
     def _base_height_row(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray | None, np.ndarray | None]:
         """The inequality C dq >= d keeping the base's world z at or above ``base_z_min`` (None, None without it):
@@ -318,14 +309,10 @@ class ComIk:
 
     def _bounds(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, np.ndarray]:
         """Step bounds from the joint limits, the speed limits from the previous frame and the base pitch [rad]."""
-        nv = self.nv
-        lo = np.full(nv, -1e20)
-        hi = np.full(nv, 1e20)
+        lo, hi = self._free_base_lo.copy(), self._free_base_hi.copy()
         qj = q[7:]
-        lo[6:], hi[6:] = self.q_lo - qj, self.q_hi - qj
-        if f.q_prev is not None:     # speed limits: from the previous frame, over all of this frame's iterations
-            lo[6:] = np.maximum(lo[6:], f.q_prev[7:] - self.v_max * self.dt - qj)
-            hi[6:] = np.minimum(hi[6:], f.q_prev[7:] + self.v_max * self.dt - qj)
+        np.subtract(f.q_lo, qj, out=lo[6:])
+        np.subtract(f.q_hi, qj, out=hi[6:])
         if f.base_pitch_min is not None:
             R = self.data.oMi[1].rotation
             lo[4] = min(0.0, f.base_pitch_min - np.arctan2(R[0, 2], R[2, 2]))
@@ -379,25 +366,31 @@ class ComIk:
         hi[pos] = np.minimum(hi[pos], reach[up > 0])
         lo[neg] = np.maximum(lo[neg], -reach[up < 0])
 
-    def _integrate(self, q: np.ndarray, dq: np.ndarray, q_prev: np.ndarray | None) -> np.ndarray:
-        """q (+) dq, clipped exactly to the joint limits and the speed limits from ``q_prev``."""
+    def _integrate(self, q: np.ndarray, dq: np.ndarray, f: _Frame) -> np.ndarray:
+        """q (+) dq, clipped exactly to the frame's joint box (limits and speed limits), whatever the QP's
+        tolerance."""
         q = pin.integrate(self.model, q, dq)
-        q[7:] = np.clip(q[7:], self.q_lo, self.q_hi)      # exact limits, whatever the QP's tolerance
-        if q_prev is not None:
-            q[7:] = np.clip(q[7:], q_prev[7:] - self.v_max * self.dt, q_prev[7:] + self.v_max * self.dt)
+        q[7:] = np.minimum(np.maximum(q[7:], f.q_lo), f.q_hi)
         return q
 
-    def _result(self, q: np.ndarray, f: _Frame, feasible: bool, it: int, step: float, dua: float,
+    def _result(self, q: np.ndarray, f: _Frame, feasible: bool, it: int, step: float,
                 t0: float) -> IkResult:
         """The solution with its COM, sole and marker errors; FloatingPointError if q is not finite."""
         model, data = self.model, self.data
-        if not np.all(np.isfinite(q)):
+        if not np.isfinite(q).all():
             raise FloatingPointError("IK produced a non-finite configuration")
         com = pin.centerOfMass(model, data, q, False)       # with the joints' placements: no frame pass needed
-        marker_sq = np.sum((self.points.positions(data, f.fids) - f.targets) ** 2, axis=1)
-        sole_err = max(np.linalg.norm(pin.log6(t.actInv(pin.updateFramePlacement(model, data, fid))).vector)
+        marker_rms = 0.0
+        if len(f.fids):
+            e = (self.points.positions(data, f.points) - f.targets).ravel()
+            marker_rms = math.sqrt(e @ e / len(f.fids))
+        sole_err = max(_norm(pin.log6(t.actInv(pin.updateFramePlacement(model, data, fid))).vector)
                        for fid, t in zip(self.soles, f.sole_targets))
-        com_err = float(np.linalg.norm((com - f.com_target)[f.axes]))
-        return IkResult(q, feasible and com_err < 1e-3, com_err, float(sole_err),
-                        float(np.sqrt(np.mean(marker_sq))) if len(marker_sq) else 0.0, it, step, dua,
-                        time.perf_counter() - t0)
+        com_err = _norm((com - f.com_target).take(f.axes))
+        return IkResult(q, feasible and com_err < 1e-3, com_err, sole_err, marker_rms, it, step,
+                        self._qp.dual_residual(), time.perf_counter() - t0)
+
+
+def _norm(v: np.ndarray) -> float:
+    """The Euclidean norm of a short vector (a third of ``np.linalg.norm``'s cost)."""
+    return math.sqrt(v @ v)

@@ -114,7 +114,6 @@ class RetargetConfig:
     #                                       [1/rad^2], ramped in as the human's pelvis rises: with the markers alone
     #                                       the robot ended its rise in a squat (knees 71 degrees, the human's 8)
     iterations: int = 2                   # Gauss-Newton steps per frame (warm-started from the previous frame)
-    qp_tolerance: float = 1e-6            # proxsuite eps_abs of each step's QP
     damping: float = 0.1                  # Levenberg-Marquardt damping of each Gauss-Newton step: with less, the
     #                                       steps in the weakly fixed yaw directions (base, hips, torso) overshoot
     tolerance: float = 1e-4
@@ -209,7 +208,6 @@ class Retargeter:
                         damping=self.cfg.damping, momentum_weight=self.cfg.momentum_weight,
                         stop_torque_share=self.cfg.stop_torque_share,
                         lift_torque_share=self.cfg.lift_torque_share, dt=frame_period_s)
-        self.ik.eps_abs = self.cfg.qp_tolerance
         self.names = list(names)
         self.weights = np.array([0.0 if n not in self.marker_frames else
                                  self.cfg.weights.get(roles.group(n), 0.0) for n in names])
