@@ -15,7 +15,7 @@ import pinocchio as pin
 from scipy.signal import savgol_coeffs   # at import time: the first frame must not pay for it
 
 from ..dynamics import G, model_cop, savgol_frames
-from ..forceplate import PlateSeries, center_of_pressure
+from ..forceplate import center_of_pressure
 from ..vectors import cross
 from .calibration import CALIBRATION_MIN_MARKERS, StreamCalibration, calibrate_stream
 from .com import WINDOW_S
@@ -23,7 +23,7 @@ from .marker_ik import MIN_MARKERS, MarkerIK, check_marker_units
 from .mass_scaling import (FactorAtBound, FrameRows, MassScaling, apply_scaling, assemble_rows, frame_rows,
                            fit_mass_scaling, lengths_at_bounds, scaling_at_bounds)
 from .skeleton import Subject, build_human
-from .support import SupportRule, plate_wrench_at
+from .support import SupportRule
 
 STREAM_FIT_STEPS = 2
 """Gauss-Newton steps per streamed frame, warm-started from the last two fits (the first fit gets 40). A third step
@@ -65,12 +65,18 @@ class PlateBuffer:
         self.data[self.n:self.n + len(rows)] = rows
         self.n += len(rows)
 
-    def between(self, t_from_s: float, t_to_s: float) -> PlateSeries:
-        """The samples in [t_from_s, t_to_s) as a :class:`PlateSeries`."""
+    def mean_about(self, t_s: float, half_width_s: float) -> tuple[np.ndarray, bool]:
+        """The mean wrench (force [N], moment about the lab origin [N m]) (6,) of the samples with |t - t_s| <=
+        ``half_width_s``, and whether there are any and all are finite (as :func:`~sit2stand.human.support.
+        plate_wrench_at` averages one plate)."""
         t = self.data[:self.n, 0]
-        lo, hi = np.searchsorted(t, [t_from_s, t_to_s])
-        d = self.data[lo:hi]
-        return PlateSeries(self.name, d[:, 0], d[:, 1:4], d[:, 4:7])
+        lo = int(np.searchsorted(t, t_s - half_width_s))
+        hi = int(np.searchsorted(t, t_s + half_width_s, side="right"))
+        d = self.data[lo:hi, 1:]
+        if hi == lo or not np.isfinite(d).all():
+            return np.zeros(6), False
+        return d.sum(axis=0) / (hi - lo), True
+
 
 
 @dataclass
@@ -126,6 +132,7 @@ class StreamingComEstimator:
         self._t: list[float] = []
         self._q: list[np.ndarray] = []
         self._plates: dict[str, PlateBuffer] = {}
+        self._bins: dict[float, tuple[np.ndarray, bool]] = {}    # see _plate_bin
         self.rows: list[FrameRows] = []
         self._x: list[np.ndarray] = []       # tangent coordinates of each frame (see smooth_motion)
         self._fitted: list[bool] = []        # False: the frame's markers could not be fitted, its pose was held
@@ -344,21 +351,41 @@ class StreamingComEstimator:
         """:attr:`at_bounds` as lines for a log, each naming the segment group and the factor (empty: none)."""
         return [f.note() for f in self.at_bounds]
 
+    def _plate_bin(self, t_s: float) -> tuple[np.ndarray, bool]:
+        """All plates' summed wrench (force [N], moment about the lab origin [N m]) (6,), each plate averaged over
+        ``t_s`` +- half a frame, and whether every plate has finite samples there. Kept per marker time once every
+        plate's samples have passed it: consecutive windows share all but one frame."""
+        got = self._bins.get(t_s)
+        if got is not None:
+            return got
+        half = self.dt / 2
+        total, covered, complete = np.zeros(6), True, True
+        for buf in self._plates.values():
+            wrench, ok = buf.mean_about(t_s, half)
+            covered &= ok
+            complete &= buf.newest_t_s >= t_s + half
+            if ok:
+                total += wrench
+        if complete:
+            self._bins[t_s] = (total, covered)
+        return total, covered
+
     def _plate_wrench(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
         """Summed plate wrench at the centre of the window's marker ``times``, smoothed by the same centred
         Savitzky-Golay fit as the kinematics; covered is False if a plate has no sample there."""
-        # only the samples around the window (not the whole buffer)
-        plates = [b.between(times[0] - self.dt, times[-1] + self.dt) for b in self._plates.values()]
-        if not plates:
+        if not self._plates:
             return np.zeros(3), np.zeros(3), False
-        force, moment, covered = plate_wrench_at(times, plates, self.dt / 2)
+        bins = [self._plate_bin(float(t)) for t in times]
+        for t in [t for t in self._bins if t < times[0]]:
+            del self._bins[t]
         centre = len(times) // 2
-        if not covered[centre]:
-            for p in plates:
-                if not plate_wrench_at(times[centre:centre + 1], [p], self.dt / 2)[2][0]:
-                    self.plate_gaps[p.name] = self.plate_gaps.get(p.name, 0) + 1
-            return force[centre], moment[centre], False
-        if covered.all():
-            c = self._savgol(centre, len(times))[0]
-            return c @ force, c @ moment, True
-        return force[centre], moment[centre], True
+        wrench, covered = bins[centre]
+        if not covered:
+            for name, buf in self._plates.items():
+                if not buf.mean_about(float(times[centre]), self.dt / 2)[1]:
+                    self.plate_gaps[name] = self.plate_gaps.get(name, 0) + 1
+            return wrench[:3], wrench[3:], False
+        if all(ok for _, ok in bins):
+            smoothed = self._savgol(centre, len(times))[0] @ np.array([w for w, _ in bins])
+            return smoothed[:3], smoothed[3:], True
+        return wrench[:3], wrench[3:], True

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+from scipy.linalg import lapack
 
 from ..errors import Sit2StandError
 from ..kinematics import PointJacobians
@@ -111,6 +112,7 @@ class MarkerIK:
         self.q: np.ndarray | None = None
         self._q_prev: np.ndarray | None = None
         self.points = PointJacobians(self.model)
+        self._point_set = self.points.point_set(self.frames)
 
     def pelvis_defined(self, ok: np.ndarray) -> bool:
         """True if the valid markers ``ok`` (in :attr:`used_names` order) define the pelvis (the set's rule)."""
@@ -126,7 +128,7 @@ class MarkerIK:
 
     def _marker_positions(self, q: np.ndarray) -> np.ndarray:
         pin.forwardKinematics(self.model, self.data, q)
-        return self.points.positions(self.data, self.frames)
+        return self.points.positions(self.data, self._point_set)
 
     def initial_guess(self, positions: np.ndarray, valid: np.ndarray) -> np.ndarray:
         """Pelvis pose by a Kabsch fit of the pelvis markers; the rest at the reference posture."""
@@ -142,6 +144,38 @@ class MarkerIK:
         q[3:7] = pin.Quaternion(R).coeffs()
         return q
 
+    def _gauss_newton(self, q: np.ndarray, pos: np.ndarray, ok: np.ndarray, max_iter: int, tol: float) -> int:
+        """Damped Gauss-Newton from q on the markers ``ok`` (the others' rows weigh 0) and the posture prior; the
+        last iterate, the best one and its cost go to ``_fitted``; returns the iterations run."""
+        model, data, nv = self.model, self.data, self.model.nv
+        w_post = self.posture_weight
+        rows = np.repeat(ok, 3).astype(float)
+        target = np.where(ok[:, None], pos, 0.0).ravel()
+        damping = MIN_DAMPING
+        best_q, best_cost, JtJ, grad = q, np.inf, np.eye(nv), np.zeros(nv)
+        it = 0
+        for it in range(1, max_iter + 1):  # noqa: B007 (the count is reported after the loop)
+            pin.computeJointJacobians(model, data, q)
+            P, Jm = self.points(data, self._point_set, rows)
+            r = (P.ravel() - target) * rows
+            e_post = self._posture_error(q)
+            cost = r @ r + w_post * (e_post @ e_post)
+            if cost <= best_cost:     # downhill (or the start): keep it, and the damping back to its floor
+                J = Jm.reshape(-1, nv)
+                best_q, best_cost, JtJ, grad = q, cost, J.T @ J, J.T @ r + w_post * e_post
+                damping = max(damping / 10, MIN_DAMPING)
+            else:                     # uphill: back to the best pose, a shorter step
+                damping *= 10
+            H = JtJ.copy()
+            H.flat[::nv + 1] += w_post + damping
+            dq = -_solve_spd(H, grad)
+            q = pin.integrate(model, best_q, dq)
+            q[7:] = np.minimum(np.maximum(q[7:], self.lo[7:]), self.hi[7:])
+            if np.abs(dq).max() < tol:
+                break
+        self._fitted = (q, best_q, best_cost)
+        return it
+
     def fit(self, positions_m: np.ndarray, valid: np.ndarray, q0: np.ndarray | None = None,
             max_iter: int = 12, tol: float = 1e-5) -> FrameFit:
         """Fit one frame. ``positions_m``/``valid`` are in the stream's marker order (all names, as received)."""
@@ -156,29 +190,9 @@ class MarkerIK:
         q = q0 if q0 is not None else (self.q if self.q is not None else self.initial_guess(pos, ok))
         q = q.copy()
         q[7:] = np.clip(q[7:], self.lo[7:], self.hi[7:])
-        model, data, nv = self.model, self.data, self.model.nv
+        it = self._gauss_newton(q, pos, ok, max_iter, tol)
+        q, best_q, best_cost = self._fitted
         w_post = self.posture_weight
-        it = 0
-        damping = MIN_DAMPING
-        eye = np.eye(nv)
-        best_q, best_cost, JtJ, grad = q, np.inf, eye, np.zeros(nv)
-        for it in range(1, max_iter + 1):  # noqa: B007 (the count is reported after the loop)
-            pin.computeJointJacobians(model, data, q)
-            P, Jm = self.points(data, self.frames)
-            r = (P[ok] - pos[ok]).ravel()
-            e_post = self._posture_error(q)
-            cost = r @ r + w_post * (e_post @ e_post)
-            if cost <= best_cost:     # downhill (or the start): keep it, and the damping back to its floor
-                J = Jm[ok].reshape(-1, nv)
-                best_q, best_cost, JtJ, grad = q, cost, J.T @ J, J.T @ r + w_post * e_post
-                damping = max(damping / 10, MIN_DAMPING)
-            else:                     # uphill: back to the best pose, a shorter step
-                damping *= 10
-            dq = -np.linalg.solve(JtJ + (w_post + damping) * eye, grad)
-            q = pin.integrate(model, best_q, dq)
-            q[7:] = np.clip(q[7:], self.lo[7:], self.hi[7:])
-            if np.max(np.abs(dq)) < tol:
-                break
         err = self._marker_positions(q)[ok] - pos[ok]
         e_post = self._posture_error(q)
         if np.sum(err**2) + w_post * (e_post @ e_post) > best_cost:   # the last step went uphill
@@ -187,6 +201,13 @@ class MarkerIK:
         self._q_prev = self.q
         self.q = q
         return FrameFit(q, float(np.sqrt(np.mean(np.sum(err**2, axis=1)))), n_ok, it, True)
+
+
+def _solve_spd(H: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """H^-1 g for a symmetric positive definite H, by Cholesky (LAPACK directly: numpy's general solve and its
+    wrapper cost several times more at this size)."""
+    x, info = lapack.dposv(H, g)[1:]
+    return x if info == 0 else np.linalg.solve(H, g)
 
 
 def fit_sequence(ik: MarkerIK, positions: np.ndarray, valid: np.ndarray, progress=None) -> list[FrameFit]:
