@@ -1,12 +1,16 @@
-"""nodes/markers.py: the plan's markers say what the plan holds, in world, and each message replaces the last."""
+"""nodes/markers.py: the plan's markers say what the plan holds, in world, and each message replaces the last; the
+bytes the nodes publish are rclpy's serialization of the same message."""
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from visualization_msgs.msg import Marker
+from rclpy.serialization import deserialize_message, serialize_message
+from visualization_msgs.msg import Marker, MarkerArray
 
+from sit2stand.io.marker_message import marker_array_cdr
 from sit2stand.nodes.markers import (COM_DROP_ID, COM_ID, HUMAN_COM_DROP_ID, HUMAN_COM_ID, HUMAN_NAMESPACE,
                                     MEASURED_COP_ID, MOCAP_ID, MODEL_COP_ID, NAMESPACE, SUPPORT_ID, ZMP_ID,
-                                    human_markers, plan_markers)
+                                    human_marker_shapes, human_markers, plan_marker_shapes, plan_markers,
+                                    to_message)
 
 SQUARE = np.array([[-0.1, -0.15], [0.12, -0.15], [0.12, 0.15], [-0.1, 0.15]])
 
@@ -54,3 +58,21 @@ def test_the_human_markers_are_in_lab_with_their_own_stamps():
 def test_the_human_markers_leave_out_what_is_not_there_yet():
     msg = human_markers(Time(sec=1), np.zeros((0, 3)), None)
     assert [m.id for m in msg.markers] == [MOCAP_ID] and not msg.markers[0].points
+
+
+def test_the_published_bytes_are_what_rclpy_serializes():
+    """The nodes publish the markers as bytes: rclpy reads them back as it reads its own serialization of the same
+    message (whose padding bytes it leaves unset, so the bytes themselves are not compared), whatever the number of
+    points and the alignment the strings leave."""
+    rng = np.random.default_rng(3)
+    cases = [human_marker_shapes(Time(sec=5, nanosec=7), rng.normal(size=(n, 3)), com, Time(sec=4), cop, cop)
+             for n, com, cop in ((35, np.array([0.05, 0.0, 0.95]), np.array([0.07, 0.01, 0.0])), (0, None, None),
+                                 (3, np.array([np.nan, 0.0, 1.0]), np.array([0.1, 0.2, 0.0])))]
+    cases.append(plan_marker_shapes(Time(sec=7, nanosec=9), np.array([0.01, 0.02, 0.8]),
+                                    np.array([0.03, -0.01, 0.0]), SQUARE, frame_id="w"))
+    for shapes in cases:
+        ours, theirs = marker_array_cdr(shapes), serialize_message(to_message(shapes))
+        assert deserialize_message(ours, MarkerArray) == deserialize_message(theirs, MarkerArray)
+        assert len(ours) == len(theirs)
+    assert deserialize_message(marker_array_cdr(cases[0]), MarkerArray).markers[0].points[34].z == \
+        cases[0][0].points[34, 2]

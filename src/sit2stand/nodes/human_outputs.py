@@ -21,13 +21,14 @@ from ..human.com_stream import StreamOutput
 from ..human.description import SkeletonFrames, human_urdf
 from ..human.mass_scaling import MassScaling
 from ..human.skeleton import HumanModel
+from ..io.marker_message import marker_array_cdr
 from ..io.messages import stamp_ns
 from ..io.stream_messages import JointStateEncoder, StampedNumbersEncoder
 from ..io.tf_message import TfEncoder
 from ..io.topics import (HUMAN_COM_TOPIC, HUMAN_DESCRIPTION_TOPIC, HUMAN_JOINTS_TOPIC, HUMAN_MARKERS_TOPIC,
                          HUMAN_MEASURED_COP_TOPIC, HUMAN_MODEL_COP_TOPIC, HUMAN_PELVIS_POSE_TOPIC, HUMAN_ROOT_FRAME,
                          HUMAN_SCALING_TOPIC, LAB_FRAME, TF_TOPIC, ros_name)
-from .markers import human_markers
+from .markers import human_marker_shapes
 from .qos import LATCHED_QOS, PUBLISH_DEPTH, TF_QOS
 
 
@@ -105,7 +106,7 @@ class HumanOutputs:
                 self.pubs[name].publish(self.lab_point.encode(ns_of(out.delayed_t_s), [cop[0], cop[1], 0.0]))
 
     def viz(self, header, human: HumanModel, markers_m: np.ndarray, out: StreamOutput) -> None:
-        """The skeleton's /tf and the human's markers every ``viz_every`` frames (~0.1 ms together); the skeleton's
+        """The skeleton's /tf and the human's markers every ``viz_every`` frames (~50 us together); the skeleton's
         URDF whenever it is built or rebuilt (new lengths)."""
         if human is not self.described:
             self.described = human
@@ -118,8 +119,8 @@ class HumanOutputs:
         if np.all(np.isfinite(out.q)):
             self.pubs["tf"].publish(self.tf_encoder.encode(stamp_ns(header), *self.frames.transforms(out.q)))
         cop_stamp = stamp_of(out.delayed_t_s) if out.delayed_t_s is not None else None
-        self.pubs["viz"].publish(human_markers(header.stamp, markers_m, self.last_com, cop_stamp, out.measured_cop_m,
-                                               out.model_cop_m))
+        self.pubs["viz"].publish(marker_array_cdr(human_marker_shapes(header.stamp, markers_m, self.last_com, cop_stamp,
+                                                                      out.measured_cop_m, out.model_cop_m)))
 
     def scaling(self, stamp, sc: MassScaling) -> None:
         names = [f"{g}.mass" for g in sc.masses] + ["torso.com_shift_x", "torso.com_shift_y"]

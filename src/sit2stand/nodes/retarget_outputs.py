@@ -15,11 +15,12 @@ from sit2stand_msgs.msg import CenterOfMass
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
+from ..io.marker_message import marker_array_cdr
 from ..io.stream_messages import CenterOfMassEncoder, JointStateEncoder, JointTrajectoryEncoder, StampedNumbersEncoder
 from ..io.topics import (ROBOT_COM_FEEDBACK_TOPIC, ROBOT_JOINT_COMMAND_TOPIC, ROBOT_PLANNED_COM_TOPIC,
                          ROBOT_PLANNED_ZMP_TOPIC, ROBOT_RETARGET_IK_TOPIC, VIZ_MARKERS_TOPIC, WORLD_FRAME, ros_name)
 from ..retarget.player import Command
-from .markers import plan_markers
+from .markers import plan_marker_shapes
 from .qos import PUBLISH_DEPTH
 
 ROOT_COORDINATES = [f"root_{c}" for c in ("x", "y", "z", "qx", "qy", "qz", "qw")]
@@ -63,7 +64,8 @@ class RetargetOutputs:
             self.pubs["feedback"].publish(self.encoders["feedback"].encode(t_ns, [offset_m[0], offset_m[1], 0.0]))
         self.commands += 1
         if self.markers_every > 0 and self.support_xy is not None and (self.commands - 1) % self.markers_every == 0:
-            self.pubs["viz"].publish(plan_markers(now.to_msg(), cmd.com, cmd.zmp, self.support_xy))   # ~0.15 ms
+            self.pubs["viz"].publish(marker_array_cdr(plan_marker_shapes(now.to_msg(), cmd.com, cmd.zmp,
+                                                                         self.support_xy)))
         return sent
 
     def ik_pose(self, t_ns: int, q: np.ndarray) -> None:
