@@ -55,6 +55,7 @@ class PointJacobians:
         self.nv = model.nv
         self._masks: dict[int, np.ndarray] = {}
         self._layouts: dict[tuple[int, ...], PointSet] = {}
+        self._weighted: tuple | None = None     # (set, row weights, masks weighted by them) of the last call
 
     def support_mask(self, frame_id: int) -> np.ndarray:
         """(nv,) 1 on the velocity coordinates that move this frame, 0 elsewhere."""
@@ -103,16 +104,20 @@ class PointJacobians:
     def __call__(self, data: pin.Data, frame_ids, row_weights: np.ndarray | None = None
                  ) -> tuple[np.ndarray, np.ndarray]:
         """World positions (M, 3) [m] and linear Jacobians (M, 3, nv) [m per unit of v] of ``frame_ids`` (or their
-        :class:`PointSet`); with ``row_weights`` (M * 3,), each Jacobian row scaled by its weight."""
+        :class:`PointSet`); with ``row_weights`` (M * 3,), each Jacobian row scaled by its weight (kept, masks
+        and weights together, for the next call with the same array: change its values only in a new array)."""
         layout = self.point_set(frame_ids)
         P = self.positions(data, layout)
-        blocks = layout.blocks
-        blocks.flat[layout.fill] = P.take(layout.source) * layout.sign
-        if row_weights is not None:
-            blocks = blocks * row_weights[:, None]
-        J = blocks @ data.J
-        J *= layout.masks
+        layout.blocks.flat[layout.fill] = P.take(layout.source) * layout.sign
+        J = layout.blocks @ data.J
+        J *= layout.masks if row_weights is None else self._weighted_masks(layout, row_weights)
         return P, J.reshape(layout.size, 3, self.nv)
+
+    def _weighted_masks(self, layout: PointSet, row_weights: np.ndarray) -> np.ndarray:
+        last = self._weighted
+        if last is None or last[0] is not layout or last[1] is not row_weights:
+            last = self._weighted = (layout, row_weights, layout.masks * row_weights[:, None])
+        return last[2]
 
 
 def positions(data: pin.Data, frame_ids) -> np.ndarray:

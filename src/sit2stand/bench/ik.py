@@ -17,7 +17,7 @@ the machine's state weighs on all alike, and writes its figures back; this modul
 ``bench/results/ik.json``: per solver ``ms_p50``, ``ms_p99`` and their ratios to ours (``ratio_p50``,
 ``ratio_p99``: theirs over ours), for 2 Gauss-Newton iterations (what the retargeter runs per frame) and converged
 (up to 20 iterations, step below 1e-6), with the agreement of the answers (marker cost, COM and sole residuals,
-evaluated alike for all).
+evaluated alike for all). BLAS runs on one thread there (:data:`ONE_BLAS_THREAD`).
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import importlib.metadata as metadata
 import json
+import os
 import pickle
 import subprocess
 import sys
@@ -46,6 +47,10 @@ RIVALS_EXTRA = "bench-ik"
 """sit2stand's optional dependencies that name the rivals and their pins (``src/pyproject.toml``)."""
 SHARED = ("pin", "mujoco", "proxsuite", "daqp", "numpy", "pyyaml")
 """Installed in ``.venv-ik`` at sit2stand's own versions: the same Pinocchio, MuJoCo and QP binaries on both sides."""
+ONE_BLAS_THREAD = {"OPENBLAS_NUM_THREADS": "1"}
+"""The solvers' process runs BLAS on one thread: their products are small, and OpenBLAS's threads, woken by one
+solver's larger product, spin on the host's other core and slow the next solver (mink's p99 in its own pass was
+5 ms against 1.3 ms with one thread, on 2 cores)."""
 TARGET_RATIO_P50 = 10.0     # mink (DAQP) p50 over ours: the target (floor 5)
 TARGET_RATIO_P99 = 5.0
 
@@ -191,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
         payload, figures = Path(tmp) / "problems.pkl", Path(tmp) / "figures.json"
         problem_file(rt, fids, problems, args.robot, payload)
         done = subprocess.run([str(python), "-m", "sit2stand.bench.ik_rivals", str(payload), str(figures),
-                               "--rounds", str(args.rounds)])
+                               "--rounds", str(args.rounds)], env={**os.environ, **ONE_BLAS_THREAD})
         if done.returncode != 0 or not figures.is_file():
             print("bench-ik: the rivals' process failed", file=sys.stderr)
             return 1

@@ -98,7 +98,6 @@ class IkResult:
     marker_rms_m: float        # RMS marker distance
     iterations: int
     step_norm: float           # size of the last Gauss-Newton step (small at a local optimum)
-    kkt_dual_residual: float   # the last step's QP stationarity residual max |H dq + g + multipliers' forces|
     seconds: float
 
 
@@ -107,7 +106,7 @@ class _Frame:
     """One frame's targets: markers (frame ids, positions [m], weights), the COM [m] on ``axes``, the soles, the
     posture reference, the previous frame and the base holds (x, z [m]; pitch [rad])."""
 
-    fids: list[int]
+    fids: tuple[int, ...]
     targets: np.ndarray
     weights: np.ndarray
     com_target: np.ndarray
@@ -198,8 +197,9 @@ class ComIk:
         ``joint_targets``: (tangent index, angle [rad], weight [1/rad^2]) soft tasks on single joints (the human's
         knee flexion)."""
         t0 = time.perf_counter()
-        frame = _Frame([int(m[0]) for m in markers], np.array([m[1] for m in markers], float).reshape(-1, 3),
-                       np.array([m[2] for m in markers], float), com_target, list(com_axes), sole_targets,
+        fids, targets, weights = zip(*markers) if markers else ((), (), ())
+        frame = _Frame(fids, np.array(targets, float).reshape(-1, 3), np.array(weights, float), com_target,
+                       com_axes, sole_targets,
                        q0 if q_ref is None else q_ref, q_prev, base_xz, base_weight, base_pitch_min, base_z_min,
                        joint_targets=list(joint_targets or ()))
         frame.points = self.points.point_set(frame.fids)
@@ -235,8 +235,7 @@ class ComIk:
         Jc = pin.jacobianCenterOfMass(model, data, False).take(f.axes, 0)
         e_com = (f.com_target - data.com[0]).take(f.axes)
         H, g = self._soft_tasks(q, f)
-        rows, rhs = self._hard_rows(q, f, H, g)
-        A, b = np.vstack((*rows, Jc)), np.concatenate((*rhs, e_com))
+        A, b = self._hard_rows(q, f, H, g, Jc, e_com)
         n_feet = len(b) - len(e_com)
         A_feet, b_feet = A[:n_feet], b[:n_feet]
         lo, hi = self._bounds(q, f)
@@ -277,26 +276,29 @@ class ComIk:
             g += self.momentum_weight * As.T @ e
         return H, g
 
-    def _hard_rows(self, q: np.ndarray, f: _Frame, H: np.ndarray, g: np.ndarray) -> tuple[list, list]:
-        """Equality rows A dq = b of the feet (J_sole dq = -log(X_target^-1 X)) and a held base x, z, as blocks
-        to stack; a soft base hold (``base_weight``) goes into H and g instead, in place."""
-        data = self.data
-        rows, rhs = [], []
-        for fid, target in zip(self.soles, f.sole_targets):
-            err = pin.log6(target.actInv(pin.updateFramePlacement(self.model, data, fid))).vector
-            rows.append(pin.getFrameJacobian(self.model, data, fid, pin.LOCAL))
-            rhs.append(-err)
+    def _hard_rows(self, q: np.ndarray, f: _Frame, H: np.ndarray, g: np.ndarray, Jc: np.ndarray,
+                   e_com: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Equality rows A dq = b: the feet (J_sole dq = -log(X_target^-1 X)), a held base x, z, then the COM's
+        (``Jc``, ``e_com``); a soft base hold (``base_weight``) goes into H and g instead, in place."""
+        data, n_soles = self.data, 6 * len(self.soles)
+        base = f.base_xz is not None and f.base_weight is None
+        n = n_soles + 2 * base
+        A, b = np.empty((n + len(e_com), self.nv)), np.empty(n + len(e_com))
+        for k, (fid, target) in enumerate(zip(self.soles, f.sole_targets)):
+            b[6 * k:6 * k + 6] = pin.log6(target.actInv(pin.updateFramePlacement(self.model, data, fid))).vector
+            A[6 * k:6 * k + 6] = pin.getFrameJacobian(self.model, data, fid, pin.LOCAL)
+        np.negative(b[:n_soles], out=b[:n_soles])
         if f.base_xz is not None:     # base linear velocity is in the base frame: world rows are R[[0, 2]]
             rb = np.zeros((2, self.nv))
             rb[:, :3] = data.oMi[1].rotation[[0, 2]]
             eb = (np.asarray(f.base_xz, float) - q[:3])[[0, 2]]
-            if f.base_weight is None:
-                rows.append(rb)
-                rhs.append(eb)
+            if base:
+                A[n_soles:n], b[n_soles:n] = rb, eb
             else:
                 H += f.base_weight * rb.T @ rb
                 g -= f.base_weight * rb.T @ eb
-        return rows, rhs
+        A[n:], b[n:] = Jc, e_com
+        return A, b
 
     def _base_height_row(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray | None, np.ndarray | None]:
         """The inequality C dq >= d keeping the base's world z at or above ``base_z_min`` (None, None without it):
@@ -388,7 +390,12 @@ class ComIk:
                        for fid, t in zip(self.soles, f.sole_targets))
         com_err = _norm((com - f.com_target).take(f.axes))
         return IkResult(q, feasible and com_err < 1e-3, com_err, sole_err, marker_rms, it, step,
-                        self._qp.dual_residual(), time.perf_counter() - t0)
+                        time.perf_counter() - t0)
+
+    def last_dual_residual(self) -> float:
+        """The last step's QP stationarity residual max |H dq + g + multipliers' forces| (inf if it had no
+        solution): a check of the solve, computed when asked."""
+        return self._qp.dual_residual()
 
 
 def _norm(v: np.ndarray) -> float:
