@@ -211,6 +211,17 @@ class Plant:
         self.site_id = {name: m.site(name).id for name in [f"{k}_{s}" for k in ("ft", "sole") for s in SIDES]}
         feet = {s: self.ctrl.inertias[self.ctrl.getJointId(cfg.profile.foot_joint(s))] for s in SIDES}
         self.foot = {s: (float(f.mass), f.lever.copy()) for s, f in feet.items()}
+        # the same per foot, stacked in SIDES order for the sensors' batched products
+        self._ft_adr = np.array([[*range(a, a + 3), *range(b, b + 3)] for a, b in (self.ft_adr[s] for s in SIDES)])
+        self._ft_sites = np.array([self.site_id[f"ft_{s}"] for s in SIDES])
+        self._sole_sites = np.array([self.site_id[f"sole_{s}"] for s in SIDES])
+        self._ft_reading = np.array([self.ft_reading[s].T for s in SIDES])      # raw (rows) @ R' = (R raw')'
+        self._ft_bias = np.array([self.ft_bias[s] for s in SIDES])
+        self._foot_mass = np.array([self.foot[s][0] for s in SIDES])
+        self._foot_lever = np.array([self.foot[s][1] for s in SIDES])
+        self._noise_sd = np.concatenate([np.full(self.n, cfg.joint_torque_noise_nm),
+                                         np.tile([cfg.ft_force_noise_n] * 3 + [cfg.ft_torque_noise_nm] * 3,
+                                                 len(SIDES))])
         self.ff_every = max(1, int(round(1.0 / (cfg.feedforward_rate_hz * cfg.timestep_s))))
         self.wbc_every = max(1, int(round(1.0 / (WBC_RATE_HZ * cfg.timestep_s))))
         self.wbc: WholeBodyController | None = None
@@ -284,7 +295,7 @@ class Plant:
             return np.zeros(self.n)
         q = self.pin_configuration(self.data.qpos)
         q[7:] = self.q_ref
-        feet_fz = sum(self._ground_reaction(s)[2] for s in SIDES)
+        feet_fz = self._feet_vertical_force()
         seated = feedforward_seated(self.data.qpos[2], self.seated_base_z, feet_fz, self.ctrl_mass)
         return contact_feedforward(self.ctrl, self.ctrl_data, q, self.qd_ref, self.qdd_ref,
                                    self.feedforward == "inverse_dynamics", seated)
@@ -301,13 +312,17 @@ class Plant:
             v = s.qvel.copy()
             v[:3] = pin.Quaternion(s.qpos[3], s.qpos[4], s.qpos[5], s.qpos[6]).matrix().T @ s.qvel[:3]
             q_t, qd_t = reference_at(self.q_ref, self.qd_ref, self.qdd_ref, float(s.time) - self._t_ref)
-            feet_fz = sum(self._ground_reaction(side)[2] for side in SIDES)
+            feet_fz = self._feet_vertical_force()
             seat = 0.0
             if feedforward_seated(s.qpos[2], self.seated_base_z, feet_fz, self.ctrl_mass):
                 seat = max(0.0, self.ctrl_mass * G - feet_fz)
-            self._ff, self._ff_age = self.wbc.torques(q, v, q_t, qd_t, self.qdd_ref, seat), 0
+            self._ff, self._ff_age = self._within_effort(self.wbc.torques(q, v, q_t, qd_t, self.qdd_ref, seat)), 0
         self._ff_age += 1
-        return self.data.qpos[self.qadr].copy(), np.clip(self._ff, -self.effort, self.effort)
+        return self.data.qpos.take(self.qadr), self._ff
+
+    def _within_effort(self, tau: np.ndarray) -> np.ndarray:
+        """``tau`` [N m] clipped to the actuators' effort limits (once per controller update, not per step)."""
+        return np.minimum(np.maximum(tau, -self.effort), self.effort)
 
     def _servos(self, on: bool) -> None:
         """Joint position servos on (PD) or off (torque control)."""
@@ -324,7 +339,7 @@ class Plant:
                 ctrl_pd, ctrl_ff = self._torque_control()
             else:
                 if self._ff_age >= self.ff_every:          # the feed-forward changes slowly: refresh at its rate
-                    self._ff, self._ff_age = self._feedforward(), 0
+                    self._ff, self._ff_age = self._within_effort(self._feedforward()), 0
                 self._ff_age += 1
                 # PD (implicit, in the servo actuator) + feed-forward (motor); the joint clamps their sum
                 # between commands the joint controller follows the reference's own velocity and acceleration
@@ -332,7 +347,7 @@ class Plant:
                 # would make the torques jump at every update
                 q_t, qd_t = reference_at(self.q_ref, self.qd_ref, self.qdd_ref, float(self.data.time) - self._t_ref)
                 ctrl_pd = q_t - self.q_offset + self.kd / self.kp * qd_t
-                ctrl_ff = np.clip(self._ff, -self.effort, self.effort)
+                ctrl_ff = self._ff
             if self.delay_steps:
                 self._tau_queue.append((ctrl_pd, ctrl_ff))
                 if len(self._tau_queue) > self.delay_steps:
@@ -364,52 +379,57 @@ class Plant:
             self.status_text = f"fallen: pelvis at {z:.2f} m, base tilted {np.degrees(tilt):.0f} deg"
 
     # -- sensors ----------------------------------------------------------------------------------------------
-    def _ft_raw(self, side: str) -> np.ndarray:
-        fa, ta = self.ft_adr[side]
-        return np.concatenate([self.data.sensordata[fa:fa + 3], self.data.sensordata[ta:ta + 3]])
+    def _ground_reactions(self, reading: np.ndarray) -> np.ndarray:
+        """Ground reaction on each foot (SIDES order, world axes): force, and torque about the sole point (2, 6),
+        from the F/T readings (2, 6) (compensated for the foot's weight below the sensor, with the controller's
+        foot mass)."""
+        d = self.data
+        site_pos, sole = d.site_xpos[self._ft_sites], d.site_xpos[self._sole_sites]
+        R = d.site_xmat[self._ft_sites].reshape(-1, 3, 3)
+        # what the legs exert on the foot subtrees, and the feet's COMs, in world axes
+        f_parent, t_parent, lever = (R @ np.stack([reading[:, :3], reading[:, 3:], self._foot_lever], axis=2)
+                                     ).transpose(2, 0, 1)
+        r = site_pos + lever - sole                      # the feet's COMs from the soles
+        weight = self._foot_mass * G
+        out = np.empty((len(SIDES), 6))
+        out[:, :3] = -f_parent
+        out[:, 2] += weight
+        # moments about the sole: ground + leg + gravity (-m g z at the COM) balance the (static) foot
+        out[:, 3:] = -(t_parent + cross(site_pos - sole, f_parent))
+        out[:, 3] += weight * r[:, 1]
+        out[:, 4] -= weight * r[:, 0]
+        return out
 
-    def _ground_reaction(self, side: str, ft: np.ndarray | None = None) -> np.ndarray:
-        """Ground reaction on the foot (world axes): force, and torque about the sole point, from the F/T reading
-        (compensated for the foot's weight below the sensor, with the controller's foot mass)."""
-        ft = self._ft_raw(side) if ft is None else ft
-        sid = self.site_id[f"ft_{side}"]
-        site_pos = self.data.site_xpos[sid]
-        R = self.data.site_xmat[sid].reshape(3, 3)
-        f_parent, t_parent = R @ ft[:3], R @ ft[3:]       # what the leg exerts on the foot subtree, world axes
-        m_foot, lever = self.foot[side]
-        com = site_pos + R @ lever
-        sole = self.data.site_xpos[self.site_id[f"sole_{side}"]]
-        f_ground = -f_parent + m_foot * np.array([0.0, 0.0, G])
-        # moments about the sole: ground + leg + gravity balance the (static) foot
-        t_ground = -(t_parent + cross(site_pos - sole, f_parent)) - cross(com - sole, np.array([0, 0, -m_foot * G]))
-        return np.concatenate([f_ground, t_ground])
+    def _feet_vertical_force(self) -> float:
+        """The feet's summed vertical ground reaction [N] (the z of :meth:`_ground_reaction`, without the rest)."""
+        total = 0.0
+        for side in SIDES:
+            fa = self.ft_adr[side][0]
+            R = self.data.site_xmat[self.site_id[f"ft_{side}"]]      # row-major: the world z row is R[6:9]
+            total += self.foot[side][0] * G - R[6:9] @ self.data.sensordata[fa:fa + 3]
+        return float(total)
 
     def sensors(self) -> Sensors:
         cfg = self.cfg
         q = self.data.qpos[self.qadr] + self.q_offset
         if cfg.encoder_noise_rad:
             q = q + self.rng.normal(0, cfg.encoder_noise_rad, self.n)
-        tau = self.tau_gain * self.data.sensordata[self.tau_adr]
-        tau = tau + self.tau_bias + self.rng.normal(0, cfg.joint_torque_noise_nm, self.n)
-        ft, world = {}, {}
-        for side in SIDES:
-            raw = self._ft_raw(side)
-            R = self.ft_reading[side]
-            meas = np.concatenate([R @ raw[:3], R @ raw[3:]]) + self.ft_bias[side] + np.concatenate(
-                [self.rng.normal(0, cfg.ft_force_noise_n, 3), self.rng.normal(0, cfg.ft_torque_noise_nm, 3)])
-            ft[side] = meas
-            world[side] = self._ground_reaction(side, meas)
-        # combined COP on the floor from both feet: sum moments about the origin, then z = 0 plane
-        force = sum(world[s][:3] for s in SIDES)
-        moment = sum(world[s][3:] + cross(self.data.site_xpos[self.site_id[f"sole_{s}"]], world[s][:3])
-                     for s in SIDES)
+        # the noise of the torques, then of each foot's force and torque: one draw, the same numbers as drawn apart
+        noise = self.rng.standard_normal(self.n + 6 * len(SIDES)) * self._noise_sd
+        tau = self.tau_gain * self.data.sensordata[self.tau_adr] + self.tau_bias + noise[:self.n]
+        raw = self.data.sensordata[self._ft_adr].reshape(len(SIDES), 2, 3)      # side, (force, torque), xyz
+        reading = (raw @ self._ft_reading).reshape(len(SIDES), 6) + self._ft_bias + noise[self.n:].reshape(-1, 6)
+        world = self._ground_reactions(reading)
+        # the combined COP on the floor from both feet: moments about the origin, then the z = 0 plane
+        force = world[:, :3].sum(axis=0)
+        moment = (world[:, 3:] + cross(self.data.site_xpos[self._sole_sites], world[:, :3])).sum(axis=0)
         if force[2] > DEFAULT_COP_THRESHOLD_N:
             cop = np.array([-moment[1] / force[2], moment[0] / force[2], 0.0])
             ok = True
         else:
             cop, ok = np.full(3, np.nan), False
-        return Sensors(self.t_s, q, self.data.qvel[self.vadr].copy(), tau, ft, world, cop, ok,
-                       self.data.qpos[:7].copy())
+        return Sensors(self.t_s, q, self.data.qvel[self.vadr].copy(), tau, dict(zip(SIDES, reading)),
+                       dict(zip(SIDES, world)), cop, ok, self.data.qpos[:7].copy())
 
     def true_com(self) -> np.ndarray:
         """The plant's true COM [m] (for tests and figures only; controllers must not use it)."""

@@ -288,6 +288,9 @@ class WholeBodyQP:
                          time.perf_counter() - t0, time.thread_time() - cpu0)
 
 
+_IDENTITY_XYZQUAT = pin.SE3ToXYZQUAT(pin.SE3.Identity())
+
+
 def feet_anchored_reference(model: pin.Model, data: pin.Data, q: np.ndarray, v_joints: np.ndarray,
                             a_joints: np.ndarray, oM_left_sole: pin.SE3) -> Reference:
     """The full reference of joint positions, velocities and accelerations ``q[7:]``, ``v_joints``, ``a_joints``
@@ -295,18 +298,21 @@ def feet_anchored_reference(model: pin.Model, data: pin.Data, q: np.ndarray, v_j
     (both soles, when the joints are a double-support plan), and the COM's. ``q``'s base part is ignored."""
     nv = model.nv
     q = q.copy()
-    q[:7] = pin.SE3ToXYZQUAT(pin.SE3.Identity())
+    q[:7] = _IDENTITY_XYZQUAT
     fid = model.getFrameId("sole_left")
-    pin.framesForwardKinematics(model, data, q)
-    q[:7] = pin.SE3ToXYZQUAT(oM_left_sole * data.oMf[fid].inverse())
+    pin.forwardKinematics(model, data, q)
+    base_to_sole = pin.updateFramePlacement(model, data, fid).copy()
+    q[:7] = pin.SE3ToXYZQUAT(oM_left_sole * base_to_sole.inverse())
+    # the sole's LOCAL velocity is X v_base + J_joints v_joints, X the motion transform from the base to the sole:
+    # the base's velocity (and acceleration) that holds the sole is -X^-1 times the rest, X^-1 = base_to_sole's
+    to_base = base_to_sole.action
     v = np.zeros(nv)
     v[6:] = v_joints
-    J6 = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
-    v[:6] = -np.linalg.solve(J6[:, :6], J6[:, 6:] @ v_joints)
+    J_joints = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)[:, 6:]
+    v[:6] = -to_base @ (J_joints @ v_joints)
     a = np.zeros(nv)
     a[6:] = a_joints
     pin.forwardKinematics(model, data, q, v, a)
-    drift = pin.getFrameAcceleration(model, data, fid, pin.LOCAL).vector - J6[:, 6:] @ a_joints
-    a[:6] = -np.linalg.solve(J6[:, :6], J6[:, 6:] @ a_joints + drift)
+    a[:6] = -to_base @ pin.getFrameAcceleration(model, data, fid, pin.LOCAL).vector
     pin.centerOfMass(model, data, q, v, a)
     return Reference(q, v, a, data.com[0].copy(), data.vcom[0].copy(), data.acom[0].copy())
