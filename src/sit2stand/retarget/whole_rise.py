@@ -13,7 +13,7 @@ joint speeds by ``max_joint_speed``. The last knot is the IK's standing end post
 warm-started from the plan player's smoothed poses and velocities, with contact-consistent inverse-dynamics torques.
 
 The rise is played at the human's timing when the solution is one: dynamically consistent, the contact forces inside
-their cones, every centre of pressure at least half ``cop_side_margin_m`` inside its sole, the COM within
+their cones, every loaded sole's centre of pressure at least half ``cop_side_margin_m`` inside it, the COM within
 ``com_tolerance_m`` of the plan's. Otherwise the problem is solved again a little slower (``time_scale`` up by
 ``scale_step``, the knots' period with it) until one is, and the factor is reported. :func:`optimised_player` then
 plays whichever of the optimised and the per-frame plan the player's own checks play shorter.
@@ -39,6 +39,11 @@ from .player import PlanPlayer
 
 FRICTION = 0.7
 """The feet's and the seat's friction coefficient in the cones (rubber soles on the floor, cloth on a seat)."""
+COP_LOAD_SHARE = 0.02
+"""A sole's centre of pressure counts in a solution's check where the sole carries at least this share of the
+robot's weight: a lighter one tips nothing (TALOS: 20 N at most 0.1 m from the sole's centre, 2 N m), and its centre
+of pressure, a moment over a small force, swings with the last bits of the plan (a left sole at 2 N lay 0.95 or
+2 cm inside its edge in two runs of the same rise, the plans 1e-14 apart)."""
 ROOT_JOINT = "root_joint"
 """Crocoddyl's floating-base actuation finds the free flyer by this name."""
 
@@ -169,6 +174,7 @@ class WholeRiseProblem:
         self.actuation = crocoddyl.ActuationModelFloatingBase(self.state)
         self.nu = self.actuation.nu
         self.limit = self.cfg.torque_share * self.model.effortLimit[6:]
+        self.cop_load_n = COP_LOAD_SHARE * float(pin.computeTotalMass(self.model)) * 9.81
 
     def _sole_centre(self, side: str, centre_x_m: float) -> int:
         """A frame at the middle of a sole (the wrench cone's centre of pressure box is centred on its frame)."""
@@ -311,8 +317,8 @@ class WholeRiseProblem:
                          float(np.mean(np.any(np.abs(us) >= 0.999 * self.limit, axis=1))), margins)
 
     def _contact_figures(self, solver) -> tuple[float, float]:
-        """(the smallest centre-of-pressure margin inside a sole over the knots [m], the largest force outside its
-        friction cone or pulling [N])."""
+        """(the smallest centre-of-pressure margin inside a sole that carries load (:data:`COP_LOAD_SHARE`) over
+        the knots [m], the largest force outside its friction cone or pulling [N])."""
         half = self.profile.sole.half_size_m
         margin, violation = np.inf, 0.0
         for d in solver.problem.runningDatas:
@@ -321,7 +327,7 @@ class WholeRiseProblem:
                 fz = float(f[2])
                 mu = self.cfg.seat_friction if name == "seat" else FRICTION
                 violation = max(violation, -fz, float(np.hypot(f[0], f[1])) - mu * max(fz, 0.0))
-                if name != "seat" and fz > 1.0:
+                if name != "seat" and fz > self.cop_load_n:
                     cop = np.array([-c.f.angular[1], c.f.angular[0]]) / fz
                     margin = min(margin, float(min(half[0] - abs(cop[0]), half[1] - abs(cop[1]))))
         return margin, violation
