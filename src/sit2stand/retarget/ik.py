@@ -159,6 +159,7 @@ class ComIk:
         self.damping = damping
         self._diagonal = self.mu + damping
         self.v_max = np.broadcast_to(np.asarray(velocity_limit, float), (model.nv - 6,)).copy()
+        self._frame_travel = self.v_max * dt          # the most each joint moves in a frame [rad]
         self.q_lo = model.lowerPositionLimit[7:].copy()
         self.q_hi = model.upperPositionLimit[7:].copy()
         self._free_base_lo = np.full(model.nv, -1e20)     # step bounds: the base's six are free
@@ -206,8 +207,8 @@ class ComIk:
         frame.lift_speed_prev = self._lift_speed_prev(q_prev)
         frame.q_lo, frame.q_hi = self.q_lo, self.q_hi
         if q_prev is not None:      # speed limits: from the previous frame, over all of this frame's iterations
-            frame.q_lo = np.maximum(self.q_lo, q_prev[7:] - self.v_max * self.dt)
-            frame.q_hi = np.minimum(self.q_hi, q_prev[7:] + self.v_max * self.dt)
+            frame.q_lo = np.maximum(self.q_lo, q_prev[7:] - self._frame_travel)
+            frame.q_hi = np.minimum(self.q_hi, q_prev[7:] + self._frame_travel)
         self._lift_inertia = None        # the trunk's inertia about its joints, once per frame (see _bound_lift)
         q = q0.copy()
         feasible = True
@@ -221,7 +222,8 @@ class ComIk:
             step = _norm(dq)
             if step < tol:
                 break
-        self._last_solve = None if q_prev is None else (q_prev.copy(), q.copy())
+        if self.lift_torque_nm is not None:       # the trunk's speed into the next frame (see _lift_speed_prev)
+            self._last_solve = None if q_prev is None else (q_prev.copy(), q.copy())
         if self.momentum_weight > 0:
             self._L_prev = None if q_prev is None else \
                 pin.computeCentroidalMap(self.model, self.data, q)[3:] @ pin.difference(self.model, q_prev, q) / self.dt
