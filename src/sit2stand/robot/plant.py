@@ -64,6 +64,20 @@ class Sensors:
     base_pose: np.ndarray          # (7,) MuJoCo free joint: position, quaternion w x y z (what a state estimator gives)
 
 
+@dataclass(frozen=True)
+class FeetSensing:
+    """The feet's F/T sensing, stacked in SIDES order for the sensors' batched products."""
+
+    adr: np.ndarray          # (2, 6) sensordata indices: force x y z, torque x y z
+    ft_sites: np.ndarray     # (2,) the sensors' sites
+    sole_sites: np.ndarray   # (2,) the soles' sites
+    reading: np.ndarray      # (2, 3, 3) raw rows @ reading: what the sensor reads (its mounting's turn, transposed)
+    bias: np.ndarray         # (2, 6) [N, N m]
+    mass_kg: np.ndarray      # (2,) the controller model's foot below the sensor
+    lever_m: np.ndarray      # (2, 3) its COM in the sensor's frame
+    noise_sd: np.ndarray     # (n + 12,) the joint torques' noise [N m], then each foot's force and torque [N, N m]
+
+
 def seated_configuration(model: mujoco.MjModel, cfg: PlantConfig) -> np.ndarray:
     """qpos of the seated posture with the soles on the floor, the base upright above the origin."""
     names = [model.joint(i).name for i in range(1, model.njnt)]
@@ -211,17 +225,13 @@ class Plant:
         self.site_id = {name: m.site(name).id for name in [f"{k}_{s}" for k in ("ft", "sole") for s in SIDES]}
         feet = {s: self.ctrl.inertias[self.ctrl.getJointId(cfg.profile.foot_joint(s))] for s in SIDES}
         self.foot = {s: (float(f.mass), f.lever.copy()) for s, f in feet.items()}
-        # the same per foot, stacked in SIDES order for the sensors' batched products
-        self._ft_adr = np.array([[*range(a, a + 3), *range(b, b + 3)] for a, b in (self.ft_adr[s] for s in SIDES)])
-        self._ft_sites = np.array([self.site_id[f"ft_{s}"] for s in SIDES])
-        self._sole_sites = np.array([self.site_id[f"sole_{s}"] for s in SIDES])
-        self._ft_reading = np.array([self.ft_reading[s].T for s in SIDES])      # raw (rows) @ R' = (R raw')'
-        self._ft_bias = np.array([self.ft_bias[s] for s in SIDES])
-        self._foot_mass = np.array([self.foot[s][0] for s in SIDES])
-        self._foot_lever = np.array([self.foot[s][1] for s in SIDES])
-        self._noise_sd = np.concatenate([np.full(self.n, cfg.joint_torque_noise_nm),
-                                         np.tile([cfg.ft_force_noise_n] * 3 + [cfg.ft_torque_noise_nm] * 3,
-                                                 len(SIDES))])
+        self.feet = FeetSensing(
+            np.array([[*range(a, a + 3), *range(b, b + 3)] for a, b in (self.ft_adr[s] for s in SIDES)]),
+            np.array([self.site_id[f"ft_{s}"] for s in SIDES]), np.array([self.site_id[f"sole_{s}"] for s in SIDES]),
+            np.array([self.ft_reading[s].T for s in SIDES]), np.array([self.ft_bias[s] for s in SIDES]),
+            np.array([self.foot[s][0] for s in SIDES]), np.array([self.foot[s][1] for s in SIDES]),
+            np.concatenate([np.full(self.n, cfg.joint_torque_noise_nm),
+                            np.tile([cfg.ft_force_noise_n] * 3 + [cfg.ft_torque_noise_nm] * 3, len(SIDES))]))
         self.ff_every = max(1, int(round(1.0 / (cfg.feedforward_rate_hz * cfg.timestep_s))))
         self.wbc_every = max(1, int(round(1.0 / (WBC_RATE_HZ * cfg.timestep_s))))
         self.wbc: WholeBodyController | None = None
@@ -384,13 +394,14 @@ class Plant:
         from the F/T readings (2, 6) (compensated for the foot's weight below the sensor, with the controller's
         foot mass)."""
         d = self.data
-        site_pos, sole = d.site_xpos[self._ft_sites], d.site_xpos[self._sole_sites]
-        R = d.site_xmat[self._ft_sites].reshape(-1, 3, 3)
+        feet = self.feet
+        site_pos, sole = d.site_xpos[feet.ft_sites], d.site_xpos[feet.sole_sites]
+        R = d.site_xmat[feet.ft_sites].reshape(-1, 3, 3)
         # what the legs exert on the foot subtrees, and the feet's COMs, in world axes
-        f_parent, t_parent, lever = (R @ np.stack([reading[:, :3], reading[:, 3:], self._foot_lever], axis=2)
+        f_parent, t_parent, lever = (R @ np.stack([reading[:, :3], reading[:, 3:], feet.lever_m], axis=2)
                                      ).transpose(2, 0, 1)
         r = site_pos + lever - sole                      # the feet's COMs from the soles
-        weight = self._foot_mass * G
+        weight = feet.mass_kg * G
         out = np.empty((len(SIDES), 6))
         out[:, :3] = -f_parent
         out[:, 2] += weight
@@ -401,13 +412,11 @@ class Plant:
         return out
 
     def _feet_vertical_force(self) -> float:
-        """The feet's summed vertical ground reaction [N] (the z of :meth:`_ground_reaction`, without the rest)."""
-        total = 0.0
-        for side in SIDES:
-            fa = self.ft_adr[side][0]
-            R = self.data.site_xmat[self.site_id[f"ft_{side}"]]      # row-major: the world z row is R[6:9]
-            total += self.foot[side][0] * G - R[6:9] @ self.data.sensordata[fa:fa + 3]
-        return float(total)
+        """The feet's summed vertical ground reaction [N] (the z of :meth:`_ground_reactions`, without the rest):
+        each foot's weight less the world z of what its sensor reads (row-major: the z row is xmat[6:9])."""
+        d, feet = self.data, self.feet
+        return float(np.sum(feet.mass_kg) * G - np.einsum("si,si->", d.site_xmat[feet.ft_sites][:, 6:9],
+                                                           d.sensordata[feet.adr[:, :3]]))
 
     def sensors(self) -> Sensors:
         cfg = self.cfg
@@ -415,14 +424,15 @@ class Plant:
         if cfg.encoder_noise_rad:
             q = q + self.rng.normal(0, cfg.encoder_noise_rad, self.n)
         # the noise of the torques, then of each foot's force and torque: one draw, the same numbers as drawn apart
-        noise = self.rng.standard_normal(self.n + 6 * len(SIDES)) * self._noise_sd
+        feet = self.feet
+        noise = self.rng.standard_normal(self.n + 6 * len(SIDES)) * feet.noise_sd
         tau = self.tau_gain * self.data.sensordata[self.tau_adr] + self.tau_bias + noise[:self.n]
-        raw = self.data.sensordata[self._ft_adr].reshape(len(SIDES), 2, 3)      # side, (force, torque), xyz
-        reading = (raw @ self._ft_reading).reshape(len(SIDES), 6) + self._ft_bias + noise[self.n:].reshape(-1, 6)
+        raw = self.data.sensordata[feet.adr].reshape(len(SIDES), 2, 3)      # side, (force, torque), xyz
+        reading = (raw @ feet.reading).reshape(len(SIDES), 6) + feet.bias + noise[self.n:].reshape(-1, 6)
         world = self._ground_reactions(reading)
         # the combined COP on the floor from both feet: moments about the origin, then the z = 0 plane
         force = world[:, :3].sum(axis=0)
-        moment = (world[:, 3:] + cross(self.data.site_xpos[self._sole_sites], world[:, :3])).sum(axis=0)
+        moment = (world[:, 3:] + cross(self.data.site_xpos[feet.sole_sites], world[:, :3])).sum(axis=0)
         if force[2] > DEFAULT_COP_THRESHOLD_N:
             cop = np.array([-moment[1] / force[2], moment[0] / force[2], 0.0])
             ok = True
