@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from conftest import real_file
-from sit2stand.capture.convert import ClockMap, DropCounter, FrameConverter, ReconnectPolicy, plate_names, plate_stamps
+from sit2stand.capture.convert import (CaptureServer, ClockMap, DropCounter, FrameConverter, ReconnectPolicy,
+                                      StreamLayout, plate_names, plate_stamps)
 from sit2stand.capture.qtm_protocol import Component, DataFrame, PlateInfo, data_packet, decode_data
 from sit2stand.capture.recording import load_recording
 from sit2stand.io.c3d import LabAxes, read_c3d
@@ -81,3 +82,18 @@ def test_reconnect_waits_double_up_to_the_cap_and_start_again_after_a_success():
     assert [policy.next_delay_s() for _ in range(5)] == [0.2, 0.4, 0.8, 1.0, 1.0]
     policy.succeeded()
     assert policy.next_delay_s() == 0.2
+
+
+def test_a_capture_server_takes_its_protocols_port_and_refuses_unknown_settings():
+    assert CaptureServer("qtm", "10.0.0.2", 0).address == "10.0.0.2:22223"
+    assert CaptureServer("natnet", "h", 0).port == 1510 and CaptureServer("natnet", "h", 3000).port == 3000
+    with pytest.raises(ValueError, match="protocol must be 'qtm' or 'natnet', not 'vicon'"):
+        CaptureServer("vicon", "h", 0)
+    with pytest.raises(ValueError, match="transport"):
+        CaptureServer("qtm", "h", 0, transport="serial")
+
+
+def test_a_connections_layout_makes_each_plates_message_layout_once():
+    conv = FrameConverter(["a"], [], LabAxes("+X", "+Z"), {}, None)
+    layout = StreamLayout(object(), conv, None)
+    assert layout.plate("feet") is layout.plate("feet") and layout.plate("chair") is not layout.plate("feet")

@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..io.c3d import LabAxes
+from ..io.stream_messages import MocapFrameEncoder, PlateSampleEncoder
+from ..io.topics import LAB_FRAME
 from ..forceplate import DEFAULT_COP_THRESHOLD_N, wrench_in_lab
 from .qtm_protocol import DataFrame, PlateInfo
 
@@ -174,3 +176,48 @@ def plate_stamps(first_sample: int, count: int, rate_hz: float, clock: ClockMap,
     if clock.offset_ns is None:
         clock.stamp(int(capture_ns[0]), now_ns)
     return capture_ns + clock.offset_ns
+
+
+DEFAULT_PORTS = {"qtm": 22223, "natnet": 1510}
+"""QTM's little-endian RT port, NatNet's command port."""
+
+
+@dataclass(frozen=True)
+class CaptureServer:
+    """Where a bridge's capture system streams from, and how."""
+
+    protocol: str               # qtm | natnet
+    host: str
+    port: int                   # 0: the protocol's default (DEFAULT_PORTS)
+    transport: str = "tcp"      # tcp | udp (QTM streams its frames over UDP to udp_port; 0: any free port)
+    udp_port: int = 0
+    version: str = "1.25"       # the QTM RT protocol version asked for
+
+    def __post_init__(self) -> None:
+        if self.protocol not in DEFAULT_PORTS:
+            raise ValueError(f"protocol must be 'qtm' or 'natnet', not {self.protocol!r}")
+        if self.transport not in ("tcp", "udp"):
+            raise ValueError(f"transport must be 'tcp' or 'udp', not {self.transport!r}")
+        if not self.port:
+            object.__setattr__(self, "port", DEFAULT_PORTS[self.protocol])
+
+    @property
+    def address(self) -> str:
+        return f"{self.host}:{self.port}"
+
+
+@dataclass
+class StreamLayout:
+    """One connection's conversion (its labels and plates, :class:`FrameConverter`) and its messages' CDR layouts:
+    the marker frame's, and each plate's from its first sample."""
+
+    info: object
+    converter: FrameConverter
+    markers: MocapFrameEncoder
+    plates: dict[str, PlateSampleEncoder] = field(default_factory=dict)
+
+    def plate(self, name: str) -> PlateSampleEncoder:
+        encoder = self.plates.get(name)
+        if encoder is None:
+            encoder = self.plates[name] = PlateSampleEncoder(name, LAB_FRAME)
+        return encoder

@@ -37,10 +37,11 @@ from rclpy.node import Node
 from sit2stand_msgs.msg import ForcePlateSample, MocapFrame
 
 from ..capture.clients import NatNetStream, QtmStream
-from ..capture.convert import ClockMap, DropCounter, FrameConverter, ReconnectPolicy, plate_names, plate_stamps
+from ..capture.convert import (CaptureServer, ClockMap, DropCounter, FrameConverter, ReconnectPolicy, StreamLayout,
+                               plate_names, plate_stamps)
 from ..human.marker_sets import load_marker_set
 from ..io.c3d import LabAxes
-from ..io.stream_messages import MocapFrameEncoder, PlateSampleEncoder
+from ..io.stream_messages import MocapFrameEncoder
 from ..io.topics import LAB_FRAME, MARKERS_TOPIC, plate_topic
 from .runtime import NodeError, declare, node_main
 from .qos import PLATE_PUBLISH_DEPTH, qos_from_bag
@@ -51,12 +52,15 @@ class MocapBridge(Node):
 
     def __init__(self) -> None:
         super().__init__("mocap_bridge")
-        self.protocol = declare(self, "protocol", "qtm", "qtm | natnet")
-        self.host = declare(self, "host", "127.0.0.1", "capture server address")
-        port = declare(self, "port", 0, "capture server port (0: the protocol's default)")
-        self.transport = declare(self, "transport", "tcp", "tcp | udp (QTM)")
-        self.udp_port = declare(self, "udp_port", 0, "local UDP port for QTM's frames (0: any)")
-        self.version = declare(self, "version", "1.25", "QTM RT protocol version")
+        try:
+            self.server = CaptureServer(declare(self, "protocol", "qtm", "qtm | natnet"),
+                                        declare(self, "host", "127.0.0.1", "capture server address"),
+                                        declare(self, "port", 0, "capture server port (0: the protocol's default)"),
+                                        declare(self, "transport", "tcp", "tcp | udp (QTM)"),
+                                        declare(self, "udp_port", 0, "local UDP port for QTM's frames (0: any)"),
+                                        declare(self, "version", "1.25", "QTM RT protocol version"))
+        except ValueError as err:
+            raise NodeError(f"parameter {err}") from None
         self.chair = declare(self, "chair_plate", 0, "0-based index of the chair's plate (-1: none)")
         self.feet = declare(self, "feet_plate", 1, "0-based index of the feet's plate (-1: none)")
         forward = declare(self, "forward", "+X", "capture axis that is the lab's forward (x)")
@@ -65,16 +69,11 @@ class MocapBridge(Node):
                                              declare(self, "markers", [], "markers to publish, in order"))
         self.threshold_n = declare(self, "cop_threshold_n", 20.0, "COP valid above this normal force [N]")
         reconnect_max_s = declare(self, "reconnect_max_s", 2.0, "longest wait between connection attempts [s]")
-        if self.protocol not in ("qtm", "natnet"):
-            raise NodeError(f"parameter 'protocol' must be 'qtm' or 'natnet', not {self.protocol!r}")
-        if self.transport not in ("tcp", "udp"):
-            raise NodeError(f"parameter 'transport' must be 'tcp' or 'udp', not {self.transport!r}")
         try:
             self.axes = LabAxes(forward.upper(), up.upper())
             self.axes.rotation()
         except ValueError as err:
             raise NodeError(f"parameters 'forward'/'up': {err}") from None
-        self.port = port or (22223 if self.protocol == "qtm" else 1510)
         self.qos, self.plate_qos = qos_from_bag(None), qos_from_bag(None, PLATE_PUBLISH_DEPTH)
         self.marker_pub = self.create_publisher(MocapFrame, MARKERS_TOPIC, self.qos)
         # the chair's and feet's topics exist from the start, as a replayer's do: a subscriber matched before the
@@ -85,11 +84,9 @@ class MocapBridge(Node):
         self.clock, self.drops = ClockMap(), DropCounter()
         self.policy = ReconnectPolicy(max_s=reconnect_max_s)
         self.connected, self.state = False, "connecting"
-        self._info, self._converter = None, None
+        self.layout: StreamLayout | None = None       # the current connection's
         self._lock = threading.Lock()
         self._last_drop_log = 0.0
-        self._marker_encoder: MocapFrameEncoder | None = None    # per connection, with the converter
-        self._plate_encoders: dict[str, PlateSampleEncoder] = {}
         self.stream = self._make_stream()
         self.create_timer(1.0, self._report)
         self.stream.start()
@@ -105,10 +102,11 @@ class MocapBridge(Node):
             raise NodeError(f"parameter 'marker_set': {err}") from None
 
     def _make_stream(self):
-        if self.protocol == "natnet":
-            return NatNetStream(self.host, self.port, self._on_frame, self._on_status, policy=self.policy)
-        return QtmStream(self.host, self.port, self._on_frame, self._on_status, transport=self.transport,
-                         udp_port=self.udp_port, version=self.version, policy=self.policy)
+        sv = self.server
+        if sv.protocol == "natnet":
+            return NatNetStream(sv.host, sv.port, self._on_frame, self._on_status, policy=self.policy)
+        return QtmStream(sv.host, sv.port, self._on_frame, self._on_status, transport=sv.transport,
+                         udp_port=sv.udp_port, version=sv.version, policy=self.policy)
 
     # --- the client thread ---------------------------------------------------------------------------------------
     def _on_status(self, text: str, connected: bool) -> None:
@@ -124,34 +122,30 @@ class MocapBridge(Node):
         else:
             self.get_logger().error(text)
 
-    def _converter_for(self, info):
-        if info is not self._info:       # a new connection: labels and plates may have changed
+    def _layout_for(self, info) -> StreamLayout:
+        if self.layout is None or info is not self.layout.info:    # a new connection: its labels and plates
             names = plate_names(info.plates, self.chair, self.feet)
-            self._converter = FrameConverter(info.labels, info.plates, self.axes, names, self.marker_names,
-                                             self.threshold_n)
-            self._marker_encoder = MocapFrameEncoder(self._converter.marker_names, LAB_FRAME)
+            conv = FrameConverter(info.labels, info.plates, self.axes, names, self.marker_names, self.threshold_n)
             for name in names.values():
                 if name not in self.plate_pubs:
                     self.plate_pubs[name] = self.create_publisher(ForcePlateSample, plate_topic(name), self.plate_qos)
-            self._info = info
-        return self._converter
+            self.layout = StreamLayout(info, conv, MocapFrameEncoder(conv.marker_names, LAB_FRAME))
+        return self.layout
 
     def _on_frame(self, frame, info) -> None:
         now_ns = self.get_clock().now().nanoseconds     # first: the clock map's offset must not hold our own work
-        conv = self._converter_for(info)
+        layout = self._layout_for(info)
+        conv = layout.converter
         m = conv.markers(frame, self.clock.stamp(frame.timestamp_us * 1000, now_ns))
-        self.marker_pub.publish(self._marker_encoder.encode(m.t_ns, m.positions_m, m.valid, m.residuals_m))
+        self.marker_pub.publish(layout.markers.encode(m.t_ns, m.positions_m, m.valid, m.residuals_m))
         for chunk in frame.plates:
             plate = conv.plates.get(chunk.plate_id)
             if plate is None or not len(chunk.samples):
                 continue
             t_ns = plate_stamps(chunk.first_sample, len(chunk.samples), plate.rate_hz, self.clock, now_ns)
             s = conv.plate(chunk.plate_id, chunk.samples, t_ns)
-            encoder = self._plate_encoders.get(s.name)
-            if encoder is None:
-                encoder = self._plate_encoders[s.name] = PlateSampleEncoder(s.name, LAB_FRAME)
             pub = self.plate_pubs[s.name]
-            for data in encoder.encode_many(t_ns, s.force_n, s.moment_origin_nm, s.cop_m, s.cop_valid,
+            for data in layout.plate(s.name).encode_many(t_ns, s.force_n, s.moment_origin_nm, s.cop_m, s.cop_valid,
                                             s.free_moment_nm):
                 pub.publish(data)
         self._count(frame.frame_number)
@@ -166,13 +160,14 @@ class MocapBridge(Node):
     # --- the executor ---------------------------------------------------------------------------------------------
     def figures(self) -> dict[str, str]:
         d = self.drops
-        return {"protocol": self.protocol, "server": f"{self.host}:{self.port}", "connected": str(self.connected),
+        return {"protocol": self.server.protocol, "server": self.server.address, "connected": str(self.connected),
                 "frames": str(d.received), "frames_lost": str(d.dropped), "stream_restarts": str(d.restarts),
                 "connections": str(getattr(self.stream, "connections", int(self.connected))), "state": self.state}
 
     def _report(self) -> None:
         level = DiagnosticStatus.OK if self.connected and not self.drops.dropped else DiagnosticStatus.WARN
-        st = DiagnosticStatus(name=self.get_fully_qualified_name(), hardware_id=f"{self.protocol}:{self.host}",
+        st = DiagnosticStatus(name=self.get_fully_qualified_name(),
+                              hardware_id=f"{self.server.protocol}:{self.server.host}",
                               level=level, message=self.state)
         st.values = [KeyValue(key=k, value=v) for k, v in self.figures().items()]
         self.status_pub.publish(st)
