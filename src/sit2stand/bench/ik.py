@@ -152,7 +152,7 @@ def problem_file(rt: Retargeter, fids: list[int], problems: list[dict], robot: s
     soles = [model.frames[f].name for f in rt.robot.sole_frames]
     payload = {"model": picklable(model), "mjcf": frame_sites(model, fids + list(rt.robot.sole_frames), robot),
                "markers": [model.frames[f].name for f in fids], "soles": soles, "site_prefix": SITE_PREFIX,
-               "sole_targets": [X.homogeneous for X in rt.robot.sole_targets], "mu": ik.mu, "v_max": ik.v_max,
+               "sole_targets": [X.homogeneous for X in rt.robot.sole_targets], "mu": ik.mu, "v_max": ik.box.v_max,
                "dt": ik.dt, "damping": ik.damping, "problems": problems}
     out.write_bytes(pickle.dumps(payload))
 

@@ -144,9 +144,10 @@ class MarkerIK:
         q[3:7] = pin.Quaternion(R).coeffs()
         return q
 
-    def _gauss_newton(self, q: np.ndarray, pos: np.ndarray, ok: np.ndarray, max_iter: int, tol: float) -> int:
-        """Damped Gauss-Newton from q on the markers ``ok`` (the others' rows weigh 0) and the posture prior; the
-        last iterate, the best one and its cost go to ``_fitted``; returns the iterations run."""
+    def _gauss_newton(self, q: np.ndarray, pos: np.ndarray, ok: np.ndarray, max_iter: int, tol: float
+                      ) -> tuple[np.ndarray, np.ndarray, float, int]:
+        """Damped Gauss-Newton from q on the markers ``ok`` (the others' rows weigh 0) and the posture prior: the
+        last iterate, the best one, its cost and the iterations run."""
         model, data, nv = self.model, self.data, self.model.nv
         w_post = self.posture_weight
         rows = np.repeat(ok, 3).astype(float)
@@ -173,8 +174,7 @@ class MarkerIK:
             q[7:] = np.minimum(np.maximum(q[7:], self.lo[7:]), self.hi[7:])
             if np.abs(dq).max() < tol:
                 break
-        self._fitted = (q, best_q, best_cost)
-        return it
+        return q, best_q, best_cost, it
 
     def fit(self, positions_m: np.ndarray, valid: np.ndarray, q0: np.ndarray | None = None,
             max_iter: int = 12, tol: float = 1e-5) -> FrameFit:
@@ -190,8 +190,7 @@ class MarkerIK:
         q = q0 if q0 is not None else (self.q if self.q is not None else self.initial_guess(pos, ok))
         q = q.copy()
         q[7:] = np.clip(q[7:], self.lo[7:], self.hi[7:])
-        it = self._gauss_newton(q, pos, ok, max_iter, tol)
-        q, best_q, best_cost = self._fitted
+        q, best_q, best_cost, it = self._gauss_newton(q, pos, ok, max_iter, tol)
         w_post = self.posture_weight
         err = self._marker_positions(q)[ok] - pos[ok]
         e_post = self._posture_error(q)

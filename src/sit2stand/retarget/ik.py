@@ -101,6 +101,31 @@ class IkResult:
     seconds: float
 
 
+@dataclass(frozen=True)
+class JointBox:
+    """The joints' limits [rad] (nq - 7), their speed limits [rad/s] (nv - 6) and the most they travel in a frame
+    [rad]; a step's bounds on the base's six are free (+-1e20)."""
+
+    q_lo: np.ndarray
+    q_hi: np.ndarray
+    v_max: np.ndarray
+    travel: np.ndarray
+    free_base_lo: np.ndarray
+    free_base_hi: np.ndarray
+
+    @classmethod
+    def of(cls, model: pin.Model, velocity_limit: float | np.ndarray, dt: float) -> JointBox:
+        v_max = np.broadcast_to(np.asarray(velocity_limit, float), (model.nv - 6,)).copy()
+        return cls(model.lowerPositionLimit[7:].copy(), model.upperPositionLimit[7:].copy(), v_max, v_max * dt,
+                   np.full(model.nv, -1e20), np.full(model.nv, 1e20))
+
+    def of_frame(self, q_prev: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The joints' box over a frame's steps: their limits and, from the previous frame, their speed limits."""
+        if q_prev is None:
+            return self.q_lo, self.q_hi
+        return np.maximum(self.q_lo, q_prev[7:] - self.travel), np.minimum(self.q_hi, q_prev[7:] + self.travel)
+
+
 @dataclass
 class _Frame:
     """One frame's targets: markers (frame ids, positions [m], weights), the COM [m] on ``axes``, the soles, the
@@ -158,12 +183,7 @@ class ComIk:
         self.mu[:6] = 0.0
         self.damping = damping
         self._diagonal = self.mu + damping
-        self.v_max = np.broadcast_to(np.asarray(velocity_limit, float), (model.nv - 6,)).copy()
-        self._frame_travel = self.v_max * dt          # the most each joint moves in a frame [rad]
-        self.q_lo = model.lowerPositionLimit[7:].copy()
-        self.q_hi = model.upperPositionLimit[7:].copy()
-        self._free_base_lo = np.full(model.nv, -1e20)     # step bounds: the base's six are free
-        self._free_base_hi = np.full(model.nv, 1e20)
+        self.box = JointBox.of(model, velocity_limit, dt)
         self._qp = WarmQp()
         self.points = PointJacobians(model)
         self.momentum_weight = momentum_weight
@@ -205,10 +225,7 @@ class ComIk:
                        joint_targets=list(joint_targets or ()))
         frame.points = self.points.point_set(frame.fids)
         frame.lift_speed_prev = self._lift_speed_prev(q_prev)
-        frame.q_lo, frame.q_hi = self.q_lo, self.q_hi
-        if q_prev is not None:      # speed limits: from the previous frame, over all of this frame's iterations
-            frame.q_lo = np.maximum(self.q_lo, q_prev[7:] - self._frame_travel)
-            frame.q_hi = np.minimum(self.q_hi, q_prev[7:] + self._frame_travel)
+        frame.q_lo, frame.q_hi = self.box.of_frame(q_prev)
         self._lift_inertia = None        # the trunk's inertia about its joints, once per frame (see _bound_lift)
         q = q0.copy()
         feasible = True
@@ -313,7 +330,7 @@ class ComIk:
 
     def _bounds(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, np.ndarray]:
         """Step bounds from the joint limits, the speed limits from the previous frame and the base pitch [rad]."""
-        lo, hi = self._free_base_lo.copy(), self._free_base_hi.copy()
+        lo, hi = self.box.free_base_lo.copy(), self.box.free_base_hi.copy()
         qj = q[7:]
         np.subtract(f.q_lo, qj, out=lo[6:])
         np.subtract(f.q_hi, qj, out=hi[6:])
@@ -334,8 +351,8 @@ class ComIk:
         gravity = pin.computeGeneralizedGravity(self.model, self.data, q)
         tau = gravity[self.stop_dofs]
         j = self.stop_dofs - 6
-        on_hi = (q[7:][j] >= self.q_hi[j] - STOP_TOLERANCE_RAD) & (tau < -self.stop_torque_nm)
-        on_lo = (q[7:][j] <= self.q_lo[j] + STOP_TOLERANCE_RAD) & (tau > self.stop_torque_nm)
+        on_hi = (q[7:][j] >= self.box.q_hi[j] - STOP_TOLERANCE_RAD) & (tau < -self.stop_torque_nm)
+        on_lo = (q[7:][j] <= self.box.q_lo[j] + STOP_TOLERANCE_RAD) & (tau > self.stop_torque_nm)
         lo[self.stop_dofs[on_hi]] = np.maximum(lo[self.stop_dofs[on_hi]], 0.0)
         hi[self.stop_dofs[on_lo]] = np.minimum(hi[self.stop_dofs[on_lo]], 0.0)
         if f.lift_speed_prev is not None:
