@@ -11,8 +11,8 @@ Each frame solves, by damped Gauss-Newton steps on the configuration q (Pinocchi
                 q_j accelerates against gravity within its motor's room               (trunk lift-off)
                 z_base(q) >= z_min                                                    (hips clear of the seat)
 
-with one dense QP (:class:`~sit2stand.optim.WarmQp`: DAQP, warm-started from the last step's multipliers) per step
-in the tangent step dq:
+with one dense QP (:class:`~sit2stand.optim.WarmQp`: DAQP, started from the last step's active set) per step in the
+tangent step dq:
 ``min 1/2 dq' H dq + g' dq  s.t.  A dq = b,  C dq >= d,  l <= dq <= u`` built from the frame, COM and sole
 Jacobians.
 Iterations are warm-started from the previous frame's solution. If the COM target cannot be met with the feet
