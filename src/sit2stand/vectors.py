@@ -10,16 +10,16 @@ from __future__ import annotations
 import numpy as np
 
 
+_NEXT, _AFTER = np.array([1, 2, 0]), np.array([2, 0, 1])
+"""The coordinates after each one, cyclically (x -> y, z): the stacked cross product's index takes."""
+
+
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a x b of 3-vectors, (3,) or (..., 3) (broadcast like ``np.cross`` over the leading axes)."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     if a.ndim == 1 and b.ndim == 1:
         return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
     return a.take(_NEXT, axis=-1) * b.take(_AFTER, axis=-1) - a.take(_AFTER, axis=-1) * b.take(_NEXT, axis=-1)
-
-
-_NEXT, _AFTER = np.array([1, 2, 0]), np.array([2, 0, 1])
-"""The coordinates after each one, cyclically (x -> y, z) for the stacked cross product."""
 
 
 def skew_rows(r: np.ndarray) -> np.ndarray:
