@@ -9,6 +9,7 @@ from sit2stand.human.calibration import StreamCalibration, calibrate_lengths, ca
 from sit2stand.human.com import estimate_com
 from sit2stand.human.com_stream import StreamingComEstimator
 from sit2stand.human.marker_ik import MarkerIK, MarkerUnitsError, TooFewMarkers
+from sit2stand.human.marker_sets import load_marker_set
 from sit2stand.human.offline import read_trial
 from sit2stand.human.support import plate_wrench_at
 from sit2stand.io.bag import BagError, BagWriter
@@ -103,6 +104,29 @@ def test_plate_wrench_window_average():
     force, moment, covered = plate_wrench_at(np.array([0.5]), [PlateSeries("p", t, f, f * 0)],
                                              0.005)
     assert covered[0] and force[0, 2] == pytest.approx(100.5, abs=1e-3)
+
+
+def test_a_streamed_plate_bin_is_the_offline_window_average_and_kept_only_once_complete():
+    """The stream's per-frame plate average equals ``plate_wrench_at``'s, a missing force leaves the bin uncovered,
+    and a bin asked for before every plate's samples have passed it is not kept (later samples change it)."""
+    t = np.arange(0, 1, 0.001)
+    f = np.c_[np.sin(t), np.cos(t), 100 + t]
+    m = np.c_[0.1 * t, -0.2 * t, 0.01 * t]
+    f[600] = np.nan                                   # a dropout at 0.6 s
+    m[700, 0] = np.nan                                # a moment missing at 0.7 s: counted as zero
+    est = StreamingComEstimator(Subject(1.75, 75.0), load_marker_set().names, calibration_frames=0)
+    est.add_plate_samples("feet", t[:505], f[:505], m[:505])
+    early = est._plate_bin(0.5)                        # samples up to 0.504 s only
+    assert 0.5 not in est._bins
+    est.add_plate_samples("feet", t[505:], f[505:], m[505:])
+    series = PlateSeries("feet", t, f, m)
+    for at in (0.5, 0.6, 0.7):
+        force, moment, covered = plate_wrench_at(np.array([at]), [series], est.dt / 2)
+        wrench, ok = est._plate_bin(at)
+        assert ok == covered[0] and at in est._bins
+        if ok:
+            np.testing.assert_allclose(wrench, np.r_[force[0], moment[0]], rtol=1e-12, atol=1e-12)
+    assert not np.allclose(early[0], est._bins[0.5][0])
 
 
 def test_streaming_estimator_matches_the_truth_after_calibration():
