@@ -54,7 +54,7 @@ class PointJacobians:
         self.model = model
         self.nv = model.nv
         self._masks: dict[int, np.ndarray] = {}
-        self._layouts: dict[tuple[int, ...], PointSet] = {}
+        self._layouts: dict[tuple[int, ...] | bytes, PointSet] = {}
         self._weighted: tuple | None = None     # (set, row weights, masks weighted by them) of the last call
 
     def support_mask(self, frame_id: int) -> np.ndarray:
@@ -74,9 +74,11 @@ class PointJacobians:
         asked for again and again (a tuple's hash costs as much as a small product)."""
         if isinstance(frame_ids, PointSet):
             return frame_ids
-        fids = tuple(frame_ids)
-        layout = self._layouts.get(fids)
+        # an array's bytes are a cheaper key than a tuple of its numbers
+        key = frame_ids.astype(np.int64).tobytes() if isinstance(frame_ids, np.ndarray) else tuple(frame_ids)
+        layout = self._layouts.get(key)
         if layout is None:
+            fids = [int(f) for f in frame_ids]
             model, m = self.model, len(fids)
             joints = sorted({model.frames[f].parentJoint for f in fids})
             column = np.array([joints.index(model.frames[f].parentJoint) for f in fids], int)
@@ -87,7 +89,7 @@ class PointJacobians:
             fill = (18 * np.arange(m)[:, None] + np.array(_CROSS_AT)).ravel()
             source = (3 * np.arange(m)[:, None] + np.array(_CROSS_FROM)).ravel()
             sign = np.tile(_CROSS_SIGN, m)
-            layout = self._layouts[fids] = PointSet(len(fids), joints, take, offsets, masks, blocks, fill, source, sign)
+            layout = self._layouts[key] = PointSet(len(fids), joints, take, offsets, masks, blocks, fill, source, sign)
         return layout
 
     def positions(self, data: pin.Data, frame_ids) -> np.ndarray:

@@ -28,7 +28,7 @@ import pink
 import pinocchio as pin
 from pink.limits import ConfigurationLimit as PinkConfigurationLimit
 
-from sit2stand.retarget.ik import ComIk
+from sit2stand.retarget.ik import ComIk, MarkerTargets
 from sit2stand.vectors import wxyz_from_xyzw, xyzw_from_wxyz
 
 MODES = {"two_iterations": (2, 0.0), "converged": (20, 1e-6)}
@@ -52,11 +52,12 @@ class Ours:
         self.model = s["model"]
         self.ik = ComIk(self.model, [self.model.getFrameId(n) for n in s["soles"]], s["v_max"], s["dt"],
                         posture_weight=s["mu"], damping=s["damping"])
-        self.fids = [self.model.getFrameId(n) for n in s["markers"]]
+        self.fids = np.array([self.model.getFrameId(n) for n in s["markers"]])
         self.soles = [pin.SE3(X) for X in s["sole_targets"]]
 
     def solve(self, p: dict, iterations: int, tol: float) -> np.ndarray:
-        markers = [(f, t, w) for f, t, w in zip(self.fids, p["targets"], p["weights"]) if w > 0]
+        use = p["weights"] > 0
+        markers = MarkerTargets(self.fids[use], p["targets"][use], p["weights"][use])
         return self.ik.solve(p["q0"], markers, p["com"], self.soles, q_ref=p["q_ref"], com_axes=p["axes"],
                              q_prev=p["q0"], max_iterations=iterations, tol=tol).q
 
@@ -181,7 +182,7 @@ class Score:
     def __init__(self, s: dict) -> None:
         self.model = s["model"]
         self.data = self.model.createData()
-        self.fids = [self.model.getFrameId(n) for n in s["markers"]]
+        self.fids = np.array([self.model.getFrameId(n) for n in s["markers"]])
         self.soles = [(self.model.getFrameId(n), pin.SE3(X)) for n, X in zip(s["soles"], s["sole_targets"])]
 
     def __call__(self, p: dict, q: np.ndarray) -> tuple[float, float, float]:

@@ -102,6 +102,30 @@ class IkResult:
 
 
 @dataclass(frozen=True)
+class MarkerTargets:
+    """One frame's marker tasks: the robot frames' ids (M,), their targets (M, 3) [m, world] and weights (M,)
+    [1/m^2]. Iterates as (frame id, target, weight) triples."""
+
+    frame_ids: np.ndarray
+    targets_m: np.ndarray
+    weights: np.ndarray
+
+    @classmethod
+    def of(cls, markers) -> MarkerTargets:
+        """``markers`` as a record: itself, or from (frame id, target [m], weight) triples."""
+        if isinstance(markers, MarkerTargets):
+            return markers
+        fids, targets, weights = zip(*markers) if len(markers) else ((), (), ())
+        return cls(np.array(fids, int), np.array(targets, float).reshape(-1, 3), np.array(weights, float))
+
+    def __len__(self) -> int:
+        return len(self.frame_ids)
+
+    def __iter__(self):
+        return zip(self.frame_ids.tolist(), self.targets_m, self.weights.tolist())
+
+
+@dataclass(frozen=True)
 class JointBox:
     """The joints' limits [rad] (nq - 7), their speed limits [rad/s] (nv - 6) and the most they travel in a frame
     [rad]; a step's bounds on the base's six are free (+-1e20)."""
@@ -131,7 +155,7 @@ class _Frame:
     """One frame's targets: markers (frame ids, positions [m], weights), the COM [m] on ``axes``, the soles, the
     posture reference, the previous frame and the base holds (x, z [m]; pitch [rad])."""
 
-    fids: tuple[int, ...]
+    fids: np.ndarray
     targets: np.ndarray
     weights: np.ndarray
     com_target: np.ndarray
@@ -203,13 +227,15 @@ class ComIk:
         dq = self._qp.solve(H, g, A, b, lo, hi, C, d)
         return (np.zeros(self.nv), False) if dq is None else (dq, True)
 
-    def solve(self, q0: np.ndarray, markers: list[tuple[int, np.ndarray, float]], com_target: np.ndarray,
-              sole_targets: list[pin.SE3], q_ref: np.ndarray | None = None, com_axes: tuple[int, ...] = (0, 1, 2),
-              q_prev: np.ndarray | None = None, max_iterations: int = 10, tol: float = 1e-7,
+    def solve(self, q0: np.ndarray, markers: MarkerTargets | list[tuple[int, np.ndarray, float]],
+              com_target: np.ndarray, sole_targets: list[pin.SE3], q_ref: np.ndarray | None = None,
+              com_axes: tuple[int, ...] = (0, 1, 2), q_prev: np.ndarray | None = None, max_iterations: int = 10,
+              tol: float = 1e-7,
               base_xz: np.ndarray | None = None, base_weight: float | None = None,
               base_pitch_min: float | None = None, base_z_min: float | None = None,
               joint_targets: list[tuple[int, float, float]] | None = None) -> IkResult:
-        """Solve one frame from ``q0``. ``markers``: (frame id, target position [m], weight) triples.
+        """Solve one frame from ``q0``. ``markers``: a :class:`MarkerTargets`, or (frame id, target position [m],
+        weight) triples.
         ``q_prev``: the previous frame's configuration; the joint speed limits bound the motion from it (none for
         the first frame). ``base_xz``: hold the floating base's world x and z at these values [m] (e.g. the hips on
         a seat): two more equality rows, or, with ``base_weight``, a soft task of that weight. ``base_pitch_min``
@@ -218,9 +244,8 @@ class ComIk:
         ``joint_targets``: (tangent index, angle [rad], weight [1/rad^2]) soft tasks on single joints (the human's
         knee flexion)."""
         t0 = time.perf_counter()
-        fids, targets, weights = zip(*markers) if markers else ((), (), ())
-        frame = _Frame(fids, np.array(targets, float).reshape(-1, 3), np.array(weights, float), com_target,
-                       com_axes, sole_targets,
+        markers = MarkerTargets.of(markers)
+        frame = _Frame(markers.frame_ids, markers.targets_m, markers.weights, com_target, com_axes, sole_targets,
                        q0 if q_ref is None else q_ref, q_prev, base_xz, base_weight, base_pitch_min, base_z_min,
                        joint_targets=list(joint_targets or ()))
         frame.points = self.points.point_set(frame.fids)

@@ -47,7 +47,7 @@ from ..robot.profile import profile_of
 from ..human.marker_sets import choose_marker_set
 from .calibration import MarkerMap, calibrate_markers, left_leg_points, marker_roles
 from .robot import RobotSetup
-from .ik import LIFT_TORQUE_SHARE, ComIk, IkResult
+from .ik import LIFT_TORQUE_SHARE, ComIk, IkResult, MarkerTargets
 from .player import Command, PlanPlayer
 
 SEATED_COM_BEHIND_ANKLE_THIGHS = 0.6
@@ -131,7 +131,7 @@ class RetargetFrame:
     seated: bool                  # hips held on the seat
     human_seat_off: bool
     ik: IkResult
-    markers: list = field(default_factory=list)     # the marker tasks solved: (frame id, target [m], weight)
+    markers: MarkerTargets | list = field(default_factory=list)     # the marker tasks solved
     human_knee_flexion_rad: float | None = None     # the human's (left) knee flexion in the frame, from its markers
 
 
@@ -211,6 +211,7 @@ class Retargeter:
         self.names = list(names)
         self.weights = np.array([0.0 if n not in self.marker_frames else
                                  self.cfg.weights.get(roles.group(n), 0.0) for n in names])
+        self.frame_ids = np.array([self.marker_frames.get(n, -1) for n in names], int)   # -1: weight 0, never used
         self.human_pelvis0 = pelvis
         self.robot_pelvis0 = self.robot.q_seated[:3].copy()
         self.pelvis_markers = pel
@@ -355,8 +356,8 @@ class Retargeter:
             tgt = tgt - (1.0 - progress) * self._marker_offset
             lowering = self._pelvis_rise_peak_m - (pelvis_now[2] - self.human_pelvis0[2]) > KNEE_RELEASE_DROP_M
             knees = [] if lowering else self._knee_targets(flexion, marker_weight)
-        markers = [(self.marker_frames[self.names[i]], tgt[i], marker_weight * float(self.weights[i]))
-                   for i in range(len(self.names)) if ok[i] and self.weights[i] > 0 and marker_weight > 0]
+        use = ok & (self.weights > 0) & (marker_weight > 0)
+        markers = MarkerTargets(self.frame_ids[use], tgt[use], marker_weight * self.weights[use])
         # hips on the seat: pelvis x and z held (hard); after seat-off the hold fades out as a soft task, so that
         # the pose does not jump to where the human's pelvis already is
         hold, weight, z_min = self.base_seated, None, None
