@@ -182,7 +182,7 @@ class Score:
     def __init__(self, s: dict) -> None:
         self.model = s["model"]
         self.data = self.model.createData()
-        self.fids = np.array([self.model.getFrameId(n) for n in s["markers"]])
+        self.fids = [self.model.getFrameId(n) for n in s["markers"]]
         self.soles = [(self.model.getFrameId(n), pin.SE3(X)) for n, X in zip(s["soles"], s["sole_targets"])]
 
     def __call__(self, p: dict, q: np.ndarray) -> tuple[float, float, float]:
