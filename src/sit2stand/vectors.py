@@ -35,6 +35,15 @@ def xyzw_from_wxyz(q_wxyz: np.ndarray) -> np.ndarray:
     return np.asarray(q_wxyz, dtype=float)[..., [1, 2, 3, 0]]
 
 
+def pose_xyzw_from_wxyz(pose: np.ndarray) -> np.ndarray:
+    """A MuJoCo free joint's pose (7,) (position, quaternion w x y z) in ROS's order (position, x y z w): one take,
+    for the driver's 500 Hz state."""
+    return pose.take(_POSE_XYZW)
+
+
+_POSE_XYZW = np.array([0, 1, 2, 4, 5, 6, 3])
+
+
 def wxyz_from_xyzw(q_xyzw: np.ndarray) -> np.ndarray:
     """Quaternions (..., 4) in Pinocchio's and ROS's order (x, y, z, w) as MuJoCo's (w, x, y, z)."""
     return np.asarray(q_xyzw, dtype=float)[..., [3, 0, 1, 2]]

@@ -26,12 +26,9 @@ from ..robot.driver_timing import SIM_EPOCH_S
 from ..robot.model import SIDES
 from ..robot.plant import Sensors
 from ..robot.profile import RobotProfile
+from ..vectors import pose_xyzw_from_wxyz
 from .runtime import NodeError
 from .qos import LATCHED_QOS, TF_QOS, publish_depth, robot_state_qos
-
-
-POSE_XYZW_FROM_WXYZ = np.array([0, 1, 2, 4, 5, 6, 3])
-"""A MuJoCo free joint's pose (position, quaternion w x y z) in a PoseStamped's order (position, x y z w)."""
 
 
 class RobotOutputs:
@@ -82,7 +79,7 @@ class RobotOutputs:
             pubs[side].publish(enc[side].encode(t_ns, s.wrench_world[side][:6]))
         pubs["cop"].publish(enc["cop"].encode(t_ns, s.cop_m if s.cop_valid else np.full(3, np.nan)))
         # the base pose: x y z, then the quaternion w x y z (MuJoCo's order); the message's is x y z w
-        pubs["base"].publish(enc["base"].encode(t_ns, s.base_pose.take(POSE_XYZW_FROM_WXYZ)))
+        pubs["base"].publish(enc["base"].encode(t_ns, pose_xyzw_from_wxyz(s.base_pose)))
         self.samples += 1
         if self.tf_every and (self.samples - 1) % self.tf_every == 0:     # from the first sample on
             self._tf(s, t_ns)

@@ -31,6 +31,7 @@ import crocoddyl
 import numpy as np
 import pinocchio as pin
 
+from ..dynamics import G
 from ..errors import Sit2StandError
 from ..robot.model import SIDES
 from ..robot.plant import contact_joint_torques
@@ -174,7 +175,7 @@ class WholeRiseProblem:
         self.actuation = crocoddyl.ActuationModelFloatingBase(self.state)
         self.nu = self.actuation.nu
         self.limit = self.cfg.torque_share * self.model.effortLimit[6:]
-        self.cop_load_n = COP_LOAD_SHARE * float(pin.computeTotalMass(self.model)) * 9.81
+        self.cop_load_n = COP_LOAD_SHARE * float(pin.computeTotalMass(self.model)) * G
 
     def _sole_centre(self, side: str, centre_x_m: float) -> int:
         """A frame at the middle of a sole (the wrench cone's centre of pressure box is centred on its frame)."""
