@@ -19,6 +19,7 @@ explicit-PD ankle instability, and the whole-body sway on the feet is well dampe
 from __future__ import annotations
 
 import fnmatch
+import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -29,7 +30,8 @@ import pinocchio as pin
 from ..dynamics import G
 from ..errors import InputError
 from ..forceplate import DEFAULT_COP_THRESHOLD_N
-from ..vectors import cross, xyzw_from_wxyz
+from ..vectors import xyzw_from_wxyz
+from .feet_sensing import FeetSensing
 from .torque_control import WholeBodyController
 from .model import (SEAT_CLEARANCE_BELOW_M, SIDES, PlantConfig, PlantConfigError, add_chair, add_seat_frame, build_spec,
                     compiled_robot, controller_model, expand)
@@ -62,20 +64,6 @@ class Sensors:
     cop_m: np.ndarray              # (3,) COP of both feet on the floor, NaN when unloaded
     cop_valid: bool
     base_pose: np.ndarray          # (7,) MuJoCo free joint: position, quaternion w x y z (what a state estimator gives)
-
-
-@dataclass(frozen=True)
-class FeetSensing:
-    """The feet's F/T sensing, stacked in SIDES order for the sensors' batched products."""
-
-    adr: np.ndarray          # (2, 6) sensordata indices: force x y z, torque x y z
-    ft_sites: np.ndarray     # (2,) the sensors' sites
-    sole_sites: np.ndarray   # (2,) the soles' sites
-    reading: np.ndarray      # (2, 3, 3) raw rows @ reading: what the sensor reads (its mounting's turn, transposed)
-    bias: np.ndarray         # (2, 6) [N, N m]
-    mass_kg: np.ndarray      # (2,) the controller model's foot below the sensor
-    lever_m: np.ndarray      # (2, 3) its COM in the sensor's frame
-    noise_sd: np.ndarray     # (n + 12,) the joint torques' noise [N m], then each foot's force and torque [N, N m]
 
 
 def seated_configuration(model: mujoco.MjModel, cfg: PlantConfig) -> np.ndarray:
@@ -193,16 +181,6 @@ class Plant:
         self.q_offset = np.zeros(self.n)      # encoder reading - true angle; the servo tracks the reading
         for name, value in expand(um.joint_offset_rad, self.joint_names).items():
             self.q_offset[self.joint_names.index(name)] = value
-        bad = set(um.ft_bias) - set(SIDES)
-        if bad:
-            raise InputError(f"{cfg.source or 'plant'}: ft_bias for unknown side(s) {sorted(bad)} (sides: {SIDES})")
-        both = np.concatenate([um.ft_force_bias_n, um.ft_torque_bias_nm])
-        self.ft_bias = {s: both + np.asarray(um.ft_bias.get(s, np.zeros(6)), float) for s in SIDES}
-        bad = set(um.ft_rotation_rad) - set(SIDES)
-        if bad:
-            raise InputError(f"{cfg.source or 'plant'}: ft_rotation_rad for unknown side(s) {sorted(bad)}")
-        # what the sensor reads, from the wrench in its modelled axes: the transpose of its mounting's turn
-        self.ft_reading = {s: pin.exp3(np.asarray(um.ft_rotation_rad.get(s, np.zeros(3)), float)).T for s in SIDES}
         self.backlash = np.zeros(self.n)       # half the gear's play [rad] (see _dead_zone)
         for name, value in expand(um.backlash_rad, self.joint_names).items():
             self.backlash[self.joint_names.index(name)] = value
@@ -220,18 +198,7 @@ class Plant:
         # addresses resolved once: MuJoCo's by-name accessors cost ~15 us each
         m = self.model
         self.tau_adr = np.array([m.sensor_adr[m.sensor(f"tau_{n}").id] for n in self.joint_names])
-        self.ft_adr = {s: (m.sensor_adr[m.sensor(f"force_{s}").id], m.sensor_adr[m.sensor(f"torque_{s}").id])
-                       for s in SIDES}
-        self.site_id = {name: m.site(name).id for name in [f"{k}_{s}" for k in ("ft", "sole") for s in SIDES]}
-        feet = {s: self.ctrl.inertias[self.ctrl.getJointId(cfg.profile.foot_joint(s))] for s in SIDES}
-        self.foot = {s: (float(f.mass), f.lever.copy()) for s, f in feet.items()}
-        self.feet = FeetSensing(
-            np.array([[*range(a, a + 3), *range(b, b + 3)] for a, b in (self.ft_adr[s] for s in SIDES)]),
-            np.array([self.site_id[f"ft_{s}"] for s in SIDES]), np.array([self.site_id[f"sole_{s}"] for s in SIDES]),
-            np.array([self.ft_reading[s].T for s in SIDES]), np.array([self.ft_bias[s] for s in SIDES]),
-            np.array([self.foot[s][0] for s in SIDES]), np.array([self.foot[s][1] for s in SIDES]),
-            np.concatenate([np.full(self.n, cfg.joint_torque_noise_nm),
-                            np.tile([cfg.ft_force_noise_n] * 3 + [cfg.ft_torque_noise_nm] * 3, len(SIDES))]))
+        self.feet = FeetSensing.of(m, self.ctrl, cfg)
         self.ff_every = max(1, int(round(1.0 / (cfg.feedforward_rate_hz * cfg.timestep_s))))
         self.wbc_every = max(1, int(round(1.0 / (WBC_RATE_HZ * cfg.timestep_s))))
         self.wbc: WholeBodyController | None = None
@@ -305,7 +272,7 @@ class Plant:
             return np.zeros(self.n)
         q = self.pin_configuration(self.data.qpos)
         q[7:] = self.q_ref
-        feet_fz = self._feet_vertical_force()
+        feet_fz = self.feet.vertical_force(self.data)
         seated = feedforward_seated(self.data.qpos[2], self.seated_base_z, feet_fz, self.ctrl_mass)
         return contact_feedforward(self.ctrl, self.ctrl_data, q, self.qd_ref, self.qdd_ref,
                                    self.feedforward == "inverse_dynamics", seated)
@@ -320,9 +287,11 @@ class Plant:
             q = self.pin_configuration(s.qpos)
             q[7:] += self.q_offset                     # what the encoders read
             v = s.qvel.copy()
-            v[:3] = pin.Quaternion(s.qpos[3], s.qpos[4], s.qpos[5], s.qpos[6]).matrix().T @ s.qvel[:3]
+            world_to_base = np.empty(4)                # the base's linear velocity in its own axes (Pinocchio's)
+            mujoco.mju_negQuat(world_to_base, s.qpos[3:7])
+            mujoco.mju_rotVecQuat(v[:3], s.qvel[:3], world_to_base)
             q_t, qd_t = reference_at(self.q_ref, self.qd_ref, self.qdd_ref, float(s.time) - self._t_ref)
-            feet_fz = self._feet_vertical_force()
+            feet_fz = self.feet.vertical_force(self.data)
             seat = 0.0
             if feedforward_seated(s.qpos[2], self.seated_base_z, feet_fz, self.ctrl_mass):
                 seat = max(0.0, self.ctrl_mass * G - feet_fz)
@@ -381,65 +350,26 @@ class Plant:
         return q + (u - np.clip(u, -self.backlash, self.backlash)) - ctrl_ff / self.kp
 
     def _check_fall(self) -> None:
-        z = self.data.qpos[2]
-        w = self.data.qpos[3:7]
-        tilt = 2 * np.arccos(min(1.0, np.sqrt(w[0] ** 2 + w[3] ** 2)))   # angle of the base z axis from vertical
+        z, w0, _, _, w3 = self.data.qpos[2:7].tolist()
+        tilt = 2 * math.acos(min(1.0, math.sqrt(w0 * w0 + w3 * w3)))     # angle of the base z axis from vertical
         if z < self.cfg.fall_height_m or tilt > self.cfg.fall_tilt_rad:
             self.fallen = True
             self.status_text = f"fallen: pelvis at {z:.2f} m, base tilted {np.degrees(tilt):.0f} deg"
 
     # -- sensors ----------------------------------------------------------------------------------------------
-    def _ground_reactions(self, reading: np.ndarray) -> np.ndarray:
-        """Ground reaction on each foot (SIDES order, world axes): force, and torque about the sole point (2, 6),
-        from the F/T readings (2, 6) (compensated for the foot's weight below the sensor, with the controller's
-        foot mass)."""
-        d = self.data
-        feet = self.feet
-        site_pos, sole = d.site_xpos[feet.ft_sites], d.site_xpos[feet.sole_sites]
-        R = d.site_xmat[feet.ft_sites].reshape(-1, 3, 3)
-        # what the legs exert on the foot subtrees, and the feet's COMs, in world axes
-        f_parent, t_parent, lever = (R @ np.stack([reading[:, :3], reading[:, 3:], feet.lever_m], axis=2)
-                                     ).transpose(2, 0, 1)
-        r = site_pos + lever - sole                      # the feet's COMs from the soles
-        weight = feet.mass_kg * G
-        out = np.empty((len(SIDES), 6))
-        out[:, :3] = -f_parent
-        out[:, 2] += weight
-        # moments about the sole: ground + leg + gravity (-m g z at the COM) balance the (static) foot
-        out[:, 3:] = -(t_parent + cross(site_pos - sole, f_parent))
-        out[:, 3] += weight * r[:, 1]
-        out[:, 4] -= weight * r[:, 0]
-        return out
-
-    def _feet_vertical_force(self) -> float:
-        """The feet's summed vertical ground reaction [N] (the z of :meth:`_ground_reactions`, without the rest):
-        each foot's weight less the world z of what its sensor reads (row-major: the z row is xmat[6:9])."""
-        d, feet = self.data, self.feet
-        return float(np.sum(feet.mass_kg) * G - np.einsum("si,si->", d.site_xmat[feet.ft_sites][:, 6:9],
-                                                           d.sensordata[feet.adr[:, :3]]))
-
     def sensors(self) -> Sensors:
-        cfg = self.cfg
-        q = self.data.qpos[self.qadr] + self.q_offset
+        cfg, d, n = self.cfg, self.data, self.n
+        q = d.qpos.take(self.qadr) + self.q_offset
         if cfg.encoder_noise_rad:
             q = q + self.rng.normal(0, cfg.encoder_noise_rad, self.n)
-        # the noise of the torques, then of each foot's force and torque: one draw, the same numbers as drawn apart
-        feet = self.feet
-        noise = self.rng.standard_normal(self.n + 6 * len(SIDES)) * feet.noise_sd
-        tau = self.tau_gain * self.data.sensordata[self.tau_adr] + self.tau_bias + noise[:self.n]
-        raw = self.data.sensordata[feet.adr].reshape(len(SIDES), 2, 3)      # side, (force, torque), xyz
-        reading = (raw @ feet.reading).reshape(len(SIDES), 6) + feet.bias + noise[self.n:].reshape(-1, 6)
-        world = self._ground_reactions(reading)
-        # the combined COP on the floor from both feet: moments about the origin, then the z = 0 plane
-        force = world[:, :3].sum(axis=0)
-        moment = (world[:, 3:] + cross(self.data.site_xpos[feet.sole_sites], world[:, :3])).sum(axis=0)
-        if force[2] > DEFAULT_COP_THRESHOLD_N:
-            cop = np.array([-moment[1] / force[2], moment[0] / force[2], 0.0])
-            ok = True
-        else:
-            cop, ok = np.full(3, np.nan), False
-        return Sensors(self.t_s, q, self.data.qvel[self.vadr].copy(), tau, dict(zip(SIDES, reading)),
-                       dict(zip(SIDES, world)), cop, ok, self.data.qpos[:7].copy())
+        # the noise of the torques, then of each foot's force and torque: one draw
+        noise = self.rng.standard_normal(n + 6 * len(SIDES))
+        tau = self.tau_gain * d.sensordata.take(self.tau_adr) + self.tau_bias + noise[:n] * cfg.joint_torque_noise_nm
+        reading = self.feet.readings(d, noise[n:])
+        world = self.feet.ground_reactions(d, reading)
+        cop = self.feet.combined_cop(d, world, DEFAULT_COP_THRESHOLD_N)
+        return Sensors(self.t_s, q, d.qvel.take(self.vadr), tau, dict(zip(SIDES, reading)), dict(zip(SIDES, world)),
+                       np.full(3, np.nan) if cop is None else cop, cop is not None, d.qpos[:7].copy())
 
     def true_com(self) -> np.ndarray:
         """The plant's true COM [m] (for tests and figures only; controllers must not use it)."""

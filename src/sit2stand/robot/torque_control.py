@@ -44,7 +44,7 @@ class WholeBodyController:
     def __init__(self, model: pin.Model, seat_frame: int, gains: WbcGains | None = None,
                  period_s: float = 0.002) -> None:
         self.model, self.data = model, model.createData()
-        self.qp = WholeBodyQP(model, seat_frame, gains)
+        self.qp = WholeBodyQP(model, seat_frame, gains, seat_contact=False)     # the seat's force: from the feet
         self.sole = model.getFrameId("sole_left")
         self.period_s = period_s
         self.oM_sole: pin.SE3 | None = None
@@ -98,7 +98,7 @@ class WholeBodyController:
         self._move_anchor(seat_load_n)
         q_full = q.copy()
         q_full[7:] = q_ref
-        ref = feet_anchored_reference(self.model, self.data, q_full, v_ref, a_ref, self.oM_sole)
+        ref = feet_anchored_reference(self.model, self.data, q_full, v_ref, a_ref, self.oM_sole, self.sole)
         seat = np.array([0.0, 0.0, seat_load_n]) if seat_load_n > 0 else None
         res = self.qp.solve(q, v, ref, 0.0, seat)
         self.qp_times_s.append(res.qp_s)

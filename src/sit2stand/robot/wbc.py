@@ -115,25 +115,30 @@ class WholeBodyQP:
 
     Args:
         model: the robot model with the parameters the controller knows (identified or CAD; never the plant's truth).
-        seat_frame: id of a frame on the pelvis at the seat surface (None: no seat contact).
+        seat_frame: id of a frame on the pelvis at the seat surface (None: no seat).
         gains: tasks' gains and weights.
+        seat_contact: the seat point is a contact of the QP, its force three unknowns (the plan's dynamics filter);
+            False: the seat acts only as a known force (the robot's controller: its force comes from the feet's
+            sensors), and the QP has three unknowns and three equalities fewer (10 % of its solve).
     """
 
-    def __init__(self, model: pin.Model, seat_frame: int | None, gains: WbcGains | None = None) -> None:
+    def __init__(self, model: pin.Model, seat_frame: int | None, gains: WbcGains | None = None,
+                 seat_contact: bool = True) -> None:
         self.model, self.data = model, model.createData()
         self.g = gains or WbcGains()
         self.soles = [model.getFrameId(f"sole_{s}") for s in SIDES]
         self.seat = seat_frame
+        self.seat_contact = seat_contact and seat_frame is not None
         self.nv, self.nj = model.nv, model.nv - 6
-        self.n_f = 3 * (4 * len(self.soles) + 1)
+        n_pts = 4 * len(self.soles) + self.seat_contact
+        self.n_f = 3 * n_pts
         self.n = self.nv + self.n_f
         self.tau_max = model.effortLimit[6:].copy()
         self.q_lo, self.q_hi = model.lowerPositionLimit[7:].copy(), model.upperPositionLimit[7:].copy()
         self.corner_local = sole_corners_local(profile_of(model), self.g.cop_margin_m)
         self.mass = float(pin.computeTotalMass(model))
-        n_pts = 4 * len(self.soles) + 1
         self.C_fric = friction_rows(n_pts, self.g.friction)
-        self.n_eq = n_eq = 6 + 6 * len(self.soles) + 3
+        self.n_eq = n_eq = 6 + 6 * len(self.soles) + 3 * self.seat_contact
         self._sense = np.zeros(self.n + n_eq + self.nj + 4 * n_pts, np.int32)   # bounds, equalities, inequalities
         self._sense[self.n:self.n + n_eq] = DAQP_EQUALITY
         # the constraint rows, filled in place each step: equalities (base, soles, seat), torques, friction
@@ -147,7 +152,8 @@ class WholeBodyQP:
         # the cost's constant part: posture weights and force regularisation (in FORCE_UNIT_N), the seat's normal
         # force more (the feet carry what they can)
         fw = np.full(self.n_f, self.g.force_weight)
-        fw[-1] += self.g.seat_force_weight
+        if self.seat_contact:
+            fw[-1] += self.g.seat_force_weight
         self._H0 = np.diag(np.concatenate([self.weights, fw * FORCE_UNIT_N**2]))
         self.weights_seated = self.weights.copy()
         self.weights_seated[3:6] = self.g.base_orientation_weight_seated
@@ -161,21 +167,26 @@ class WholeBodyQP:
         self._A_c = np.zeros((n_eq - 6, self.nv))
         self._b_c = np.zeros(n_eq - 6)
         self._corners = np.zeros((4 * len(self.soles), 3))
-        self._x_lo, self._x_hi = np.full(self.n, -INF), np.full(self.n, INF)
-        self._x_lo[self.nv + 2:self.n:3] = 0.0                       # unilateral normal forces
-        self._lo = np.full(self.nj + len(self.C_fric), -INF)          # torques, then friction (C f <= 0)
-        self._hi = np.zeros(self.nj + len(self.C_fric))
+        # DAQP's bounds, filled in place: of x, then of the rows (equalities: both bounds the right-hand side;
+        # torques; friction, C f <= 0)
+        self._lower, self._upper = np.full(len(self._sense), -INF), np.full(len(self._sense), INF)
+        self._upper[self.n + n_eq + self.nj:] = 0.0
+        self._lower[self.nv + 2:self.n:3] = 0.0                      # unilateral normal forces
         self._eye3 = np.eye(3)
+        self._zero_v = np.zeros(self.nv)
 
     # -- matrices ---------------------------------------------------------------------------------------------
     def _kinematics(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """M and h = C v + g at (q, v); fills data with Jacobians and zero-acceleration drifts."""
+        """M and h = C v + g at (q, v); fills data with Jacobians and zero-acceleration drifts. The passes this QP
+        needs (half the time of ``computeAllTerms``, which computes the centroidal terms and energies too)."""
         model, data = self.model, self.data
-        pin.computeAllTerms(model, data, q, v)
-        M = data.M.copy()                     # whole: Pinocchio 4's computeAllTerms fills both triangles
-        h = data.nle.copy()
-        self._jcom = data.Jcom.copy()
-        pin.centerOfMass(model, data, q, v, np.zeros(self.nv))     # FK with a = 0: the drifts
+        pin.crba(model, data, q)
+        M = data.M.copy()                     # whole: Pinocchio 4's crba fills both triangles
+        h = pin.nonLinearEffects(model, data, q, v).copy()
+        pin.computeJointJacobians(model, data, q)
+        pin.forwardKinematics(model, data, q, v, self._zero_v)     # a = 0: the drifts
+        pin.centerOfMass(model, data, pin.KinematicLevel.ACCELERATION)
+        self._jcom = pin.jacobianCenterOfMass(model, data).copy()
         pin.updateFramePlacements(model, data)
         return M, h
 
@@ -197,11 +208,15 @@ class WholeBodyQP:
             np.matmul((R @ self._corner_map).reshape(12, 6), J6, out=Jf[12 * k:12 * k + 12])
             corners[4 * k:4 * k + 4] = oMf.translation + self.corner_local @ R.T
         s = 6 * len(self.soles)
-        if self.seat is not None:
-            Js = pin.getFrameJacobian(model, data, self.seat, pin.LOCAL_WORLD_ALIGNED)[:3]
+        if self.seat_contact:
+            Js = self._seat_jacobian()
             Jf[-3:], A_c[s:] = Js, Js
             b_c[s:] = -pin.getFrameClassicalAcceleration(model, data, self.seat, pin.LOCAL_WORLD_ALIGNED).linear
         return Jf, A_c, b_c, corners
+
+    def _seat_jacobian(self) -> np.ndarray:
+        """(3, nv): the seat point's linear Jacobian in world axes."""
+        return pin.getFrameJacobian(self.model, self.data, self.seat, pin.LOCAL_WORLD_ALIGNED)[:3]
 
     def _cost(self, q: np.ndarray, v: np.ndarray, ref: Reference, seated: bool) -> tuple[np.ndarray, np.ndarray]:
         """H, g of the weighted tasks over x = (a, f); ``seated``: the seat carries weight."""
@@ -256,35 +271,40 @@ class WholeBodyQP:
         M, h = self._kinematics(q, v)
         Jf, A_c, b_c, corners = self._contacts()
         if seat_force_known_n is not None and self.seat is not None:
-            h = h - Jf[-3:].T @ np.asarray(seat_force_known_n, float)
-        seat_on = self.seat is not None and seat_force_max_n > 0
+            h = h - self._seat_jacobian().T @ np.asarray(seat_force_known_n, float)
+        seat_on = self.seat_contact and seat_force_max_n > 0
         H, c = self._cost(q, v, ref, seat_on or seat_force_known_n is not None)
-        e = self.n_eq
+        e, n = self.n_eq, self.n
         rows, Jf_u = self._rows, Jf * FORCE_UNIT_N
         rows[:6, :nv], rows[:6, nv:] = M[:6], -Jf_u[:, :6].T            # the base's Newton-Euler rows
         rows[6:e, :nv], rows[6:e, nv:] = A_c, 0.0                        # the contacts
-        b = np.concatenate([-h[:6], b_c])
-        if not seat_on:     # the seat's rows say its force is zero (zero rows are degenerate equalities)
-            rows[e - 3:e], b[-3:] = 0.0, 0.0
+        lower, upper = self._lower, self._upper
+        np.negative(h[:6], out=lower[n:n + 6])
+        lower[n + 6:n + e] = b_c
+        if self.seat_contact and not seat_on:    # the seat's rows say its force is zero (zero rows are degenerate)
+            rows[e - 3:e], lower[n + e - 3:n + e] = 0.0, 0.0
             rows[e - 3:e, -3:] = self._eye3
+        upper[n:n + e] = lower[n:n + e]
         rows[e:e + nj, :nv], rows[e:e + nj, nv:] = M[6:], -Jf_u[:, 6:].T   # the joint torques
-        lo, hi = self._lo, self._hi
-        np.subtract(-self.tau_max, h[6:], out=lo[:nj])
-        np.subtract(self.tau_max, h[6:], out=hi[:nj])
-        x_lo, x_hi = self._x_lo, self._x_hi
-        x_lo[6:nv], x_hi[6:nv], at_lo, at_hi = self._joint_limits(q, v)
-        lo[:nj][at_hi] = -INF                  # the stop at the upper limit pushes down: any demand below
-        hi[:nj][at_lo] = INF
-        x_lo[-3:] = (-INF, -INF, 0.0) if seat_on else 0.0           # the seat's force: (x, y, z)
-        x_hi[-3:] = (INF, INF, seat_force_max_n / FORCE_UNIT_N) if seat_on else 0.0
-        x, solved = self._solve_qp(H, c, rows, np.concatenate([x_hi, b, hi]), np.concatenate([x_lo, b, lo]))
+        lo, hi = lower[n + e:n + e + nj], upper[n + e:n + e + nj]
+        np.subtract(-self.tau_max, h[6:], out=lo)
+        np.subtract(self.tau_max, h[6:], out=hi)
+        lower[6:nv], upper[6:nv], at_lo, at_hi = self._joint_limits(q, v)
+        lo[at_hi] = -INF                       # the stop at the upper limit pushes down: any demand below
+        hi[at_lo] = INF
+        if self.seat_contact:                                         # the seat's force: (x, y, z)
+            lower[n - 3:n] = (-INF, -INF, 0.0) if seat_on else 0.0
+            upper[n - 3:n] = (INF, INF, seat_force_max_n / FORCE_UNIT_N) if seat_on else 0.0
+        x, solved = self._solve_qp(H, c, rows, upper, lower)
         a, f = x[:nv], x[nv:] * FORCE_UNIT_N
         tau = M[6:] @ a + h[6:] - Jf[:, 6:].T @ f
         np.minimum(np.maximum(tau, -self.tau_max, out=tau), self.tau_max, out=tau)    # the stops take the rest
-        feet = f[:-3].reshape(-1, 3)
+        n_feet = 3 * len(corners)
+        feet = f[:n_feet].reshape(-1, 3)
         fz = feet[:, 2].sum()
         cop = (feet[:, 2] @ corners) / fz if fz > 1.0 else np.full(3, np.nan)
-        return WbcResult(a, tau, feet, f[-3:].copy(), cop, corners.copy(), self.data.com[0].copy(), solved,
+        seat_force = f[n_feet:].copy() if self.seat_contact else np.zeros(3)
+        return WbcResult(a, tau, feet, seat_force, cop, corners.copy(), self.data.com[0].copy(), solved,
                          time.perf_counter() - t0, time.thread_time() - cpu0)
 
 
@@ -292,14 +312,15 @@ _IDENTITY_XYZQUAT = pin.SE3ToXYZQUAT(pin.SE3.Identity())
 
 
 def feet_anchored_reference(model: pin.Model, data: pin.Data, q: np.ndarray, v_joints: np.ndarray,
-                            a_joints: np.ndarray, oM_left_sole: pin.SE3) -> Reference:
+                            a_joints: np.ndarray, oM_left_sole: pin.SE3, left_sole: int | None = None) -> Reference:
     """The full reference of joint positions, velocities and accelerations ``q[7:]``, ``v_joints``, ``a_joints``
     with the left sole held at ``oM_left_sole``: the base placement, velocity and acceleration that keep it there
-    (both soles, when the joints are a double-support plan), and the COM's. ``q``'s base part is ignored."""
+    (both soles, when the joints are a double-support plan), and the COM's. ``q``'s base part is ignored.
+    ``left_sole``: the left sole's frame id, when the caller has it."""
     nv = model.nv
     q = q.copy()
     q[:7] = _IDENTITY_XYZQUAT
-    fid = model.getFrameId("sole_left")
+    fid = model.getFrameId("sole_left") if left_sole is None else left_sole
     pin.forwardKinematics(model, data, q)
     base_to_sole = pin.updateFramePlacement(model, data, fid).copy()
     q[:7] = pin.SE3ToXYZQUAT(oM_left_sole * base_to_sole.inverse())

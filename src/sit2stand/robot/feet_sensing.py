@@ -1,0 +1,108 @@
+"""The robot's two ankle force/torque sensors as the simulated plant reads them, and the ground reactions a
+controller computes from them.
+
+A sensor reads the wrench of the leg on the foot below it in its own axes, turned by its mounting error (the plant's
+``ft_rotation_rad``), plus a bias and noise. From the readings the ground reaction on each foot follows as a
+controller computes it: the foot below the sensor (the controller model's mass and COM, not the plant's) is static,
+so ground + leg + the foot's weight balance. Everything is stacked in ``SIDES`` order: one product per step for
+both feet, few array operations (this runs for every published state, 500 times a second).
+
+Units SI; world frame REP-103 (x forward, y left, z up).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+
+from ..dynamics import G
+from ..errors import InputError
+from ..vectors import cross
+from .model import SIDES, PlantConfig
+
+
+@dataclass(frozen=True)
+class FeetSensing:
+    """The feet's F/T sensing, stacked in SIDES order."""
+
+    adr: np.ndarray          # (2, 6) sensordata indices: force x y z, torque x y z
+    sites: np.ndarray        # (4,) the sensors' sites, then the soles'
+    reading: np.ndarray      # (2, 3, 3) raw rows @ reading: what the sensor reads (its mounting's turn, transposed)
+    bias: np.ndarray         # (2, 6) [N, N m]
+    weight_n: np.ndarray     # (2, 3) the controller model's foot below the sensor, as the force that holds it up
+    lever_m: np.ndarray      # (2, 3) its COM in the sensor's frame
+    noise_sd: np.ndarray     # (12,) each foot's force and torque noise [N, N m]
+
+    @staticmethod
+    def of(model: mujoco.MjModel, controller: pin.Model, cfg: PlantConfig) -> FeetSensing:
+        """The sensing of the plant ``model`` (its sensors ``force_<side>``, ``torque_<side>``, sites ``ft_<side>``,
+        ``sole_<side>``), with the feet of the ``controller`` model and the sensor errors of ``cfg``.
+
+        Raises:
+            InputError: the plant file names a side that is not one of ``SIDES``.
+        """
+        um = cfg.unmodeled
+        for key, values in (("ft_bias", um.ft_bias), ("ft_rotation_rad", um.ft_rotation_rad)):
+            if set(values) - set(SIDES):
+                raise InputError(f"{cfg.source or 'plant'}: {key} for unknown side(s) "
+                                 f"{sorted(set(values) - set(SIDES))} (sides: {SIDES})")
+        both = np.concatenate([um.ft_force_bias_n, um.ft_torque_bias_nm])
+        adr = [(model.sensor_adr[model.sensor(f"force_{s}").id], model.sensor_adr[model.sensor(f"torque_{s}").id])
+               for s in SIDES]
+        feet = [controller.inertias[controller.getJointId(cfg.profile.foot_joint(s))] for s in SIDES]
+        return FeetSensing(
+            np.array([[*range(f, f + 3), *range(t, t + 3)] for f, t in adr]),
+            np.array([model.site(f"{k}_{s}").id for k in ("ft", "sole") for s in SIDES]),
+            # what the sensor reads, from the wrench in its modelled axes: the transpose of its mounting's turn
+            np.array([pin.exp3(np.asarray(um.ft_rotation_rad.get(s, np.zeros(3)), float)) for s in SIDES]),
+            np.array([both + np.asarray(um.ft_bias.get(s, np.zeros(6)), float) for s in SIDES]),
+            np.outer([float(f.mass) * G for f in feet], (0.0, 0.0, 1.0)),
+            np.array([f.lever for f in feet]),
+            np.tile([cfg.ft_force_noise_n] * 3 + [cfg.ft_torque_noise_nm] * 3, len(SIDES)))
+
+    @property
+    def ft_sites(self) -> np.ndarray:
+        return self.sites[:len(SIDES)]
+
+    def readings(self, data: mujoco.MjData, noise: np.ndarray) -> np.ndarray:
+        """(2, 6) what the sensors read [N, N m], given standard-normal ``noise`` (12,)."""
+        raw = data.sensordata.take(self.adr).reshape(len(SIDES), 2, 3)      # side, (force, torque), xyz
+        out = (raw @ self.reading).reshape(len(SIDES), 6)
+        out += self.bias
+        out += noise.reshape(len(SIDES), 6) * self.noise_sd.reshape(len(SIDES), 6)
+        return out
+
+    def ground_reactions(self, data: mujoco.MjData, readings: np.ndarray) -> np.ndarray:
+        """(2, 6) the ground reaction on each foot (world axes): force [N], and torque about the sole point [N m],
+        from the readings (2, 6)."""
+        xpos = data.site_xpos.take(self.sites, axis=0)           # the sensors' sites, then the soles'
+        # what the legs exert on the foot subtrees, and the feet's COMs from the sensors, in world axes
+        vectors = np.concatenate((readings.reshape(len(SIDES), 2, 3), self.lever_m[:, None]), axis=1)
+        R = data.site_xmat.take(self.ft_sites, axis=0).reshape(-1, 3, 3)
+        f_parent, t_parent, lever = (vectors @ R.transpose(0, 2, 1)).transpose(1, 0, 2)
+        out = np.empty((len(SIDES), 6))
+        np.subtract(self.weight_n, f_parent, out=out[:, :3])
+        # moments about the sole: ground + leg + the weight at the foot's COM (arm + lever) balance the static foot
+        arm = xpos[:len(SIDES)] - xpos[len(SIDES):]
+        np.subtract(cross(arm + lever, self.weight_n), t_parent + cross(arm, f_parent), out=out[:, 3:])
+        return out
+
+    def vertical_force(self, data: mujoco.MjData) -> float:
+        """The feet's summed vertical ground reaction [N] (the z of :meth:`ground_reactions`, without the rest, the
+        sensor errors aside): each foot's weight less the world z of what its sensor reads (row-major: the z row is
+        xmat[6:9])."""
+        z_rows = data.site_xmat.take(self.ft_sites, axis=0)[:, 6:9]
+        return float(self.weight_n[:, 2].sum() - np.vdot(z_rows, data.sensordata.take(self.adr[:, :3])))
+
+    def combined_cop(self, data: mujoco.MjData, ground: np.ndarray, threshold_n: float) -> np.ndarray | None:
+        """The centre of pressure of both feet on the floor (3,) [m] from their ground reactions (2, 6) (moments about
+        the origin, then the z = 0 plane); None while they carry no more than ``threshold_n``."""
+        force = ground[:, :3].sum(axis=0)
+        if force[2] <= threshold_n:
+            return None
+        sole = data.site_xpos.take(self.sites[len(SIDES):], axis=0)
+        moment = (ground[:, 3:] + cross(sole, ground[:, :3])).sum(axis=0)
+        return np.array([-moment[1] / force[2], moment[0] / force[2], 0.0])
