@@ -275,8 +275,9 @@ class WholeBodyQP:
         seat_on = self.seat_contact and seat_force_max_n > 0
         H, c = self._cost(q, v, ref, seat_on or seat_force_known_n is not None)
         e, n = self.n_eq, self.n
-        rows, Jf_u = self._rows, Jf * FORCE_UNIT_N
-        rows[:6, :nv], rows[:6, nv:] = M[:6], -Jf_u[:, :6].T            # the base's Newton-Euler rows
+        rows, JfT = self._rows, Jf.T
+        rows[:6, :nv] = M[:6]                                          # the base's Newton-Euler rows
+        np.multiply(JfT[:6], -FORCE_UNIT_N, out=rows[:6, nv:])
         rows[6:e, :nv], rows[6:e, nv:] = A_c, 0.0                        # the contacts
         lower, upper = self._lower, self._upper
         np.negative(h[:6], out=lower[n:n + 6])
@@ -285,7 +286,8 @@ class WholeBodyQP:
             rows[e - 3:e], lower[n + e - 3:n + e] = 0.0, 0.0
             rows[e - 3:e, -3:] = self._eye3
         upper[n:n + e] = lower[n:n + e]
-        rows[e:e + nj, :nv], rows[e:e + nj, nv:] = M[6:], -Jf_u[:, 6:].T   # the joint torques
+        rows[e:e + nj, :nv] = M[6:]                                    # the joint torques
+        np.multiply(JfT[6:], -FORCE_UNIT_N, out=rows[e:e + nj, nv:])
         lo, hi = lower[n + e:n + e + nj], upper[n + e:n + e + nj]
         np.subtract(-self.tau_max, h[6:], out=lo)
         np.subtract(self.tau_max, h[6:], out=hi)
