@@ -77,3 +77,28 @@ def test_robot_stays_seated_on_the_chair():
     assert not plant.fallen
     assert plant.chair_force_n() > 0.2 * plant.model.body_subtreemass[1] * 9.81   # 27 % measured (feet drawn back)
     assert np.linalg.norm(plant.data.qpos[:3] - x0) < 0.01         # pelvis moved < 1 cm in 5 s
+
+
+def test_feet_sensing_is_consistent_with_itself_and_with_a_turned_sensor():
+    cfg = PlantConfig.load(DEFAULT)
+    plant = Plant(cfg)
+    plant.step(500)
+    feet, data = plant.feet, plant.data
+    ground = feet.ground_reactions(data, feet.readings(data, np.zeros(12)))
+    # the controller's quick vertical force is the z of the full ground reactions, the sensor errors aside
+    unbiased = feet.ground_reactions(data, feet.readings(data, np.zeros(12)) - feet.bias)
+    assert feet.vertical_force(data) == pytest.approx(unbiased[:, 2].sum(), rel=1e-9)
+    # the two feet's COP: the moments about the origin (numpy's cross product) through the floor
+    soles = data.site_xpos[feet.sites[2:]]
+    moment = (ground[:, 3:] + np.cross(soles, ground[:, :3])).sum(axis=0)
+    cop = feet.combined_cop(data, ground, 1.0)
+    assert cop == pytest.approx([-moment[1] / ground[:, 2].sum(), moment[0] / ground[:, 2].sum(), 0.0], abs=1e-12)
+    assert feet.combined_cop(data, ground * 0.0, 1.0) is None
+    # a sensor mounted turned 0.1 rad about z reads the same wrench turned back
+    cfg.unmodeled.ft_rotation_rad["left"] = (0.0, 0.0, 0.1)
+    turned = Plant(cfg).feet                                  # the same sensors, one mounted turned
+    raw = turned.readings(data, np.zeros(12)) - turned.bias
+    R = pin.exp3(np.array([0.0, 0.0, 0.1]))
+    straight = feet.readings(data, np.zeros(12)) - feet.bias
+    assert raw[0, :3] == pytest.approx(straight[0, :3] @ R, abs=1e-6)
+    assert raw[1] == pytest.approx(straight[1], abs=1e-9)

@@ -100,9 +100,13 @@ class FeetSensing:
     def combined_cop(self, data: mujoco.MjData, ground: np.ndarray, threshold_n: float) -> np.ndarray | None:
         """The centre of pressure of both feet on the floor (3,) [m] from their ground reactions (2, 6) (moments about
         the origin, then the z = 0 plane); None while they carry no more than ``threshold_n``."""
-        force = ground[:, :3].sum(axis=0)
-        if force[2] <= threshold_n:
+        fz = mx = my = 0.0
+        # in floats: two feet's x and y moments are a few products, cheaper than array operations
+        for (f_x, f_y, f_z, m_x, m_y, _), (s_x, s_y, s_z) in zip(ground.tolist(),
+                                                                  data.site_xpos[self.sites[len(SIDES):]].tolist()):
+            fz += f_z
+            mx += m_x + s_y * f_z - s_z * f_y
+            my += m_y + s_z * f_x - s_x * f_z
+        if fz <= threshold_n:
             return None
-        sole = data.site_xpos.take(self.sites[len(SIDES):], axis=0)
-        moment = (ground[:, 3:] + cross(sole, ground[:, :3])).sum(axis=0)
-        return np.array([-moment[1] / force[2], moment[0] / force[2], 0.0])
+        return np.array([-my / fz, mx / fz, 0.0])
