@@ -49,7 +49,9 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import pinocchio as pin
@@ -89,16 +91,30 @@ def trunk_lift_dofs(model: pin.Model, dofs: np.ndarray) -> np.ndarray:
 
 @dataclass
 class IkResult:
-    """One frame's solution and how good it is."""
+    """One frame's solution and how good it is. The sole and marker errors are computed when first read (a forward
+    kinematics pass and the markers' positions, 10 % of a frame's solve, that a live frame does not need)."""
 
     q: np.ndarray
     feasible: bool             # the COM equality (and the feet) could be met
     com_error_m: float         # |c(q) - c_target| on the constrained axes
-    sole_error: float          # largest sole pose error (norm of the 6-D log)
-    marker_rms_m: float        # RMS marker distance
     iterations: int
     step_norm: float           # size of the last Gauss-Newton step (small at a local optimum)
     seconds: float
+    errors: Callable[[], tuple[float, float]] = field(repr=False)   # -> (sole_error, marker_rms_m) at q
+
+    @cached_property
+    def _sole_and_marker_errors(self) -> tuple[float, float]:
+        return self.errors()
+
+    @property
+    def sole_error(self) -> float:
+        """The largest sole pose error (norm of the 6-D log)."""
+        return self._sole_and_marker_errors[0]
+
+    @property
+    def marker_rms_m(self) -> float:
+        """The RMS marker distance [m]."""
+        return self._sole_and_marker_errors[1]
 
 
 @dataclass(frozen=True)
@@ -426,15 +442,23 @@ class ComIk:
         if not np.isfinite(q).all():
             raise FloatingPointError("IK produced a non-finite configuration")
         com = pin.centerOfMass(model, data, q, False)       # with the joints' placements: no frame pass needed
+        com_err = _norm((com - f.com_target).take(f.axes))
+        return IkResult(q, feasible and com_err < 1e-3, com_err, it, step, time.perf_counter() - t0,
+                        lambda: self._errors_at(q, f))
+
+    def _errors_at(self, q: np.ndarray, f: _Frame) -> tuple[float, float]:
+        """The largest sole pose error and the markers' RMS distance [m] at ``q``, on a data of their own (the
+        solver's has moved on by the time they are read)."""
+        model = self.model
+        data = model.createData()
+        pin.forwardKinematics(model, data, q)
         marker_rms = 0.0
         if len(f.fids):
             e = (self.points.positions(data, f.points) - f.targets).ravel()
             marker_rms = math.sqrt(e @ e / len(f.fids))
         sole_err = max(_norm(pin.log6(t.actInv(pin.updateFramePlacement(model, data, fid))).vector)
                        for fid, t in zip(self.soles, f.sole_targets))
-        com_err = _norm((com - f.com_target).take(f.axes))
-        return IkResult(q, feasible and com_err < 1e-3, com_err, sole_err, marker_rms, it, step,
-                        time.perf_counter() - t0)
+        return sole_err, marker_rms
 
     def last_dual_residual(self) -> float:
         """The last step's QP stationarity residual max |H dq + g + multipliers' forces| (inf if it had no
