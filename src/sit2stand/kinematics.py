@@ -10,6 +10,7 @@ Units SI; world frame (REP-103).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +22,16 @@ _CROSS_AT = [4, 5, 9, 11, 15, 16]
 ``_CROSS_SIGN``: v_p = v_O + omega x p = [I | -[p]x] (v_O, omega)."""
 _CROSS_FROM = [2, 1, 2, 0, 1, 0]
 _CROSS_SIGN = np.array([1.0, -1.0, -1.0, 1.0, 1.0, -1.0])
+
+
+@functools.lru_cache(maxsize=64)
+def _block_layout(m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """For M points: the blocks [I | 0] (M * 3, 6) (copy them: their p-entries are refilled per call), the flat
+    indices of those entries, the flat indices into P (M, 3) that fill them, and their signs."""
+    blocks = np.tile(np.hstack([np.eye(3), np.zeros((3, 3))]), (m, 1))
+    fill = (18 * np.arange(m)[:, None] + np.array(_CROSS_AT)).ravel()
+    source = (3 * np.arange(m)[:, None] + np.array(_CROSS_FROM)).ravel()
+    return blocks, fill, source, np.tile(_CROSS_SIGN, m)
 
 
 @dataclass(frozen=True)
@@ -53,21 +64,27 @@ class PointJacobians:
     def __init__(self, model: pin.Model) -> None:
         self.model = model
         self.nv = model.nv
-        self._masks: dict[int, np.ndarray] = {}
+        self._frames: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}
         self._layouts: dict[tuple[int, ...] | bytes, PointSet] = {}
         self._weighted: tuple | None = None     # (set, row weights, masks weighted by them) of the last call
 
     def support_mask(self, frame_id: int) -> np.ndarray:
         """(nv,) 1 on the velocity coordinates that move this frame, 0 elsewhere."""
-        mask = self._masks.get(frame_id)
-        if mask is None:
+        return self._frame(frame_id)[2]
+
+    def _frame(self, frame_id: int) -> tuple[int, np.ndarray, np.ndarray]:
+        """A frame's parent joint, homogeneous offset in it (4,) and support mask (nv,), kept per frame: a new set
+        of frames (a marker lost or found) is then laid out from them in a few products."""
+        known = self._frames.get(frame_id)
+        if known is None:
             model = self.model
+            frame = model.frames[frame_id]
             mask = np.zeros(self.nv)
-            for j in model.supports[model.frames[frame_id].parentJoint]:
+            for j in model.supports[frame.parentJoint]:
                 if j > 0:
                     mask[model.joints[j].idx_v:model.joints[j].idx_v + model.joints[j].nv] = 1.0
-            self._masks[frame_id] = mask
-        return mask
+            known = self._frames[frame_id] = (frame.parentJoint, np.array([*frame.placement.translation, 1.0]), mask)
+        return known
 
     def point_set(self, frame_ids) -> PointSet:
         """The precomputed layout of ``frame_ids`` (cached per set): pass it instead of the ids where one set is
@@ -78,18 +95,15 @@ class PointJacobians:
         key = frame_ids.astype(np.int64).tobytes() if isinstance(frame_ids, np.ndarray) else tuple(frame_ids)
         layout = self._layouts.get(key)
         if layout is None:
-            fids = [int(f) for f in frame_ids]
-            model, m = self.model, len(fids)
-            joints = sorted({model.frames[f].parentJoint for f in fids})
-            column = np.array([joints.index(model.frames[f].parentJoint) for f in fids], int)
+            frames = [self._frame(int(f)) for f in frame_ids]
+            m = len(frames)
+            joints = sorted({parent for parent, _, _ in frames})
+            column = np.array([joints.index(parent) for parent, _, _ in frames], int)
             take = ((4 * column[:, None] + np.arange(3)) * m + np.arange(m)[:, None])
-            offsets = np.array([[*model.frames[f].placement.translation, 1.0] for f in fids]).reshape(m, 4).T
-            masks = np.repeat(np.array([self.support_mask(f) for f in fids]).reshape(m, self.nv), 3, axis=0)
-            blocks = np.tile(np.hstack([np.eye(3), np.zeros((3, 3))]), (m, 1))
-            fill = (18 * np.arange(m)[:, None] + np.array(_CROSS_AT)).ravel()
-            source = (3 * np.arange(m)[:, None] + np.array(_CROSS_FROM)).ravel()
-            sign = np.tile(_CROSS_SIGN, m)
-            layout = self._layouts[key] = PointSet(len(fids), joints, take, offsets, masks, blocks, fill, source, sign)
+            offsets = np.array([offset for _, offset, _ in frames]).reshape(m, 4).T
+            masks = np.repeat(np.array([mask for _, _, mask in frames]).reshape(m, self.nv), 3, axis=0)
+            blocks, fill, source, sign = _block_layout(m)
+            layout = self._layouts[key] = PointSet(m, joints, take, offsets, masks, blocks.copy(), fill, source, sign)
         return layout
 
     def positions(self, data: pin.Data, frame_ids) -> np.ndarray:
