@@ -23,7 +23,7 @@ from ..human.mass_scaling import MassScaling
 from ..human.skeleton import HumanModel
 from ..io.marker_message import marker_array_cdr
 from ..io.messages import stamp_ns
-from ..io.stream_messages import JointStateEncoder, StampedNumbersEncoder
+from ..io.stream_messages import CenterOfMassEncoder, JointStateEncoder, StampedNumbersEncoder
 from ..io.tf_message import TfEncoder
 from ..io.topics import (HUMAN_COM_TOPIC, HUMAN_DESCRIPTION_TOPIC, HUMAN_JOINTS_TOPIC, HUMAN_MARKERS_TOPIC,
                          HUMAN_MEASURED_COP_TOPIC, HUMAN_MODEL_COP_TOPIC, HUMAN_PELVIS_POSE_TOPIC, HUMAN_ROOT_FRAME,
@@ -69,6 +69,7 @@ class HumanOutputs:
         self.joint_encoder: JointStateEncoder | None = None     # the skeleton's joints: made with the estimator
         self.lab_pose = StampedNumbersEncoder(LAB_FRAME, StampedNumbersEncoder.POSE)
         self.lab_point = StampedNumbersEncoder(LAB_FRAME, StampedNumbersEncoder.POINT)
+        self.com_encoder = CenterOfMassEncoder("skeleton_fit", LAB_FRAME)
         self.viz_every = viz_every
         self.described: HumanModel | None = None     # the skeleton the frames and description are of
         self.frames: SkeletonFrames | None = None
@@ -82,17 +83,15 @@ class HumanOutputs:
         self.joint_encoder = JointStateEncoder(names, HUMAN_ROOT_FRAME, ("position",))
 
     def com(self, header, out: StreamOutput) -> None:
-        msg = CenterOfMass(header=header_of(header.stamp, LAB_FRAME), source="skeleton_fit", valid=bool(out.valid),
-                           marker_rms_m=float(out.marker_rms_m), n_markers=int(out.n_markers), cop_error_m=float("nan"))
+        """The COM of the frame (the last valid one while the fit fails), with its quality and the latest delayed
+        frame's COP error (~half a window back), as bytes: ~10 us against ~100 us as an rclpy message."""
         com = out.com_m if np.all(np.isfinite(out.com_m)) else self.last_com
-        if com is not None:
-            msg.position.x, msg.position.y, msg.position.z = map(float, com)
-            if out.valid:
-                self.last_com = com
-                (msg.velocity.x, msg.velocity.y, msg.velocity.z) = map(float, out.com_vel)
-                (msg.acceleration.x, msg.acceleration.y, msg.acceleration.z) = map(float, out.com_acc)
-        msg.cop_error_m = self.last_cop_error      # of the latest delayed frame (~half a window back)
-        self.pubs["com"].publish(msg)
+        velocity = acceleration = (0.0, 0.0, 0.0)
+        if com is not None and out.valid:
+            self.last_com, velocity, acceleration = com, out.com_vel, out.com_acc
+        self.pubs["com"].publish(self.com_encoder.encode(
+            stamp_ns(header), (0.0, 0.0, 0.0) if com is None else com, velocity, acceleration, bool(out.valid),
+            float(out.marker_rms_m), self.last_cop_error, int(out.n_markers)))
 
     def rest(self, header, out: StreamOutput) -> None:
         """Joint angles (of the chain below the pelvis), the pelvis pose in lab, both COPs of the delayed frame."""
