@@ -252,7 +252,7 @@ def test_a_recording_that_starts_seated_gets_no_lead_in(retargeted, elderly):
 def test_a_joint_resting_on_its_stop_is_left_out_of_the_torque_criterion_and_one_lifting_off_counts(retargeted):
     """The torso pitch near its upper stop (0.785 rad) with its static torque pressing into it: the stop carries the
     load, so the joint does not hold the plan; far from the stop, pulled off it by its static torque, or lifted off it
-    by the plan (moving away faster than LIFT_OFF_SPEED_RAD_S), it counts."""
+    by the plan (moving away faster than LIFT_OFF_SPEED_RAD_S) while the IK's pose has left the stop, it counts."""
     robot, _, frames, _, player = retargeted
     model = player.model
     jid = model.getJointId("torso_2_joint")
@@ -266,4 +266,10 @@ def test_a_joint_resting_on_its_stop_is_left_out_of_the_torque_criterion_and_one
             (0.75, -70.0, -slow, True), (0.75, -70.0, -fast, False), (0.75, -70.0, fast, True),
             (-0.2, 30.0, slow, True), (-0.2, 30.0, fast, False)):
         q[iq], static[iv], v[iv] = q_torso, static_torso, v_torso
-        assert player._resting_on_stop(q, v, static)[iv] == resting, (q_torso, static_torso, v_torso)
+        assert player._resting_on_stop(q, q, v, static)[iv] == resting, (q_torso, static_torso, v_torso)
+    # the smoothing's overshoot past the stop coming back, the IK's own pose on the stop: still resting
+    on_stop = q.copy()
+    on_stop[iq] = model.upperPositionLimit[iq]
+    q[iq], static[iv], v[iv] = model.upperPositionLimit[iq] + 0.01, -70.0, -3 * LIFT_OFF_SPEED_RAD_S
+    assert player._resting_on_stop(q, on_stop, v, static)[iv]
+    assert not player._resting_on_stop(q, q - 0.05, v, static)[iv]

@@ -64,16 +64,14 @@ control), COM tracking p90 1.05 -> 0.97 cm (PD); the plan's COM stays within 0.5
 DEFAULT_MARGIN_M = 0.04
 """The ZMP's margin inside the feet [m]: what joint PD with an inverse-dynamics feed-forward was measured to need
 (../shared/notes/robot-talos.md); the uniform player used 6 cm."""
-TORQUE_ROOM_MIN = 0.1
-"""The least room below its limit [share of the limit] an arm or head joint is given in the torque criterion: an arm
-posed near its static limit would otherwise hold the whole plan at the cap for its smallest motion. The legs and
-the torso get none: with 10 % the torso pitch (78 N m) extended too fast in 3 of 29 digital humans, which fell."""
 STOP_REACH_RAD = 0.1
 """A joint this close to a position limit, its static torque pressing it into that stop, is left out of the torque
 criterion, as one whose static torque alone is past its limit, unless the plan lifts it off (``LIFT_OFF_SPEED_RAD_S``):
 the stop carries the load while the joint rests on it, and a joint landing on it lands a little early (the plan takes
 it there next). Measured on the elderly rise: the torso pitch, leaning onto its stop with 77 of its 78 N m static, held
 the plan at the cap for 0.1 s of human time (time scale 1.18, then 1.07)."""
+ON_STOP_RAD = 1e-4
+"""A joint the IK's pose (before smoothing) puts this close to a position limit is on that stop."""
 LIFT_OFF_SPEED_RAD_S = 0.05
 """A joint within ``STOP_REACH_RAD`` of a stop its static torque presses it into, moving away from that stop faster
 than this in the plan, is lifting off: its motor bears static and motion torque alone, and it counts in the torque
@@ -151,11 +149,13 @@ class PlanPlayer:
         self.dynamics = dynamics
         self.local = retiming == "local"
         self.torque_limits = model.effortLimit[6:].copy() if torque_limited else None
-        upper = np.zeros(model.nv - 6, bool)
+        # the torque criterion's joints: those that carry the body (legs, trunk); the upper limbs' own motors
+        # (TALOS's shoulders, 22 N m) bound the natural rise in 20 of its 60 slowed frames for a swing that moves
+        # the COM little: they lag there instead, within their limits, as the whole-body controller keeps them
+        self._carries_body = np.ones(model.nv - 6, bool)
         for j in range(2, model.njoints):
             if profile_of(model).is_upper_limb(model.names[j]):
-                upper[model.joints[j].idx_v - 6] = True
-        self._room_floor = np.where(upper, TORQUE_ROOM_MIN * model.effortLimit[6:], 1e-9)
+                self._carries_body[model.joints[j].idx_v - 6] = False
         self._q_index = np.array([model.joints[j].idx_q for j in range(2, model.njoints)])     # joint i -> its q
         self.pulled = 0.0             # periods played
         self._settings = dict(margin_m=margin_m, lookahead_s=lookahead_s, smooth_s=smooth_s,
@@ -223,7 +223,8 @@ class PlanPlayer:
     def frame_scale(self, k: int) -> float:
         """Smallest time scale (grid of 0.02, at most ``max_scale``) keeping frame ``k``'s ZMP ``margin_m`` inside the
         feet (none while the robot is on the chair), its joint speeds under ``max_joint_speed`` [rad/s] and, when
-        ``torque_limited``, its inverse-dynamics torques within the URDF effort limits; at least
+        ``torque_limited``, the inverse-dynamics torques of the joints that carry the body (not the upper limbs)
+        within the URDF effort limits; at least
         ``planned_time_scale``."""
         speed = float(np.abs(self._v[k][6:]).max()) / self.max_speed if self.max_speed > 0 else 1.0
         s = 1.0
@@ -233,10 +234,10 @@ class PlanPlayer:
         return min(max(s, speed, self._torque_scale(k), self.planned_time_scale or 1.0), self.max_time_scale)
 
     def _torque_scale(self, k: int) -> float:
-        """Smallest time scale keeping frame ``k``'s joint torques (contact-consistent inverse dynamics, the chair
-        taking load while seated) within the URDF effort limits. Played s x slower, tau = tau_static + tau_motion / s^2;
-        a joint whose static torque alone is past its limit, or one resting on its stop, cannot be helped by slowing
-        down and is left out."""
+        """Smallest time scale keeping frame ``k``'s torques of the legs and trunk (contact-consistent inverse
+        dynamics, the chair taking load while seated) within the URDF effort limits. Played s x slower,
+        tau = tau_static + tau_motion / s^2; a joint whose static torque alone is past its limit, or one resting on
+        its stop, cannot be helped by slowing down and is left out."""
         if self.torque_limits is None:
             return 1.0
         q, v, a = self._q[k], np.zeros(self.model.nv), np.zeros(self.model.nv)
@@ -246,18 +247,22 @@ class PlanPlayer:
         static, motion = contact_joint_torques(self.model, self.data, q, np.stack([gravity, full - gravity]),
                                                not self._feet[k])
         room = self.torque_limits - np.sign(motion) * static
-        need = np.where(room > 0, np.abs(motion) / np.maximum(room, self._room_floor), 0.0)
-        need[self._resting_on_stop(q, v[6:], static)] = 0.0
+        need = np.where((room > 0) & self._carries_body, np.abs(motion) / np.maximum(room, 1e-9), 0.0)
+        need[self._resting_on_stop(q, self._raw_q[k], v[6:], static)] = 0.0
         return float(np.sqrt(max(1.0, need.max())))
 
-    def _resting_on_stop(self, q: np.ndarray, v: np.ndarray, static: np.ndarray) -> np.ndarray:
-        """Joints within ``STOP_REACH_RAD`` of a position limit whose static torque presses them into it (a stop at
-        the upper limit pushes back with negative torque: such a joint needs negative torque), and which the plan
-        (joint speeds ``v`` [rad/s]) does not lift off it faster than ``LIFT_OFF_SPEED_RAD_S``."""
-        qj = q[self._q_index]
+    def _resting_on_stop(self, q: np.ndarray, raw_q: np.ndarray, v: np.ndarray, static: np.ndarray) -> np.ndarray:
+        """The joints of a smoothed pose ``q`` within ``STOP_REACH_RAD`` of a position limit whose static torque
+        presses them into it (a stop at the upper limit pushes back with negative torque: such a joint needs negative
+        torque), and which the plan (joint speeds ``v`` [rad/s]) does not lift off it faster than
+        ``LIFT_OFF_SPEED_RAD_S``, or which the IK's own pose ``raw_q`` holds on the stop (``ON_STOP_RAD``): the
+        smoothing's fit of a joint that lands on its stop and stays overshoots the limit and comes back at ~0.15 rad/s,
+        a lift-off that is not one (TALOS's trunk at 45 degrees on the natural rise: counted, it slowed the seat-off
+        2.6 times)."""
+        qj, raw = q[self._q_index], raw_q[self._q_index]
         lo, hi = self.model.lowerPositionLimit[self._q_index], self.model.upperPositionLimit[self._q_index]
-        on_hi = (hi - qj < STOP_REACH_RAD) & (static < 0) & (v > -LIFT_OFF_SPEED_RAD_S)
-        on_lo = (qj - lo < STOP_REACH_RAD) & (static > 0) & (v < LIFT_OFF_SPEED_RAD_S)
+        on_hi = (hi - qj < STOP_REACH_RAD) & (static < 0) & ((v > -LIFT_OFF_SPEED_RAD_S) | (hi - raw < ON_STOP_RAD))
+        on_lo = (qj - lo < STOP_REACH_RAD) & (static > 0) & ((v < LIFT_OFF_SPEED_RAD_S) | (raw - lo < ON_STOP_RAD))
         return on_hi | on_lo
 
     def required_scale(self, frames: range) -> float:
