@@ -239,3 +239,18 @@ def test_the_clis_and_the_graphs_controller_choices_and_default_are_the_stand_up
     assert CONTROLLER_CHOICES == CONTROLLERS and CLI_DEFAULT_CONTROLLER == DEFAULT_CONTROLLER
     for graph in ("standup", "live"):
         assert yaml.safe_load(graph_path(graph).read_text())["arguments"]["controller"] == DEFAULT_CONTROLLER, graph
+
+
+def test_a_seat_known_as_a_force_gives_the_torques_of_a_seat_contact_with_that_force(plant):
+    """The robot's controller has no seat unknowns (its force is known from the feet): with the seat's force given,
+    it finds the torques a QP with a seat contact finds when that contact carries no force, and it is smaller."""
+    with_contact = WholeBodyQP(plant.ctrl, plant.seat_frame)
+    known = WholeBodyQP(plant.ctrl, plant.seat_frame, seat_contact=False)
+    assert known.n == with_contact.n - 3 and known.n_eq == with_contact.n_eq - 3
+    q = plant.pin_configuration(plant.q_seated)
+    v = np.zeros(plant.ctrl.nv)
+    seat = np.array([0.0, 0.0, 300.0])
+    a = with_contact.solve(q, v, _at_rest(plant.ctrl, q), seat_force_max_n=0.0, seat_force_known_n=seat)
+    b = known.solve(q, v, _at_rest(plant.ctrl, q), seat_force_known_n=seat)
+    assert a.solved and b.solved and np.all(b.seat_force == 0.0)
+    assert np.allclose(a.tau, b.tau, atol=1e-6) and np.allclose(a.feet_forces, b.feet_forces, atol=1e-6)
