@@ -140,7 +140,8 @@ def add_retarget(sub) -> None:
     p.add_argument("bag", help="demonstration bag (/mocap/markers, force plates)")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--params", default=None, help="identified COM parameters YAML (default: CAD)")
-    p.add_argument("--plant", default=None, help="plant YAML (seated posture; default: the nominal plant)")
+    p.add_argument("--plant", default=None, help="plant YAML or a packaged plant: default (the default: the robot "
+                   "with the mass its CAD model lacks), heavy_front, cad (nothing unmodeled)")
     p.add_argument("--human-com", default=None, help="bag with /human/com (default: the bag's, else estimated)")
     p.add_argument("--margin", type=float, default=0.04, help="ZMP margin inside the feet [m] (default 0.04)")
     p.add_argument("--time-scale", type=float, default=None, help="fixed time scale (default: adaptive)")
