@@ -110,6 +110,48 @@ def friction_rows(n_points: int, mu: float) -> np.ndarray:
     return np.kron(np.eye(n_points), block)
 
 
+@dataclass
+class PostureCost:
+    """The QP cost's constant part: the posture weights per tangent coordinate (the base's translation left to the
+    COM task) and the diagonal Hessian they make with the forces' regularisation, standing and seated."""
+
+    weights: np.ndarray
+    weights_seated: np.ndarray
+    H0: np.ndarray
+    H0_seated: np.ndarray
+
+    @staticmethod
+    def of(g: WbcGains, nv: int, force_weights: np.ndarray) -> PostureCost:
+        """For ``nv`` tangent coordinates and the forces' weights per unknown (in ``FORCE_UNIT_N``)."""
+        weights = np.full(nv, g.posture_weight)
+        weights[:3] = 0.0                 # base translation: the COM task's
+        weights[3:6] = g.base_orientation_weight
+        seated = weights.copy()
+        seated[3:6] = g.base_orientation_weight_seated
+        return PostureCost(weights, seated, np.diag(np.concatenate([weights, force_weights])),
+                           np.diag(np.concatenate([seated, force_weights])))
+
+    def at(self, seated: bool) -> tuple[np.ndarray, np.ndarray]:
+        """(weights, H0) while the seat carries weight or not."""
+        return (self.weights_seated, self.H0_seated) if seated else (self.weights, self.H0)
+
+
+@dataclass
+class QpWorkspace:
+    """The arrays a step fills in place: the force Jacobian, the contact rows and right-hand side, the corners'
+    positions, the COM Jacobian, DAQP's constraint rows, bounds (of x, then of the rows) and senses."""
+
+    Jf: np.ndarray          # (n_f, nv)
+    A_c: np.ndarray         # (n_eq - 6, nv)
+    b_c: np.ndarray         # (n_eq - 6,)
+    corners: np.ndarray     # (8, 3) [m]
+    jcom: np.ndarray        # (3, nv)
+    rows: np.ndarray        # equalities (base, soles, seat), torques, friction
+    lower: np.ndarray
+    upper: np.ndarray
+    sense: np.ndarray
+
+
 class WholeBodyQP:
     """Task-space inverse dynamics (see the module docstring).
 
@@ -129,51 +171,52 @@ class WholeBodyQP:
         self.soles = [model.getFrameId(f"sole_{s}") for s in SIDES]
         self.seat = seat_frame
         self.seat_contact = seat_contact and seat_frame is not None
-        self.nv, self.nj = model.nv, model.nv - 6
+        self.nv = nv = model.nv
         n_pts = 4 * len(self.soles) + self.seat_contact
-        self.n_f = 3 * n_pts
-        self.n = self.nv + self.n_f
+        self.n = nv + 3 * n_pts
+        self.n_eq = 6 + 6 * len(self.soles) + 3 * self.seat_contact
         self.tau_max = model.effortLimit[6:].copy()
-        self.q_lo, self.q_hi = model.lowerPositionLimit[7:].copy(), model.upperPositionLimit[7:].copy()
-        self.corner_local = sole_corners_local(profile_of(model), self.g.cop_margin_m)
+        self._q_limits = model.lowerPositionLimit[7:].copy(), model.upperPositionLimit[7:].copy()
         self.mass = float(pin.computeTotalMass(model))
-        self.C_fric = friction_rows(n_pts, self.g.friction)
-        self.n_eq = n_eq = 6 + 6 * len(self.soles) + 3 * self.seat_contact
-        self._sense = np.zeros(self.n + n_eq + self.nj + 4 * n_pts, np.int32)   # bounds, equalities, inequalities
-        self._sense[self.n:self.n + n_eq] = DAQP_EQUALITY
-        # the constraint rows, filled in place each step: equalities (base, soles, seat), torques, friction
-        self._rows = np.zeros((n_eq + self.nj + 4 * n_pts, self.n))
-        self._rows[n_eq + self.nj:, self.nv:] = self.C_fric
         self._multipliers: np.ndarray | None = None     # the last solve's: its active set starts the next
         self.cold_solves = 0
-        self.weights = np.full(self.nv, self.g.posture_weight)
-        self.weights[:3] = 0.0                 # base translation: the COM task's
-        self.weights[3:6] = self.g.base_orientation_weight
         # the cost's constant part: posture weights and force regularisation (in FORCE_UNIT_N), the seat's normal
         # force more (the feet carry what they can)
         fw = np.full(self.n_f, self.g.force_weight)
         if self.seat_contact:
             fw[-1] += self.g.seat_force_weight
-        self._H0 = np.diag(np.concatenate([self.weights, fw * FORCE_UNIT_N**2]))
-        self.weights_seated = self.weights.copy()
-        self.weights_seated[3:6] = self.g.base_orientation_weight_seated
-        self._H0_seated = np.diag(np.concatenate([self.weights_seated, fw * FORCE_UNIT_N**2]))
-        # a corner's velocity in its sole's axes from the sole's 6D one (LOCAL: v, omega): v + omega x r = K_i (v,
-        # omega), K_i = [I, -[r_i]x]; constant, as the corners are fixed on the sole
-        self._corner_map = np.concatenate([np.broadcast_to(np.eye(3), (4, 3, 3)), -skew_rows(self.corner_local)],
-                                          axis=2)
-        # what each step fills in place: the force Jacobian, the contact rows, the corners, the bounds
-        self._Jf = np.zeros((self.n_f, self.nv))
-        self._A_c = np.zeros((n_eq - 6, self.nv))
-        self._b_c = np.zeros(n_eq - 6)
-        self._corners = np.zeros((4 * len(self.soles), 3))
-        # DAQP's bounds, filled in place: of x, then of the rows (equalities: both bounds the right-hand side;
-        # torques; friction, C f <= 0)
-        self._lower, self._upper = np.full(len(self._sense), -INF), np.full(len(self._sense), INF)
-        self._upper[self.n + n_eq + self.nj:] = 0.0
-        self._lower[self.nv + 2:self.n:3] = 0.0                      # unilateral normal forces
-        self._eye3 = np.eye(3)
-        self._zero_v = np.zeros(self.nv)
+        self._posture = PostureCost.of(self.g, nv, fw * FORCE_UNIT_N**2)
+        # the corners in their sole's frame, and a corner's velocity in its sole's axes from the sole's 6D one
+        # (LOCAL: v, omega): v + omega x r = K_i (v, omega), K_i = [I, -[r_i]x]; constant, the corners fixed on it
+        corners = sole_corners_local(profile_of(model), self.g.cop_margin_m)
+        self._corner_map = corners, np.concatenate([np.broadcast_to(np.eye(3), (4, 3, 3)), -skew_rows(corners)],
+                                                   axis=2)
+        self._ws = self._workspace(n_pts)
+
+    def _workspace(self, n_pts: int) -> QpWorkspace:
+        """The arrays each step fills, with what never changes in them: the friction rows, the equalities' senses,
+        the friction rows' upper bound (C f <= 0), the unilateral normal forces' lower bound."""
+        nv, nj, n, n_eq = self.nv, self.nj, self.n, self.n_eq
+        m = n_eq + nj + 4 * n_pts
+        rows = np.zeros((m, n))
+        rows[n_eq + nj:, nv:] = friction_rows(n_pts, self.g.friction)
+        sense = np.zeros(n + m, np.int32)
+        sense[n:n + n_eq] = DAQP_EQUALITY
+        lower, upper = np.full(n + m, -INF), np.full(n + m, INF)
+        upper[n + n_eq + nj:] = 0.0
+        lower[nv + 2:n:3] = 0.0
+        return QpWorkspace(np.zeros((self.n_f, nv)), np.zeros((n_eq - 6, nv)), np.zeros(n_eq - 6),
+                           np.zeros((4 * len(self.soles), 3)), np.zeros((3, nv)), rows, lower, upper, sense)
+
+    @property
+    def nj(self) -> int:
+        """Actuated joints."""
+        return self.nv - 6
+
+    @property
+    def n_f(self) -> int:
+        """Force unknowns: 3 per contact point."""
+        return self.n - self.nv
 
     # -- matrices ---------------------------------------------------------------------------------------------
     def _kinematics(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -184,9 +227,9 @@ class WholeBodyQP:
         M = data.M.copy()                     # whole: Pinocchio 4's crba fills both triangles
         h = pin.nonLinearEffects(model, data, q, v).copy()
         pin.computeJointJacobians(model, data, q)
-        pin.forwardKinematics(model, data, q, v, self._zero_v)     # a = 0: the drifts
+        pin.forwardKinematics(model, data, q, v, np.zeros(self.nv))     # a = 0: the drifts
         pin.centerOfMass(model, data, pin.KinematicLevel.ACCELERATION)
-        self._jcom = pin.jacobianCenterOfMass(model, data).copy()
+        self._ws.jcom[:] = pin.jacobianCenterOfMass(model, data)
         pin.updateFramePlacements(model, data)
         return M, h
 
@@ -195,7 +238,9 @@ class WholeBodyQP:
         contact rows (A_c, b_c) of the soles and the seat (A_c a = b_c), and the corners' positions (8, 3): arrays
         the QP owns, filled in place."""
         model, data = self.model, self.data
-        Jf, A_c, b_c, corners = self._Jf, self._A_c, self._b_c, self._corners
+        ws = self._ws
+        Jf, A_c, b_c, corners = ws.Jf, ws.A_c, ws.b_c, ws.corners
+        corner_local, corner_map = self._corner_map
         for k, fid in enumerate(self.soles):
             J6 = pin.getFrameJacobian(model, data, fid, pin.LOCAL)
             drift = pin.getFrameAcceleration(model, data, fid, pin.LOCAL).vector
@@ -205,8 +250,8 @@ class WholeBodyQP:
             oMf = data.oMf[fid]
             R = oMf.rotation
             # the corners' velocities in world axes: R K_i J6 v
-            np.matmul((R @ self._corner_map).reshape(12, 6), J6, out=Jf[12 * k:12 * k + 12])
-            corners[4 * k:4 * k + 4] = oMf.translation + self.corner_local @ R.T
+            np.matmul((R @ corner_map).reshape(12, 6), J6, out=Jf[12 * k:12 * k + 12])
+            corners[4 * k:4 * k + 4] = oMf.translation + corner_local @ R.T
         s = 6 * len(self.soles)
         if self.seat_contact:
             Js = self._seat_jacobian()
@@ -221,15 +266,16 @@ class WholeBodyQP:
     def _cost(self, q: np.ndarray, v: np.ndarray, ref: Reference, seated: bool) -> tuple[np.ndarray, np.ndarray]:
         """H, g of the weighted tasks over x = (a, f); ``seated``: the seat carries weight."""
         g, nv = self.g, self.nv
-        H = (self._H0_seated if seated else self._H0).copy()     # posture weights, force regularisation
+        weights, H0 = self._posture.at(seated)
+        H = H0.copy()                          # posture weights, force regularisation
         c = np.zeros(self.n)
         # posture (base orientation and joints): a = a*
         a_post = ref.a + g.posture_kp * pin.difference(self.model, q, ref.q) + g.posture_kd * (ref.v - v)
-        c[:nv] -= (self.weights_seated if seated else self.weights) * a_post
+        c[:nv] -= weights * a_post
         # COM: Jcom a + drift = a_com*
         com, vcom, drift = self.data.com[0], self.data.vcom[0], self.data.acom[0]
         a_com = ref.com_a + g.com_kp * (ref.com - com) + g.com_kd * (ref.com_v - vcom)
-        J = self._jcom
+        J = self._ws.jcom
         H[:nv, :nv] += (g.com_weight * J).T @ J
         c[:nv] -= g.com_weight * J.T @ (a_com - drift)
         return H, c
@@ -242,7 +288,7 @@ class WholeBodyQP:
         for start in (self._multipliers, None):
             if start is None and self._multipliers is not None:
                 self.cold_solves += 1
-            x, _, flag, info = daqp.solve(H, c, rows, upper, lower, self._sense, dual_start=start)
+            x, _, flag, info = daqp.solve(H, c, rows, upper, lower, self._ws.sense, dual_start=start)
             if flag == 1:
                 self._multipliers = info["lam"]
                 return x, True
@@ -256,9 +302,10 @@ class WholeBodyQP:
         and the joints on (or reaching within that horizon) their lower and upper mechanical stops."""
         eps, H = self.g.limit_contact_rad, self.g.limit_horizon_s
         q_ahead = q[7:] + v[6:] * H
-        a_hi = 2.0 / H**2 * (self.q_hi - q_ahead)
-        a_lo = 2.0 / H**2 * (self.q_lo - q_ahead)
-        return a_lo, np.maximum(a_hi, a_lo), q_ahead <= self.q_lo + eps, q_ahead >= self.q_hi - eps
+        q_lo, q_hi = self._q_limits
+        a_hi = 2.0 / H**2 * (q_hi - q_ahead)
+        a_lo = 2.0 / H**2 * (q_lo - q_ahead)
+        return a_lo, np.maximum(a_hi, a_lo), q_ahead <= q_lo + eps, q_ahead >= q_hi - eps
 
     # -- solve ------------------------------------------------------------------------------------------------
     def solve(self, q: np.ndarray, v: np.ndarray, ref: Reference, seat_force_max_n: float = 0.0,
@@ -275,16 +322,16 @@ class WholeBodyQP:
         seat_on = self.seat_contact and seat_force_max_n > 0
         H, c = self._cost(q, v, ref, seat_on or seat_force_known_n is not None)
         e, n = self.n_eq, self.n
-        rows, JfT = self._rows, Jf.T
+        rows, JfT = self._ws.rows, Jf.T
         rows[:6, :nv] = M[:6]                                          # the base's Newton-Euler rows
         np.multiply(JfT[:6], -FORCE_UNIT_N, out=rows[:6, nv:])
         rows[6:e, :nv], rows[6:e, nv:] = A_c, 0.0                        # the contacts
-        lower, upper = self._lower, self._upper
+        lower, upper = self._ws.lower, self._ws.upper
         np.negative(h[:6], out=lower[n:n + 6])
         lower[n + 6:n + e] = b_c
         if self.seat_contact and not seat_on:    # the seat's rows say its force is zero (zero rows are degenerate)
             rows[e - 3:e], lower[n + e - 3:n + e] = 0.0, 0.0
-            rows[e - 3:e, -3:] = self._eye3
+            rows[e - 3:e, -3:] = np.eye(3)
         upper[n:n + e] = lower[n:n + e]
         rows[e:e + nj, :nv] = M[6:]                                    # the joint torques
         np.multiply(JfT[6:], -FORCE_UNIT_N, out=rows[e:e + nj, nv:])
