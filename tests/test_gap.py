@@ -17,6 +17,7 @@ import yaml
 from sit2stand.batch.gap import CASES as HUMAN_CASES
 from sit2stand.batch.gap import GROUPS, draw_cases, run_one, score_run
 from sit2stand.bench.gap_human import bench_gap_human, gap_human_rates
+from sit2stand.gap.effects import Effect
 from sit2stand.gap.hidden import Hidden, draw, plant_with, run_case, score
 from sit2stand.gap.human import LIGHTER_SHARE, WITHIN_VARIATION, human_gap, segment_reach_m, segment_refusal
 from sit2stand.gap.plausibility import Limits
@@ -154,8 +155,8 @@ def test_new_kind_spring_is_confirmed_by_the_replay(outcomes):
 
 def test_score_counts_group_members_and_extras():
     h = Hidden("extra_mass", "head_1_link", 2.0)
-    named = [{"kind": "extra_mass", "location": "torso_2_link", "members": ["torso_2_link", "head_1_link"],
-              "mass_kg": 2.2}, {"kind": "torque_bias", "location": "leg_left_4_joint", "value": 1.0}]
+    named = [Effect("extra_mass", "torso_2_link", members=("torso_2_link", "head_1_link"), mass_kg=2.2),
+             Effect("torque_bias", "leg_left_4_joint", value=1.0)]
     s = score([h], named)
     assert s.found == [True] and abs(s.errors[0] - 0.1) < 1e-9
     assert len(s.extra) == 1 and not s.hit()
@@ -214,8 +215,8 @@ def test_human_side_names_a_hidden_trunk_mass(tmp_path):
     r = human_gap(bag)
     assert r.effects, r.verdict
     first = r.effects[0]
-    assert first["kind"] == "extra_mass" and first["location"] == "torso", r.verdict
-    assert abs(first["mass_kg"] - 15.0) <= 0.2 * 15.0
+    assert first.kind == "extra_mass" and first.location == "torso", r.verdict
+    assert abs(first.mass_kg - 15.0) <= 0.2 * 15.0
     assert r.rms_after[4] < 0.7 * r.rms_before[4]      # the sagittal moment's gap shrinks
 
 
@@ -234,25 +235,25 @@ def test_human_declared_mass_factor_makes_a_scale_error(tmp_path):
 
 def test_human_gap_benchmark_scores_by_kind_place_and_size():
     """bench_gap_human's scoring on hand-made results, and its draw: n different bodies per case, loads in range."""
-    foot = {"kind": "extra_mass", "location": "foot_l", "mass_kg": 2.0}
-    mass = lambda loc, kg: {"kind": "extra_mass", "location": loc, "mass_kg": kg}   # noqa: E731
+    foot = Effect("extra_mass", "foot_l", mass_kg=2.0)
+    mass = lambda loc, kg: Effect("extra_mass", loc, mass_kg=kg)   # noqa: E731
     s = score_run(foot, [mass("toes_l", 2.3)], "extra mass on toes_l")        # foot and toes: one rigid body
     assert s["hit"] and s["clean"] and abs(s["size_error"] - 0.15) < 1e-9
     s = score_run(foot, [mass("foot_l", 2.5)], "")                             # 25 % off
     assert s["found"] and not s["hit"] and s["clean"]
     s = score_run(foot, [mass("foot_r", 2.0)], "")
     assert not s["found"] and s["wrong_side"] and not s["clean"]
-    s = score_run(foot, [mass("foot_l", 1.9), {"kind": "mass_scale", "value": 1.02}], "")
+    s = score_run(foot, [mass("foot_l", 1.9), Effect("mass_scale", value=1.02)], "")
     assert s["hit"] and not s["clean"] and s["spurious"] == ["mass_scale 1.020"]
-    scale = {"kind": "mass_scale", "value": 1.08}
-    assert score_run(scale, [{"kind": "mass_scale", "value": 1.095}], "")["hit"]        # 0.015 of 0.08: 19 %
-    assert not score_run(scale, [{"kind": "mass_scale", "value": 1.1}], "")["hit"]      # 25 %
+    scale = Effect("mass_scale", value=1.08)
+    assert score_run(scale, [Effect("mass_scale", value=1.095)], "")["hit"]        # 0.015 of 0.08: 19 %
+    assert not score_run(scale, [Effect("mass_scale", value=1.1)], "")["hit"]      # 25 %
     assert score_run(None, [], "no significant discrepancy")["hit"]
     assert score_run(None, [], f"{WITHIN_VARIATION} (torso +6 %)")["hit"]
     unexplained = score_run(None, [], "disagreement found, but no candidate effect explains it")
     assert not unexplained["hit"] and unexplained["clean"]
-    rows = [{"case": "foot", "hidden": foot, "wall_s": 1.0, **score_run(foot, [mass("toes_l", 2.3)], "")},
-            {"case": "foot", "hidden": foot, "wall_s": 1.0, **score_run(foot, [], "")},
+    rows = [{"case": "foot", "hidden": foot.as_dict(), "wall_s": 1.0, **score_run(foot, [mass("toes_l", 2.3)], "")},
+            {"case": "foot", "hidden": foot.as_dict(), "wall_s": 1.0, **score_run(foot, [], "")},
             {"case": "none", "hidden": None, "wall_s": 1.0, **unexplained}]
     out = gap_human_rates(rows)
     assert out["foot_hit_rate"] == 0.5 and out["hit_rate"] == 0.5 and out["none_no_alarm_rate"] == 0.0
@@ -265,9 +266,10 @@ def test_human_gap_benchmark_scores_by_kind_place_and_size():
         h = c.hidden()
         if c.case in GROUPS:
             (lo, hi), _ = GROUPS[c.case]
-            assert h["location"].startswith(c.case) and lo <= h["mass_kg"] <= hi
+            assert h.location.startswith(c.case) and lo <= h.mass_kg <= hi
+            assert c.hidden_row()["offset_m"] == list(c.extra[0].offset_m)
         elif c.case == "scale":
-            assert 0.05 <= abs(h["value"] - 1) <= 0.12 + 1e-9
+            assert 0.05 <= abs(h.value - 1) <= 0.12 + 1e-9
         else:
             assert h is None
     assert [c.hidden() for c in draw_cases(3, ("scale", "hand"))] == [c.hidden() for c in cases

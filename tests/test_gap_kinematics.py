@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from sit2stand.gap.effects import alter_model, tilted_axis
+from sit2stand.gap.effects import Effect, alter_model, tilted_axis
 from sit2stand.gap.kinematics import _pin_q, contact_points, kinematic_model
 from sit2stand.robot.model import PlantConfig, controller_model
 from sit2stand.robot.plant import Plant
@@ -18,10 +18,10 @@ TALOS = load_profile("talos")
 
 EFFECTS = {
     "none": [],
-    "shanks longer": [{"kind": "link_length", "location": "leg_*_5_link", "value": 1.05}],
-    "knee axis": [{"kind": "joint_axis", "location": "leg_left_4_joint", "value": 0.09, "value_2": -0.04}],
-    "hip axis, thigh": [{"kind": "joint_axis", "location": "leg_right_3_joint", "value": -0.07},
-                        {"kind": "link_length", "location": "leg_right_4_link", "value": 0.96}],
+    "shanks longer": [Effect("link_length", "leg_*_5_link", value=1.05)],
+    "knee axis": [Effect("joint_axis", "leg_left_4_joint", value=0.09, value_2=-0.04)],
+    "hip axis, thigh": [Effect("joint_axis", "leg_right_3_joint", value=-0.07),
+                        Effect("link_length", "leg_right_4_link", value=0.96)],
 }
 
 

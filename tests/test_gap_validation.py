@@ -11,7 +11,7 @@ import pytest
 from sit2stand.errors import InputError
 from sit2stand.gap import validate as contact
 from sit2stand.gap.control import feedforward_rate
-from sit2stand.gap.effects import alter_model, unmodeled_from
+from sit2stand.gap.effects import Effect, alter_model, unmodeled_from
 from sit2stand.gap.human import map_departures, within_spread
 from sit2stand.gap.plausibility import Limits, cancelling_offsets, lopsided, mirror, refusal, side_of
 from sit2stand.gap.residuals import coulomb_signature, fit_backlash_widths, fit_coulomb_widths, joint_columns
@@ -108,7 +108,7 @@ def test_spring_and_rotor_inertia_signatures():
     assert np.allclose(spring[:, 6, 0], rec.q[:, 0]) and np.allclose(spring[:, 6, 1], 1.0)
     assert np.allclose(joint_columns(rec, ev, "rotor_inertia", 1)[:, 7, 0], rec.qdd[:, 1])
     # k (q - q_rest) = k q - k q_rest: the preload column carries -k q_rest
-    assert np.allclose(effect_theta({"kind": "joint_spring", "value": 40.0, "rest_rad": 0.1}), [40.0, -4.0])
+    assert np.allclose(effect_theta(Effect("joint_spring", value=40.0, rest_rad=0.1)), [40.0, -4.0])
 
 
 def test_alterations_change_the_compiled_plant():
@@ -120,11 +120,11 @@ def test_alterations_change_the_compiled_plant():
     pos0 = m.body_pos[m.body("leg_right_5_link").id].copy()
     forearm = m.body("arm_left_4_link").id
     mass0 = float(m.body_mass[forearm])
-    effects = [{"kind": "extra_mass", "location": "arm_left_4_link", "mass_kg": -0.5, "pos_m": (0.0, 0.0, -0.1)},
-               {"kind": "joint_spring", "location": "leg_left_4_joint", "value": 40.0, "rest_rad": 0.2},
-               {"kind": "rotor_inertia", "location": "leg_left_4_joint", "value": 0.5},
-               {"kind": "link_length", "location": "leg_*_5_link", "value": 1.05},
-               {"kind": "contact_softness", "location": "soles", "value": 0.05}]
+    effects = [Effect("extra_mass", "arm_left_4_link", mass_kg=-0.5, pos_m=(0.0, 0.0, -0.1)),
+               Effect("joint_spring", "leg_left_4_joint", value=40.0, rest_rad=0.2),
+               Effect("rotor_inertia", "leg_left_4_joint", value=0.5),
+               Effect("link_length", "leg_*_5_link", value=1.05),
+               Effect("contact_softness", "soles", value=0.05)]
     alter_model(m, effects)
     assert abs(m.body_mass[forearm] - (mass0 - 0.5)) < 1e-12     # a lighter link is lighter in the replay too
     assert m.jnt_stiffness[knee] == 40.0 and m.qpos_spring[m.jnt_qposadr[knee]] == 0.2
@@ -133,13 +133,13 @@ def test_alterations_change_the_compiled_plant():
     assert m.geom_solref[m.geom("sole_box_left").id][0] == 0.05 and shank > 0
     assert unmodeled_from(effects).masses == []          # none of these is a plant-file field
     with pytest.raises(InputError, match="no joint matches"):
-        alter_model(m, [{"kind": "joint_spring", "location": "knee", "value": 1.0}])
+        alter_model(m, [Effect("joint_spring", "knee", value=1.0)])
 
 
 def test_contact_time_constant_is_searched_on_the_replay(monkeypatch):
     """The search alone, on a stand-in replay whose COP error grows with the distance to a 0.05 s sole."""
     def replay(ds, effects, nominal=None):
-        tc = next((e["value"] for e in effects if e["kind"] == "contact_softness"), 0.02)
+        tc = next((e.value for e in effects if e.kind == "contact_softness"), 0.02)
         return {0: {"tc": tc}}
 
     def z(res):
@@ -149,8 +149,8 @@ def test_contact_time_constant_is_searched_on_the_replay(monkeypatch):
     monkeypatch.setattr(contact, "replay_residuals", lambda ds, sims: sims)
     monkeypatch.setattr(contact, "replay_z", z)
     found, sims = contact.fit_contact(None, [], {0: {"tc": 0.02}}, lambda msg: None)
-    assert found is not None and abs(found["value"] - 0.05) < 0.05 * 0.05, found
-    assert sims[0]["tc"] == found["value"]
+    assert found is not None and abs(found.value - 0.05) < 0.05 * 0.05, found
+    assert sims[0]["tc"] == found.value
     # already agreeing: nothing searched, nothing named
     assert contact.fit_contact(None, [], {0: {"tc": 0.05}}, lambda msg: None)[0] is None
 
@@ -197,7 +197,7 @@ def test_an_ft_sensor_mounted_turned_reads_part_of_the_load_sideways(tmp_path):
     readings = {}
     for turned in (False, True):
         cfg = PlantConfig(seed=3)
-        cfg.unmodeled = unmodeled_from([{"kind": "ft_rotation", "location": "ft_left", "value": 0.05}] if turned
+        cfg.unmodeled = unmodeled_from([Effect("ft_rotation", "ft_left", value=0.05)] if turned
                                        else [])
         plant = Plant(cfg, with_chair=False)
         qpos = standing_qpos(plant, 0.0, 0.0, 0.0, 0.0)
@@ -306,3 +306,21 @@ def test_the_feed_forwards_rate_holds_over_samples_without_a_command():
     assert np.all(np.abs(rate[:4, 0]) < 3.0) and np.all(np.abs(rate[:4, 1]) < 1e-9)  # -0.04 to 2.2 (a jump: 3,000)
     assert np.all(feedforward_rate(ff, t, np.zeros(len(t), bool)) == 0.0)
 
+
+
+def test_an_effect_round_trips_as_plain_data_and_bad_data_names_the_file():
+    """Effect.as_dict keeps the fields a kind has (no mass on a spring, no rest angle on a mass) and from_dict reads
+    it back; an unknown kind or field, or a size that is not a number, is an error naming the file and the field."""
+    spring = Effect("joint_spring", "leg_left_4_joint", value=40.0, rest_rad=0.2, ci95=1.5, unit="N m/rad")
+    mass = Effect("extra_mass", "torso_2_link", mass_kg=2.0, pos_m=(0.0, 0.1, 0.2), members=("torso_2_link",))
+    assert set(spring.as_dict()) == {"kind", "location", "value", "rest_rad", "ci95", "unit"}
+    assert set(mass.as_dict()) == {"kind", "location", "mass_kg", "pos_m", "members"}
+    for e in (spring, mass, Effect("joint_axis", "leg_left_4_joint", value=0.1)):
+        assert Effect.from_dict(e.as_dict()) == e
+    assert mass.key == "extra_mass@torso_2_link" and mass.size == 2.0 and spring.size == 40.0
+    with pytest.raises(InputError, match=r"model\.yaml: an effect needs a kind"):
+        Effect.from_dict({"kind": "gremlin", "location": "x"}, "model.yaml")
+    with pytest.raises(InputError, match=r"model\.yaml: effect backlash: unknown field\(s\) width"):
+        Effect.from_dict({"kind": "backlash", "location": "x", "width": 1.0}, "model.yaml")
+    with pytest.raises(InputError, match="value is not a number"):
+        Effect.from_dict({"kind": "backlash", "location": "x", "value": "wide"}, "model.yaml")

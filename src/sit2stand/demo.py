@@ -178,10 +178,11 @@ def model_gap(out: Path, robot: str = DEFAULT_ROBOT) -> dict:
     print(f"      gap above the noise {result.gap_before:.1f} -> {result.gap_after:.2f} (shrink "
           f"{100 * result.shrink:.0f} %); model COP error {100 * cop[0][0]:.2f} -> {100 * cop[0][1]:.2f} cm RMS; "
           f"report {out}/report.md", flush=True)
-    masses = [e for e in result.effects if e["kind"] == "extra_mass"]
-    return {"effects": result.effects, "gap_before": result.gap_before, "gap_after": result.gap_after,
+    masses = [e for e in result.effects if e.kind == "extra_mass"]
+    return {"effects": [e.as_dict() for e in result.effects], "gap_before": result.gap_before,
+            "gap_after": result.gap_after,
             "shrink": result.shrink, "cop_rms_before_m": cop[0][0], "cop_rms_after_m": cop[0][1],
-            "extra_mass_kg": sum(e["mass_kg"] for e in masses), "mass_links": [e["location"] for e in masses]}
+            "extra_mass_kg": sum(e.mass_kg for e in masses), "mass_links": [e.location for e in masses]}
 
 
 def com_paths_figure(runs: dict[str, tuple[Path, Path]], png: Path) -> None:

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..gap.effects import KINDS, OUT_OF_LIBRARY
+from ..gap.effects import KINDS, MASS_SCALE, OUT_OF_LIBRARY, Effect
 from ..gap.hidden import draw, run_case
 from ..gap.human import WITHIN_VARIATION, human_gap
 from ..gap.workflow import NO_DISCREPANCY
@@ -108,14 +108,26 @@ class GapCase(Case):
         return dataclasses.replace(super().config(), extra=list(self.extra),
                                    declared_mass_factor=self.declared_mass_factor, vary_subject=self.vary_subject)
 
-    def hidden(self) -> dict | None:
-        """What is hidden, in the workflow's terms (None: nothing)."""
+    def hidden(self) -> Effect | None:
+        """What is hidden, in the workflow's terms (None: nothing); an extra mass without its place (the scores
+        ask for its segment and size)."""
         if self.extra:
-            e = self.extra[0]
-            return {"kind": "extra_mass", "location": e.segment, "mass_kg": e.mass_kg, "offset_m": list(e.offset_m)}
+            return Effect("extra_mass", self.extra[0].segment, mass_kg=self.extra[0].mass_kg)
         if self.declared_mass_factor != 1.0:
-            return {"kind": "mass_scale", "value": 1.0 / self.declared_mass_factor}
+            return Effect(MASS_SCALE, value=1.0 / self.declared_mass_factor)
         return None
+
+    def hidden_row(self) -> dict | None:
+        """:meth:`hidden` as plain data for the rows; an extra mass with its offset from its segment's COM
+        (``offset_m``, segment axes)."""
+        h = self.hidden()
+        if h is None:
+            return None
+        row = h.as_dict()
+        if self.extra:
+            row.pop("pos_m")
+            row["offset_m"] = list(self.extra[0].offset_m)
+        return row
 
 
 def draw_cases(n: int, cases: tuple[str, ...] = CASES, seed: int = 0, vary_subject: bool = True) -> list[GapCase]:
@@ -183,14 +195,14 @@ def _group(location: str) -> str:
     return "foot" if base == "toes" else base
 
 
-def _size_error(hidden: dict, effect: dict) -> float:
+def _size_error(hidden: Effect, effect: Effect) -> float:
     """Relative size error of a named effect: of the mass [kg], or of the scale's deviation from 1."""
-    if hidden["kind"] == "extra_mass":
-        return abs(effect["mass_kg"] - hidden["mass_kg"]) / hidden["mass_kg"]
-    return abs(effect["value"] - hidden["value"]) / abs(hidden["value"] - 1.0)
+    if hidden.kind == "extra_mass":
+        return abs(effect.mass_kg - hidden.mass_kg) / hidden.mass_kg
+    return abs(effect.value - hidden.value) / abs(hidden.value - 1.0)
 
 
-def score_run(hidden: dict | None, effects: list[dict], verdict: str) -> dict:
+def score_run(hidden: Effect | None, effects: list[Effect], verdict: str) -> dict:
     """Score one run: ``found`` (kind and place right), ``size_error``, ``hit`` (found, size within 20 %; nothing
     hidden: nothing named and no discrepancy), ``clean`` (nothing named but the hidden effect), ``wrong_side`` (the
     mass named on the right group's other side), ``spurious`` (the other effects named)."""
@@ -198,27 +210,27 @@ def score_run(hidden: dict | None, effects: list[dict], verdict: str) -> dict:
         quiet = verdict == NO_DISCREPANCY or verdict.startswith(WITHIN_VARIATION)
         return {"found": False, "size_error": float("nan"), "hit": not effects and quiet,
                 "clean": not effects, "wrong_side": False, "spurious": [_named(e) for e in effects]}
-    match = next((k for k, e in enumerate(effects) if e["kind"] == hidden["kind"]
-                  and (e["kind"] != "extra_mass" or e["location"] in _place(hidden["location"]))), None)
+    match = next((k for k, e in enumerate(effects) if e.kind == hidden.kind
+                  and (e.kind != "extra_mass" or e.location in _place(hidden.location))), None)
     err = _size_error(hidden, effects[match]) if match is not None else float("nan")
-    wrong_side = match is None and hidden["kind"] == "extra_mass" and any(
-        e["kind"] == "extra_mass" and _group(e["location"]) == _group(hidden["location"]) for e in effects)
+    wrong_side = match is None and hidden.kind == "extra_mass" and any(
+        e.kind == "extra_mass" and _group(e.location) == _group(hidden.location) for e in effects)
     spurious = [_named(e) for k, e in enumerate(effects) if k != match]
     return {"found": match is not None, "size_error": err, "hit": match is not None and err <= SIZE_TOLERANCE,
             "clean": not spurious, "wrong_side": wrong_side, "spurious": spurious}
 
 
-def _effect_row(e: dict) -> dict:
+def _effect_row(e: Effect) -> dict:
     """A named effect's figures for the JSON rows (a mass's position in its segment's joint frame too)."""
     keys = ("kind", "location", "mass_kg", "mass_ci95_kg", "pos_m", "value", "ci95", "share_of_gap")
-    return {k: e[k] for k in keys if k in e}
+    return {k: v for k, v in e.as_dict().items() if k in keys}
 
 
-def _named(e: dict) -> str:
+def _named(e: Effect) -> str:
     """An effect in a few words: kind @ place, size."""
-    if e["kind"] == "extra_mass":
-        return f"extra_mass @ {e['location']} {e['mass_kg']:.2f} kg"
-    return f"{e['kind']} {e['value']:.3f}"
+    if e.kind == "extra_mass":
+        return f"extra_mass @ {e.location} {e.mass_kg:.2f} kg"
+    return f"{e.kind} {e.value:.3f}"
 
 
 FAILED_ROW = {"named": [], "verdict": "error", "found": False, "size_error": float("nan"), "hit": False,
@@ -231,7 +243,7 @@ def run_one(case: GapCase) -> dict:
     t0 = time.monotonic()
     body = dataclasses.asdict(case)
     body.pop("extra")
-    row: dict = {"case": case.case, "body": body, "hidden": case.hidden()}
+    row: dict = {"case": case.case, "body": body, "hidden": case.hidden_row()}
     try:
         for k in range(SPARE_BODIES + 1):
             try:
@@ -251,7 +263,7 @@ def run_one(case: GapCase) -> dict:
         row["verdict"] = r.verdict
         row["z_before_max"] = float(np.max(r.rms_before / r.floors))
         row["z_after_max"] = float(np.max(r.rms_after / r.floors))
-        row.update(score_run(row["hidden"], r.effects, r.verdict))
+        row.update(score_run(case.hidden(), r.effects, r.verdict))
     except Exception as exc:  # noqa: BLE001 - a run that breaks is a result too (a miss), the benchmark goes on
         row.update({"error": f"{type(exc).__name__}: {exc}", **FAILED_ROW})
     row["wall_s"] = round(time.monotonic() - t0, 2)

@@ -60,7 +60,7 @@ def bench_gap_human(n: int = 20, cases: tuple[str, ...] = CASES, workers: int = 
     with tempfile.TemporaryDirectory(prefix="sit2stand-gap-human-") as tmp:
         rows = run_jobs(gap_human_jobs(todo), out or Path(tmp), address=address, workers=workers, fresh=True,
                         on_row=show, label="bench-gap-human")
-    rows = [r if r["status"] == "ok" else {**r, **FAILED_ROW, "hidden": c.hidden(), "wall_s": float("nan")}
+    rows = [r if r["status"] == "ok" else {**r, **FAILED_ROW, "hidden": c.hidden_row(), "wall_s": float("nan")}
             for r, c in zip(rows, todo)]
     out_rates = gap_human_rates(rows)
     out_rates.update({"humans_per_case": n, "workers": workers, "seed": seed, "vary_subject": vary_subject,

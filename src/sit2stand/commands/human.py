@@ -128,14 +128,14 @@ def _gap_human(args: argparse.Namespace) -> int:
     r = human_gap(args.bag, progress=progress_printer)
     print(r.verdict)
     for e in r.effects:
-        if e.get("alternatives"):
-            print(f"  {e['location']}: nearly as good here: {', '.join(e['alternatives'][:4])}")
+        if e.alternatives:
+            print(f"  {e.location}: nearly as good here: {', '.join(e.alternatives[:4])}")
     names = ["force_x", "force_y", "force_z", "moment_x", "moment_y", "moment_z"]
     for n, f, b, a in zip(names, r.floors, r.rms_before, r.rms_after):
         print(f"  {n:9s} floor {f:6.2f}  RMS {b:6.2f} -> {a:6.2f}")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"bag": r.bag, "verdict": r.verdict, "effects": r.effects,
+        args.out.write_text(json.dumps({"bag": r.bag, "verdict": r.verdict, "effects": [e.as_dict() for e in r.effects],
                                         "floors": r.floors.tolist(), "rms_before": r.rms_before.tolist(),
                                         "rms_after": r.rms_after.tolist(), "steps": r.selection.steps}, indent=1))
     return 0

@@ -12,14 +12,12 @@ import pinocchio as pin
 
 from ..robot.profile import SIDES, profile_of
 from .dataset import MOVING_RADPS, Dataset
-from .effects import EFFECT_KINDS, FT_AXES
+from .effects import FT_AXES, KIND_UNITS, MASS_SCALE, Effect
 from .plausibility import Limits, refusal
 from .residuals import body_link_names, joint_columns
 from .select import Candidate, Selection
 
 MOVED_RAD = 0.1              # a joint whose range in the data is below this did not move: its links are one body
-UNITS = {**{name: kind.unit for name, kind in EFFECT_KINDS.items()}, "mass_scale": "true / model"}
-"""Each candidate kind's unit: the effect kinds' (gap.effects), and the human side's segment mass scale."""
 
 def moved_joints(ds: Dataset) -> np.ndarray:
     """(n,) joints whose range over the data exceeds MOVED_RAD."""
@@ -138,23 +136,22 @@ def _joint_candidates(model: pin.Model, links: list[str], ds: Dataset) -> list[C
             X = stack_rows(ds, [joint_columns(r, ev, kind, j) for r, ev in zip(ds.recordings, ds.evaluations)])
             if np.linalg.norm(X) < 1e-6:
                 continue
-            params = [f"{kind} [{UNITS[kind]}]"] + (["preload [N m]"] if kind == "joint_spring" else [])
+            params = [f"{kind} [{KIND_UNITS[kind]}]"] + (["preload [N m]"] if kind == "joint_spring" else [])
             out.append(Candidate(kind, name, params, X, plausible=_bounded(model, links, kind, name)))
     return out
 
 
-# --- The named effects in physical terms: the selection's estimates as effect dicts with 95 % intervals, and one line
+# --- The named effects in physical terms: the selection's estimates as effects with 95 % intervals, and one line
 # per effect for a person (the workflow's report, the verdict, ``sit2stand gap``).
 
 
-def effect_summary(sel: Selection) -> list[dict]:
+def effect_summary(sel: Selection) -> list[Effect]:
     """The chosen effects in physical terms with 95 % intervals (1.96 standard errors; position by the delta
     method from the mass and first moment)."""
     out = []
     for s in sel.effects:
         c = s.candidate
-        d = {"kind": c.kind, "location": c.location, "share_of_gap": s.gain, "delta_bic": s.delta_bic,
-             "alternatives": s.alternatives}
+        d = Effect(c.kind, c.location, share_of_gap=s.gain, delta_bic=s.delta_bic, alternatives=tuple(s.alternatives))
         se = np.sqrt(np.clip(np.diag(s.cov), 0, None))
         if c.kind == "extra_mass":
             m, mc = float(s.theta[0]), s.theta[1:]
@@ -163,34 +160,30 @@ def effect_summary(sel: Selection) -> list[dict]:
             J[:, 0] = -mc / m ** 2
             J[:, 1:] = np.eye(3) / m
             pos_se = np.sqrt(np.clip(np.diag(J @ s.cov @ J.T), 0, None))
-            d.update({"members": c.members, "mass_kg": m, "mass_ci95_kg": 1.96 * float(se[0]),
-                      "pos_m": pos.tolist(), "pos_ci95_m": (1.96 * pos_se).tolist()})
+            d.members, d.mass_kg, d.mass_ci95_kg = tuple(c.members), m, 1.96 * float(se[0])
+            d.pos_m, d.pos_ci95_m = tuple(pos.tolist()), tuple((1.96 * pos_se).tolist())
         else:
-            v = float(s.theta[0])
-            if c.kind in ("torque_gain", "mass_scale"):   # fitted as the departure from 1
-                d.update({"value": 1.0 + v, "ci95": 1.96 * float(se[0]),
-                          "unit": "measured / true" if c.kind == "torque_gain" else UNITS[c.kind]})
+            v, d.ci95, d.unit = float(s.theta[0]), 1.96 * float(se[0]), KIND_UNITS[c.kind]
+            d.value = v
+            if c.kind in ("torque_gain", MASS_SCALE):   # fitted as the departure from 1
+                d.value = 1.0 + v
+                d.unit = "measured / true" if c.kind == "torque_gain" else d.unit
             elif c.kind == "joint_spring":    # k and the preload -k q_rest
-                k = v
-                d.update({"value": k, "ci95": 1.96 * float(se[0]), "unit": UNITS[c.kind],
-                          "rest_rad": -float(s.theta[1]) / k if abs(k) > 1e-9 else 0.0})
+                d.rest_rad = -float(s.theta[1]) / v if abs(v) > 1e-9 else 0.0
             elif c.kind == "ft_bias":
-                d.update({"value": v, "ci95": 1.96 * float(se[0]),
-                          "unit": "N" if c.location.endswith(("fx", "fy", "fz")) else "N m"})
-            else:
-                d.update({"value": v, "ci95": 1.96 * float(se[0]), "unit": UNITS[c.kind]})
+                d.unit = "N" if c.location.endswith(("fx", "fy", "fz")) else "N m"
         out.append(d)
     return out
 
 
-def describe(effect: dict) -> str:
+def describe(effect: Effect) -> str:
     """One line naming an effect for a person."""
-    k = effect["kind"]
+    k, e = effect.kind, effect
     if k == "extra_mass":
-        p = effect["pos_m"]
-        members = [m for m in effect["members"] if m != effect["location"]]
+        p = e.pos_m
+        members = [m for m in e.members or () if m != e.location]
         group = f" (rigid in these data with {', '.join(members)})" if members else ""
-        return (f"extra mass on {effect['location']}{group}: {effect['mass_kg']:.2f} +- {effect['mass_ci95_kg']:.2f} "
+        return (f"extra mass on {e.location}{group}: {e.mass_kg:.2f} +- {e.mass_ci95_kg or 0.0:.2f} "
                 f"kg at ({p[0]:+.3f}, {p[1]:+.3f}, {p[2]:+.3f}) m in the link frame")
     label = {"viscous_friction": "viscous friction", "coulomb_friction": "Coulomb friction",
              "torque_bias": "torque-sensor bias", "torque_gain": "torque-sensor gain",
@@ -200,7 +193,7 @@ def describe(effect: dict) -> str:
              "contact_softness": "soles' contact time constant (MuJoCo solref; the model's 0.02 s)",
              "link_length": "link length (its offset from the parent joint, scaled)",
              "joint_axis": "joint axis tilt (toward axis x z)"}[k]
-    text = f"{label} at {effect['location']}: {effect['value']:.4g} +- {effect['ci95']:.2g} {effect['unit']}"
+    text = f"{label} at {e.location}: {e.value:.4g} +- {e.ci95 or 0.0:.2g} {e.unit or KIND_UNITS[k]}"
     if k == "joint_axis":
-        text += f", and {effect['value_2']:.4g} +- {effect['ci95_2']:.2g} rad toward the axis x (axis x z)"
+        text += f", and {e.value_2:.4g} +- {e.ci95_2 or 0.0:.2g} rad toward the axis x (axis x z)"
     return text

@@ -4,9 +4,8 @@ whether the hidden-effect suite draws it inside the workflow's library): adding 
 effects as a plant's ``unmodeled`` section, or as changes to the compiled MuJoCo model: one mapping for the
 hidden-effect plants, the augmented model file and the re-simulation.
 
-An effect is a dict as the workflow reports it: ``kind``, ``location`` (a link, a joint, ``ft_<side>/<axis>`` or
-"all joints"), and ``mass_kg`` + ``pos_m`` (extra mass) or ``value`` (the rest; a torque gain as measured / true;
-a spring also has ``rest_rad``).
+An effect is an :class:`Effect` record, named by the workflow or hidden in a plant; ``Effect.as_dict`` and
+``Effect.from_dict`` are its plain-data form in reports, model files and JSON rows.
 
 The plant file's ``unmodeled`` section has no field for a joint spring or a rotor inertia, nor for the kinematic and
 contact errors the hidden-effect suite hides outside the workflow's library (link length, joint axis, sole contact
@@ -15,7 +14,7 @@ stiffness): :func:`alter_model` applies those to a compiled model (``MODEL_KINDS
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from fnmatch import fnmatchcase
 
 import mujoco
@@ -66,6 +65,93 @@ EFFECT_KINDS = {k.name: k for k in (
 """Every kind, in the hidden-effect suite's order (its random draws are seeded by a kind's index)."""
 
 
+MASS_SCALE = "mass_scale"
+"""The human side's whole-body mass scale (true / model): a kind of the human gap, not of a robot's model."""
+KIND_UNITS = {**{name: kind.unit for name, kind in EFFECT_KINDS.items()}, MASS_SCALE: "true / model"}
+
+
+@dataclass
+class Effect:
+    """One model-gap effect, named by the workflow or hidden in a plant: ``kind`` (an :data:`EFFECT_KINDS` name, or
+    :data:`MASS_SCALE`) at ``location`` (a link, a joint, ``ft_<side>/<axis>``, ``ft_<side>``, ``soles``, ``all
+    joints``, a glob such as ``*_knee_link``, a body segment).
+
+    Its size: an extra mass ``mass_kg`` at ``pos_m`` (link frame, m); any other kind ``value`` in the kind's unit
+    (a torque gain: measured / true; a link length: its scale), with ``value_2`` a tilt's second direction [rad]
+    (joint axis, F/T mounting) and ``rest_rad`` a joint spring's rest angle. A named effect also has its 95 %
+    intervals (``ci95``, ``ci95_2``, ``mass_ci95_kg``, ``pos_ci95_m``), ``unit``, how the selection chose it
+    (``share_of_gap``, ``delta_bic``, ``alternatives``; a mass's rigid group ``members``) and, a Coulomb friction, the
+    transition speed its signature used (``v0_radps``). None: not known or not applicable."""
+
+    kind: str
+    location: str = ""
+    value: float = 0.0
+    value_2: float = 0.0
+    rest_rad: float = 0.0
+    mass_kg: float = 0.0
+    pos_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    unit: str | None = None
+    ci95: float | None = None
+    ci95_2: float | None = None
+    mass_ci95_kg: float | None = None
+    pos_ci95_m: tuple[float, float, float] | None = None
+    members: tuple[str, ...] | None = None
+    share_of_gap: float | None = None
+    delta_bic: float | None = None
+    alternatives: tuple[str, ...] | None = None
+    v0_radps: float | None = None
+    refined: str | None = None        # a kinematic effect the dynamics corrected: by what
+
+    @property
+    def key(self) -> str:
+        """``kind@location``: the selection's name for it."""
+        return f"{self.kind}@{self.location}"
+
+    @property
+    def size(self) -> float:
+        """Its magnitude: the mass [kg] of an extra mass, else ``value``."""
+        return self.mass_kg if self.kind == "extra_mass" else self.value
+
+    def as_dict(self) -> dict:
+        """Plain data (reports, model files, JSON rows): the fields this kind has, those not known left out."""
+        mass = self.kind == "extra_mass"
+        skip = {"value", "value_2", "rest_rad"} if mass else {"mass_kg", "pos_m"}
+        if not mass and self.kind != "joint_axis" and not self.value_2:
+            skip.add("value_2")
+        if self.kind != "joint_spring":
+            skip.add("rest_rad")
+        out = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name not in skip and v is not None:
+                out[f.name] = list(v) if isinstance(v, tuple) else v
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "effect") -> Effect:
+        """An effect from its plain data; an unknown kind or field, or a size that is not a number, is an
+        :class:`InputError` naming ``where`` (the file) and the field."""
+        if not isinstance(d, dict) or d.get("kind") not in KIND_UNITS:
+            raise InputError(f"{where}: an effect needs a kind among {', '.join(KIND_UNITS)}, not {d!r}")
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - names)
+        if unknown:
+            raise InputError(f"{where}: effect {d['kind']}: unknown field(s) {', '.join(unknown)}")
+        try:
+            return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})._checked(where)
+        except (TypeError, ValueError) as err:
+            raise InputError(f"{where}: effect {d['kind']}: {err}") from None
+
+    def _checked(self, where: str) -> Effect:
+        for name in ("value", "value_2", "rest_rad", "mass_kg"):
+            if not isinstance(getattr(self, name), (int, float)):
+                raise InputError(f"{where}: effect {self.kind}: {name} is not a number: {getattr(self, name)!r}")
+        self.pos_m = tuple(float(x) for x in self.pos_m)
+        if len(self.pos_m) != 3:
+            raise InputError(f"{where}: effect {self.kind}: pos_m needs 3 coordinates, not {len(self.pos_m)}")
+        return self
+
+
 def kinds(**flags: bool) -> tuple[str, ...]:
     """The names of the kinds with these :class:`EffectKind` flags, in the registry's order."""
     return tuple(k.name for k in EFFECT_KINDS.values() if all(getattr(k, f) == v for f, v in flags.items()))
@@ -87,33 +173,32 @@ def ft_location(location: str) -> tuple[str, int]:
     return side, FT_AXES.index(axis)
 
 
-def unmodeled_from(effects: list[dict], mass_prefix: str = "found") -> Unmodeled:
+def unmodeled_from(effects: list[Effect], mass_prefix: str = "found") -> Unmodeled:
     """The effects as a plant's unmodeled section; effects of one kind at one place add up (gains multiply). A
     negative extra mass (a link lighter than modelled) has no plant body: it is left out here (the augmented
     model's ``links`` carry it, and :func:`alter_model` takes it off the compiled plant's link)."""
     um = Unmodeled()
     for e in effects:
-        k = e["kind"]
+        k, v = e.kind, float(e.value)
         if k == "extra_mass":
-            if e["mass_kg"] > 0:
-                um.masses.append(ExtraBodyMass(e["location"], float(e["mass_kg"]),
-                                               tuple(float(v) for v in e["pos_m"]), f"{mass_prefix}_{len(um.masses)}"))
+            if e.mass_kg > 0:
+                um.masses.append(ExtraBodyMass(e.location, float(e.mass_kg), tuple(float(x) for x in e.pos_m),
+                                               f"{mass_prefix}_{len(um.masses)}"))
         elif k == "ft_bias":
-            side, a = ft_location(e["location"])
+            side, a = ft_location(e.location)
             bias = list(um.ft_bias.get(side, (0.0,) * 6))
-            bias[a] += float(e["value"])
+            bias[a] += v
             um.ft_bias[side] = tuple(bias)
         elif k == "actuator_delay":
-            um.actuator_delay_s += float(e["value"])
+            um.actuator_delay_s += v
         elif k == "ft_rotation":      # a plant's effect only: no workflow candidate names it
-            side = e["location"].removeprefix("ft_")
-            um.ft_rotation_rad[side] = (float(e["value"]), float(e.get("value_2", 0.0)), 0.0)
+            um.ft_rotation_rad[e.location.removeprefix("ft_")] = (v, float(e.value_2), 0.0)
         elif k in MODEL_KINDS:
             continue                     # applied to the compiled model (alter_model)
         else:
             table = getattr(um, JOINT_TABLES[k])
-            old = table.get(e["location"], 1.0 if k == "torque_gain" else 0.0)
-            table[e["location"]] = old * float(e["value"]) if k == "torque_gain" else old + float(e["value"])
+            old = table.get(e.location, 1.0 if k == "torque_gain" else 0.0)
+            table[e.location] = old * v if k == "torque_gain" else old + v
     return um
 
 
@@ -131,12 +216,12 @@ def unmodeled_dict(um: Unmodeled) -> dict:
     return out
 
 
-def alter_model(model: mujoco.MjModel, effects: list[dict]) -> None:
+def alter_model(model: mujoco.MjModel, effects: list[Effect]) -> None:
     """Apply the ``MODEL_KINDS`` effects of ``effects`` to a compiled plant model in place (a location may be a glob
     such as ``*_knee_link``); the other kinds are left to :func:`unmodeled_from`."""
     for e in effects:
-        k, v = e["kind"], float(e.get("value", 0.0))
-        if k == "extra_mass" and e["mass_kg"] < 0:
+        k, v = e.kind, float(e.value)
+        if k == "extra_mass" and e.mass_kg < 0:
             _lighten(model, e)
         if k not in MODEL_KINDS:
             continue
@@ -145,36 +230,36 @@ def alter_model(model: mujoco.MjModel, effects: list[dict]) -> None:
                 model.geom_solref[g] = [v, DAMPING_RATIO]
             continue
         obj = mujoco.mjtObj.mjOBJ_BODY if k == "link_length" else mujoco.mjtObj.mjOBJ_JOINT
-        ids = _matching(model, obj, model.nbody if k == "link_length" else model.njnt, e["location"])
+        ids = _matching(model, obj, model.nbody if k == "link_length" else model.njnt, e.location)
         if not ids:
-            raise InputError(f"{k}: no {'link' if k == 'link_length' else 'joint'} matches {e['location']!r}")
+            raise InputError(f"{k}: no {'link' if k == 'link_length' else 'joint'} matches {e.location!r}")
         for i in ids:
             _alter_one(model, k, i, v, e)
 
 
-def _lighten(model: mujoco.MjModel, effect: dict) -> None:
+def _lighten(model: mujoco.MjModel, effect: Effect) -> None:
     """A negative extra mass: the link's mass lowered and its centre of mass moved away from the removed point (the
     body frame of a URDF link is its joint's frame, as in the workflow's model)."""
-    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, effect["location"])
+    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, effect.location)
     if i < 0:
-        raise InputError(f"extra_mass: no link {effect['location']!r}")
-    m, old = float(effect["mass_kg"]), float(model.body_mass[i])
+        raise InputError(f"extra_mass: no link {effect.location!r}")
+    m, old = float(effect.mass_kg), float(model.body_mass[i])
     total = max(old + m, 1e-6)
-    model.body_ipos[i] = (old * model.body_ipos[i] + m * np.asarray(effect["pos_m"], float)) / total
+    model.body_ipos[i] = (old * model.body_ipos[i] + m * np.asarray(effect.pos_m, float)) / total
     model.body_mass[i] = total
 
 
-def _alter_one(model: mujoco.MjModel, kind: str, i: int, v: float, effect: dict) -> None:
+def _alter_one(model: mujoco.MjModel, kind: str, i: int, v: float, effect: Effect) -> None:
     """One body or joint ``i`` of ``model`` changed by effect ``kind`` of size ``v``."""
     if kind == "link_length":
         model.body_pos[i] *= v
     elif kind == "joint_spring":
         model.jnt_stiffness[i] = v
-        model.qpos_spring[model.jnt_qposadr[i]] = float(effect.get("rest_rad", 0.0))
+        model.qpos_spring[model.jnt_qposadr[i]] = float(effect.rest_rad)
     elif kind == "rotor_inertia":
         model.dof_armature[model.jnt_dofadr[i]] += v
     elif kind == "joint_axis":
-        model.jnt_axis[i] = tilted_axis(np.array(model.jnt_axis[i]), v, float(effect.get("value_2", 0.0)))
+        model.jnt_axis[i] = tilted_axis(np.array(model.jnt_axis[i]), v, float(effect.value_2))
 
 
 def tilt_directions(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import InputError
 from ..robot.model import DEFAULT_ROBOT, PlantConfig
 from ..robot.profile import SIDES, load_profile
-from .effects import FT_AXES, KINDS, MODEL_KINDS, OUT_OF_LIBRARY, unmodeled_from
+from .effects import FT_AXES, KINDS, MODEL_KINDS, OUT_OF_LIBRARY, Effect, unmodeled_from
 from .recording import excite
 from .workflow import run
 
@@ -66,12 +66,11 @@ class Hidden:
     outside: bool = False          # drawn outside the workflow's library (OUT_OF_LIBRARY)
     magnitude_2: float = 0.0       # a tilt's second direction [rad] (joint axis, F/T mounting; gap.effects)
 
-    def as_effect(self) -> dict:
+    def as_effect(self) -> Effect:
         """In the workflow's terms (see gap.effects)."""
         if self.kind == "extra_mass":
-            return {"kind": self.kind, "location": self.location, "mass_kg": self.magnitude, "pos_m": self.pos_m}
-        second = {"value_2": self.magnitude_2} if self.magnitude_2 else {}
-        return {"kind": self.kind, "location": self.location, "value": self.magnitude, **second}
+            return Effect(self.kind, self.location, mass_kg=self.magnitude, pos_m=self.pos_m)
+        return Effect(self.kind, self.location, value=self.magnitude, value_2=self.magnitude_2)
 
     def describe(self) -> str:
         extra = f" at {tuple(round(p, 3) for p in self.pos_m)} m" if self.kind == "extra_mass" else ""
@@ -151,39 +150,34 @@ def plant_with(effects: list[Hidden], seed: int = 0, robot: str = DEFAULT_ROBOT)
     return cfg
 
 
-def found_value(effect: dict) -> float:
-    """The named effect's magnitude (mass [kg] or value)."""
-    return float(effect["mass_kg"] if effect["kind"] == "extra_mass" else effect["value"])
-
-
-def matches(h: Hidden, effect: dict) -> bool:
+def matches(h: Hidden, effect: Effect) -> bool:
     """Whether a named effect is ``h``'s kind at ``h``'s location (a mass: any link of the named rigid group)."""
-    if effect["kind"] != h.kind:
+    if effect.kind != h.kind:
         return False
     if h.kind == "extra_mass":
-        return h.location in effect.get("members", [effect["location"]])
-    return effect["location"] == h.location
+        return h.location in (effect.members or (effect.location,))
+    return effect.location == h.location
 
 
-def relative_error(h: Hidden, effect: dict) -> float:
+def relative_error(h: Hidden, effect: Effect) -> float:
     if h.kind in ("torque_gain", "link_length"):      # a factor's error relative to its departure from 1
-        return abs(found_value(effect) - h.magnitude) / abs(h.magnitude - 1.0)
-    return abs(found_value(effect) - h.magnitude) / abs(h.magnitude)
+        return abs(effect.size - h.magnitude) / abs(h.magnitude - 1.0)
+    return abs(effect.size - h.magnitude) / abs(h.magnitude)
 
 
 @dataclass
 class Score:
     hidden: list[Hidden]
-    named: list[dict]
+    named: list[Effect]
     found: list[bool] = field(default_factory=list)        # per hidden effect: right kind and location
     errors: list[float] = field(default_factory=list)      # per hidden effect: relative magnitude error (nan: missed)
-    extra: list[dict] = field(default_factory=list)        # named but not hidden
+    extra: list[Effect] = field(default_factory=list)      # named but not hidden
 
     def hit(self, tolerance: float = 0.2) -> bool:
         return all(self.found) and all(e <= tolerance for e in self.errors) and not self.extra
 
 
-def score(hidden: list[Hidden], named: list[dict]) -> Score:
+def score(hidden: list[Hidden], named: list[Effect]) -> Score:
     s = Score(hidden, named)
     used = set()
     for h in hidden:
@@ -213,8 +207,8 @@ def run_case(hidden: list[Hidden], seed: int, workdir: str, n_moves: int = 8, re
     shutil.rmtree(bag, ignore_errors=True)
     outside = any(h.outside for h in hidden)
     return {"hidden": [h.describe() for h in hidden],
-            "named": [e["kind"] + " @ " + e["location"] for e in result.effects],
-            "found": s.found, "errors": s.errors, "extra": [e["kind"] + " @ " + e["location"] for e in s.extra],
+            "named": [f"{e.kind} @ {e.location}" for e in result.effects],
+            "found": s.found, "errors": s.errors, "extra": [f"{e.kind} @ {e.location}" for e in s.extra],
             "hit": s.hit() if not outside else honest(result), "outside": outside,
             "unexplained": [u["channel"] + ": " + u["shape"] for u in result.unexplained[:3]],
             "refused": [d["effect"] for d in result.refused],

@@ -31,6 +31,7 @@ from ..human.skeleton import SEGMENT_MASS_SD, SEGMENTS, Subject, build_human
 from ..io.bag import BagError
 from ..optim import effective_fraction
 from .candidates import MASS_PARAMS, effect_summary
+from .effects import Effect
 from .dataset import fast_part_floor
 from .plausibility import Limits, refusal
 from .residuals import base_to_world
@@ -49,7 +50,7 @@ class HumanGap:
     rms_before: np.ndarray             # (6,)
     rms_after: np.ndarray
     selection: Selection
-    effects: list[dict]
+    effects: list[Effect]
     verdict: str
     own_variation: np.ndarray          # (S,) the body's own segment-mass departures fitted [fraction of the table's]
 
@@ -153,7 +154,7 @@ def _mass_at_com(inertia: pin.Inertia) -> np.ndarray:
     return float(inertia.mass) * np.concatenate([[1.0], inertia.lever])
 
 
-def _verdict(effects: list[dict], z_before: np.ndarray, z_after: np.ndarray, delta: np.ndarray) -> str:
+def _verdict(effects: list[Effect], z_before: np.ndarray, z_after: np.ndarray, delta: np.ndarray) -> str:
     """The named loads; or no discrepancy; or none beyond the body's own variation; or unexplained."""
     if effects:
         return "; ".join(_named(d) for d in effects)
@@ -164,13 +165,13 @@ def _verdict(effects: list[dict], z_before: np.ndarray, z_after: np.ndarray, del
     return UNEXPLAINED
 
 
-def _named(d: dict) -> str:
+def _named(d: Effect) -> str:
     """One named effect in words, with the segments the data cannot tell it from."""
-    if d["kind"] != "extra_mass":
-        return f"whole-body mass scale {d['value']:.3f}"
-    alts = [a.split("@", 1)[-1] for a in d.get("alternatives", []) if a.startswith("extra_mass@")]
-    where = d["location"] + (f" (or {', '.join(alts)}: the plates cannot tell them apart)" if alts else "")
-    return f"extra mass on {where}: {d['mass_kg']:.2f} +- {d['mass_ci95_kg']:.2f} kg"
+    if d.kind != "extra_mass":
+        return f"whole-body mass scale {d.value:.3f}"
+    alts = [a.split("@", 1)[-1] for a in d.alternatives or () if a.startswith("extra_mass@")]
+    where = d.location + (f" (or {', '.join(alts)}: the plates cannot tell them apart)" if alts else "")
+    return f"extra mass on {where}: {d.mass_kg:.2f} +- {d.mass_ci95_kg:.2f} kg"
 
 
 LIGHTER_SHARE = 0.3

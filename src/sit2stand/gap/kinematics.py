@@ -27,6 +27,7 @@ evaluates the dynamics with the named lengths and axes (:func:`kinematic_model`)
 
 from __future__ import annotations
 
+from dataclasses import replace
 from fnmatch import fnmatchcase
 
 import numpy as np
@@ -36,7 +37,7 @@ from ..robot.profile import SIDES, Sole, load_profile, profile_of
 from ..vectors import xyzw_from_wxyz
 from .candidates import stack_rows
 from .dataset import Dataset
-from .effects import tilted_axis
+from .effects import Effect, tilted_axis
 from .residuals import body_link_names, evaluate
 from .select import SIGNIFICANT_Z, Candidate
 
@@ -64,17 +65,17 @@ def closure_channels() -> list[str]:
 
 
 # -- the model with kinematic effects --------------------------------------------------------------------------------
-def kinematic_model(nominal: pin.Model, effects: list[dict]) -> pin.Model:
+def kinematic_model(nominal: pin.Model, effects: list[Effect]) -> pin.Model:
     """``nominal`` (copied) with the ``link_length`` and ``joint_axis`` effects of ``effects`` applied."""
     model = nominal.copy()
     links = body_link_names(model)
     for e in effects:
-        if e["kind"] == "link_length":
-            for jid in [i + 1 for i, name in enumerate(links) if fnmatchcase(name, e["location"])]:
+        if e.kind == "link_length":
+            for jid in [i + 1 for i, name in enumerate(links) if fnmatchcase(name, e.location)]:
                 p = model.jointPlacements[jid]
-                model.jointPlacements[jid] = pin.SE3(p.rotation, p.translation * float(e["value"]))
-        elif e["kind"] == "joint_axis":
-            _tilt(model, model.getJointId(e["location"]), float(e["value"]), float(e.get("value_2", 0.0)))
+                model.jointPlacements[jid] = pin.SE3(p.rotation, p.translation * float(e.value))
+        elif e.kind == "joint_axis":
+            _tilt(model, model.getJointId(e.location), float(e.value), float(e.value_2))
     return model
 
 
@@ -123,15 +124,15 @@ class Closure:
                                          tuple(int(contact[s][1][k]) for s in SIDES)))
         self.floor = np.tile([CLOSURE_FLOOR_M[a] for a in CLOSURE_AXES], len(SIDES))
 
-    def positions(self, nominal: pin.Model, effects: list[dict]) -> np.ndarray:
+    def positions(self, nominal: pin.Model, effects: list[Effect]) -> np.ndarray:
         """(S, 2, 3) the soles' world positions [m] under ``nominal`` with the kinematic ``effects`` (link lengths,
         joint axes, encoder offsets), NaN where the foot is not loaded and flat."""
         model = kinematic_model(nominal, effects)
         data = model.createData()
         shift = np.zeros(model.nq)
         for e in effects:
-            if e["kind"] == "joint_offset":                 # reading - true angle
-                shift[model.joints[model.getJointId(e["location"])].idx_q] += float(e["value"])
+            if e.kind == "joint_offset":                 # reading - true angle
+                shift[model.joints[model.getJointId(e.location)].idx_q] += float(e.value)
         frames = [model.getFrameId(f"sole_{s}") for s in SIDES]
         out = np.full((len(self.samples), len(SIDES), 3), np.nan)
         for i, (_r, _k, q, points, _kind) in enumerate(self.samples):
@@ -141,7 +142,7 @@ class Closure:
                     out[i, j] = data.oMf[f].act(points[j])
         return out
 
-    def residual(self, nominal: pin.Model, effects: list[dict]) -> np.ndarray:
+    def residual(self, nominal: pin.Model, effects: list[Effect]) -> np.ndarray:
         """(S, 6) each sole's departure from its median per recording, in floors (NaN where not used)."""
         p = self.positions(nominal, effects)
         rec = np.array([s[0] for s in self.samples])
@@ -206,16 +207,16 @@ def candidates(ds: Dataset) -> list[tuple[str, str, int]]:
     return out
 
 
-def _effects(chosen: list[tuple[str, str, int]], theta: np.ndarray) -> list[dict]:
-    """The chosen candidates with parameters ``theta`` (link: scale - 1; axis: the two tilts) as effect dicts."""
+def _effects(chosen: list[tuple[str, str, int]], theta: np.ndarray) -> list[Effect]:
+    """The chosen candidates with parameters ``theta`` (link: scale - 1; axis: the two tilts) as effects."""
     out, i = [], 0
     for kind, loc, n in chosen:
         if kind == "link_length":
-            out.append({"kind": kind, "location": loc, "value": 1.0 + float(theta[i])})
+            out.append(Effect(kind, loc, value=1.0 + float(theta[i])))
         elif kind == "joint_offset":
-            out.append({"kind": kind, "location": loc, "value": float(theta[i])})
+            out.append(Effect(kind, loc, value=float(theta[i])))
         else:
-            out.append({"kind": kind, "location": loc, "value": float(theta[i]), "value_2": float(theta[i + 1])})
+            out.append(Effect(kind, loc, value=float(theta[i]), value_2=float(theta[i + 1])))
         i += n
     return out
 
@@ -235,7 +236,7 @@ def _jacobian(closure: Closure, nominal: pin.Model, chosen, theta: np.ndarray, b
     return np.column_stack(cols)
 
 
-def fit_kinematics(ds: Dataset, nominal: pin.Model, say) -> tuple[list[dict], dict]:
+def fit_kinematics(ds: Dataset, nominal: pin.Model, say) -> tuple[list[Effect], dict]:
     """(the named kinematic effects, a report: the closure's per-channel z before and after, what was refused)."""
     closure = Closure(ds, nominal)
     report = {"channels": closure_channels(), "z_before": [], "z_after": [], "refused": [], "unexplained": []}
@@ -263,7 +264,7 @@ def fit_kinematics(ds: Dataset, nominal: pin.Model, say) -> tuple[list[dict], di
     after = closure.residual(nominal, found)
     bad = [_describe_bound(e) for e in found if not _inside(e) or not _matters(e)]
     if bad:
-        report["refused"] = [{"effect": f"{e['kind']}@{e['location']}", "why": "; ".join(bad)} for e in found]
+        report["refused"] = [{"effect": e.key, "why": "; ".join(bad)} for e in found]
         say(f"  kinematic fit not named: {'; '.join(bad)}")
         return [], report
     z1 = closure.z(after)
@@ -340,33 +341,33 @@ def _covariance(closure: Closure, nominal: pin.Model, chosen, theta: np.ndarray,
     return s2 * np.linalg.pinv(J.T @ J)
 
 
-def _add_intervals(found: list[dict], cov: np.ndarray) -> None:
+def _add_intervals(found: list[Effect], cov: np.ndarray) -> None:
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     i = 0
     for e in found:
-        e.update({"ci95": 1.96 * float(se[i]), "unit": "x the model's offset" if e["kind"] == "link_length" else "rad",
-                  "share_of_gap": 0.0, "delta_bic": 0.0, "alternatives": []})
-        if e["kind"] == "joint_axis":
-            e["ci95_2"] = 1.96 * float(se[i + 1])
-        i += 2 if e["kind"] == "joint_axis" else 1
+        e.ci95, e.unit = 1.96 * float(se[i]), "x the model's offset" if e.kind == "link_length" else "rad"
+        e.share_of_gap, e.delta_bic, e.alternatives = 0.0, 0.0, ()
+        if e.kind == "joint_axis":
+            e.ci95_2 = 1.96 * float(se[i + 1])
+        i += 2 if e.kind == "joint_axis" else 1
 
 
-def _matters(e: dict) -> bool:
+def _matters(e: Effect) -> bool:
     """Whether an estimate is at least its kind's ``SMALLEST``: below, a fit only follows a foot's slip."""
-    size = abs(e["value"] - 1.0) if e["kind"] == "link_length" else float(np.hypot(e["value"], e.get("value_2", 0.0)))
-    return size >= SMALLEST[e["kind"]]
+    size = abs(e.value - 1.0) if e.kind == "link_length" else float(np.hypot(e.value, e.value_2))
+    return size >= SMALLEST[e.kind]
 
 
-def _inside(e: dict) -> bool:
-    lo, hi = BOUNDS[e["kind"]]
-    return all(lo <= float(e.get(k, 1.0 if e["kind"] == "link_length" else 0.0)) <= hi for k in ("value", "value_2"))
+def _inside(e: Effect) -> bool:
+    lo, hi = BOUNDS[e.kind]
+    return all(lo <= float(v) <= hi for v in ((e.value,) if e.kind == "link_length" else (e.value, e.value_2)))
 
 
-def _describe_bound(e: dict) -> str:
-    lo, hi = BOUNDS[e["kind"]]
+def _describe_bound(e: Effect) -> str:
+    lo, hi = BOUNDS[e.kind]
     if not _matters(e):
-        return f"{e['kind']}@{e['location']} below the smallest error named ({SMALLEST[e['kind']]})"
-    return f"{e['kind']}@{e['location']} past its bounds [{lo}, {hi}]"
+        return f"{e.key} below the smallest error named ({SMALLEST[e.kind]})"
+    return f"{e.key} past its bounds [{lo}, {hi}]"
 
 
 def _unexplained(ds: Dataset, closure: Closure, res: np.ndarray) -> list[dict]:
@@ -400,7 +401,7 @@ def _unexplained(ds: Dataset, closure: Closure, res: np.ndarray) -> list[dict]:
 CORRECTION_BOUND = {"link_length": 0.02, "joint_axis": 0.02}    # |correction|: scale; rad
 
 
-def correction_candidates(ds: Dataset, nominal: pin.Model, kinematic: list[dict]) -> list[Candidate]:
+def correction_candidates(ds: Dataset, nominal: pin.Model, kinematic: list[Effect]) -> list[Candidate]:
     """One candidate per named kinematic effect: the dynamics' residual change per unit of its parameters (finite
     differences about the closure's estimate; the controller channels do not change)."""
     if not kinematic:
@@ -409,38 +410,38 @@ def correction_candidates(ds: Dataset, nominal: pin.Model, kinematic: list[dict]
     base = [evaluate(kinematic_model(nominal, kinematic), rec, seated=np.isin(lab, ["seated", "seat-off"]),
                      offsets=False, signatures=False).e for rec, lab in zip(ds.recordings, ds.labels)]
     for i, e in enumerate(kinematic):
-        names = ["value"] + (["value_2"] if e["kind"] == "joint_axis" else [])
+        names = ["value"] + (["value_2"] if e.kind == "joint_axis" else [])
         cols = [np.zeros(ev.e.shape + (len(names),)) for ev in ds.evaluations]
         for k, key in enumerate(names):
-            moved = [dict(d) for d in kinematic]
-            moved[i][key] = float(moved[i].get(key, 0.0)) + FD_STEP
+            moved = list(kinematic)
+            moved[i] = replace(e, **{key: float(getattr(e, key)) + FD_STEP})
             model = kinematic_model(nominal, moved)
             for r, (rec, lab) in enumerate(zip(ds.recordings, ds.labels)):
                 ev = evaluate(model, rec, seated=np.isin(lab, ["seated", "seat-off"]), offsets=False,
                               signatures=False)
                 cols[r][:, :ev.e.shape[1], k] = -(ev.e - base[r]) / FD_STEP   # the residual an error leaves
-        bound = CORRECTION_BOUND[e["kind"]]
-        out.append(Candidate(e["kind"], e["location"], [f"correction of {n}" for n in names], stack_rows(ds, cols),
+        bound = CORRECTION_BOUND[e.kind]
+        out.append(Candidate(e.kind, e.location, [f"correction of {n}" for n in names], stack_rows(ds, cols),
                              plausible=lambda th, b=bound: None if np.all(np.abs(th) <= b) else
                              f"a correction past {b} of the closure's estimate", columns=cols))
     return out
 
 
-def corrected(kinematic: list[dict], chosen, say) -> list[dict]:
+def corrected(kinematic: list[Effect], chosen, say) -> list[Effect]:
     """The closure's kinematic effects with the dynamics' corrections (``chosen``: selected candidates of their
     kinds) added; one that comes out below its kind's ``SMALLEST`` is dropped."""
-    out = [dict(e) for e in kinematic]
+    out = [replace(e) for e in kinematic]
     for s in chosen:
-        e = next(d for d in out if d["kind"] == s.candidate.kind and d["location"] == s.candidate.location)
-        e["value"] += float(s.theta[0])
+        e = next(d for d in out if d.key == s.candidate.key)
+        e.value += float(s.theta[0])
         if len(s.theta) > 1:
-            e["value_2"] += float(s.theta[1])
+            e.value_2 += float(s.theta[1])
         se = np.sqrt(np.clip(np.diag(s.cov), 0.0, None))
-        e["ci95"] = 1.96 * float(se[0])
+        e.ci95 = 1.96 * float(se[0])
         if len(se) > 1:
-            e["ci95_2"] = 1.96 * float(se[1])
-        e["refined"] = "by the dynamics"
+            e.ci95_2 = 1.96 * float(se[1])
+        e.refined = "by the dynamics"
     for e in [e for e in out if not _matters(e)]:
-        say(f"  {e['kind']}@{e['location']}: below the smallest error named once the dynamics refined it")
+        say(f"  {e.key}: below the smallest error named once the dynamics refined it")
         out.remove(e)
     return out

@@ -38,7 +38,7 @@ from ..io.topics import (
 from ..robot.model import SIDES, PlantConfig
 from ..robot.plant import Plant
 from ..robot.postures import home_com_bias, plan_postures
-from .effects import alter_model
+from .effects import Effect, alter_model
 
 STATIC_PERIOD_S = 0.2     # samples further apart than this are held postures, not a run
 
@@ -322,7 +322,7 @@ def quintic(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def excite(cfg: PlantConfig, out: str | Path, seed: int = 0, n_moves: int = 8, move_s: float = 2.5,
            hold_s: float = 0.5, rate_hz: float = 100.0, progress: bool = False,
-           alterations: list[dict] | None = None) -> dict:
+           alterations: list[Effect] | None = None) -> dict:
     """Run and record an excitation (see the module docstring); returns a summary (duration, fell).
     ``alterations``: effects applied to the compiled plant (``gap.effects.alter_model``: springs, rotor inertia,
     kinematic and contact errors)."""

@@ -203,9 +203,9 @@ def markdown(result: GapResult) -> str:
     lines += ["", "## Verdict", ""]
     if result.effects:
         lines += [f"{len(result.effects)} effect(s) named:", ""]
-        lines += [f"{i + 1}. {describe(e)} ({100 * e['share_of_gap']:.1f} % of the residual when chosen, "
-                  f"dBIC {e['delta_bic']:.0f})" + (f"; equally good here: {', '.join(e['alternatives'][:3])}"
-                                                   if e["alternatives"] else "")
+        lines += [f"{i + 1}. {describe(e)} ({100 * e.share_of_gap:.1f} % of the residual when chosen, "
+                  f"dBIC {e.delta_bic:.0f})" + (f"; equally good here: {', '.join(e.alternatives[:3])}"
+                                                   if e.alternatives else "")
                   for i, e in enumerate(result.effects)]
     else:
         lines.append(f"**{result.verdict}**")
@@ -335,7 +335,8 @@ def summary(result: GapResult) -> dict:
     """The result as plain data (``gap.json``)."""
     return plain_data({
         "model": result.model_source, "bags": result.bags, "verdict": result.verdict,
-        "effects": result.effects, "gap_before": result.gap_before, "gap_after": result.gap_after,
+        "effects": [e.as_dict() for e in result.effects], "gap_before": result.gap_before,
+        "gap_after": result.gap_after,
         "gap_shrink": result.shrink, "gap_after_first_order": result.gap_after_first_order,
         "gap_shrink_first_order": result.shrink_first_order, "replay_gap_before": result.replay_gap_before,
         "replay_gap_after": result.replay_gap_after, "refused": result.refused,
@@ -363,7 +364,8 @@ def augmented_model(result: GapResult, nominal: pin.Model) -> dict:
                                     "com": [float(v) for v in model.inertias[j].lever]}
                    for j in range(1, model.njoints)}
     return {"nominal": result.model_source, "bags": result.bags, "verdict": result.verdict,
-            "effects": effects, "links": link_params, "unmodeled": unmodeled_dict(unmodeled_from(effects))}
+            "effects": [e.as_dict() for e in effects], "links": link_params,
+            "unmodeled": unmodeled_dict(unmodeled_from(effects))}
 
 
 def write_augmented(result: GapResult, nominal: pin.Model, path: str | Path) -> dict:

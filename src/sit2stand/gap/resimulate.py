@@ -17,20 +17,20 @@ import numpy as np
 from ..errors import InputError
 from ..robot.model import DEFAULT_ROBOT, SIDES, PlantConfig
 from ..robot.plant import Plant
-from .effects import alter_model, unmodeled_from
+from .effects import Effect, alter_model, unmodeled_from
 from .recording import Recording
 
 SETTLE_S = 1.0               # the replay holds the first command this long before t = 0 (as `excite` does)
 
 
-def plant_from_effects(effects: list[dict], robot: str = DEFAULT_ROBOT) -> PlantConfig:
+def plant_from_effects(effects: list[Effect], robot: str = DEFAULT_ROBOT) -> PlantConfig:
     """``robot``'s CAD plus the named effects (the workflow's effect dicts) as a plant configuration."""
     cfg = PlantConfig(name="augmented", robot=robot)
     cfg.unmodeled = unmodeled_from(effects)
     return cfg
 
 
-def simulate(cfg: PlantConfig, rec: Recording, seated: bool, alterations: list[dict] | None = None
+def simulate(cfg: PlantConfig, rec: Recording, seated: bool, alterations: list[Effect] | None = None
              ) -> dict[str, np.ndarray]:
     """Replay ``rec``'s commands in the plant ``cfg`` (with ``alterations``: effects applied to the compiled model,
     ``gap.effects.alter_model``); returns the simulated measured torque (N, n), joint positions (N, n), feet

@@ -31,7 +31,7 @@ import pinocchio as pin
 from ..robot.model import PlantConfig
 from .candidates import series_ids, stack_rows
 from .dataset import Dataset, GapError
-from .effects import KINEMATIC_KINDS, REEVALUATED_KINDS, REPLAY_ONLY_KINDS, SENSOR_KINDS, ft_location
+from .effects import KINEMATIC_KINDS, REEVALUATED_KINDS, REPLAY_ONLY_KINDS, SENSOR_KINDS, Effect, ft_location
 from .kinematics import kinematic_model
 from .residuals import body_link_names, evaluate, joint_columns
 from .resimulate import plant_from_effects, simulate
@@ -74,28 +74,28 @@ def effect_columns(ds: Dataset, links: list[str], r: int, kind: str, location: s
     return joint_columns(rec, ev, kind, rec.joint_names.index(location))
 
 
-def effect_theta(effect: dict) -> np.ndarray:
+def effect_theta(effect: Effect) -> np.ndarray:
     """An effect's parameters in its signature's terms (a gain: its departure from 1; a spring: k, -k q_rest)."""
-    k = effect["kind"]
+    k = effect.kind
     if k == "extra_mass":
-        return float(effect["mass_kg"]) * np.concatenate([[1.0], np.asarray(effect["pos_m"], float)])
+        return float(effect.mass_kg) * np.concatenate([[1.0], np.asarray(effect.pos_m, float)])
     if k == "torque_gain":
-        return np.array([effect["value"] - 1.0])
+        return np.array([effect.value - 1.0])
     if k == "joint_spring":
-        return np.array([effect["value"], -effect["value"] * effect.get("rest_rad", 0.0)])
-    return np.array([float(effect["value"])])
+        return np.array([effect.value, -effect.value * effect.rest_rad])
+    return np.array([float(effect.value)])
 
 
-def merged_model(nominal: pin.Model, effects: list[dict]) -> pin.Model:
+def merged_model(nominal: pin.Model, effects: list[Effect]) -> pin.Model:
     """``nominal`` with the extra masses of ``effects`` merged into their links (a negative one removed at its
     point, the link's rotational inertia kept) and its leg kinematics altered (``gap.kinematics``)."""
     links = body_link_names(nominal)
     model = kinematic_model(nominal, effects)
     for e in effects:
-        if e["kind"] != "extra_mass":
+        if e.kind != "extra_mass":
             continue
-        jid = links.index(e["location"]) + 1
-        old, m, p = model.inertias[jid], float(e["mass_kg"]), np.asarray(e["pos_m"], float)
+        jid = links.index(e.location) + 1
+        old, m, p = model.inertias[jid], float(e.mass_kg), np.asarray(e.pos_m, float)
         if m > 0:
             model.inertias[jid] = old + pin.Inertia(m, p, np.eye(3) * 1e-4 * m)
         else:
@@ -104,26 +104,26 @@ def merged_model(nominal: pin.Model, effects: list[dict]) -> pin.Model:
     return model
 
 
-def exact_residuals(ds: Dataset, nominal: pin.Model, effects: list[dict], known: list[dict]) -> list[np.ndarray]:
+def exact_residuals(ds: Dataset, nominal: pin.Model, effects: list[Effect], known: list[Effect]) -> list[np.ndarray]:
     """Per recording, the (N, C) residual of the nominal model with ``effects`` applied for real (see the module
     docstring); ``known``: the nominal model file's own joint and sensor effects (already out of ``ds``)."""
     model = merged_model(nominal, effects)
     links = body_link_names(nominal)
-    again = any(e["kind"] in REEVALUATED_KINDS for e in effects)   # else the residual is linear
-    effects = [e for e in effects if e["kind"] not in REPLAY_ONLY_KINDS]
+    again = any(e.kind in REEVALUATED_KINDS for e in effects)   # else the residual is linear
+    effects = [e for e in effects if e.kind not in REPLAY_ONLY_KINDS]
     out = []
     for r, (rec, ev, lab) in enumerate(zip(ds.recordings, ds.evaluations, ds.labels)):
         e_r = ev.e.copy()
         for eff in effects:
-            if eff["kind"] not in REEVALUATED_KINDS:
+            if eff.kind not in REEVALUATED_KINDS:
                 e_r -= _contribution(ds, links, r, eff)
         if not again:
             out.append(e_r)
             continue
         q = rec.q.copy()
         for e in effects:
-            if e["kind"] == "joint_offset":       # reading - true angle
-                q[:, rec.joint_names.index(e["location"])] -= e["value"]
+            if e.kind == "joint_offset":       # reading - true angle
+                q[:, rec.joint_names.index(e.location)] -= e.value
         dyn = 6 + len(rec.joint_names)
         # the dynamics channels re-evaluated: the nominal residual's share of them replaced
         e_r[:, :dyn] += evaluate(model, replace(rec, q=q), seated=np.isin(lab, ["seated", "seat-off"]),
@@ -134,18 +134,18 @@ def exact_residuals(ds: Dataset, nominal: pin.Model, effects: list[dict], known:
     return out
 
 
-def _contribution(ds: Dataset, links: list[str], r: int, effect: dict) -> np.ndarray:
+def _contribution(ds: Dataset, links: list[str], r: int, effect: Effect) -> np.ndarray:
     """(N, C) what ``effect`` adds to the residual of recording ``r``."""
-    cols = effect_columns(ds, links, r, effect["kind"], effect["location"])
+    cols = effect_columns(ds, links, r, effect.kind, effect.location)
     return np.tensordot(cols, effect_theta(effect), axes=(2, 0))
 
 
 # -- the re-simulation ------------------------------------------------------------------------------------------------
-def replay_effects(ds: Dataset, effects: list[dict], nominal: dict[int, dict] | None = None) -> dict[int, dict]:
+def replay_effects(ds: Dataset, effects: list[Effect], nominal: dict[int, dict] | None = None) -> dict[int, dict]:
     """Recording index -> the simulated signals of its commands replayed in the plant with ``effects`` (runs that
     carry their commands only); ``nominal``: the nominal replay, returned as it is when the effects are all
     sensor faults (``SENSOR_KINDS``)."""
-    physical = [e for e in effects if e["kind"] not in SENSOR_KINDS]
+    physical = [e for e in effects if e.kind not in SENSOR_KINDS]
     if nominal is not None and not physical:
         return nominal
     cfg = plant_from_effects(effects, ds.robot) if effects else PlantConfig(robot=ds.robot)
@@ -283,13 +283,13 @@ SEARCH_TRIALS = 8            # replays of ~3 s each; the bracket ends 3 % wide i
 GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
 
 
-def contact_effect(time_constant_s: float, half_width_s: float = 0.0) -> dict:
+def contact_effect(time_constant_s: float, half_width_s: float = 0.0) -> Effect:
     """The soles' contact time constant as a named effect."""
-    return {"kind": "contact_softness", "location": "soles", "value": float(time_constant_s),
-            "ci95": float(half_width_s), "unit": "s", "share_of_gap": 0.0, "delta_bic": 0.0, "alternatives": []}
+    return Effect("contact_softness", "soles", value=float(time_constant_s), ci95=float(half_width_s), unit="s",
+                  share_of_gap=0.0, delta_bic=0.0, alternatives=())
 
 
-def fit_contact(ds: Dataset, effects: list[dict], sims: dict[int, dict], say) -> tuple[dict | None, dict]:
+def fit_contact(ds: Dataset, effects: list[Effect], sims: dict[int, dict], say) -> tuple[Effect | None, dict]:
     """(the contact effect, its replay) when the replay with ``effects`` disagrees on the contact channels and a
     time constant fixes it; (None, ``sims``) otherwise."""
     z = replay_z(replay_residuals(ds, sims))

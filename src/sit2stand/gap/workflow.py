@@ -37,7 +37,7 @@ from ..robot.identify import IdentificationError, read_link_parameters
 from ..robot.model import PlantConfig, controller_model
 from .candidates import build_candidates, describe, effect_summary, series_ids, stack_rows
 from .dataset import Dataset, GapError, evaluate_all, fast_part_floor, load_dataset
-from .effects import KINEMATIC_KINDS, REPLAY_ONLY_KINDS
+from .effects import KINEMATIC_KINDS, REPLAY_ONLY_KINDS, Effect
 from .kinematics import corrected, correction_candidates, fit_kinematics, kinematic_model
 from .plausibility import RESIDUE, cancelling_offsets, lopsided
 from .recording import RecordingError
@@ -72,7 +72,7 @@ MAX_REFUSAL_ROUNDS = 4      # selection re-run without the refused candidates at
 
 
 # -- nominal model --------------------------------------------------------------------------------------------------
-def load_nominal(path: str | Path | None, robot: str | None = None) -> tuple[pin.Model, str, list[dict]]:
+def load_nominal(path: str | Path | None, robot: str | None = None) -> tuple[pin.Model, str, list[Effect]]:
     """The nominal model of ``robot`` (a profile; None: TALOS): CAD (None or "cad"), identified parameters
     (``sit2stand identify`` YAML) or an augmented model written by this workflow (its ``links``, and its joint and
     sensor ``effects``, returned third)."""
@@ -84,8 +84,8 @@ def load_nominal(path: str | Path | None, robot: str | None = None) -> tuple[pin
         doc = yaml.safe_load(Path(path).read_text())
     except (IdentificationError, OSError, KeyError, ValueError, yaml.YAMLError) as err:
         raise GapError(f"{path}: not a usable model file: {err}") from None
-    known = [e for e in doc.get("effects", []) or []
-             if e.get("kind") != "extra_mass" and e.get("kind") not in REPLAY_ONLY_KINDS]
+    known = [e for e in (Effect.from_dict(d, f"{path}: effects") for d in doc.get("effects", []) or [])
+             if e.kind != "extra_mass" and e.kind not in REPLAY_ONLY_KINDS]
     return model, str(path), known
 
 
@@ -102,7 +102,7 @@ class GapResult:
     rms_after: np.ndarray
     table: list[dict]                      # ranked disagreements (channel x phase)
     selection: Selection
-    effects: list[dict]
+    effects: list[Effect]
     verdict: str
     unexplained: list[dict]
     gap_before: float                      # gap_size over the (channel, phase) pairs >= SIGNIFICANT_Z floors before
@@ -110,7 +110,7 @@ class GapResult:
     notes: list[str]
     dataset: Dataset
     after: list[np.ndarray]                # per recording: (N, C) residual of the augmented model
-    known: list[dict] = field(default_factory=list)   # joint/sensor effects the nominal model file already had
+    known: list[Effect] = field(default_factory=list)   # joint/sensor effects the nominal model file already had
     replay: list[dict] = field(default_factory=list)  # re-simulation figures per recording (RMS per model)
     gap_after_first_order: float = 0.0     # the gap with the effects' linear signatures subtracted (selection's view)
     refused: list[dict] = field(default_factory=list)  # candidates refused (bounds, symmetry, no real improvement)
@@ -216,7 +216,7 @@ def run(bags: list[str | Path], model_path: str | Path | None = None, rate_hz: f
     sims = {}
     if replay and source == "cad" and any(r.commands is not None and not r.static for r in ds.recordings):
         effects, exact, sims = _confirm_replay(ds, model, effects, exact, refused, say)
-    sel.effects = [s for s in sel.effects if s.candidate.key in {f"{e['kind']}@{e['location']}" for e in effects}]
+    sel.effects = [s for s in sel.effects if s.candidate.key in {e.key for e in effects}]
     first_order = _after(ds, sel, lambda r, c: _columns(ds, links, r, c))
     rms_b = np.array([_rms(e, ev.valid) for e, ev in zip(nominal, ds.evaluations)])
     rms_a = np.array([_rms(e, ev.valid) for e, ev in zip(exact, ds.evaluations)])
@@ -274,22 +274,22 @@ def _weighted_rss(es: list[np.ndarray], ds: Dataset) -> float:
     return float(sum(np.sum((e / f[None, :])[ev.valid] ** 2) for e, f, ev in zip(es, ds.floors, ds.evaluations)))
 
 
-def _confirm_exact(ds: Dataset, model: pin.Model, effects: list[dict], known: list[dict], refused: list[dict],
-                   say) -> tuple[list[dict], list[np.ndarray]]:
+def _confirm_exact(ds: Dataset, model: pin.Model, effects: list[Effect], known: list[Effect], refused: list[dict],
+                   say) -> tuple[list[Effect], list[np.ndarray]]:
     """Drop, weakest first, each effect that does not lower the nonlinear residual (gap.validate) by the selection's
     practical floor; the kept effects and their nonlinear residuals."""
     n_rows = sum(int(ev.valid.sum()) for ev in ds.evaluations)
     exact = exact_residuals(ds, model, effects, known)
-    for e in sorted(effects, key=lambda d: d["share_of_gap"]):
-        if e["kind"] in KINEMATIC_KINDS:           # the soles' closure confirmed them, not the torques
+    for e in sorted(effects, key=lambda d: d.share_of_gap):
+        if e.kind in KINEMATIC_KINDS:           # the soles' closure confirmed them, not the torques
             continue
         rest = [d for d in effects if d is not e]
-        without = exact_residuals(ds, model, rest, known) if e["kind"] in ("extra_mass", "joint_offset") else \
-            [x + np.tensordot(effect_columns(ds, body_link_names(model), r, e["kind"], e["location"]),
+        without = exact_residuals(ds, model, rest, known) if e.kind in ("extra_mass", "joint_offset") else \
+            [x + np.tensordot(effect_columns(ds, body_link_names(model), r, e.kind, e.location),
                               effect_theta(e), axes=(2, 0)) for r, x in enumerate(exact)]
         gain = _weighted_rss(without, ds) - _weighted_rss(exact, ds)
         if gain < MIN_SHARE * n_rows:
-            key = f"{e['kind']}@{e['location']}"
+            key = e.key
             say(f"  not confirmed: {key} (applied for real it lowers the residual by {gain:.3g})")
             refused.append({"effect": key, "why": "applied for real (nonlinear residuals) it does not improve the "
                                                  "model"})
@@ -297,19 +297,19 @@ def _confirm_exact(ds: Dataset, model: pin.Model, effects: list[dict], known: li
     return effects, exact
 
 
-def _kinematics_first(ds: Dataset, model: pin.Model, say) -> tuple[list[dict], dict]:
+def _kinematics_first(ds: Dataset, model: pin.Model, say) -> tuple[list[Effect], dict]:
     """The legs' link lengths and joint axes from the soles' closure (gap.kinematics), before the dynamics: a
     kinematic error left in the model would be absorbed by dynamic proxies. Encoder offsets the closure sees are
     left to the dynamics, which name them with the torques' evidence as well."""
     found, report = fit_kinematics(ds, model, say)
-    kinematic = [e for e in found if e["kind"] in KINEMATIC_KINDS]
+    kinematic = [e for e in found if e.kind in KINEMATIC_KINDS]
     for e in kinematic:
         say(f"  named from the soles' closure: {describe(e)}")
     return kinematic, report
 
 
-def _confirm_replay(ds: Dataset, model: pin.Model, effects: list[dict], exact: list[np.ndarray],
-                    refused: list[dict], say) -> tuple[list[dict], list[np.ndarray], dict]:
+def _confirm_replay(ds: Dataset, model: pin.Model, effects: list[Effect], exact: list[np.ndarray],
+                    refused: list[dict], say) -> tuple[list[Effect], list[np.ndarray], dict]:
     """Re-simulate with the nominal model and with the effects; while the effects make the re-simulation worse,
     drop the one whose removal improves it most."""
     say("  re-simulating the recorded commands: nominal model, then with the named effects")
@@ -326,8 +326,8 @@ def _confirm_replay(ds: Dataset, model: pin.Model, effects: list[dict], exact: l
         if best >= score:
             break
         e = effects[i]
-        say(f"  not confirmed: {e['kind']}@{e['location']} (the re-simulation is closer without it)")
-        refused.append({"effect": f"{e['kind']}@{e['location']}", "why": "the re-simulation is closer without it"})
+        say(f"  not confirmed: {e.key} (the re-simulation is closer without it)")
+        refused.append({"effect": e.key, "why": "the re-simulation is closer without it"})
         effects = effects[:i] + effects[i + 1:]
         score, sims = best, sim
         exact = exact_residuals(ds, model, effects, [])
@@ -373,32 +373,32 @@ def _controller_params(controller: str | Path | None) -> dict | None:
         raise GapError(f"{controller}: not a usable controller model: {err}") from None
 
 
-def _with_widths(ds: Dataset, effects: list[dict]) -> list[dict]:
+def _with_widths(ds: Dataset, effects: list[Effect]) -> list[Effect]:
     """``effects``, each Coulomb friction with the transition speed its signature used (``v0_radps``)."""
     names = ds.recordings[0].joint_names
     for e in effects:
-        if e["kind"] == "coulomb_friction":
-            e["v0_radps"] = float(ds.evaluations[0].coulomb_v0[names.index(e["location"])])
+        if e.kind == "coulomb_friction":
+            e.v0_radps = float(ds.evaluations[0].coulomb_v0[names.index(e.location)])
     return effects
 
 
-def _subtract_known(ds: Dataset, links: list[str], known: list[dict]) -> None:
+def _subtract_known(ds: Dataset, links: list[str], known: list[Effect]) -> None:
     """Take the model file's own joint and sensor effects out of the residuals (they are part of the model; a
     Coulomb friction with the transition speed it was named with, a backlash with its own play as the width)."""
     for rec, ev in zip(ds.recordings, ds.evaluations):
         ev.coulomb_v0 = np.full(ev.n_joints, COULOMB_V0_RADPS) if ev.coulomb_v0 is None else ev.coulomb_v0
         ev.backlash_b0 = np.full(ev.n_joints, BACKLASH_GRID_RAD[0]) if ev.backlash_b0 is None else ev.backlash_b0
         for eff in known:
-            if eff["location"] not in rec.joint_names:
+            if eff.location not in rec.joint_names:
                 continue
-            j = rec.joint_names.index(eff["location"])
-            if eff["kind"] == "coulomb_friction" and "v0_radps" in eff:
-                ev.coulomb_v0[j] = float(eff["v0_radps"])
-            elif eff["kind"] == "backlash":
-                ev.backlash_b0[j] = float(eff["value"])
+            j = rec.joint_names.index(eff.location)
+            if eff.kind == "coulomb_friction" and eff.v0_radps is not None:
+                ev.coulomb_v0[j] = float(eff.v0_radps)
+            elif eff.kind == "backlash":
+                ev.backlash_b0[j] = float(eff.value)
     for r, ev in enumerate(ds.evaluations):
         for eff in known:
-            ev.e -= np.tensordot(effect_columns(ds, links, r, eff["kind"], eff["location"]), effect_theta(eff),
+            ev.e -= np.tensordot(effect_columns(ds, links, r, eff.kind, eff.location), effect_theta(eff),
                                  axes=(2, 0))
 
 
