@@ -194,7 +194,7 @@ def test_gap_command_report_and_augmented_model(tmp_path):
     assert again.returncode == 0, again.stderr
     assert "no significant discrepancy" in again.stdout
     plant = Plant(PlantConfig(), controller_params=read_link_parameters(out / "augmented_model.yaml"))
-    assert abs(plant.ctrl_mass - (90.27 + 6.0)) < 1.2
+    assert abs(plant.onboard.mass_kg - (90.27 + 6.0)) < 1.2
 
 
 def test_not_a_robot_bag_is_named(tmp_path):

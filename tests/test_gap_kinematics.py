@@ -40,7 +40,7 @@ def test_the_models_kinematic_errors_are_the_plants(name):
         q = plant.q_ref + rng.uniform(-0.4, 0.4, len(names))
         base = np.array([0.1, -0.05, 1.0, *pin.Quaternion(pin.rpy.rpyToMatrix(0.05, 0.2, -0.1)).coeffs()[[3, 0, 1, 2]]])
         plant.data.qpos[:7] = base
-        plant.data.qpos[plant.qadr] = q - plant.q_offset
+        plant.data.qpos[plant.qadr] = q - plant.faults.q_offset
         mujoco.mj_kinematics(plant.model, plant.data)
         pin.framesForwardKinematics(model, data, _pin_q(model, names, base, q))
         for side in ("left", "right"):

@@ -243,10 +243,10 @@ def test_a_gears_play_is_a_dead_zone_in_the_joint_torque():
     ff[j] = 2.0
     for u, expected in [(0.005, 0.0), (-0.009, 0.0), (0.03, 0.02), (-0.02, -0.01)]:
         target = q.copy()
-        target[j] += u - ff[j] / plant.kp[j]          # the servo's target that asks for kp u in all
+        target[j] += u - ff[j] / plant.joints.kp[j]          # the servo's target that asks for kp u in all
         out = plant._dead_zone(target, ff)
-        torque = plant.kp * (out - q) + ff
-        assert torque[j] == pytest.approx(plant.kp[j] * expected, abs=1e-9)
+        torque = plant.joints.kp * (out - q) + ff
+        assert torque[j] == pytest.approx(plant.joints.kp[j] * expected, abs=1e-9)
         others = np.arange(plant.n) != j
         assert np.allclose(out[others], target[others])
 

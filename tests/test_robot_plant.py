@@ -66,7 +66,7 @@ def test_standing_robot_measures_its_cop_where_its_true_com_is():
     fz = s.wrench_world["left"][2] + s.wrench_world["right"][2]
     assert fz == pytest.approx(weight, rel=0.01)                  # the F/T sensors carry the whole (true) weight
     assert abs(s.cop_m[0] - plant.true_com()[0]) < 0.005            # static: COP under the COM (1.2 mm measured)
-    assert np.abs(s.tau).max() < plant.effort.max()
+    assert np.abs(s.tau).max() < plant.joints.effort.max()
 
 
 def test_robot_stays_seated_on_the_chair():

@@ -52,7 +52,7 @@ def _standing(plant):
 def test_seated_equilibrium_is_consistent(plant):
     """Seated at rest: the base's Newton-Euler rows hold with the forces found, the seat and the feet share the
     weight, the torques are inside the limits and the feet's COP inside their shrunk soles."""
-    qp = WholeBodyQP(plant.ctrl, plant.seat_frame)
+    qp = WholeBodyQP(plant.ctrl, plant.onboard.seat_frame)
     q = plant.pin_configuration(plant.q_seated)
     res = qp.solve(q, np.zeros(plant.ctrl.nv), _at_rest(plant.ctrl, q), seat_force_max_n=2000.0)
     assert res.solved
@@ -70,7 +70,7 @@ def test_seated_equilibrium_is_consistent(plant):
 def test_without_the_seat_the_seated_robot_must_move(plant):
     """No seat, COM behind the heels: no force distribution holds it at rest; the QP puts the COP on the heel edge
     and accelerates the robot."""
-    qp = WholeBodyQP(plant.ctrl, plant.seat_frame)
+    qp = WholeBodyQP(plant.ctrl, plant.onboard.seat_frame)
     q = plant.pin_configuration(plant.q_seated)
     res = qp.solve(q, np.zeros(plant.ctrl.nv), _at_rest(plant.ctrl, q), seat_force_max_n=0.0)
     assert res.seat_force[2] == pytest.approx(0.0, abs=1e-6)
@@ -81,7 +81,7 @@ def test_without_the_seat_the_seated_robot_must_move(plant):
 
 def test_standing_holds_with_cop_under_com(plant):
     q = _standing(plant)
-    qp = WholeBodyQP(plant.ctrl, plant.seat_frame)
+    qp = WholeBodyQP(plant.ctrl, plant.onboard.seat_frame)
     res = qp.solve(q, np.zeros(plant.ctrl.nv), _at_rest(plant.ctrl, q))
     assert res.solved
     assert np.abs(res.a).max() < 1e-2
@@ -95,7 +95,7 @@ def test_torque_limits_bind(plant):
     ref = _at_rest(model, q)
     knee = [model.joints[model.getJointId(f"leg_{s}_4_joint")].idx_v for s in ("left", "right")]
     ref.a[knee] = -400.0
-    res = WholeBodyQP(model, plant.seat_frame).solve(q, np.zeros(model.nv), ref)
+    res = WholeBodyQP(model, plant.onboard.seat_frame).solve(q, np.zeros(model.nv), ref)
     assert np.all(np.abs(res.tau) <= model.effortLimit[6:] + 1e-6)
 
 
@@ -107,7 +107,7 @@ def test_the_qps_torques_are_the_robots_inverse_dynamics_with_the_forces_it_foun
     q = _standing(plant)
     rng = np.random.default_rng(3)
     v = 0.3 * rng.standard_normal(model.nv)
-    qp = WholeBodyQP(model, plant.seat_frame)
+    qp = WholeBodyQP(model, plant.onboard.seat_frame)
     res = qp.solve(q, v, _at_rest(model, q))
     assert res.solved
     pin.computeJointJacobians(model, data, q)
@@ -188,14 +188,14 @@ def test_torque_controller_holds_the_seated_robot(plant):
     assert np.abs(plant.data.qpos[plant.qadr] - q_hold).max() < 0.3
     assert len(plant.wbc.qp_times_s) == pytest.approx(500, abs=2)
     plant.reset()
-    assert plant.model.actuator_gainprm[plant.pd_ids, 0].min() > 0    # back under PD after a reset
+    assert plant.model.actuator_gainprm[plant.joints.pd_ids, 0].min() > 0    # back under PD after a reset
 
 
 def test_the_reference_sole_lies_flat_until_the_feet_carry_the_weight_then_moves_to_as_measured(plant):
     """The torque controller's reference sole: flat on the floor while the seat carries weight; as measured at the
     start (pitched, where the plan has the soles) after the feet have carried the whole weight for the settling
     time and the blend; flat again once the seat takes weight back."""
-    ctrl = WholeBodyController(plant.ctrl, plant.seat_frame, period_s=0.01)
+    ctrl = WholeBodyController(plant.ctrl, plant.onboard.seat_frame, period_s=0.01)
     q = _standing(plant)
     q[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(0.0, -0.02, 0.0)).coeffs()     # the body (and its soles) pitched
     ctrl.anchor(q)
@@ -244,8 +244,8 @@ def test_the_clis_and_the_graphs_controller_choices_and_default_are_the_stand_up
 def test_a_seat_known_as_a_force_gives_the_torques_of_a_seat_contact_with_that_force(plant):
     """The robot's controller has no seat unknowns (its force is known from the feet): with the seat's force given,
     it finds the torques a QP with a seat contact finds when that contact carries no force, and it is smaller."""
-    with_contact = WholeBodyQP(plant.ctrl, plant.seat_frame)
-    known = WholeBodyQP(plant.ctrl, plant.seat_frame, seat_contact=False)
+    with_contact = WholeBodyQP(plant.ctrl, plant.onboard.seat_frame)
+    known = WholeBodyQP(plant.ctrl, plant.onboard.seat_frame, seat_contact=False)
     assert known.n == with_contact.n - 3 and known.n_eq == with_contact.n_eq - 3
     q = plant.pin_configuration(plant.q_seated)
     v = np.zeros(plant.ctrl.nv)

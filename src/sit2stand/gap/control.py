@@ -27,7 +27,8 @@ import numpy as np
 
 from ..dynamics import savgol_series
 from ..robot.model import DEFAULT_ROBOT, PlantConfig
-from ..robot.plant import Plant, contact_feedforward, feedforward_seated, reference_at
+from ..robot.actuation import reference_at
+from ..robot.plant import Plant, contact_feedforward, feedforward_seated
 from .recording import Recording, smoothing_window
 
 
@@ -77,7 +78,7 @@ def control_law(rec: Recording, controller_params: dict | None = None, sensor_la
         order = [names.index(j) for j in rec.joint_names]
     else:
         order = list(range(len(names)))
-    kp, kd, effort = plant.kp[order], plant.kd[order], plant.effort[order]
+    kp, kd, effort = plant.joints.kp[order], plant.joints.kd[order], plant.joints.effort[order]
     n, N = len(rec.joint_names), len(rec)
     law = np.zeros((N, n))
     ff_all = np.zeros((N, n))
@@ -97,8 +98,8 @@ def control_law(rec: Recording, controller_params: dict | None = None, sensor_la
         qp[7:][order] = q_t
         qd_full, qdd_full = np.zeros(n), np.zeros(n)
         qd_full[order], qdd_full[order] = qd_t, cmd.qdd[c]
-        seated = feedforward_seated(base[2], plant.seated_base_z, fz[k], plant.ctrl_mass)
-        ff = contact_feedforward(plant.ctrl, plant.ctrl_data, qp, qd_full, qdd_full, True, seated)[order]
+        seated = feedforward_seated(base[2], plant.onboard.seated_base_z_m, fz[k], plant.onboard.mass_kg)
+        ff = contact_feedforward(plant.ctrl, plant.onboard.data, qp, qd_full, qdd_full, True, seated)[order]
         ff = np.clip(ff, -effort, effort)
         law[k] = np.clip(kp * (q_t - q_meas) + kd * (qd_t - qd_meas) + ff, -effort, effort)
         ff_all[k] = ff

@@ -340,7 +340,7 @@ def excite(cfg: PlantConfig, out: str | Path, seed: int = 0, n_moves: int = 8, m
     plant.data.time = 0.0
     dt = cfg.timestep_s
     every = max(1, int(round(1.0 / (rate_hz * dt))))
-    refs = [s[plant.qadr] + plant.q_offset for s in stances]
+    refs = [s[plant.qadr] + plant.faults.q_offset for s in stances]
     segment_s = move_s + hold_s
     duration = segment_s * (len(refs) - 1) + hold_s
     steps = int(round(duration / dt))

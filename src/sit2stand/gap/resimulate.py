@@ -45,7 +45,7 @@ def simulate(cfg: PlantConfig, rec: Recording, seated: bool, alterations: list[E
     else:
         q = plant.data.qpos.copy()
         q[:7] = rec.base_pose[0]
-        q[plant.qadr] = rec.q[0] - plant.q_offset
+        q[plant.qadr] = rec.q[0] - plant.faults.q_offset
         plant.reset(q)
     cmd = rec.commands
     # hold the first command, not the measured angles: what the robot was told; an effect that loads a joint (a

@@ -103,7 +103,7 @@ class Driver(Node):
 
     # -- commands ---------------------------------------------------------------------------------------------
     def _apply(self, names, positions, velocities=None, accelerations=None, ff=None) -> None:
-        q, qd, qdd = self.plant.q_ref.copy(), self.plant.qd_ref.copy(), self.plant.qdd_ref.copy()
+        q, qd, qdd = self.plant.q_ref.copy(), self.plant.ref.qd.copy(), self.plant.ref.qdd.copy()
         for k, name in enumerate(names):
             j = self.index.get(name)
             if j is None:

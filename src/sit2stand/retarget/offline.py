@@ -17,7 +17,6 @@ from pathlib import Path
 import matplotlib
 import matplotlib.pyplot as plt
 import numpy as np
-import pinocchio as pin
 
 from ..errors import InputError
 from ..human.com import estimate_com
@@ -355,22 +354,21 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
                 q, offset, lag = fix.q, fix.offset_m, fix.lag_m
             elif c.on_feet:      # no COM feedback (torque control has its own COM task, or it is off): the plan
                 #                  still waits for a robot behind it, from the measured state
-                measured = pin.centerOfMass(plant.ctrl, plant.ctrl_data, plant.pin_configuration(plant.data.qpos))
-                lag = com_lag_m(c.com - measured)
+                lag = com_lag_m(c.com - plant.model_com())
             plant.command(q[7:], c.v[6:], c.a[6:], feedforward=controller)
         ticks += 1
         steps = physics_steps_due(ticks, dt, plant.cfg.timestep_s, taken)
         plant.step(steps)
         taken += steps
-        demand = np.abs(plant.data.actuator_force[plant.pd_ids] + plant.data.actuator_force[plant.ff_ids])
-        torque.append(demand / plant.effort)
+        jm = plant.joints
+        torque.append(np.abs(plant.data.actuator_force[jm.pd_ids] + plant.data.actuator_force[jm.ff_ids]) / jm.effort)
         s = plant.sensors()
         sensed.append(s)
         err = plant.data.qpos[plant.qadr] - plant.q_ref
         rows.append([plant.t_s, *plant.true_com(), *c.com,
                      *s.cop_m, plant.data.qpos[2], plant.data.qpos[0], c.q[0],
                      float(np.abs(err).max()), float(np.argmax(np.abs(err))), plant.chair_force_n(),
-                     *pin.centerOfMass(plant.ctrl, plant.ctrl_data, plant.pin_configuration(plant.data.qpos)), *offset,
+                     *plant.model_com(), *offset,
                      float(np.mean(plant.data.qpos[knees]))])
         if plant.fallen:
             while not player.done:      # the rest of the plan, for its bag and figures

@@ -87,7 +87,7 @@ def check_robot(robot: str, plant: str | None = None) -> RobotCheck:
     put = sim.data.qpos[:3].copy()
     sim.settle(2.0)
     drift = float(np.linalg.norm(sim.data.qpos[:3] - put))
-    model, data = sim.ctrl, sim.ctrl_data
+    model, data = sim.ctrl, sim.onboard.data
     standing = standing_qpos(sim, 0.0, 0.0, 0.0, 0.0)
     com = pin.centerOfMass(model, data, sim.pin_configuration(standing))
     tau = seat_off_torques(sim)
@@ -97,8 +97,8 @@ def check_robot(robot: str, plant: str | None = None) -> RobotCheck:
     return RobotCheck(profile.name, str(profile.urdf), float(pin.computeTotalMass(model)), sim.n,
                       float(standing[2]), float(com[2]), float(sim.q_seated[2]), sim.seat_height_m,
                       drift < SEATED_DRIFT_M and not sim.fallen, drift, float(knee),
-                      float(sim.effort[names.index(profile.leg("left", "knee"))]), float(trunk),
-                      float(sim.effort[names.index(profile.trunk_pitch)]))
+                      float(sim.joints.effort[names.index(profile.leg("left", "knee"))]), float(trunk),
+                      float(sim.joints.effort[names.index(profile.trunk_pitch)]))
 
 
 def seat_off_torques(sim: Plant) -> np.ndarray:
@@ -115,7 +115,7 @@ def seat_off_torques(sim: Plant) -> np.ndarray:
     target = heel + SEAT_OFF_COM_FRACTION * 2 * sole.half_size_m[0]
     hips = [sim.qadr[names.index(profile.leg(s, "hip_pitch"))] for s in SIDES]
     hip_at = np.mean([d.joint(profile.leg(s, "hip_pitch")).xanchor for s in SIDES], axis=0)
-    model, data = sim.ctrl, sim.ctrl_data
+    model, data = sim.ctrl, sim.onboard.data
 
     def leaned(lean: float) -> np.ndarray:      # the pelvis and trunk turn forward about the hips, the legs stay
         qq = q.copy()

@@ -21,7 +21,7 @@ from __future__ import annotations
 import fnmatch
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -31,6 +31,7 @@ from ..dynamics import G
 from ..errors import InputError
 from ..forceplate import DEFAULT_COP_THRESHOLD_N
 from ..vectors import xyzw_from_wxyz
+from .actuation import JointFaults, JointMap, JointReference
 from .feet_sensing import FeetSensing
 from .torque_control import WholeBodyController
 from .model import (SEAT_CLEARANCE_BELOW_M, SIDES, PlantConfig, PlantConfigError, add_chair, add_seat_frame, build_spec,
@@ -48,7 +49,7 @@ touched, tracks the population about twice as far from the plan and asks several
 (docs/results.md). The driver and retargeter nodes' own defaults stay joint PD: the identification and
 replay graphs pose the robot with it."""
 WBC_RATE_HZ = 500.0          # the whole-body torque controller's rate (tsid's TALOS examples run at 1 kHz)
-EXTRAPOLATE_MAX_S = 0.05      # a reference is followed along its velocity for at most this long after its message
+STALE = 10**9                 # a feed-forward's age [steps] that forces its refresh
 
 
 @dataclass
@@ -142,6 +143,36 @@ def lowest_point(model: mujoco.MjModel, data: mujoco.MjData, bodies: tuple[str, 
     return best
 
 
+@dataclass(frozen=True)
+class OnBoardModel:
+    """The on-board controller's own model of the robot (CAD, or identified parameters; never the plant's truth):
+    Pinocchio's ``model`` and ``data``, its total ``mass_kg``, the ``seat_frame`` (a frame on the pelvis at the seat
+    surface) and the base height [m] at which it takes the robot as seated."""
+
+    model: pin.Model
+    data: pin.Data
+    mass_kg: float
+    seat_frame: int
+    seated_base_z_m: float
+
+    @classmethod
+    def of(cls, cfg: PlantConfig, params: dict | None, seat_height_m: float, seated_base_z_m: float) -> OnBoardModel:
+        model = controller_model(cfg, params)
+        frame = add_seat_frame(model, seat_height_m, seated_base_z_m)
+        return cls(model, model.createData(), float(pin.computeTotalMass(model)), frame, seated_base_z_m)
+
+
+@dataclass
+class FeedForward:
+    """The on-board controller's last torques [N m] and their age [physics steps]: joint PD's feed-forward is
+    refreshed every ``pd_every`` steps, whole-body torque control every ``wbc_every``."""
+
+    pd_every: int
+    wbc_every: int
+    tau: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    age: int = STALE
+
+
 class Plant:
     """The robot on a chair in MuJoCo under joint PD + feed-forward (see the module docstring)."""
 
@@ -162,50 +193,40 @@ class Plant:
             add_chair(spec, cfg, self.seat_height_m, self.chair_front_x)
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
-        self.joint_names = [self.model.joint(i).name for i in range(1, self.model.njnt)]
-        self.n = len(self.joint_names)
-        self.qadr = np.array([self.model.joint(n).qposadr[0] for n in self.joint_names])
-        self.vadr = np.array([self.model.joint(n).dofadr[0] for n in self.joint_names])
-        self.effort = np.array([self.model.jnt_actfrcrange[self.model.joint(n).id][1] for n in self.joint_names])
-        self.pd_ids = np.array([self.model.actuator(n).id for n in self.joint_names])
-        self.ff_ids = np.array([self.model.actuator(f"ff_{n}").id for n in self.joint_names])
-        self._gains = (self.model.actuator_gainprm[self.pd_ids].copy(), self.model.actuator_biasprm[self.pd_ids].copy())
+        self.joints = JointMap.of(self.model)
+        self.faults = JointFaults.of(cfg.unmodeled, self.joints.names, cfg.timestep_s)
         self.rng = np.random.default_rng(cfg.seed)
-        um = cfg.unmodeled
-        self.tau_bias = np.zeros(self.n)
-        for name, value in expand(um.torque_bias_nm, self.joint_names).items():
-            self.tau_bias[self.joint_names.index(name)] = value
-        self.tau_gain = np.ones(self.n)
-        for name, value in expand(um.torque_gain, self.joint_names).items():
-            self.tau_gain[self.joint_names.index(name)] = value
-        self.q_offset = np.zeros(self.n)      # encoder reading - true angle; the servo tracks the reading
-        for name, value in expand(um.joint_offset_rad, self.joint_names).items():
-            self.q_offset[self.joint_names.index(name)] = value
-        self.backlash = np.zeros(self.n)       # half the gear's play [rad] (see _dead_zone)
-        for name, value in expand(um.backlash_rad, self.joint_names).items():
-            self.backlash[self.joint_names.index(name)] = value
-        self.has_backlash = bool(self.backlash.any())    # checked at every physics step
-        self.delay_steps = int(round(um.actuator_delay_s / cfg.timestep_s))
-        self._tau_queue: deque[np.ndarray] = deque()
-        # the controller's model (CAD unless identified parameters are given)
-        self.ctrl = controller_model(cfg, controller_params)
-        self.seat_frame = add_seat_frame(self.ctrl, self.seat_height_m, float(self.q_seated[2]))
-        self.ctrl_data = self.ctrl.createData()
-        self.ctrl_mass = float(pin.computeTotalMass(self.ctrl))
-        self.kp = self.model.actuator_gainprm[self.pd_ids, 0].copy()
-        self.kd = -self.model.actuator_biasprm[self.pd_ids, 2].copy()
-        self.seated_base_z = float(self.q_seated[2])
-        # addresses resolved once: MuJoCo's by-name accessors cost ~15 us each
-        m = self.model
-        self.tau_adr = np.array([m.sensor_adr[m.sensor(f"tau_{n}").id] for n in self.joint_names])
-        self.feet = FeetSensing.of(m, self.ctrl, cfg)
-        self.ff_every = max(1, int(round(1.0 / (cfg.feedforward_rate_hz * cfg.timestep_s))))
-        self.wbc_every = max(1, int(round(1.0 / (WBC_RATE_HZ * cfg.timestep_s))))
+        self._tau_queue: deque[tuple[np.ndarray, np.ndarray]] = deque()    # the actuators' delay line
+        self.onboard = OnBoardModel.of(cfg, controller_params, self.seat_height_m, float(self.q_seated[2]))
+        self.feet = FeetSensing.of(self.model, self.onboard.model, cfg)
+        self.ff = FeedForward(max(1, int(round(1.0 / (cfg.feedforward_rate_hz * cfg.timestep_s)))),
+                              max(1, int(round(1.0 / (WBC_RATE_HZ * cfg.timestep_s)))), np.zeros(self.n))
         self.wbc: WholeBodyController | None = None
-        self._ff = np.zeros(self.n)
-        self._ff_age = 10**9
         self.reset()
         self.status_text = "ok"
+
+    @property
+    def joint_names(self) -> list[str]:
+        return self.joints.names
+
+    @property
+    def n(self) -> int:
+        return self.joints.n
+
+    @property
+    def qadr(self) -> np.ndarray:
+        """The actuated joints' addresses in qpos."""
+        return self.joints.qadr
+
+    @property
+    def q_ref(self) -> np.ndarray:
+        """The joint controller's position reference [rad] (encoder readings)."""
+        return self.ref.q
+
+    @property
+    def ctrl(self) -> pin.Model:
+        """The on-board controller's Pinocchio model (:class:`OnBoardModel`)."""
+        return self.onboard.model
 
     # -- state ------------------------------------------------------------------------------------------------
     def reset(self, q: np.ndarray | None = None) -> None:
@@ -213,13 +234,11 @@ class Plant:
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[:] = self.q_seated if q is None else q
         mujoco.mj_forward(self.model, self.data)
-        self.q_ref = self.data.qpos[self.qadr] + self.q_offset     # what the encoders read: hold it
-        self.qd_ref = np.zeros(self.n)
-        self.qdd_ref = np.zeros(self.n)
+        # what the encoders read: hold it
+        self.ref = JointReference.holding(self.data.qpos[self.qadr] + self.faults.q_offset, float(self.data.time))
         self.feedforward = "gravity"
         self.wbc = None
-        self._t_ref = float(self.data.time)
-        self._ff_age = 10**9
+        self.ff.age = STALE
         self.set_limp(False)
         self._tau_queue.clear()
         self.fallen = False
@@ -230,7 +249,7 @@ class Plant:
         then start the clock at 0."""
         self.step(int(round(seconds / self.cfg.timestep_s)))
         self.data.time = 0.0
-        self._t_ref = 0.0
+        self.ref.t_s = 0.0
 
     def set_limp(self, limp: bool) -> None:
         """Go limp (zero joint torque, e.g. after a fall) or back to PD control."""
@@ -249,16 +268,15 @@ class Plant:
         q = np.asarray(q, float)
         if q.shape != (self.n,):
             raise InputError(f"joint command has {q.shape} positions, the robot has {self.n} joints")
-        self.q_ref = q.copy()
-        self.qd_ref = np.zeros(self.n) if qd is None else np.asarray(qd, float).copy()
-        self.qdd_ref = np.zeros(self.n) if qdd is None else np.asarray(qdd, float).copy()
-        self._t_ref = float(self.data.time)
+        self.ref = JointReference(q.copy(), np.zeros(self.n) if qd is None else np.asarray(qd, float).copy(),
+                                  np.zeros(self.n) if qdd is None else np.asarray(qdd, float).copy(),
+                                  float(self.data.time))
         if feedforward is not None:
             if (feedforward == "wbc") != (self.feedforward == "wbc") and not self.limp:
                 self._servos(feedforward != "wbc")
             self.feedforward = feedforward
         if refresh:
-            self._ff_age = 10**9
+            self.ff.age = STALE
 
     # -- control ----------------------------------------------------------------------------------------------
     def pin_configuration(self, qpos: np.ndarray) -> np.ndarray:
@@ -271,72 +289,73 @@ class Plant:
         if self.feedforward == "none":
             return np.zeros(self.n)
         q = self.pin_configuration(self.data.qpos)
-        q[7:] = self.q_ref
-        feet_fz = self.feet.vertical_force(self.data)
-        seated = feedforward_seated(self.data.qpos[2], self.seated_base_z, feet_fz, self.ctrl_mass)
-        return contact_feedforward(self.ctrl, self.ctrl_data, q, self.qd_ref, self.qdd_ref,
+        q[7:] = self.ref.q
+        ob = self.onboard
+        seated = feedforward_seated(self.data.qpos[2], ob.seated_base_z_m, self.feet.vertical_force(self.data),
+                                    ob.mass_kg)
+        return contact_feedforward(ob.model, ob.data, q, self.ref.qd, self.ref.qdd,
                                    self.feedforward == "inverse_dynamics", seated)
 
     def _torque_control(self) -> tuple[np.ndarray, np.ndarray]:
         """Whole-body torque control (:mod:`sit2stand.robot.torque_control`) at its rate; the servos off."""
-        if self._ff_age >= self.wbc_every:
+        ff, ob = self.ff, self.onboard
+        if ff.age >= ff.wbc_every:
             if self.wbc is None:
-                self.wbc = WholeBodyController(self.ctrl, self.seat_frame,
-                                               period_s=self.wbc_every * self.model.opt.timestep)
+                self.wbc = WholeBodyController(ob.model, ob.seat_frame, period_s=ff.wbc_every * self.model.opt.timestep)
             s = self.data
             q = self.pin_configuration(s.qpos)
-            q[7:] += self.q_offset                     # what the encoders read
+            q[7:] += self.faults.q_offset                     # what the encoders read
             v = s.qvel.copy()
             world_to_base = np.empty(4)                # the base's linear velocity in its own axes (Pinocchio's)
             mujoco.mju_negQuat(world_to_base, s.qpos[3:7])
             mujoco.mju_rotVecQuat(v[:3], s.qvel[:3], world_to_base)
-            q_t, qd_t = reference_at(self.q_ref, self.qd_ref, self.qdd_ref, float(s.time) - self._t_ref)
+            q_t, qd_t = self.ref.at(float(s.time))
             feet_fz = self.feet.vertical_force(self.data)
             seat = 0.0
-            if feedforward_seated(s.qpos[2], self.seated_base_z, feet_fz, self.ctrl_mass):
-                seat = max(0.0, self.ctrl_mass * G - feet_fz)
-            self._ff, self._ff_age = self._within_effort(self.wbc.torques(q, v, q_t, qd_t, self.qdd_ref, seat)), 0
-        self._ff_age += 1
-        return self.data.qpos.take(self.qadr), self._ff
+            if feedforward_seated(s.qpos[2], ob.seated_base_z_m, feet_fz, ob.mass_kg):
+                seat = max(0.0, ob.mass_kg * G - feet_fz)
+            ff.tau, ff.age = self._within_effort(self.wbc.torques(q, v, q_t, qd_t, self.ref.qdd, seat)), 0
+        ff.age += 1
+        return self.data.qpos.take(self.qadr), ff.tau
 
     def _within_effort(self, tau: np.ndarray) -> np.ndarray:
         """``tau`` [N m] clipped to the actuators' effort limits (once per controller update, not per step)."""
-        return np.minimum(np.maximum(tau, -self.effort), self.effort)
+        return np.minimum(np.maximum(tau, -self.joints.effort), self.joints.effort)
 
     def _servos(self, on: bool) -> None:
         """Joint position servos on (PD) or off (torque control)."""
-        gain, bias = self._gains
-        self.model.actuator_gainprm[self.pd_ids] = gain if on else 0.0
-        self.model.actuator_biasprm[self.pd_ids] = bias if on else 0.0
+        self.joints.servos(self.model, on)
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics steps under the PD + feed-forward law (limp: zero torque)."""
+        jm, faults, ff = self.joints, self.faults, self.ff
+        backlash = faults.has_backlash
         for _ in range(n):
             if self.limp:
                 ctrl_pd, ctrl_ff = self.data.qpos[self.qadr].copy(), np.zeros(self.n)
             elif self.feedforward == "wbc":
                 ctrl_pd, ctrl_ff = self._torque_control()
             else:
-                if self._ff_age >= self.ff_every:          # the feed-forward changes slowly: refresh at its rate
-                    self._ff, self._ff_age = self._within_effort(self._feedforward()), 0
-                self._ff_age += 1
+                if ff.age >= ff.pd_every:          # the feed-forward changes slowly: refresh at its rate
+                    ff.tau, ff.age = self._within_effort(self._feedforward()), 0
+                ff.age += 1
                 # PD (implicit, in the servo actuator) + feed-forward (motor); the joint clamps their sum
                 # between commands the joint controller follows the reference's own velocity and acceleration
                 # (as a real one interpolates a trajectory point): a reference held still until the next message
                 # would make the torques jump at every update
-                q_t, qd_t = reference_at(self.q_ref, self.qd_ref, self.qdd_ref, float(self.data.time) - self._t_ref)
-                ctrl_pd = q_t - self.q_offset + self.kd / self.kp * qd_t
-                ctrl_ff = self._ff
-            if self.delay_steps:
+                q_t, qd_t = self.ref.at(float(self.data.time))
+                ctrl_pd = q_t - faults.q_offset + jm.kd / jm.kp * qd_t
+                ctrl_ff = ff.tau
+            if faults.delay_steps:
                 self._tau_queue.append((ctrl_pd, ctrl_ff))
-                if len(self._tau_queue) > self.delay_steps:
+                if len(self._tau_queue) > faults.delay_steps:
                     ctrl_pd, ctrl_ff = self._tau_queue.popleft()
                 else:
                     ctrl_pd, ctrl_ff = self.data.qpos[self.qadr].copy(), np.zeros(self.n)
-            if self.has_backlash and not self.limp and self.feedforward != "wbc":
+            if backlash and not self.limp and self.feedforward != "wbc":
                 ctrl_pd = self._dead_zone(ctrl_pd, ctrl_ff)
-            self.data.ctrl[self.pd_ids] = ctrl_pd
-            self.data.ctrl[self.ff_ids] = ctrl_ff
+            self.data.ctrl[jm.pd_ids] = ctrl_pd
+            self.data.ctrl[jm.ff_ids] = ctrl_ff
             mujoco.mj_step(self.model, self.data)
         self._check_fall()
 
@@ -345,9 +364,9 @@ class Plant:
         its encoder on the joint side) crosses the play of +-b freely, so the joint feels kp dz(u, b), where u [rad] is
         where the motor would sit to give the law's torque (kp u = the PD + feed-forward torque) and dz takes b off
         |u|: a torque dead zone of +-kp b. Under torque control (wbc) the motor's torque passes the play unchanged."""
-        q = self.data.qpos[self.qadr]
-        u = ctrl_pd - q + ctrl_ff / self.kp
-        return q + (u - np.clip(u, -self.backlash, self.backlash)) - ctrl_ff / self.kp
+        q, kp, b = self.data.qpos[self.qadr], self.joints.kp, self.faults.backlash
+        u = ctrl_pd - q + ctrl_ff / kp
+        return q + (u - np.clip(u, -b, b)) - ctrl_ff / kp
 
     def _check_fall(self) -> None:
         z, w0, _, _, w3 = self.data.qpos[2:7].tolist()
@@ -359,17 +378,23 @@ class Plant:
     # -- sensors ----------------------------------------------------------------------------------------------
     def sensors(self) -> Sensors:
         cfg, d, n = self.cfg, self.data, self.n
-        q = d.qpos.take(self.qadr) + self.q_offset
+        jm, faults = self.joints, self.faults
+        q = d.qpos.take(jm.qadr) + faults.q_offset
         if cfg.encoder_noise_rad:
             q = q + self.rng.normal(0, cfg.encoder_noise_rad, self.n)
         # the noise of the torques, then of each foot's force and torque: one draw
         noise = self.rng.standard_normal(n + 6 * len(SIDES))
-        tau = self.tau_gain * d.sensordata.take(self.tau_adr) + self.tau_bias + noise[:n] * cfg.joint_torque_noise_nm
+        tau = faults.tau_gain * d.sensordata.take(jm.tau_adr) + faults.tau_bias + noise[:n] * cfg.joint_torque_noise_nm
         reading = self.feet.readings(d, noise[n:])
         world = self.feet.ground_reactions(d, reading)
         cop = self.feet.combined_cop(d, world, DEFAULT_COP_THRESHOLD_N)
-        return Sensors(self.t_s, q, d.qvel.take(self.vadr), tau, dict(zip(SIDES, reading)), dict(zip(SIDES, world)),
+        return Sensors(self.t_s, q, d.qvel.take(jm.vadr), tau, dict(zip(SIDES, reading)), dict(zip(SIDES, world)),
                        np.full(3, np.nan) if cop is None else cop, cop is not None, d.qpos[:7].copy())
+
+    def model_com(self) -> np.ndarray:
+        """The on-board model's COM [m] at the plant's configuration (true base and joints)."""
+        ob = self.onboard
+        return pin.centerOfMass(ob.model, ob.data, self.pin_configuration(self.data.qpos))
 
     def true_com(self) -> np.ndarray:
         """The plant's true COM [m] (for tests and figures only; controllers must not use it)."""
@@ -387,14 +412,6 @@ class Plant:
                 mujoco.mj_contactForce(self.model, self.data, i, f6)
                 total += abs((c.frame.reshape(3, 3).T @ f6[:3])[2])
         return total
-
-
-def reference_at(q_ref: np.ndarray, qd_ref: np.ndarray, qdd_ref: np.ndarray,
-                 age_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """The joint controller's reference [rad, rad/s] ``age_s`` after its command: followed along the command's own
-    velocity and acceleration, for at most EXTRAPOLATE_MAX_S."""
-    age = min(max(age_s, 0.0), EXTRAPOLATE_MAX_S)
-    return q_ref + age * qd_ref + 0.5 * age * age * qdd_ref, qd_ref + age * qdd_ref
 
 
 def feedforward_seated(base_z_m: float, seated_base_z_m: float, feet_fz_n: float, mass_kg: float) -> bool:

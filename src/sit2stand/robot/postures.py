@@ -111,7 +111,7 @@ def random_arms(rng: np.random.Generator, profile: RobotProfile) -> dict[str, fl
 
 
 def cad_com_x(plant: Plant, qpos: np.ndarray) -> float:
-    model, data = plant.ctrl, plant.ctrl_data
+    model, data = plant.ctrl, plant.onboard.data
     return float(pin.centerOfMass(model, data, plant.pin_configuration(qpos))[0])
 
 
