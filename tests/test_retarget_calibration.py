@@ -97,7 +97,7 @@ def test_a_renamed_marker_set_retargets_as_plug_in_gait(tmp_path):
     for names, cfg in ((trial.marker_names, RetargetConfig()), ([rename[n] for n in trial.marker_names], renamed)):
         rt = Retargeter(robot, cfg)
         maps.append(rt.calibrate(names, trial.positions[k], trial.valid[k], com))
-        knots.append((rt.knots_h, rt.scale))
+        knots.append((rt.com_map.knots_h, rt.com_map.scale))
     assert {rename[m]: link for m, link in maps[0].links.items()} == maps[1].links
     np.testing.assert_allclose(knots[0][0], knots[1][0])
     with pytest.raises(ValueError, match=r"marker\(s\) m_lhee missing"):

@@ -41,22 +41,22 @@ def retargeted(elderly):
 
 def test_com_map_is_monotone_and_passes_through_its_knots(retargeted):
     robot, rt, *_ = retargeted
-    ankle_h = rt.human_ankle_x
-    xs = ankle_h + np.linspace(rt.knots_h[0], 0.1, 200) / rt.scale
+    ankle_h = rt.com_map.human_ankle_x_m
+    xs = ankle_h + np.linspace(rt.com_map.knots_h[0], 0.1, 200) / rt.com_map.scale
     r = rt.com_target_x(xs)
     assert np.all(np.diff(r) >= -1e-12), "the COM map must be monotone"
-    knots = rt.com_target_x(ankle_h + rt.knots_h / rt.scale) - robot.ankle_left[0]
-    assert np.allclose(knots, rt.knots_r, atol=1e-9)
+    knots = rt.com_target_x(ankle_h + rt.com_map.knots_h / rt.com_map.scale) - robot.ankle_left[0]
+    assert np.allclose(knots, rt.com_map.knots_r, atol=1e-9)
     # the seated start maps to the robot's own seated COM, the seat-off knot lies inside the feet
     data = rt.model.createData()
-    assert abs(rt.com_target_x(ankle_h + rt.knots_h[0] / rt.scale) - pin.centerOfMass(rt.model, data,
+    assert abs(rt.com_target_x(ankle_h + rt.com_map.knots_h[0] / rt.com_map.scale) - pin.centerOfMass(rt.model, data,
                                                                                       robot.q_seated)[0]) < 1e-9
-    assert robot.heel_x_m < robot.ankle_left[0] + rt.knots_r[1] < robot.toe_x_m
+    assert robot.heel_x_m < robot.ankle_left[0] + rt.com_map.knots_r[1] < robot.toe_x_m
 
 
 def test_calibration_fixes_markers_to_their_own_body_parts(retargeted):
     _, rt, *_ = retargeted
-    links = rt.marker_map.links
+    links = rt.markers.marker_map.links
     assert all(links[m] == rt.model.names[1] for m in ("LASI", "RASI", "LPSI", "RPSI"))
     assert links["C7"].startswith("torso_") and links["LFHD"].startswith("head_")
     assert links["LKNE"].startswith("leg_left_") and links["RWRA"].startswith("arm_right_")
@@ -231,7 +231,7 @@ def test_a_recording_that_starts_after_seat_off_is_led_in_from_the_robots_seat(e
     robot = robot_setup()
     rt = Retargeter(robot)
     rt.calibrate(trial.marker_names, trial.positions[k0], trial.valid[k0], com_h[k0])
-    assert not rt.started_seated and rt.human_seat_off
+    assert not rt.human.started_seated and rt.human_seat_off
     lead = rt.lead_in(float(trial.marker_t_s[k0]), 0.01, trial.positions[k0], trial.valid[k0], com_h[k0])
     targets = np.array([f.com_target[0] for f in lead])
     assert len(lead) >= 50 and targets[0] == pytest.approx(rt.com_seated[0], abs=0.002)
@@ -245,7 +245,7 @@ def test_a_recording_that_starts_after_seat_off_is_led_in_from_the_robots_seat(e
 def test_a_recording_that_starts_seated_gets_no_lead_in(retargeted, elderly):
     trial, com_h, _ = elderly
     _, rt, frames, *_ = retargeted
-    assert rt.started_seated and len(frames) == len(trial.marker_t_s)
+    assert rt.human.started_seated and len(frames) == len(trial.marker_t_s)
     assert rt.lead_in(0.0, 0.01, trial.positions[0], trial.valid[0], com_h[0]) == []
 
 

@@ -82,7 +82,7 @@ def recorded_problems(bag: Path, robot: str) -> tuple[Retargeter, list[int], lis
     com_h = np.stack([np.interp(trial.marker_t_s, t, com[:, i]) for i in range(3)], axis=1)
     rt = Retargeter(setup)
     rt.calibrate(trial.marker_names, trial.positions[0], trial.valid[0], com_h[0])
-    fids = sorted(set(rt.marker_frames.values()))
+    fids = sorted(set(rt.markers.frames.values()))
     column = {f: i for i, f in enumerate(fids)}
     problems: list[dict] = []
     solve = rt.ik.solve

@@ -190,7 +190,7 @@ class RetargeterNode(Node):
                "frames from the robot's seat" if self.live.lead_in_frames else ""
         self.get_logger().info(f"calibrated on the first frame in {(time.perf_counter() - began) * 1e3:.0f} ms: "
                                f"{len(marker_map.links)} markers fixed to the robot; "
-                               f"leg-length scale {self.live.retargeter.scale:.3f}{waited}{lead}")
+                               f"leg-length scale {self.live.retargeter.com_map.scale:.3f}{waited}{lead}")
         return True
 
     def _measured_q(self) -> tuple[np.ndarray, float] | None:

@@ -46,6 +46,7 @@ from ..robot.model import (SIDES)
 from ..robot.profile import profile_of
 from ..human.marker_sets import choose_marker_set
 from .calibration import MarkerMap, calibrate_markers, left_leg_points, marker_roles
+from .demonstration import ComMap, HumanSeated, HumanWatch, MarkerTasks, RobotSeatOff, knee_flexion
 from .robot import RobotSetup
 from .ik import LIFT_TORQUE_SHARE, ComIk, IkResult, MarkerTargets
 from .player import Command, PlanPlayer
@@ -136,7 +137,9 @@ class RetargetFrame:
 
 
 class Retargeter:
-    """Per-frame human -> robot retargeting (see the module docstring)."""
+    """Per-frame human -> robot retargeting (see the module docstring). After :meth:`calibrate`: ``com_map``,
+    ``markers`` and ``human`` hold what the calibration frame fixed, ``watch`` what the human has shown since,
+    ``seat_off`` the robot's seat-off (None while seated)."""
 
     def __init__(self, robot: RobotSetup, cfg: RetargetConfig | None = None) -> None:
         self.robot = robot
@@ -144,16 +147,14 @@ class Retargeter:
         self.model = pin.Model(robot.model)         # marker frames are added to a copy
         self.data = self.model.createData()
         self.ik: ComIk | None = None
-        self.marker_map: MarkerMap | None = None
+        self.com_map: ComMap | None = None
+        self.markers: MarkerTasks | None = None
+        self.human: HumanSeated | None = None
+        self.watch: HumanWatch | None = None
+        self.seat_off: RobotSeatOff | None = None
         self.q = robot.q_seated.copy()
-        self.calibrated = False
         self.seated = True
-        self.human_seat_off = False
         self.sat_down = False           # the human sat back down after standing: the plan is on the seat again
-        self._pelvis_rise_peak_m = 0.0
-        self._chair_loaded = False
-        self._t_off: float | None = None
-        self._y_off = 0.0
         pin.centerOfMass(self.model, self.data, self.q)
         self.com_seated = self.data.com[0].copy()
         self.base_seated = self.q[:3].copy()
@@ -161,6 +162,17 @@ class Retargeter:
         self._com_x_floor: float | None = None  # seated again after a sit-down: the COM target goes no further back
         R = pin.Quaternion(self.q[3:7]).toRotationMatrix()
         self.pitch_seated = float(np.arctan2(R[0, 2], R[2, 2]))
+        self.held_to_seated = np.zeros(self.model.nq, bool)     # arms, head, lateral joints: posture pulled to seated
+        self.knees: list = []
+
+    @property
+    def calibrated(self) -> bool:
+        return self.com_map is not None
+
+    @property
+    def human_seat_off(self) -> bool:
+        """Whether the human has left the seat (the chair plate unloaded, or the pelvis markers risen)."""
+        return self.watch is not None and self.watch.seat_off
 
     # -- calibration -------------------------------------------------------------------------------------------
     def calibrate(self, names: list[str], positions_m: np.ndarray, valid: np.ndarray, human_com_m: np.ndarray,
@@ -181,70 +193,68 @@ class Retargeter:
         markers = choose_marker_set(names, self.cfg.marker_set)
         roles = marker_roles(markers)
         pelvis, pel, knee, ankle, heel = left_leg_points(roles, names, positions_m, valid, markers)
-        self.human_thigh = float(np.linalg.norm(knee - pelvis))
-        self._pelvis_last = pelvis
+        thigh = float(np.linalg.norm(knee - pelvis))
         human_leg = float(np.linalg.norm(knee - pelvis) + np.linalg.norm(ankle - knee))
-        self.scale = self.robot.leg_length_m / human_leg
+        scale = self.robot.leg_length_m / human_leg
         if marker_map is None:
             marker_map = calibrate_markers(self.robot.model, self.robot.q_seated, names, positions_m, valid,
                                            human_leg, self.robot.leg_length_m, roles=roles)
-        self.marker_map = marker_map
-        self.marker_frames = marker_map.add_frames(self.model)
+        frames = marker_map.add_frames(self.model)
         self.data = self.model.createData()
-        mu = np.full(self.model.nv, self.cfg.posture_weight)
-        # arms, head and the lateral joints are regularised toward the seated posture (the rest: the previous frame)
-        self.held_to_seated = np.zeros(self.model.nq, bool)
-        lateral = set(profile_of(self.model).lateral_joints())
-        for j in range(2, self.model.njoints):
-            name, jt = self.model.names[j], self.model.joints[j]
-            w = self.cfg.upper_limb_weight if profile_of(self.model).is_upper_limb(name) else \
-                self.cfg.lateral_weight if name in lateral else None
-            if w is not None:
-                mu[jt.idx_v:jt.idx_v + jt.nv] = w
-                self.held_to_seated[jt.idx_q:jt.idx_q + jt.nq] = True
-        profile = profile_of(self.model)
-        self.knees = [self.model.joints[self.model.getJointId(profile.leg(s, "knee"))] for s in SIDES]
-        self.ik = ComIk(self.model, self.robot.sole_frames, self.cfg.velocity_limit_rad_s, posture_weight=mu,
-                        damping=self.cfg.damping, momentum_weight=self.cfg.momentum_weight,
-                        stop_torque_share=self.cfg.stop_torque_share,
-                        lift_torque_share=self.cfg.lift_torque_share, dt=frame_period_s)
-        self.names = list(names)
-        self.weights = np.array([0.0 if n not in self.marker_frames else
-                                 self.cfg.weights.get(roles.group(n), 0.0) for n in names])
-        self.frame_ids = np.array([self.marker_frames.get(n, -1) for n in names], int)   # -1: weight 0, never used
-        self.human_pelvis0 = pelvis
-        self.robot_pelvis0 = self.robot.q_seated[:3].copy()
-        self.pelvis_markers = pel
+        self._make_ik(frame_period_s)
         # the left knee's and ankle's marker indices, looked up once: the knee flexion is read every frame
-        self.knee_ankle_markers = [[names.index(m) for m in group if m in names] for group in (roles.knee, roles.ankle)]
-        self.human_knee_seated = self.human_knee_flexion(positions_m, valid & np.all(np.isfinite(positions_m), axis=1),
-                                                         pelvis) or np.pi / 2
+        knee_ankle = [[names.index(m) for m in group if m in names] for group in (roles.knee, roles.ankle)]
+        knee_seated = knee_flexion(knee_ankle, positions_m, valid & np.all(np.isfinite(positions_m), axis=1),
+                                   pelvis) or np.pi / 2
         # forward-axis knots of the COM map (robot x relative to its left ankle vs scaled human x relative to its)
         ax, rx = ankle[0], self.robot.ankle_left[0]
         foot = self.robot.toe_x_m - self.robot.heel_x_m
         # a frame whose COM is not behind the heel is after the human's seat-off: the seated knot then comes from
         # the body's proportions, and a lead-in (see :meth:`lead_in`) takes the robot from its seat to this frame
-        self.started_seated = human_com_m[0] < heel[0] and heel[0] < ax
+        started_seated = human_com_m[0] < heel[0] and heel[0] < ax
         # a recording that starts mid-rise has no seated pelvis to scale the rise from: leg lengths alone
-        rise = self._rise_scale(pelvis, knee, ankle, human_leg) if self.started_seated else self.scale
-        self.marker_scale = np.array([self.scale, self.scale, rise])
-        self.seated_com_x = float(human_com_m[0]) if self.started_seated else \
-            float(ax - SEATED_COM_BEHIND_ANKLE_THIGHS * self.human_thigh)
-        self.human_seat_off = not self.started_seated
-        h = [self.scale * (self.seated_com_x - ax), self.scale * (heel[0] - ax), 0.0]
+        rise = self._rise_scale(pelvis, knee, ankle, human_leg, scale) if started_seated else scale
+        seated_com_x = float(human_com_m[0]) if started_seated else \
+            float(ax - SEATED_COM_BEHIND_ANKLE_THIGHS * thigh)
+        h = [scale * (seated_com_x - ax), scale * (heel[0] - ax), 0.0]
         r = [self.com_seated[0] - rx, self.robot.heel_x_m + self.cfg.seat_off_fraction * foot - rx, 0.0]
         if not (h[0] < h[1] < h[2]) or not (r[0] < r[1] <= r[2] + 0.05):
-            raise InputError(f"calibration frame: the human's seated COM ({self.seated_com_x:.3f} m), heel "
+            raise InputError(f"calibration frame: the human's seated COM ({seated_com_x:.3f} m), heel "
                              f"({heel[0]:.3f} m) and ankle ({ax:.3f} m) are not in that order along x")
-        self.knots_h, self.knots_r = np.array(h), np.array(r)
-        self.human_ankle_x, self.robot_ankle_x = ax, rx
-        self.calibrated = True
+        weights = np.array([0.0 if n not in frames else self.cfg.weights.get(roles.group(n), 0.0) for n in names])
+        self.markers = MarkerTasks(marker_map, frames, list(names), weights,
+                                   np.array([frames.get(n, -1) for n in names], int), pel, knee_ankle,
+                                   np.array([scale, scale, rise]), pelvis, self.robot.q_seated[:3].copy())
+        self.human = HumanSeated(thigh, knee_seated, seated_com_x, started_seated)
+        self.watch = HumanWatch(pelvis, seat_off=not started_seated)
+        self.com_map = ComMap(scale, ax, rx, np.array(h), np.array(r))
         return marker_map
 
-    def _rise_scale(self, pelvis: np.ndarray, knee: np.ndarray, ankle: np.ndarray, human_leg: float) -> float:
+    def _make_ik(self, frame_period_s: float) -> None:
+        """The per-frame IK on the model with its marker frames; arms, head and the lateral joints regularised
+        toward the seated posture (the rest: toward the previous frame)."""
+        mu = np.full(self.model.nv, self.cfg.posture_weight)
+        self.held_to_seated = np.zeros(self.model.nq, bool)
+        profile = profile_of(self.model)
+        lateral = set(profile.lateral_joints())
+        for j in range(2, self.model.njoints):
+            name, jt = self.model.names[j], self.model.joints[j]
+            w = self.cfg.upper_limb_weight if profile.is_upper_limb(name) else \
+                self.cfg.lateral_weight if name in lateral else None
+            if w is not None:
+                mu[jt.idx_v:jt.idx_v + jt.nv] = w
+                self.held_to_seated[jt.idx_q:jt.idx_q + jt.nq] = True
+        self.knees = [self.model.joints[self.model.getJointId(profile.leg(s, "knee"))] for s in SIDES]
+        self.ik = ComIk(self.model, self.robot.sole_frames, self.cfg.velocity_limit_rad_s, posture_weight=mu,
+                        damping=self.cfg.damping, momentum_weight=self.cfg.momentum_weight,
+                        stop_torque_share=self.cfg.stop_torque_share,
+                        lift_torque_share=self.cfg.lift_torque_share, dt=frame_period_s)
+
+    def _rise_scale(self, pelvis: np.ndarray, knee: np.ndarray, ankle: np.ndarray, human_leg: float,
+                    scale: float) -> float:
         """The markers' vertical scale: the robot's pelvis rise from its seat to its straight-legged stance over the
         human's (each stance estimated as the ankle's height plus the leg's length, from a seated frame), within
-        ``RISE_SCALE_RANGE`` of the leg-length scale. Scaled by leg length alone, the rise fell short (a robot's
+        ``RISE_SCALE_RANGE`` of the leg-length ``scale``. Scaled by leg length alone, the rise fell short (a robot's
         seated posture is not the human's: TALOS's shanks lean 40 degrees back), and the robot ended bowed at the
         hips with its pelvis at 84-92 % of its stance. The human's seated leg (pelvis centre -> knee -> ankle)
         underestimates its standing one, so on the shipped demonstrations the ratio meets the range's top."""
@@ -255,17 +265,13 @@ class Retargeter:
         robot_rise = robot.ankle_height_m + robot.leg_length_m - hip[2]
         human_rise = ankle[2] + human_leg - pelvis[2]
         if not (robot_rise > 0 and human_rise > 0):
-            return self.scale
-        return float(np.clip(robot_rise / human_rise, *(np.array(RISE_SCALE_RANGE) * self.scale)))
+            return scale
+        return float(np.clip(robot_rise / human_rise, *(np.array(RISE_SCALE_RANGE) * scale)))
 
     def com_target_x(self, human_com_x_m: float | np.ndarray) -> np.ndarray:
-        """The robot's forward COM target [m] for a human COM x [m] (lab), through the piecewise-linear map, at
-        most ``toe_margin_m`` behind the robot's toes."""
-        h = self.scale * (np.asarray(human_com_x_m, float) - self.human_ankle_x)
-        r = np.interp(h, self.knots_h, self.knots_r, left=self.knots_r[0], right=np.nan)
-        beyond = h > self.knots_h[-1]
-        r = np.where(beyond, self.knots_r[-1] + (h - self.knots_h[-1]), r)
-        return np.minimum(self.robot_ankle_x + r, self.robot.toe_x_m - self.cfg.toe_margin_m)
+        """The robot's forward COM target [m] for a human COM x [m] (lab), through the COM map, at most
+        ``toe_margin_m`` behind the robot's toes."""
+        return self.com_map.target_x(human_com_x_m, self.robot.toe_x_m - self.cfg.toe_margin_m)
 
     def lead_in(self, t0_s: float, dt: float, positions_m: np.ndarray, valid: np.ndarray, human_com_m: np.ndarray,
                 human_com_vx_mps: float = 0.0, on_frame=None) -> list[RetargetFrame]:
@@ -278,9 +284,9 @@ class Retargeter:
         robot's COM target passes the seat-off knot, as in a recording that starts seated. The frames are stamped
         before ``t0_s``, every ``dt``; ``on_frame`` is called with each as it is made.
         """
-        if self.started_seated:
+        if self.human.started_seated:
             return []
-        x0, x1 = self.seated_com_x, float(human_com_m[0])
+        x0, x1 = self.human.com_x_m, float(human_com_m[0])
         duration = max(MIN_LEAD_IN_S, (x1 - x0) / LEAD_IN_COM_SPEED_MPS)
         n = int(round(duration / dt))
         frames = []
@@ -302,23 +308,14 @@ class Retargeter:
         weight (the lead-in fades the first frame's markers in)."""
         if not self.calibrated:
             raise RuntimeError("Retargeter.step before calibrate")
-        cfg, robot = self.cfg, self.robot
+        cfg, robot, mk = self.cfg, self.robot, self.markers
         ok = valid & np.all(np.isfinite(positions_m), axis=1)
-        # human seat-off
-        if not self.human_seat_off:
-            if chair_force_n is not None and np.isfinite(chair_force_n):
-                self._chair_loaded |= chair_force_n > 2 * cfg.chair_off_force_n
-                self.human_seat_off = self._chair_loaded and chair_force_n < cfg.chair_off_force_n
-            else:
-                pel = [i for i in self.pelvis_markers if ok[i]]
-                if pel:
-                    rise = positions_m[pel, 2].mean() - self.human_pelvis0[2]
-                    self.human_seat_off = rise > cfg.pelvis_rise_m
+        self._watch_seat_off(positions_m, ok, chair_force_n)
         target = self.com_seated.copy()
         target[0] = float(self.com_target_x(human_com_m[0]))
-        pel = [i for i in self.pelvis_markers if ok[i]]
-        pelvis_now = positions_m[pel].mean(axis=0) if pel else self._pelvis_last
-        self._pelvis_last = pelvis_now
+        pel = [i for i in mk.pelvis if ok[i]]
+        pelvis_now = positions_m[pel].mean(axis=0) if pel else self.watch.pelvis_last_m
+        self.watch.pelvis_last_m = pelvis_now
         if not self.seated and not self.sat_down:
             self.sat_down = self._human_touched_down(pelvis_now, chair_force_n)
         elif self.sat_down and self.q[2] < self.seat_z_m + REARM_ABOVE_SEAT_M:
@@ -326,43 +323,21 @@ class Retargeter:
             self._com_x_floor = float(target[0])
         if self._com_x_floor is not None:        # seated again: the COM stays where the hips landed, or ahead
             target[0] = max(target[0], self._com_x_floor)
-        if self.seated and self.human_seat_off and target[0] >= robot.ankle_left[0] + self.knots_r[1] - 1e-3:
-            self.seated = False
-            self._com_x_floor = None
-            self._t_off = t_s
-            pin.centerOfMass(self.model, self.data, self.q)
-            self._y_off = float(self.data.com[0][1])
-            # the human's pelvis has already moved (the robot leaves the seat later): take that displacement out of
-            # the marker targets, and give it back as the human's pelvis rises, so the robot's pelvis does not lunge
-            self._marker_offset = self.marker_scale * (pelvis_now - self.human_pelvis0)
-            self._z_off = pelvis_now[2]
+        if self.seated and self.watch.seat_off and target[0] >= robot.ankle_left[0] + self.com_map.knots_r[1] - 1e-3:
+            self._leave_seat(t_s, pelvis_now)
         mid_y = float(np.mean([X.translation[1] for X in robot.sole_targets]))
         if self.seated:
             axes = (0,)
         else:
             axes = (0, 1)
-            target[1] = self._y_off + self._since_seat_off(t_s, cfg.y_ramp_s) * (mid_y - self._y_off)
-        # markers: the calibration's similarity (pelvis on pelvis, scaled), fixed for the whole demonstration
-        rise = pelvis_now[2] - self.human_pelvis0[2]
-        scale = self.marker_scale.copy()
-        if self.sat_down or self._pelvis_rise_peak_m - rise > KNEE_RELEASE_DROP_M:   # sitting back down
-            share = np.clip(rise / max(self._pelvis_rise_peak_m, 1e-6), 0.0, 1.0)
-            scale[2] = self.scale + share * (scale[2] - self.scale)
-        tgt = self.robot_pelvis0 + scale * (positions_m - self.human_pelvis0)
-        knees = []
-        flexion = self.human_knee_flexion(positions_m, ok, pelvis_now)
-        if not self.seated:
-            progress = np.clip((pelvis_now[2] - self._z_off) / (0.9 * self.human_thigh), 0.0, 1.0)
-            tgt = tgt - (1.0 - progress) * self._marker_offset
-            lowering = self._pelvis_rise_peak_m - (pelvis_now[2] - self.human_pelvis0[2]) > KNEE_RELEASE_DROP_M
-            knees = [] if lowering else self._knee_targets(flexion, marker_weight)
-        use = ok & (self.weights > 0) & (marker_weight > 0)
-        markers = MarkerTargets(self.frame_ids[use], tgt[use], marker_weight * self.weights[use])
+            y0 = self.seat_off.com_y_m
+            target[1] = y0 + self._since_seat_off(t_s, cfg.y_ramp_s) * (mid_y - y0)
+        markers, knees, flexion = self._marker_tasks(positions_m, ok, pelvis_now, marker_weight)
         # hips on the seat: pelvis x and z held (hard); after seat-off the hold fades out as a soft task, so that
         # the pose does not jump to where the human's pelvis already is
         hold, weight, z_min = self.base_seated, None, None
         if not self.seated:
-            fade = (t_s - self._t_off) / max(cfg.hip_release_s, 1e-9)
+            fade = (t_s - self.seat_off.t_s) / max(cfg.hip_release_s, 1e-9)
             weight = 1e4 * (1.0 - min(1.0, fade)) ** 2 if fade < 1.0 else None
             lift = 0.0 if self.sat_down else self.seat_clearance(t_s)
             z_min = None if self.sat_down else self.base_seated[2] + lift
@@ -375,27 +350,62 @@ class Retargeter:
         self.q = res.q
         pin.centerOfMass(self.model, self.data, self.q)
         return RetargetFrame(t_s, res.q, target, axes, self.data.com[0].copy(), self.seated or self.sat_down,
-                             self.human_seat_off, res, markers, flexion)
+                             self.watch.seat_off, res, markers, flexion)
 
-    def human_knee_flexion(self, positions_m: np.ndarray, ok: np.ndarray, pelvis_m: np.ndarray) -> float | None:
-        """The human's left knee flexion [rad] in the sagittal (x-z) plane: the angle between the thigh (pelvis
-        centre -> knee) and the shank (knee -> ankle); None when a knee or ankle marker is not seen."""
-        points = []
-        for markers in self.knee_ankle_markers:
-            seen = [i for i in markers if ok[i]]
-            if not seen:
-                return None
-            points.append(positions_m[seen].mean(axis=0))
-        thigh, shank = (points[0] - pelvis_m)[[0, 2]], (points[1] - points[0])[[0, 2]]
-        turn = np.arctan2(thigh[0] * shank[1] - thigh[1] * shank[0], thigh @ shank)
-        return float(-turn)                     # the shank turns back (clockwise seen from the left) as it flexes
+    def _watch_seat_off(self, positions_m: np.ndarray, ok: np.ndarray, chair_force_n: float | None) -> None:
+        """The human's seat-off: the chair plate unloaded after it was loaded, or without one, the pelvis markers
+        risen ``pelvis_rise_m`` over their seated height."""
+        watch, cfg = self.watch, self.cfg
+        if watch.seat_off:
+            return
+        if chair_force_n is not None and np.isfinite(chair_force_n):
+            watch.chair_loaded |= chair_force_n > 2 * cfg.chair_off_force_n
+            watch.seat_off = watch.chair_loaded and chair_force_n < cfg.chair_off_force_n
+        else:
+            pel = [i for i in self.markers.pelvis if ok[i]]
+            if pel:
+                rise = positions_m[pel, 2].mean() - self.markers.human_pelvis0_m[2]
+                watch.seat_off = rise > cfg.pelvis_rise_m
+
+    def _leave_seat(self, t_s: float, pelvis_now: np.ndarray) -> None:
+        """The robot's seat-off: its COM's lateral target ramps from where it is; the human's pelvis has already
+        moved (the robot leaves the seat later): that displacement is taken out of the marker targets and given
+        back as the human's pelvis rises, so the robot's pelvis does not lunge."""
+        self.seated = False
+        self._com_x_floor = None
+        pin.centerOfMass(self.model, self.data, self.q)
+        mk = self.markers
+        self.seat_off = RobotSeatOff(t_s, float(self.data.com[0][1]), mk.scale * (pelvis_now - mk.human_pelvis0_m),
+                                     pelvis_now[2])
+
+    def _marker_tasks(self, positions_m: np.ndarray, ok: np.ndarray, pelvis_now: np.ndarray,
+                      marker_weight: float) -> tuple[MarkerTargets, list, float | None]:
+        """The frame's marker targets (the calibration's similarity, fixed for the whole demonstration), the knee
+        targets, and the human's knee flexion [rad]."""
+        mk, watch = self.markers, self.watch
+        rise = pelvis_now[2] - mk.human_pelvis0_m[2]
+        scale = mk.scale.copy()
+        if self.sat_down or watch.rise_peak_m - rise > KNEE_RELEASE_DROP_M:   # sitting back down
+            share = np.clip(rise / max(watch.rise_peak_m, 1e-6), 0.0, 1.0)
+            scale[2] = self.com_map.scale + share * (scale[2] - self.com_map.scale)
+        tgt = mk.targets(positions_m, scale)
+        knees = []
+        flexion = mk.knee_flexion(positions_m, ok, pelvis_now)
+        if not self.seated:
+            off = self.seat_off
+            progress = np.clip((pelvis_now[2] - off.pelvis_z_m) / (0.9 * self.human.thigh_m), 0.0, 1.0)
+            tgt = tgt - (1.0 - progress) * off.marker_offset_m
+            lowering = watch.rise_peak_m - (pelvis_now[2] - mk.human_pelvis0_m[2]) > KNEE_RELEASE_DROP_M
+            knees = [] if lowering else self._knee_targets(flexion, marker_weight)
+        use = ok & (mk.weights > 0) & (marker_weight > 0)
+        return MarkerTargets(mk.frame_ids[use], tgt[use], marker_weight * mk.weights[use]), knees, flexion
 
     def _knee_targets(self, flexion: float | None, share: float) -> list[tuple[int, float, float]]:
         """Both robot knees' soft targets at the human's knee ``flexion`` [rad], weighted ``knee_weight`` x
         ``share`` x (how far the human's knee has extended from its seated flexion) ** ``KNEE_RAMP_POWER``."""
         if flexion is None or self.sat_down or self.cfg.knee_weight <= 0 or share <= 0:
             return []
-        seated = max(self.human_knee_seated, 1e-3)
+        seated = max(self.human.knee_flexion_rad, 1e-3)
         share *= float(np.clip((seated - flexion) / seated, 0.0, 1.0)) ** KNEE_RAMP_POWER
         lo, hi = self.model.lowerPositionLimit, self.model.upperPositionLimit
         return [(j.idx_v, float(np.clip(flexion, lo[j.idx_q], hi[j.idx_q])), self.cfg.knee_weight * share)
@@ -408,16 +418,16 @@ class Retargeter:
 
     def _since_seat_off(self, t_s: float, duration_s: float) -> float:
         """A 0 -> 1 smoothstep over ``duration_s`` [s] from the robot's seat-off."""
-        return smoothstep((t_s - self._t_off) / max(duration_s, 1e-9))
+        return smoothstep((t_s - self.seat_off.t_s) / max(duration_s, 1e-9))
 
     def _seated_again(self) -> None:
         """After a sit-down, the plan's pelvis back within ``REARM_ABOVE_SEAT_M`` of the seat: the next rise starts
         as the first (hips held on the seat where they are, the human's seat-off awaited, then the robot's), so a
         trial of several cycles plays each one."""
-        self.seated, self.sat_down, self.human_seat_off = True, False, False
-        self._chair_loaded = True         # the sit-down loaded the chair (with a plate): its unloading is the seat-off
-        self._pelvis_rise_peak_m = 0.0
-        self._t_off = None
+        self.seated, self.sat_down = True, False
+        # the sit-down loaded the chair (with a plate): its unloading is the seat-off
+        self.watch.seat_off, self.watch.chair_loaded, self.watch.rise_peak_m = False, True, 0.0
+        self.seat_off = None
         self.base_seated = np.array([self.q[0], self.q[1], self.seat_z_m])    # where it is, on the seat
         R = pin.Quaternion(self.q[3:7]).toRotationMatrix()
         self.pitch_seated = min(self.pitch_seated, float(np.arctan2(R[0, 2], R[2, 2])))
@@ -428,10 +438,10 @@ class Retargeter:
         rising over five times that. From then on the plan's frames are seated again (the chair takes the load: no
         ZMP criterion, the seat in the torque criterion); the IK keeps following the markers and the COM map,
         which bring the hips back onto the seat."""
-        cfg = self.cfg
-        rise = float(pelvis_m[2] - self.human_pelvis0[2])
-        self._pelvis_rise_peak_m = max(self._pelvis_rise_peak_m, rise)
-        if self._pelvis_rise_peak_m < 5 * cfg.pelvis_rise_m:
+        cfg, watch = self.cfg, self.watch
+        rise = float(pelvis_m[2] - self.markers.human_pelvis0_m[2])
+        watch.rise_peak_m = max(watch.rise_peak_m, rise)
+        if watch.rise_peak_m < 5 * cfg.pelvis_rise_m:
             return False
         if chair_force_n is not None and np.isfinite(chair_force_n):
             return chair_force_n > 2 * cfg.chair_off_force_n
