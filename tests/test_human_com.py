@@ -116,17 +116,17 @@ def test_a_streamed_plate_bin_is_the_offline_window_average_and_kept_only_once_c
     m[700, 0] = np.nan                                # a moment missing at 0.7 s: counted as zero
     est = StreamingComEstimator(Subject(1.75, 75.0), load_marker_set().names, calibration_frames=0)
     est.add_plate_samples("feet", t[:505], f[:505], m[:505])
-    early = est._plate_bin(0.5)                        # samples up to 0.504 s only
-    assert 0.5 not in est._bins
+    early = est.plates.bin(0.5)                        # samples up to 0.504 s only
+    assert 0.5 not in est.plates.bins
     est.add_plate_samples("feet", t[505:], f[505:], m[505:])
     series = PlateSeries("feet", t, f, m)
     for at in (0.5, 0.6, 0.7):
         force, moment, covered = plate_wrench_at(np.array([at]), [series], est.dt / 2)
-        wrench, ok = est._plate_bin(at)
-        assert ok == covered[0] and at in est._bins
+        wrench, ok = est.plates.bin(at)
+        assert ok == covered[0] and at in est.plates.bins
         if ok:
             np.testing.assert_allclose(wrench, np.r_[force[0], moment[0]], rtol=1e-12, atol=1e-12)
-    assert not np.allclose(early[0], est._bins[0.5][0])
+    assert not np.allclose(early[0], est.plates.bins[0.5][0])
 
 
 def test_streaming_estimator_matches_the_truth_after_calibration():
@@ -201,8 +201,8 @@ def test_a_deferred_rescale_gives_the_same_stream():
         out = deferred.update(t, demo.markers_m[i], demo.marker_valid[i])
         assert not out.rescaled
         b.append(out.com_m)
-        if deferred.rescale_pending:
-            deferred.rescale_pending = False
+        if deferred.rows.pending:
+            deferred.rows.pending = False
             solves += deferred.rescale() is not None
     assert solves >= 1
     assert np.allclose(np.array(a), np.array(b), atol=1e-12, equal_nan=True)
@@ -242,7 +242,7 @@ def test_a_marker_dropout_does_not_corrupt_the_mass_scaling_that_follows():
     truth = demo.com_m[::10][: len(coms)]
     err = np.linalg.norm(coms[after] - truth[after], axis=1).mean()
     err_clean = np.linalg.norm(clean[after] - truth[after], axis=1).mean()
-    assert est.rows_skipped_unfitted > 0
+    assert est.rows.skipped_unfitted > 0
     assert all(0.55 < f < 1.9 for f in est.scaling.factors().values()), est.scaling.factors()
     assert err < max(2 * err_clean, 0.015), (err, err_clean)
 

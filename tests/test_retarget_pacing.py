@@ -102,7 +102,7 @@ def test_frames_before_the_com_stream_began_are_dropped_and_counted():
     assert live.next_ready() is None, "no COM yet: wait"
     live.coms.add(1.00, np.array([0.0, 0.0, 0.8]), np.zeros(3), True)
     frame, com = live.next_ready()
-    assert frame.t_s == 1.00 and live.skipped == 2
+    assert frame.t_s == 1.00 and live.progress.skipped == 2
     assert com == pytest.approx([0.0, 0.0, 0.8])
     assert "2 without a human COM" in summary_line(live.figures())
 
@@ -124,13 +124,13 @@ def test_after_the_plan_the_last_pose_is_re_sent_once_per_period_of_the_robots_c
     live = LiveRetargeting(LiveConfig(), send=lambda cmd, offset: sent.append(cmd) or 0.0, measured_q=lambda: None,
                            robot_clock=lambda: robot_now[0])
     live.player = _PlayedPlan()
-    live._held = _HeldPose()
-    live._last_frame_robot_s = 10.0          # the last marker frame
+    live.sent.held = _HeldPose()
+    live.progress.last_frame_robot_s = 10.0          # the last marker frame
     live.pacer.sent(10.0)
     for _ in range(3):                       # a graph held in lockstep: wall time passes, the robot's clock does not
         assert not live.tick() and not sent, "markers and commands both wait with the robot's clock"
     robot_now[0] = 10.016
-    assert not live.tick() and sent == [live._held], "the pose is held; markers not yet taken as stopped"
+    assert not live.tick() and sent == [live.sent.held], "the pose is held; markers not yet taken as stopped"
     robot_now[0] = 10.032
     assert live.tick() is True and len(sent) == 2, "three periods of the robot's clock without markers: done"
 
@@ -161,10 +161,10 @@ def test_under_torque_control_a_robot_behind_the_plan_slows_it_from_its_measured
                    com_seated, np.inf, True)
     live.player = _OnePlanCommand(plan)
     live.pull_and_send(5.0)
-    assert live.lag_m == 0.0 and live.state_stale == 1, "no robot state: no lag, counted"
+    assert live.sent.lag_m == 0.0 and live.progress.state_stale == 1, "no robot state: no lag, counted"
     measured[0] = (q_seated, 5.0)
     live.pull_and_send(5.01)
-    assert live.lag_m == pytest.approx(0.05, abs=1e-9)
+    assert live.sent.lag_m == pytest.approx(0.05, abs=1e-9)
     live.pull_and_send(5.02)
     assert live.player.lags[-1] == pytest.approx(0.05, abs=1e-9), "the next command is pulled with that lag"
     assert live.stabiliser is None and "whole-body torque controller" in live.figures()["com_feedback"]
@@ -194,9 +194,9 @@ def test_after_the_plan_the_held_pose_stays_under_the_com_feedback():
     live.model, live.model_data = model, model.createData()
     live.stabiliser = ComStabiliser(model, robot.sole_frames, robot.sole_targets, StabiliserConfig(ramp_s=0.0))
     live.player = _PlayedPlan()
-    live._held = Command(1.0, q, np.zeros(model.nv), np.zeros(model.nv), 1.0, com + [0.01, 0.0, 0.0], com, np.inf,
+    live.sent.held = Command(1.0, q, np.zeros(model.nv), np.zeros(model.nv), 1.0, com + [0.01, 0.0, 0.0], com, np.inf,
                          True)
-    live._last_frame_robot_s = robot_now[0]
+    live.progress.last_frame_robot_s = robot_now[0]
     live.pacer.sent(robot_now[0])
     robot_now[0] += 0.016
     live.tick()
@@ -219,7 +219,7 @@ def test_a_faster_capture_is_planned_on_every_nth_frame_by_its_stamps():
     for k in (0, 1, 2, 3, 5, 6, 8):          # frames 4 and 7 lost
         live.add_frame(MarkerFrame(10.0 + k * 0.005, ["LASI"], np.zeros((1, 3)), np.ones(1, bool), 0.0))
     assert [round((f.t_s - 10.0) / 0.005) for f in live.frames] == [0, 2, 6, 8]
-    assert live.between_plan_frames == 3
+    assert live.progress.between_plan_frames == 3
     assert "frames planned (3 between them left out)" in summary_line(live.figures())
     with pytest.raises(ValueError, match="plan_rate_hz"):
         plan_stride(200.0, -1.0)

@@ -266,10 +266,10 @@ def test_a_joint_resting_on_its_stop_is_left_out_of_the_torque_criterion_and_one
             (0.75, -70.0, -slow, True), (0.75, -70.0, -fast, False), (0.75, -70.0, fast, True),
             (-0.2, 30.0, slow, True), (-0.2, 30.0, fast, False)):
         q[iq], static[iv], v[iv] = q_torso, static_torso, v_torso
-        assert player._resting_on_stop(q, q, v, static)[iv] == resting, (q_torso, static_torso, v_torso)
+        assert player.torque.resting_on_stop(q, q, v, static)[iv] == resting, (q_torso, static_torso, v_torso)
     # the smoothing's overshoot past the stop coming back, the IK's own pose on the stop: still resting
     on_stop = q.copy()
     on_stop[iq] = model.upperPositionLimit[iq]
     q[iq], static[iv], v[iv] = model.upperPositionLimit[iq] + 0.01, -70.0, -3 * LIFT_OFF_SPEED_RAD_S
-    assert player._resting_on_stop(q, on_stop, v, static)[iv]
-    assert not player._resting_on_stop(q, q - 0.05, v, static)[iv]
+    assert player.torque.resting_on_stop(q, on_stop, v, static)[iv]
+    assert not player.torque.resting_on_stop(q, q - 0.05, v, static)[iv]

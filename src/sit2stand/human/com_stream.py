@@ -8,7 +8,7 @@ COP-matched mass scaling (:mod:`sit2stand.human.mass_scaling`), re-solved every 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
@@ -81,6 +81,158 @@ class PlateBuffer:
         return d.sum(axis=0) / (hi - lo), True
 
 
+class PlateSet:
+    """The stream's force plates: each one's samples (:class:`PlateBuffer`), their summed wrench per marker time
+    (``bins``, kept once every plate's samples have passed it: consecutive windows share all but one frame) and, per
+    plate, how many windows it left uncovered (``gaps``). ``dt``: the marker frame period [s]."""
+
+    def __init__(self, dt: float) -> None:
+        self.dt = dt
+        self.buffers: dict[str, PlateBuffer] = {}
+        self.bins: dict[float, tuple[np.ndarray, bool]] = {}
+        self.gaps: dict[str, int] = {}
+
+    @property
+    def newest_t_s(self) -> float:
+        """The time [s] up to which every plate has samples (-inf: none, or no plate)."""
+        return min((b.newest_t_s for b in self.buffers.values()), default=-np.inf)
+
+    def add(self, name: str, rows: np.ndarray, now_s: float) -> None:
+        buf = self.buffers.get(name)
+        if buf is None:
+            buf = self.buffers[name] = PlateBuffer(name, max(4096, 2 * len(rows)))
+        buf.append(rows, now_s)
+
+    def bin(self, t_s: float) -> tuple[np.ndarray, bool]:
+        """All plates' summed wrench (force [N], moment about the lab origin [N m]) (6,), each plate averaged over
+        ``t_s`` +- half a frame, and whether every plate has finite samples there."""
+        got = self.bins.get(t_s)
+        if got is not None:
+            return got
+        half = self.dt / 2
+        total, covered, complete = np.zeros(6), True, True
+        for buf in self.buffers.values():
+            wrench, ok = buf.mean_about(t_s, half)
+            covered &= ok
+            complete &= buf.newest_t_s >= t_s + half
+            if ok:
+                total += wrench
+        if complete:
+            self.bins[t_s] = (total, covered)
+        return total, covered
+
+    def wrench(self, times: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Summed plate wrench at the centre of the window's marker ``times``, smoothed by the centred
+        Savitzky-Golay ``weights`` of the kinematics; covered is False if a plate has no sample there."""
+        if not self.buffers:
+            return np.zeros(3), np.zeros(3), False
+        bins = [self.bin(float(t)) for t in times]
+        for t in [t for t in self.bins if t < times[0]]:
+            del self.bins[t]
+        centre = len(times) // 2
+        wrench, covered = bins[centre]
+        if not covered:
+            for name, buf in self.buffers.items():
+                if not buf.mean_about(float(times[centre]), self.dt / 2)[1]:
+                    self.gaps[name] = self.gaps.get(name, 0) + 1
+            return wrench[:3], wrench[3:], False
+        if all(ok for _, ok in bins):
+            smoothed = weights @ np.array([w for w, _ in bins])
+            return smoothed[:3], smoothed[3:], True
+        return wrench[:3], wrench[3:], True
+
+
+class MotionWindow:
+    """The last ``2 window`` fitted frames: times [s], poses, their decoupled coordinates (base position, base
+    rotation vector about the first frame's, joint angles) and whether each was fitted (False: its pose was held);
+    with Savitzky-Golay fits over them (weights cached per position and length)."""
+
+    def __init__(self, window: int, dt: float) -> None:
+        self.window, self.dt = window, dt
+        self.t: list[float] = []
+        self.q: list[np.ndarray] = []
+        self.x: list[np.ndarray] = []
+        self.fitted: list[bool] = []
+        self.R0: np.ndarray | None = None
+        self._coeffs: dict[tuple[int, int], list[np.ndarray]] = {}
+
+    def __len__(self) -> int:
+        return len(self.x)
+
+    def append(self, t_s: float, q: np.ndarray, fitted: bool) -> None:
+        self.t.append(t_s)
+        self.q.append(q.copy())
+        self.x.append(self._coords(q))
+        self.fitted.append(fitted)
+        keep = 2 * self.window
+        if len(self.q) > keep:
+            del self.t[:-keep], self.q[:-keep], self.x[:-keep], self.fitted[:-keep]
+
+    def clear(self) -> None:
+        self.t.clear()
+        self.q.clear()
+        self.x.clear()
+        self.fitted.clear()
+
+    def _coords(self, q: np.ndarray) -> np.ndarray:
+        """Decoupled coordinates of smooth_motion: base position, base rotation vector about R0, joint angles."""
+        R = pin.Quaternion(q[3:7]).normalized().matrix()
+        if self.R0 is None:
+            self.R0 = R
+        return np.concatenate([q[:3], pin.log3(self.R0.T @ R), q[7:]])
+
+    def savgol(self, pos: int, length: int) -> list[np.ndarray]:
+        """Savitzky-Golay weights (position, first and second derivative) at sample ``pos`` of ``length``, cached."""
+        key = (pos, length)
+        if key not in self._coeffs:
+            order = min(4, length - 2)
+            self._coeffs[key] = [savgol_coeffs(length, order, deriv=d, pos=pos, use="dot") / self.dt**d
+                                 for d in (0, 1, 2)]
+        return self._coeffs[key]
+
+    def derivatives_at(self, pos: int, length: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, v, a of the window's sample ``pos`` from a Savitzky-Golay fit of the last ``length`` frames."""
+        X = np.array(self.x[-length:])
+        xs, xd, xdd = (c @ X for c in self.savgol(pos, length))
+        r, rd, rdd = xs[3:6], xd[3:6], xdd[3:6]
+        R = self.R0 @ pin.exp3(r)
+        q = np.concatenate([xs[:3], pin.Quaternion(R).coeffs(), xs[6:]])
+        Jr = pin.Jexp3(r)
+        h = 1e-4
+        dJr = (pin.Jexp3(r + h * rd) - pin.Jexp3(r - h * rd)) / (2 * h)
+        w = Jr @ rd
+        v_lin = R.T @ xd[:3]
+        v = np.concatenate([v_lin, w, xd[6:]])
+        a = np.concatenate([R.T @ xdd[:3] - cross(w, v_lin), Jr @ rdd + dJr @ rd, xdd[6:]])
+        return q, v, a
+
+
+@dataclass
+class ScalingRows:
+    """The COP-matched mass scaling's rows (one per supported frame), and when to solve them: first at ``first``
+    rows, then every ``every``, never from fewer than ``min_rows``. ``defer``: a due solve is only flagged
+    (``pending``), for a live caller to run after the frame is out (a re-solve costs ~10 ms)."""
+
+    every: int
+    min_rows: int
+    first: int
+    defer: bool = False
+    frames: list[FrameRows] = field(default_factory=list)
+    skipped_unfitted: int = 0      # supported frames kept out: held poses in their window
+    pending: bool = False
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def add(self, rows: FrameRows) -> bool:
+        """Add a frame's rows; whether to solve now (False also when the solve is deferred: ``pending``)."""
+        self.frames.append(rows)
+        n = len(self.frames)
+        if n < self.min_rows or not (n == self.first or n % self.every == 0):
+            return False
+        self.pending = self.defer
+        return not self.defer
+
 
 @dataclass
 class StreamOutput:
@@ -116,67 +268,71 @@ class StreamingComEstimator:
                  calibration: StreamCalibration | None = None, defer_rescale: bool = False) -> None:
         self.subject = subject
         self.marker_names = list(marker_names)
-        self.dt = 1.0 / rate_hz
-        self.window = savgol_frames(window_s, self.dt)
+        dt = 1.0 / rate_hz
         self.calibration_frames = calibration_frames
         if not rescale_every_s > 0:
             raise ValueError(f"rescale_every_s {rescale_every_s!r}: the time between two mass scalings must be > 0 s")
-        # the scaling's schedule in rows (one per supported frame), from times: the same seconds at any rate
-        self.rescale_every = max(1, round(rescale_every_s * rate_hz))
-        self.chair_on_plate = chair_on_plate
-        self.min_frames_to_scale = max(1, round(MIN_SCALE_S * rate_hz))
-        self.first_rescale = max(self.min_frames_to_scale, round(FIRST_RESCALE_S * rate_hz))
+        # the scaling's schedule in rows (one per supported frame), from times: the same seconds at any rate; a
+        # re-solve of the masses costs ~10 ms: a live caller may defer it past the frame's publication
+        # (``rows.pending``, then :meth:`rescale`); the frame's own COM never depends on it
+        min_rows = max(1, round(MIN_SCALE_S * rate_hz))
+        self.rows = ScalingRows(max(1, round(rescale_every_s * rate_hz)), min_rows,
+                                max(min_rows, round(FIRST_RESCALE_S * rate_hz)), defer_rescale)
         self.human = build_human(subject)
         self.ik = MarkerIK(self.human, self.marker_names)   # raises TooFewMarkers early
         self.model = self.human.model
         self.data = self.model.createData()
-        self.calibrated = calibration_frames <= 0
         self._calib: list[tuple[np.ndarray, np.ndarray]] = []
-        self._t: list[float] = []
-        self._q: list[np.ndarray] = []
-        self._plates: dict[str, PlateBuffer] = {}
-        self._bins: dict[float, tuple[np.ndarray, bool]] = {}    # see _plate_bin
-        self.rows: list[FrameRows] = []
-        self._x: list[np.ndarray] = []       # tangent coordinates of each frame (see smooth_motion)
-        self._fitted: list[bool] = []        # False: the frame's markers could not be fitted, its pose was held
+        self.motion = MotionWindow(savgol_frames(window_s, dt), dt)
+        self.plates = PlateSet(dt)
         self._units_checked = False
         self._t_first: float | None = None    # the first marker frame's time [s]
-        self.rows_skipped_unfitted = 0       # supported frames kept out of the scaling: held poses in their window
-        self._R0: np.ndarray | None = None
         self.scaling: MassScaling | None = None
         self.scaled_model = self.model
         self.scaled_data = self.model.createData()
         self.frames = 0
-        self.plate_gaps: dict[str, int] = {}
         self.support = SupportRule(subject.mass_kg * G, chair_on_plate)
-        self._coeffs: dict[tuple[int, int], list[np.ndarray]] = {}
         self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]] = []
-        # a re-solve of the masses costs ~10 ms: a live caller may defer it past the frame's publication
-        # (``rescale_pending``, then :meth:`rescale`); the frame's own COM never depends on it
-        self.defer_rescale = defer_rescale
-        self.rescale_pending = False
         self.calibration: StreamCalibration | None = None
         if calibration is not None:       # calibrated beforehand: no pause in the stream
             self._use(calibration)
 
+    @property
+    def dt(self) -> float:
+        """The marker frame period [s]."""
+        return self.motion.dt
+
+    @property
+    def window(self) -> int:
+        """The Savitzky-Golay window [frames]."""
+        return self.motion.window
+
+    @property
+    def calibrated(self) -> bool:
+        return self.calibration is not None or self.calibration_frames <= 0
+
+    @property
+    def plate_gaps(self) -> dict[str, int]:
+        """Per plate, the windows it left uncovered."""
+        return self.plates.gaps
+
     # -- inputs ------------------------------------------------------------------------------------------------
     def expect_plate(self, name: str) -> None:
         """Declare a plate that must have data for a frame to count (before its first sample arrives)."""
-        if name not in self._plates:
-            self._plates[name] = PlateBuffer(name)
+        if name not in self.plates.buffers:
+            self.plates.buffers[name] = PlateBuffer(name)
 
     def drop_silent_plates(self, after_s: float = 0.3) -> list[str]:
         """Expected plates that have sent nothing for ``after_s`` [s] of marker time while another plate has: the
         recording has no such plate. They stop holding frames back; without the chair plate, frames count for the
         scaling only once the feet carry the whole weight. Returns the plates dropped."""
-        if self._t_first is None or not self._t or self._t[-1] - self._t_first < after_s or \
-                not any(b.n for b in self._plates.values()):
+        buffers, t = self.plates.buffers, self.motion.t
+        if self._t_first is None or not t or t[-1] - self._t_first < after_s or not any(b.n for b in buffers.values()):
             return []
-        silent = [name for name, b in self._plates.items() if b.n == 0]
+        silent = [name for name, b in buffers.items() if b.n == 0]
         for name in silent:
-            del self._plates[name]
+            del buffers[name]
         if "chair" in silent:
-            self.chair_on_plate = False
             self.support = SupportRule(self.subject.mass_kg * G, chair_on_plate=False)
         return silent
 
@@ -184,10 +340,7 @@ class StreamingComEstimator:
         """Append force-plate samples (times [s], force [N] and moment about the lab origin [N m], (K, 3))."""
         t = np.atleast_1d(np.asarray(t_s, float))
         rows = np.hstack([t[:, None], np.atleast_2d(force_n), np.atleast_2d(moment_nm)])
-        buf = self._plates.get(name)
-        if buf is None:
-            buf = self._plates[name] = PlateBuffer(name, max(4096, 2 * len(rows)))
-        buf.append(rows, self._t[-1] if self._t else t[0])
+        self.plates.add(name, rows, self.motion.t[-1] if self.motion.t else t[0])
 
     def update(self, t_s: float, positions_m: np.ndarray, valid: np.ndarray,
                defer_delayed: bool = False) -> StreamOutput:
@@ -206,17 +359,11 @@ class StreamingComEstimator:
                 self._calibrate()
         fit = self.ik.fit(positions_m, valid, max_iter=STREAM_FIT_STEPS if self.ik.q is not None else 40)
         self.frames += 1
-        if not fit.ok and not self._q:
+        if not fit.ok and not self.motion.q:
             nan3 = np.full(3, np.nan)
             return StreamOutput(t_s, False, fit.q, nan3, nan3, nan3, fit.rms_m, fit.n_markers)
-        q = fit.q if fit.ok else self._q[-1]
-        self._t.append(t_s)
-        self._q.append(q.copy())
-        self._x.append(self._coords(q))
-        self._fitted.append(fit.ok)
-        keep = 2 * self.window
-        if len(self._q) > keep:
-            del self._t[:-keep], self._q[:-keep], self._x[:-keep], self._fitted[:-keep]
+        q = fit.q if fit.ok else self.motion.q[-1]
+        self.motion.append(t_s, q, fit.ok)
         com, vcom, acom = self._causal_com()
         out = StreamOutput(t_s, fit.ok, q, com, vcom, acom, fit.rms_m, fit.n_markers)
         if not defer_delayed:
@@ -243,67 +390,31 @@ class StreamingComEstimator:
         self.ik = MarkerIK(human, self.marker_names)
         self.ik.q = q_prev
         self.scaled_model, self.scaled_data = self.model, self.model.createData()
-        self._q.clear()
-        self._t.clear()
-        self._x.clear()
-        self._fitted.clear()
-        self.calibrated = True
-
-    def _coords(self, q: np.ndarray) -> np.ndarray:
-        """Decoupled coordinates of smooth_motion: base position, base rotation vector about R0, joint angles."""
-        R = pin.Quaternion(q[3:7]).normalized().matrix()
-        if self._R0 is None:
-            self._R0 = R
-        return np.concatenate([q[:3], pin.log3(self._R0.T @ R), q[7:]])
-
-    def _savgol(self, pos: int, length: int) -> list[np.ndarray]:
-        """Savitzky-Golay weights (position, first and second derivative) at sample ``pos`` of ``length``, cached."""
-        key = (pos, length)
-        if key not in self._coeffs:
-            order = min(4, length - 2)
-            self._coeffs[key] = [savgol_coeffs(length, order, deriv=d, pos=pos, use="dot") / self.dt**d
-                                 for d in (0, 1, 2)]
-        return self._coeffs[key]
-
-    def _derivatives_at(self, pos: int, length: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """q, v, a of the window's sample ``pos`` from a Savitzky-Golay fit of the last ``length`` frames."""
-        X = np.array(self._x[-length:])
-        xs, xd, xdd = (c @ X for c in self._savgol(pos, length))
-        r, rd, rdd = xs[3:6], xd[3:6], xdd[3:6]
-        R = self._R0 @ pin.exp3(r)
-        q = np.concatenate([xs[:3], pin.Quaternion(R).coeffs(), xs[6:]])
-        Jr = pin.Jexp3(r)
-        h = 1e-4
-        dJr = (pin.Jexp3(r + h * rd) - pin.Jexp3(r - h * rd)) / (2 * h)
-        w = Jr @ rd
-        v_lin = R.T @ xd[:3]
-        v = np.concatenate([v_lin, w, xd[6:]])
-        a = np.concatenate([R.T @ xdd[:3] - cross(w, v_lin), Jr @ rdd + dJr @ rd, xdd[6:]])
-        return q, v, a
+        self.motion.clear()
 
     def _causal_com(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        n = len(self._x)
+        motion = self.motion
+        n = len(motion)
         if n < 7:
-            pin.centerOfMass(self.scaled_model, self.scaled_data, self._q[-1])
+            pin.centerOfMass(self.scaled_model, self.scaled_data, motion.q[-1])
             return self.scaled_data.com[0].copy(), np.zeros(3), np.zeros(3)
-        length = min(self.window, n - (1 - n % 2))
-        q, v, a = self._derivatives_at(length - 1, length)
-        pin.centerOfMass(self.scaled_model, self.scaled_data, self._q[-1], v, a)
+        length = min(motion.window, n - (1 - n % 2))
+        q, v, a = motion.derivatives_at(length - 1, length)
+        pin.centerOfMass(self.scaled_model, self.scaled_data, motion.q[-1], v, a)
         return self.scaled_data.com[0].copy(), self.scaled_data.vcom[0].copy(), self.scaled_data.acom[0].copy()
 
     def _delayed(self, out: StreamOutput) -> None:
         """Queue the frame half a window back (its centred derivatives are known now) and process every queued
         frame whose plate samples have all arrived (plates may lag the markers on a busy executor)."""
-        n, half = len(self._x), self.window // 2
-        if n >= self.window and self.calibrated:
-            q_k, v_k, a_k = self._derivatives_at(half, self.window)
-            times = np.array(self._t[-self.window:])
-            self._pending.append((times, q_k, v_k, a_k, all(self._fitted[-self.window:])))
+        motion = self.motion
+        n, w = len(motion), motion.window
+        if n >= w and self.calibrated:
+            q_k, v_k, a_k = motion.derivatives_at(w // 2, w)
+            self._pending.append((np.array(motion.t[-w:]), q_k, v_k, a_k, all(motion.fitted[-w:])))
         while self._pending:
             times, q_k, v_k, a_k, fitted = self._pending[0]
             t_k = times[len(times) // 2]
-            newest = min((b.newest_t_s for b in self._plates.values()), default=-np.inf)
-            if newest < times[-1] + self.dt / 2 and self._t[-1] - t_k < 0.5 and self._plates:
+            if self.plates.newest_t_s < times[-1] + self.dt / 2 and motion.t[-1] - t_k < 0.5 and self.plates.buffers:
                 break                      # plate samples for this window not all here yet
             self._pending.pop(0)
             self._process(out, times, q_k, v_k, a_k, fitted)
@@ -311,7 +422,7 @@ class StreamingComEstimator:
     def _process(self, out: StreamOutput, times: np.ndarray, q_k: np.ndarray, v_k: np.ndarray,
                  a_k: np.ndarray, fitted: bool) -> None:
         t_k = times[len(times) // 2]
-        force, moment, covered = self._plate_wrench(times)
+        force, moment, covered = self.plates.wrench(times, self.motion.savgol(len(times) // 2, len(times))[0])
         com, _, _, cop_model = model_cop(self.scaled_model, self.scaled_data, q_k, v_k, a_k)
         out.delayed_t_s = t_k
         out.model_cop_m = cop_model
@@ -323,22 +434,17 @@ class StreamingComEstimator:
             return
         if not fitted:
             # a held pose has no velocity or acceleration: its rows would pull every mass to a bound
-            self.rows_skipped_unfitted += 1
+            self.rows.skipped_unfitted += 1
             return
-        self.rows.append(frame_rows(self.human, q_k, v_k, a_k, force, moment, cop, self.subject.mass_kg, self.data))
-        n = len(self.rows)
-        if n >= self.min_frames_to_scale and (n == self.first_rescale or n % self.rescale_every == 0):
-            if self.defer_rescale:         # the caller solves it after publishing this frame (see __init__)
-                self.rescale_pending = True
-            else:
-                self.rescale()
-                out.rescaled = True
+        if self.rows.add(frame_rows(self.human, q_k, v_k, a_k, force, moment, cop, self.subject.mass_kg, self.data)):
+            self.rescale()
+            out.rescaled = True
 
     def rescale(self) -> MassScaling | None:
         """Solve the scaling from all rows so far and switch the COM model to it."""
-        if len(self.rows) < self.min_frames_to_scale:
+        if len(self.rows) < self.rows.min_rows:
             return None
-        self.scaling = fit_mass_scaling(self.human, assemble_rows(self.rows), self.subject.mass_kg)
+        self.scaling = fit_mass_scaling(self.human, assemble_rows(self.rows.frames), self.subject.mass_kg)
         self.scaled_model = apply_scaling(self.human, self.scaling)
         self.scaled_data = self.scaled_model.createData()
         return self.scaling
@@ -353,42 +459,3 @@ class StreamingComEstimator:
     def warnings(self) -> list[str]:
         """:attr:`at_bounds` as lines for a log, each naming the segment group and the factor (empty: none)."""
         return [f.note() for f in self.at_bounds]
-
-    def _plate_bin(self, t_s: float) -> tuple[np.ndarray, bool]:
-        """All plates' summed wrench (force [N], moment about the lab origin [N m]) (6,), each plate averaged over
-        ``t_s`` +- half a frame, and whether every plate has finite samples there. Kept per marker time once every
-        plate's samples have passed it: consecutive windows share all but one frame."""
-        got = self._bins.get(t_s)
-        if got is not None:
-            return got
-        half = self.dt / 2
-        total, covered, complete = np.zeros(6), True, True
-        for buf in self._plates.values():
-            wrench, ok = buf.mean_about(t_s, half)
-            covered &= ok
-            complete &= buf.newest_t_s >= t_s + half
-            if ok:
-                total += wrench
-        if complete:
-            self._bins[t_s] = (total, covered)
-        return total, covered
-
-    def _plate_wrench(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
-        """Summed plate wrench at the centre of the window's marker ``times``, smoothed by the same centred
-        Savitzky-Golay fit as the kinematics; covered is False if a plate has no sample there."""
-        if not self._plates:
-            return np.zeros(3), np.zeros(3), False
-        bins = [self._plate_bin(float(t)) for t in times]
-        for t in [t for t in self._bins if t < times[0]]:
-            del self._bins[t]
-        centre = len(times) // 2
-        wrench, covered = bins[centre]
-        if not covered:
-            for name, buf in self._plates.items():
-                if not buf.mean_about(float(times[centre]), self.dt / 2)[1]:
-                    self.plate_gaps[name] = self.plate_gaps.get(name, 0) + 1
-            return wrench[:3], wrench[3:], False
-        if all(ok for _, ok in bins):
-            smoothed = self._savgol(centre, len(times))[0] @ np.array([w for w, _ in bins])
-            return smoothed[:3], smoothed[3:], True
-        return wrench[:3], wrench[3:], True

@@ -203,8 +203,8 @@ class HumanComNode(Node):
         self.costs.cpu_s.append(time.thread_time() - c0)
         if self.fifo_after_calibration and self.estimator.calibrated:
             self._enter_real_time()
-        if self.estimator.rescale_pending:     # after the frame is out: the re-solve does not delay its COM
-            self.estimator.rescale_pending = False
+        if self.estimator.rows.pending:     # after the frame is out: the re-solve does not delay its COM
+            self.estimator.rows.pending = False
             t0 = time.perf_counter()
             if self.estimator.rescale() is not None:
                 self._publish_scaling(msg.header.stamp, time.perf_counter() - t0)

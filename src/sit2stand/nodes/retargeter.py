@@ -84,7 +84,7 @@ class RetargeterNode(Node):
         # when a frame first waited (for a COM, then for the robot's state), and when the plan ended
         self._waits: dict[str, float | None] = {"frame": None, "robot": None, "done": None}
         self.finished, self.exit_code = False, 0
-        self.drain = IdleDrain(lambda: self.live.processed)
+        self.drain = IdleDrain(lambda: self.live.progress.processed)
         self.scheduling = scheduling_text()
         steady_timer(self, 0.25 / self.live.cfg.rate_hz, self._tick)
         steady_timer(self, 2.0, self._report)
@@ -186,8 +186,8 @@ class RetargeterNode(Node):
         self.out.calibrated(robot.joint_names, profile_of(robot.model).root_link, robot.support_xy)
         if self.map_out:
             marker_map.save(self.map_out)
-        lead = f"; the recording starts after the human's seat-off: a lead-in of {self.live.lead_in_frames} " \
-               "frames from the robot's seat" if self.live.lead_in_frames else ""
+        lead = f"; the recording starts after the human's seat-off: a lead-in of {self.live.progress.lead_in_frames} " \
+               "frames from the robot's seat" if self.live.progress.lead_in_frames else ""
         self.get_logger().info(f"calibrated on the first frame in {(time.perf_counter() - began) * 1e3:.0f} ms: "
                                f"{len(marker_map.links)} markers fixed to the robot; "
                                f"leg-length scale {self.live.retargeter.com_map.scale:.3f}{waited}{lead}")
@@ -201,7 +201,7 @@ class RetargeterNode(Node):
         """Input time-out, the pacing timer, and the end of the plan."""
         now = time.monotonic()
         frames = self.live.frames
-        if frames and now - max(self.live.last_frame_s, self._waits["frame"] or now) > self.input_timeout_s:
+        if frames and now - max(self.live.progress.last_frame_s, self._waits["frame"] or now) > self.input_timeout_s:
             missing = f"{ROBOT_JOINT_STATES_TOPIC} and {ROBOT_BASE_POSE_TOPIC}" if self.live.retargeter is None \
                 and self.live.coms.samples and self.wait_for_robot else HUMAN_COM_TOPIC
             self.get_logger().error(f"{len(frames)} marker frames waited {self.input_timeout_s:g} s for "
@@ -220,8 +220,8 @@ class RetargeterNode(Node):
         return self.out.command(cmd, offset_m)
 
     def _report(self) -> None:
-        self.out.status({**self.live.figures(), "scheduling": self.scheduling}, self.live.processed,
-                        self.live.infeasible)
+        self.out.status({**self.live.figures(), "scheduling": self.scheduling}, self.live.progress.processed,
+                        self.live.progress.infeasible)
 
     def close(self) -> None:
         print(f"[retargeter] {summary_line({**self.live.figures(), 'scheduling': self.scheduling})}", flush=True)

@@ -235,6 +235,43 @@ class LiveConfig:
     marker_set: str = ""          # a packaged set's name or a YAML file; empty: chosen from the stream's names
 
 
+@dataclass
+class LiveProgress:
+    """How far a live run has got: frames retargeted and of them infeasible, frames dropped without a human COM,
+    frames off the plan's stride, lead-in frames, on-feet commands without a recent robot state, the COM feedback's
+    largest shift [m]; and when the last frame was processed (``time.monotonic`` [s], and the robot's clock [s])."""
+
+    processed: int = 0
+    infeasible: int = 0
+    skipped: int = 0
+    between_plan_frames: int = 0
+    lead_in_frames: int = 0
+    state_stale: int = 0
+    feedback_max_m: float = 0.0
+    last_frame_s: float = 0.0
+    last_frame_robot_s: float | None = None
+
+
+@dataclass
+class SentCommands:
+    """What went to the robot: the robot's clock at the last command [s]; the planned COMs sent, with the robot time
+    each went (a robot state can arrive late: it is compared with the plan of its own stamp); the plan's last command
+    at rest, held once the plan is played; the robot's COM behind the plan's at the last command [m]."""
+
+    last_s: float | None = None
+    planned_com: deque[tuple[float, np.ndarray]] = field(default_factory=lambda: deque(maxlen=PLANNED_COM_KEPT))
+    held: Command | None = None
+    lag_m: float = 0.0
+
+    def planned_com_at(self, t_s: float, default: np.ndarray) -> np.ndarray:
+        """The planned COM of the last command sent at or before robot time ``t_s``: what a state measured then
+        is compared with (against the newest plan a late state would read as a lag)."""
+        for sent_s, com in reversed(self.planned_com):
+            if sent_s <= t_s + 1e-9:
+                return com
+        return default
+
+
 class LiveRetargeting:
     """Marker frames and human COMs in, paced joint commands out (see the module docstring).
 
@@ -265,15 +302,8 @@ class LiveRetargeting:
         self.stabiliser: ComStabiliser | None = None
         self.model = self.model_data = None       # the robot model (the plan's COM parameters), once started
         self.names: list[str] = []
-        self.infeasible = self.skipped = self.processed = self.state_stale = self.lead_in_frames = 0
-        self.between_plan_frames = 0      # frames off the plan's stride, not retargeted
-        self.feedback_max_m = 0.0
-        self.lag_m = 0.0              # the robot's COM behind the plan's at the last command [m]
-        self._last_command_s: float | None = None     # the robot's clock at the last command [s]
-        self._planned_com: deque[tuple[float, np.ndarray]] = deque(maxlen=PLANNED_COM_KEPT)   # (robot time, COM)
-        self.last_frame_s = 0.0       # time.monotonic of the last frame processed
-        self._last_frame_robot_s: float | None = None      # the robot's clock then [s]
-        self._held: Command | None = None       # the plan's last command, at rest: held once it is played
+        self.progress = LiveProgress()
+        self.sent = SentCommands()
 
     def start(self, robot: RobotSetup, frame: MarkerFrame, com_m: np.ndarray):
         """Calibrate on ``frame`` (the human seated) over the robot's start posture; returns the marker map.
@@ -291,7 +321,7 @@ class LiveRetargeting:
                                  max_joint_speed=c.max_joint_speed, retiming=c.retiming,
                                  seat_off_dwell_s=c.seat_off_dwell_s)
         vx = float(self.coms.velocity_at(frame.t_s)[0])
-        self.lead_in_frames = len(self.retargeter.lead_in(frame.t_s, self.plan_period_s, frame.positions_m,
+        self.progress.lead_in_frames = len(self.retargeter.lead_in(frame.t_s, self.plan_period_s, frame.positions_m,
                                                           frame.valid, com_m, vx, on_frame=self._push))
         if com_feedback_applies(c.com_feedback, c.controller):
             self.stabiliser = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, c.stabiliser)
@@ -305,7 +335,7 @@ class LiveRetargeting:
         if self._first_stamp_s is None:
             self._first_stamp_s = frame.t_s
         if round((frame.t_s - self._first_stamp_s) * self.cfg.rate_hz) % self.stride:
-            self.between_plan_frames += 1
+            self.progress.between_plan_frames += 1
             return
         self.frames.append(frame)
 
@@ -324,7 +354,7 @@ class LiveRetargeting:
             if not self.coms.began_after(frame.t_s):
                 return None
             self.frames.popleft()
-            self.skipped += 1
+            self.progress.skipped += 1
         return None
 
     def step(self, frame: MarkerFrame, com_m: np.ndarray) -> np.ndarray:
@@ -335,7 +365,7 @@ class LiveRetargeting:
         pos, valid = reorder_markers(frame.names, frame.positions_m, frame.valid, self.names)
         result = self.retargeter.step(frame.t_s, pos, valid, com_m, self.chair.at(frame.t_s))
         self.latency.ik.append(result.ik.seconds)
-        self.infeasible += not result.ik.feasible
+        self.progress.infeasible += not result.ik.feasible
         self.player.push(result.q, not result.seated)
         now = self.robot_clock()
         if self.pacer.due(now):
@@ -343,61 +373,55 @@ class LiveRetargeting:
             if sent is not None:
                 self.pacer.sent(now)
                 self.latency.command(frame.received_s, ready, sent)
-        self.processed += 1
-        self.last_frame_s = time.monotonic()
-        self._last_frame_robot_s = self.robot_clock()
+        self.progress.processed += 1
+        self.progress.last_frame_s = time.monotonic()
+        self.progress.last_frame_robot_s = self.robot_clock()
         return result.q
 
     def pull_and_send(self, robot_now_s: float) -> float | None:
         """Send the plan's next command (corrected by the COM feedback), if it has one, for the robot's time
         ``robot_now_s``; returns when it went (wall time)."""
-        periods = 1.0 if self._last_command_s is None else float(np.clip(
-            (robot_now_s - self._last_command_s) / self.pacer.period_s, 0.0, MAX_CATCH_UP_PERIODS))
+        sent = self.sent
+        periods = 1.0 if sent.last_s is None else float(np.clip(
+            (robot_now_s - sent.last_s) / self.pacer.period_s, 0.0, MAX_CATCH_UP_PERIODS))
         # a robot that trails its plan slows it (the player)
-        cmd = self.player.pull(lag_m=self.lag_m, periods=periods)
+        cmd = self.player.pull(lag_m=sent.lag_m, periods=periods)
         if cmd is None:
             return None
-        self._last_command_s = robot_now_s
+        sent.last_s = robot_now_s
         # held after the plan: the same pose, at rest, still corrected by the COM feedback
-        self._held = dataclasses.replace(cmd, v=np.zeros_like(cmd.v), a=np.zeros_like(cmd.a))
+        sent.held = dataclasses.replace(cmd, v=np.zeros_like(cmd.v), a=np.zeros_like(cmd.a))
         return self._correct_and_send(robot_now_s, cmd)
 
     def _correct_and_send(self, robot_now_s: float, cmd: Command) -> float:
         """Send ``cmd``, a command of the plan, corrected by the COM feedback for the robot's measured state; returns
         when it went (wall time)."""
-        self._planned_com.append((robot_now_s, cmd.com))
+        sent, progress = self.sent, self.progress
+        sent.planned_com.append((robot_now_s, cmd.com))
         offset = None
         if self.stabiliser is not None:
             measured = self.measured_q()
             q_measured, plan_com = None, cmd.com
             if measured is not None:
-                q_measured, plan_com = measured[0], self._planned_com_at(measured[1], cmd.com)
-            self.state_stale += q_measured is None and cmd.on_feet
+                q_measured, plan_com = measured[0], sent.planned_com_at(measured[1], cmd.com)
+            progress.state_stale += q_measured is None and cmd.on_feet
             fix = self.stabiliser.correct(cmd.q, plan_com, q_measured, cmd.on_feet, self.plan_period_s)
             cmd = dataclasses.replace(cmd, q=fix.q)
             offset = fix.offset_m
-            self.lag_m = fix.lag_m if q_measured is not None else 0.0
-            self.feedback_max_m = max(self.feedback_max_m, float(np.abs(offset).max()))
+            sent.lag_m = fix.lag_m if q_measured is not None else 0.0
+            progress.feedback_max_m = max(progress.feedback_max_m, float(np.abs(offset).max()))
         elif cmd.on_feet:       # no COM feedback: the plan still waits for a robot behind it, from its measured state
-            self.lag_m = self._measured_lag_m(cmd.com)
+            sent.lag_m = self._measured_lag_m(cmd.com)
         return self.send(cmd, offset)
 
     def _measured_lag_m(self, plan_com: np.ndarray) -> float:
         """The robot's measured COM behind the plan's of its stamp [m] (0 without a recent state)."""
         measured = self.measured_q()
         if measured is None:
-            self.state_stale += 1
+            self.progress.state_stale += 1
             return 0.0
         com = pin.centerOfMass(self.model, self.model_data, measured[0])
-        return com_lag_m(self._planned_com_at(measured[1], plan_com) - com)
-
-    def _planned_com_at(self, t_s: float, default: np.ndarray) -> np.ndarray:
-        """The planned COM of the last command sent at or before robot time ``t_s``: what a state measured then
-        is compared with (a robot state can arrive late; against the newest plan it would read as a lag)."""
-        for sent_s, com in reversed(self._planned_com):
-            if sent_s <= t_s + 1e-9:
-                return com
-        return default
+        return com_lag_m(self.sent.planned_com_at(measured[1], plan_com) - com)
 
     def tick(self) -> bool:
         """The timer: keep commands at the plan's rate when frames are late; after the markers stop (three periods
@@ -411,10 +435,11 @@ class LiveRetargeting:
         if self.pacer.late(robot_now):
             if not self.player.done and self.pull_and_send(robot_now) is not None:
                 self.pacer.sent(robot_now)      # after a jump of the clock: from now on, no burst to catch up
-            elif self.player.done and self._held is not None:
-                self._correct_and_send(robot_now, self._held)
+            elif self.player.done and self.sent.held is not None:
+                self._correct_and_send(robot_now, self.sent.held)
                 self.pacer.sent(robot_now)
-        stopped_s = robot_now - (self._last_frame_robot_s if self._last_frame_robot_s is not None else robot_now)
+        last = self.progress.last_frame_robot_s
+        stopped_s = robot_now - (last if last is not None else robot_now)
         if self.frames or stopped_s < 3.0 * self.pacer.period_s:
             return False
         if not self.player.finished:
@@ -425,12 +450,13 @@ class LiveRetargeting:
         """The run's figures as text, for the node's status and summary line."""
         torque_control = " (the robot's whole-body torque controller tracks the COM)" \
             if self.cfg.controller == "wbc" else ""
+        n = self.progress
         feedback = f"off{torque_control}" if self.stabiliser is None else (
-            f"largest shift {self.feedback_max_m * 100:.1f} cm; {self.state_stale} on-feet commands without a "
+            f"largest shift {n.feedback_max_m * 100:.1f} cm; {n.state_stale} on-feet commands without a "
             "recent robot state")
-        return {"frames": str(self.processed), "between_plan_frames": str(self.between_plan_frames),
-                "infeasible_frames": str(self.infeasible),
-                "skipped_frames": str(self.skipped),
+        return {"frames": str(n.processed), "between_plan_frames": str(n.between_plan_frames),
+                "infeasible_frames": str(n.infeasible),
+                "skipped_frames": str(n.skipped),
                 # the robot's duration over the human's, as sit2stand retarget's summary has it
                 "time_scale": f"{self.player.duration_ratio:.2f}" if self.player else "nan",
                 **self.latency.figures(), "com_feedback": feedback}

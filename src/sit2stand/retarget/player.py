@@ -17,7 +17,7 @@ Units SI; world frame REP-103 (x forward, y left, z up).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import pinocchio as pin
@@ -101,6 +101,87 @@ class Command:
     filter: FilterReport | None = None        # what the dynamics filter did
 
 
+@dataclass(frozen=True)
+class PlayerSettings:
+    """A plan player's settings (see :class:`PlanPlayer`)."""
+
+    margin_m: float = DEFAULT_MARGIN_M
+    lookahead_s: float = LOOKAHEAD_S
+    smooth_s: float = SMOOTH_S
+    max_time_scale: float = DEFAULT_MAX_TIME_SCALE
+    max_time_scale_rate: float = MAX_TIME_SCALE_RATE
+    fixed_time_scale: float | None = None
+    max_joint_speed: float = DEFAULT_MAX_JOINT_SPEED
+    seat_off_dwell_s: float = SEAT_OFF_DWELL_S
+    retiming: str = "local"
+    torque_limited: bool = True
+    planned_time_scale: float | None = None
+
+
+@dataclass
+class PlanFrames:
+    """The plan as pushed and as smoothed, frame by frame at the human's timing: the IK's poses and whether each is
+    on the feet; the smoothed poses (nq), velocities and accelerations (nv), on the feet; each frame's dynamics at
+    its own timing (COM [m], COM acceleration [m/s^2], rate of angular momentum [N m]); and each frame's own smallest
+    time scale."""
+
+    raw_q: list[np.ndarray] = field(default_factory=list)
+    raw_feet: list[bool] = field(default_factory=list)
+    q: list[np.ndarray] = field(default_factory=list)
+    v: list[np.ndarray] = field(default_factory=list)
+    a: list[np.ndarray] = field(default_factory=list)
+    feet: list[bool] = field(default_factory=list)
+    dyn: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
+    s_req: list[float] = field(default_factory=list)
+
+
+class TorqueCriterion:
+    """The torque criterion of a frame's time scale: the joints that carry the body (legs, trunk) within the URDF
+    effort limits. The upper limbs' own motors (TALOS's shoulders, 22 N m) bound the natural rise in 20 of its 60
+    slowed frames for a swing that moves the COM little: they lag there instead, within their limits, as the
+    whole-body controller keeps them."""
+
+    def __init__(self, model: pin.Model) -> None:
+        self.model, self.data = model, model.createData()
+        self.limits = model.effortLimit[6:].copy()
+        self.carries_body = np.ones(model.nv - 6, bool)
+        for j in range(2, model.njoints):
+            if profile_of(model).is_upper_limb(model.names[j]):
+                self.carries_body[model.joints[j].idx_v - 6] = False
+        self.q_index = np.array([model.joints[j].idx_q for j in range(2, model.njoints)])     # joint i -> its q
+
+    def scale(self, q: np.ndarray, raw_q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, seated: bool) -> float:
+        """Smallest time scale keeping a frame's torques of the legs and trunk (contact-consistent inverse dynamics
+        at pose ``q``, joint velocities ``qd`` and accelerations ``qdd``, the chair taking load while ``seated``)
+        within the URDF effort limits. Played s x slower, tau = tau_static + tau_motion / s^2; a joint whose static
+        torque alone is past its limit, or one resting on its stop, cannot be helped by slowing down and is left
+        out."""
+        model, data = self.model, self.data
+        v, a = np.zeros(model.nv), np.zeros(model.nv)
+        v[6:], a[6:] = qd, qdd
+        gravity = pin.computeGeneralizedGravity(model, data, q).copy()
+        full = pin.rnea(model, data, q, v, a)
+        static, motion = contact_joint_torques(model, data, q, np.stack([gravity, full - gravity]), seated)
+        room = self.limits - np.sign(motion) * static
+        need = np.where((room > 0) & self.carries_body, np.abs(motion) / np.maximum(room, 1e-9), 0.0)
+        need[self.resting_on_stop(q, raw_q, v[6:], static)] = 0.0
+        return float(np.sqrt(max(1.0, need.max())))
+
+    def resting_on_stop(self, q: np.ndarray, raw_q: np.ndarray, v: np.ndarray, static: np.ndarray) -> np.ndarray:
+        """The joints of a smoothed pose ``q`` within ``STOP_REACH_RAD`` of a position limit whose static torque
+        presses them into it (a stop at the upper limit pushes back with negative torque: such a joint needs negative
+        torque), and which the plan (joint speeds ``v`` [rad/s]) does not lift off it faster than
+        ``LIFT_OFF_SPEED_RAD_S``, or which the IK's own pose ``raw_q`` holds on the stop (``ON_STOP_RAD``): the
+        smoothing's fit of a joint that lands on its stop and stays overshoots the limit and comes back at ~0.15 rad/s,
+        a lift-off that is not one (TALOS's trunk at 45 degrees on the natural rise: counted, it slowed the seat-off
+        2.6 times)."""
+        qj, raw = q[self.q_index], raw_q[self.q_index]
+        lo, hi = self.model.lowerPositionLimit[self.q_index], self.model.upperPositionLimit[self.q_index]
+        on_hi = (hi - qj < STOP_REACH_RAD) & (static < 0) & ((v > -LIFT_OFF_SPEED_RAD_S) | (hi - raw < ON_STOP_RAD))
+        on_lo = (qj - lo < STOP_REACH_RAD) & (static > 0) & ((v < LIFT_OFF_SPEED_RAD_S) | (raw - lo < ON_STOP_RAD))
+        return on_hi | on_lo
+
+
 class PlanPlayer:
     """Smooths, checks and retimes a stream of IK poses (see the module docstring).
 
@@ -119,60 +200,41 @@ class PlanPlayer:
                  planned_time_scale: float | None = None) -> None:
         if retiming not in RETIMING:
             raise InputError(f"retiming {retiming!r}: one of {', '.join(RETIMING)}")
+        self.cfg = PlayerSettings(margin_m, lookahead_s, smooth_s, max_time_scale, max_time_scale_rate,
+                                        fixed_time_scale, max_joint_speed, seat_off_dwell_s, retiming, torque_limited,
+                                        planned_time_scale)
         self.model, self.data = model, model.createData()
         self.dt = dt
         self.polygon = polygon_xy
-        self.margin_m = margin_m
-        self.lookahead = max(0, int(round(lookahead_s / dt)))
-        self.half = savgol_frames(smooth_s, dt, minimum=1) // 2       # frames either side
-        self.max_time_scale = max_time_scale
-        self.max_time_scale_rate = max_time_scale_rate
-        self.fixed_time_scale = fixed_time_scale
-        self.max_speed = max_joint_speed
-        self.dwell_pulls = int(round(seat_off_dwell_s / dt))
-        self._dwelt = 0
-        self.time_scale = 1.0 if fixed_time_scale is None else float(fixed_time_scale)
-        self.time_scale_goal = self.time_scale
         self.mass = float(pin.computeTotalMass(model))
-        self._raw_q: list[np.ndarray] = []
-        self._raw_feet: list[bool] = []
-        self._q: list[np.ndarray] = []         # smoothed poses
-        self._v: list[np.ndarray] = []
-        self._a: list[np.ndarray] = []
-        self._feet: list[bool] = []
-        self._dyn: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []    # (com, com acc, dL/dt) at s = 1
+        self.lookahead = max(0, int(round(lookahead_s / dt)))          # frames
+        self.half = savgol_frames(smooth_s, dt, minimum=1) // 2       # frames either side
+        self.dwell_pulls = int(round(seat_off_dwell_s / dt))
+        self.dynamics = dynamics
+        self.torque = TorqueCriterion(model) if torque_limited else None
+        self.plan = PlanFrames()
+        self._coef_cache: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self.u = 0.0              # playback point, in frames of the plan
         self.started = False
         self.finished = False
-        self._coef_cache: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self._s_req: list[float] = []          # each frame's own smallest time scale
-        self.dynamics = dynamics
-        self.local = retiming == "local"
-        self.torque_limits = model.effortLimit[6:].copy() if torque_limited else None
-        # the torque criterion's joints: those that carry the body (legs, trunk); the upper limbs' own motors
-        # (TALOS's shoulders, 22 N m) bound the natural rise in 20 of its 60 slowed frames for a swing that moves
-        # the COM little: they lag there instead, within their limits, as the whole-body controller keeps them
-        self._carries_body = np.ones(model.nv - 6, bool)
-        for j in range(2, model.njoints):
-            if profile_of(model).is_upper_limb(model.names[j]):
-                self._carries_body[model.joints[j].idx_v - 6] = False
-        self._q_index = np.array([model.joints[j].idx_q for j in range(2, model.njoints)])     # joint i -> its q
         self.pulled = 0.0             # periods played
-        self._settings = dict(margin_m=margin_m, lookahead_s=lookahead_s, smooth_s=smooth_s,
-                              max_time_scale=max_time_scale, max_time_scale_rate=max_time_scale_rate,
-                              fixed_time_scale=fixed_time_scale, max_joint_speed=max_joint_speed,
-                              seat_off_dwell_s=seat_off_dwell_s, dynamics=dynamics, retiming=retiming,
-                              torque_limited=torque_limited, planned_time_scale=planned_time_scale)
-        self.planned_time_scale = planned_time_scale
+        self._dwelt = 0
+        self.time_scale = 1.0 if fixed_time_scale is None else float(fixed_time_scale)
+        self.time_scale_goal = self.time_scale
+
+    @property
+    def max_time_scale(self) -> float:
+        return self.cfg.max_time_scale
 
     def like(self, **changes) -> PlanPlayer:
-        """A new, empty player with this one's model and settings, but ``changes``."""
-        return PlanPlayer(self.model, self.dt, self.polygon, **{**self._settings, **changes})
+        """A new, empty player with this one's model, settings and dynamics filter, but ``changes``."""
+        settings = {**asdict(self.cfg), "dynamics": self.dynamics, **changes}
+        return PlanPlayer(self.model, self.dt, self.polygon, **settings)
 
     # -- input -------------------------------------------------------------------------------------------------
     def push(self, q: np.ndarray, on_feet: bool) -> None:
-        self._raw_q.append(np.asarray(q, float).copy())
-        self._raw_feet.append(bool(on_feet))
+        self.plan.raw_q.append(np.asarray(q, float).copy())
+        self.plan.raw_feet.append(bool(on_feet))
         self._smooth_available(final=False)
 
     def close(self) -> None:
@@ -183,33 +245,35 @@ class PlanPlayer:
     def _smooth_available(self, final: bool) -> None:
         """Savitzky-Golay fit (cubic) of the poses' tangent coordinates around each frame once its window is
         known: the smoothed pose and its velocity and acceleration from the same fit; then the frame's dynamics."""
-        n = len(self._raw_q)
+        plan = self.plan
+        n = len(plan.raw_q)
         model, dt = self.model, self.dt
-        while len(self._q) < n and (final or len(self._q) + self.half < n):
-            k = len(self._q)
+        while len(plan.q) < n and (final or len(plan.q) + self.half < n):
+            k = len(plan.q)
             half = min(self.half, k, n - 1 - k)
-            ref = self._raw_q[k]
+            ref = plan.raw_q[k]
             if half >= 2:
-                X = np.array([pin.difference(model, ref, self._raw_q[j]) for j in range(k - half, k + half + 1)])
+                X = np.array([pin.difference(model, ref, plan.raw_q[j]) for j in range(k - half, k + half + 1)])
                 c0, c1, c2 = self._coefs(half)
                 q, v, a = pin.integrate(model, ref, c0 @ X), c1 @ X / dt, c2 @ X / dt**2
             else:        # the ends of a closed plan: at rest
                 q, v, a = ref, np.zeros(model.nv), np.zeros(model.nv)
-            self._append(q, v, a, self._raw_feet[k])
+            self._append(q, v, a, plan.raw_feet[k])
 
     def _append(self, q: np.ndarray, v: np.ndarray, a: np.ndarray, on_feet: bool) -> None:
         """A frame of the plan (pose, velocity, acceleration) and its dynamics: COM, COM acceleration and angular
         momentum rate, and the frame's own smallest time scale."""
-        self._q.append(q)
-        self._v.append(v)
-        self._a.append(a)
-        self._feet.append(on_feet)
+        plan = self.plan
+        plan.q.append(q)
+        plan.v.append(v)
+        plan.a.append(a)
+        plan.feet.append(on_feet)
         pin.centerOfMass(self.model, self.data, q, v, a)
         com, acom = self.data.com[0].copy(), self.data.acom[0].copy()
         pin.computeCentroidalMomentumTimeVariation(self.model, self.data, q, v, a)
         # dL/dt's velocity-product and acceleration parts both scale with 1/s^2 when played s x slower
-        self._dyn.append((com, acom, self.data.dhg.angular.copy()))
-        self._s_req.append(self.frame_scale(len(self._dyn) - 1))
+        plan.dyn.append((com, acom, self.data.dhg.angular.copy()))
+        plan.s_req.append(self.frame_scale(len(plan.dyn) - 1))
 
     def _coefs(self, half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         c = self._coef_cache.get(half)
@@ -226,52 +290,23 @@ class PlanPlayer:
         ``torque_limited``, the inverse-dynamics torques of the joints that carry the body (not the upper limbs)
         within the URDF effort limits; at least
         ``planned_time_scale``."""
-        speed = float(np.abs(self._v[k][6:]).max()) / self.max_speed if self.max_speed > 0 else 1.0
+        cfg, plan = self.cfg, self.plan
+        speed = float(np.abs(plan.v[k][6:]).max()) / cfg.max_joint_speed if cfg.max_joint_speed > 0 else 1.0
         s = 1.0
-        if self._feet[k]:
-            com, acc, dl = self._dyn[k]
-            s = float(frame_time_scales(com, acc, dl, self.mass, self.polygon, self.margin_m, self.max_time_scale)[0])
-        return min(max(s, speed, self._torque_scale(k), self.planned_time_scale or 1.0), self.max_time_scale)
-
-    def _torque_scale(self, k: int) -> float:
-        """Smallest time scale keeping frame ``k``'s torques of the legs and trunk (contact-consistent inverse
-        dynamics, the chair taking load while seated) within the URDF effort limits. Played s x slower,
-        tau = tau_static + tau_motion / s^2; a joint whose static torque alone is past its limit, or one resting on
-        its stop, cannot be helped by slowing down and is left out."""
-        if self.torque_limits is None:
-            return 1.0
-        q, v, a = self._q[k], np.zeros(self.model.nv), np.zeros(self.model.nv)
-        v[6:], a[6:] = self._v[k][6:], self._a[k][6:]
-        gravity = pin.computeGeneralizedGravity(self.model, self.data, q).copy()
-        full = pin.rnea(self.model, self.data, q, v, a)
-        static, motion = contact_joint_torques(self.model, self.data, q, np.stack([gravity, full - gravity]),
-                                               not self._feet[k])
-        room = self.torque_limits - np.sign(motion) * static
-        need = np.where((room > 0) & self._carries_body, np.abs(motion) / np.maximum(room, 1e-9), 0.0)
-        need[self._resting_on_stop(q, self._raw_q[k], v[6:], static)] = 0.0
-        return float(np.sqrt(max(1.0, need.max())))
-
-    def _resting_on_stop(self, q: np.ndarray, raw_q: np.ndarray, v: np.ndarray, static: np.ndarray) -> np.ndarray:
-        """The joints of a smoothed pose ``q`` within ``STOP_REACH_RAD`` of a position limit whose static torque
-        presses them into it (a stop at the upper limit pushes back with negative torque: such a joint needs negative
-        torque), and which the plan (joint speeds ``v`` [rad/s]) does not lift off it faster than
-        ``LIFT_OFF_SPEED_RAD_S``, or which the IK's own pose ``raw_q`` holds on the stop (``ON_STOP_RAD``): the
-        smoothing's fit of a joint that lands on its stop and stays overshoots the limit and comes back at ~0.15 rad/s,
-        a lift-off that is not one (TALOS's trunk at 45 degrees on the natural rise: counted, it slowed the seat-off
-        2.6 times)."""
-        qj, raw = q[self._q_index], raw_q[self._q_index]
-        lo, hi = self.model.lowerPositionLimit[self._q_index], self.model.upperPositionLimit[self._q_index]
-        on_hi = (hi - qj < STOP_REACH_RAD) & (static < 0) & ((v > -LIFT_OFF_SPEED_RAD_S) | (hi - raw < ON_STOP_RAD))
-        on_lo = (qj - lo < STOP_REACH_RAD) & (static > 0) & ((v < LIFT_OFF_SPEED_RAD_S) | (raw - lo < ON_STOP_RAD))
-        return on_hi | on_lo
+        if plan.feet[k]:
+            com, acc, dl = plan.dyn[k]
+            s = float(frame_time_scales(com, acc, dl, self.mass, self.polygon, cfg.margin_m, cfg.max_time_scale)[0])
+        torque = 1.0 if self.torque is None else \
+            self.torque.scale(plan.q[k], plan.raw_q[k], plan.v[k][6:], plan.a[k][6:], not plan.feet[k])
+        return min(max(s, speed, torque, cfg.planned_time_scale or 1.0), cfg.max_time_scale)
 
     def required_scale(self, frames: range) -> float:
         """Smallest time scale keeping the ZMP ``margin_m`` inside the feet on all of ``frames`` (known ones)."""
-        ks = [k for k in frames if k < len(self._s_req)]
-        return max((self._s_req[k] for k in ks), default=1.0)
+        ks = [k for k in frames if k < len(self.plan.s_req)]
+        return max((self.plan.s_req[k] for k in ks), default=1.0)
 
     def ready(self) -> bool:
-        known = len(self._v)
+        known = len(self.plan.v)
         return self.finished or known >= self.lookahead + 2
 
     def pull(self, lag_m: float = 0.0, periods: float = 1.0) -> Command | None:
@@ -279,31 +314,32 @@ class PlanPlayer:
         slows the local plan once the robot is off the chair (``LAG_DEADBAND_M``, ``LAG_GAIN_PER_M``);
         ``periods``: the robot's time since the last command, in periods ``dt`` (live, a command can come late: the
         plan is where the robot's clock says, not one frame on)."""
-        known = len(self._v)
+        cfg, plan = self.cfg, self.plan
+        known = len(plan.v)
         if known < 1 or (not self.started and not self.ready()):
             return None
         self.started = True
-        if self.fixed_time_scale is None and self.dynamics is not None:
-            self.time_scale_goal = self.dynamics.stretch(self.max_time_scale)     # local: up and down
-        elif self.fixed_time_scale is None and self.local:
+        if cfg.fixed_time_scale is None and self.dynamics is not None:
+            self.time_scale_goal = self.dynamics.stretch(cfg.max_time_scale)     # local: up and down
+        elif cfg.fixed_time_scale is None and cfg.retiming == "local":
             # local: just in time for each frame about to be played (its own scale less what the bounded rate of
             # change can add before it is reached; plan time is a lower bound on the robot's), back down after
             ahead = range(int(self.u), min(known, int(self.u) + self.lookahead + 1))
-            off_chair = self._feet[min(int(self.u), known - 1)]
+            off_chair = plan.feet[min(int(self.u), known - 1)]
             wait = 1.0 + LAG_GAIN_PER_M * max(0.0, lag_m - LAG_DEADBAND_M) if off_chair else 1.0
             # live, poses can arrive late (an estimator catching up): with less than the look-ahead known, slow
             # down in proportion, as a streaming player's buffer does, rather than run dry and hold
             buffered = known - 1 - self.u
             if not self.finished and buffered < self.lookahead:
-                wait = max(wait, min(self.max_time_scale, self.lookahead / max(buffered, 1.0)))
-            self.time_scale_goal = min(self.max_time_scale, max(
-                [wait] + [self._s_req[k] - self.max_time_scale_rate * max(0.0, k - self.u) * self.dt
-                          for k in ahead if k < len(self._s_req)]))
-        elif self.fixed_time_scale is None:
+                wait = max(wait, min(cfg.max_time_scale, self.lookahead / max(buffered, 1.0)))
+            self.time_scale_goal = min(cfg.max_time_scale, max(
+                [wait] + [plan.s_req[k] - cfg.max_time_scale_rate * max(0.0, k - self.u) * self.dt
+                          for k in ahead if k < len(plan.s_req)]))
+        elif cfg.fixed_time_scale is None:
             ahead = range(int(self.u), min(known, int(self.u) + self.lookahead + 1))
             self.time_scale_goal = max(self.time_scale_goal, self.required_scale(ahead))
         s_prev = self.time_scale
-        rate = self.max_time_scale_rate * self.dt * periods
+        rate = cfg.max_time_scale_rate * self.dt * periods
         self.time_scale = float(np.clip(self.time_scale_goal, self.time_scale - rate, self.time_scale + rate))
         s_dot = (self.time_scale - s_prev) / (self.dt * max(periods, 1e-9))
         k = int(np.floor(self.u))
@@ -311,7 +347,7 @@ class PlanPlayer:
             k, frac = known - 1, 0.0
             self.u = float(k)
             hold = True
-        elif self._feet[k] and self._dwelt < self.dwell_pulls:
+        elif plan.feet[k] and self._dwelt < self.dwell_pulls:
             # at the robot's seat-off: wait, so that the COM settles over the feet before the hips lift
             frac, hold = 0.0, True
             self.u = float(k)
@@ -319,23 +355,23 @@ class PlanPlayer:
         else:
             frac = self.u - k
             hold = False
-        q = pin.interpolate(self.model, self._q[k], self._q[min(k + 1, known - 1)], frac)
-        v_plan = (1 - frac) * self._v[k] + frac * self._v[min(k + 1, known - 1)]
-        a_plan = (1 - frac) * self._a[k] + frac * self._a[min(k + 1, known - 1)]
+        q = pin.interpolate(self.model, plan.q[k], plan.q[min(k + 1, known - 1)], frac)
+        v_plan = (1 - frac) * plan.v[k] + frac * plan.v[min(k + 1, known - 1)]
+        a_plan = (1 - frac) * plan.a[k] + frac * plan.a[min(k + 1, known - 1)]
         u_dot = 0.0 if hold else 1.0 / self.time_scale
         u_ddot = 0.0 if hold else -s_dot / self.time_scale**2
         v = v_plan * u_dot
         a = a_plan * u_dot**2 + v_plan * u_ddot
         # the command's own ZMP: its accelerations carry the time warp's change of speed too
         com, _, _, zmp = model_cop(self.model, self.data, q, v, a)
-        on_feet = self._feet[k]
+        on_feet = plan.feet[k]
         margin = float(support_margin(zmp[None, :2], self.polygon)[0]) if on_feet else np.inf
         if not hold:
             self.u += u_dot * periods
         self.pulled += periods
         criterion = np.inf
         if on_feet:
-            zmp_s = zmp_at_scale(*(x[None] for x in self._dyn[k]), self.mass, self.time_scale)
+            zmp_s = zmp_at_scale(*(x[None] for x in plan.dyn[k]), self.mass, self.time_scale)
             criterion = float(support_margin(zmp_s[:, :2], self.polygon)[0])
         cmd = Command(k * self.dt + frac * self.dt, q, v, a, self.time_scale, com, zmp, margin, on_feet, criterion)
         return cmd if self.dynamics is None else self._filtered(cmd, k)
@@ -343,8 +379,8 @@ class PlanPlayer:
     def seconds_to_seat_off(self, k: int) -> float | None:
         """Robot time [s] from plan frame ``k`` to the plan's seat-off (0 once on the feet); None when the known
         frames do not reach it."""
-        for j in range(k, len(self._feet)):
-            if self._feet[j]:
+        for j in range(k, len(self.plan.feet)):
+            if self.plan.feet[j]:
                 return (j - k) * self.dt * self.time_scale
         return None
 
@@ -360,13 +396,13 @@ class PlanPlayer:
     def smoothed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The smoothed poses (N, nq) of the frames known so far, their velocities and accelerations (N, nv) at the
         human's timing."""
-        return np.array(self._q), np.array(self._v), np.array(self._a)
+        return np.array(self.plan.q), np.array(self.plan.v), np.array(self.plan.a)
 
     def played_ratio(self) -> float:
         """How many times longer than the human's the plan pushed so far plays for a robot that keeps up with it: a
         copy of this player played out without lag (this one is left as it is)."""
         dry = self.like()
-        for q, on_feet in zip(self._raw_q, self._raw_feet):
+        for q, on_feet in zip(self.plan.raw_q, self.plan.raw_feet):
             dry.push(q, on_feet)
         dry.close()
         while not dry.done:
@@ -377,8 +413,8 @@ class PlanPlayer:
     def duration_ratio(self) -> float:
         """Periods played per pose pushed so far: the robot's duration over the human's (``time_scale`` in
         ``sit2stand retarget``'s summary)."""
-        return self.pulled / max(1, len(self._raw_q))
+        return self.pulled / max(1, len(self.plan.raw_q))
 
     @property
     def done(self) -> bool:
-        return self.finished and self.u >= len(self._v) - 1
+        return self.finished and self.u >= len(self.plan.v) - 1
