@@ -64,11 +64,6 @@ class MarkerTasks:
         """(M, 3) the markers' targets on the robot [m, world] for the human's ``positions_m``, scaled ``scale``."""
         return self.robot_pelvis0_m + scale * (positions_m - self.human_pelvis0_m)
 
-    def pelvis_centre(self, positions_m: np.ndarray, ok: np.ndarray) -> np.ndarray | None:
-        """The seen pelvis markers' mean [m]; None when none is seen."""
-        seen = [i for i in self.pelvis if ok[i]]
-        return positions_m[seen].mean(axis=0) if seen else None
-
     def knee_flexion(self, positions_m: np.ndarray, ok: np.ndarray, pelvis_m: np.ndarray) -> float | None:
         """The human's left knee flexion [rad] (:func:`knee_flexion`)."""
         return knee_flexion(self.knee_ankle, positions_m, ok, pelvis_m)

@@ -323,7 +323,7 @@ class Retargeter:
             self._com_x_floor = float(target[0])
         if self._com_x_floor is not None:        # seated again: the COM stays where the hips landed, or ahead
             target[0] = max(target[0], self._com_x_floor)
-        if self.seated and self.watch.seat_off and target[0] >= robot.ankle_left[0] + self.com_map.knots_r[1] - 1e-3:
+        if self.seated and self.watch.seat_off and target[0] >= self.com_map.seat_off_x_m - 1e-3:
             self._leave_seat(t_s, pelvis_now)
         mid_y = float(np.mean([X.translation[1] for X in robot.sole_targets]))
         if self.seated:

@@ -66,6 +66,7 @@ class JointFaults:
     q_offset: np.ndarray
     backlash: np.ndarray
     delay_steps: int
+    has_backlash: bool = False     # any gear play: checked at every physics step
 
     @classmethod
     def of(cls, um: Unmodeled, names: list[str], timestep_s: float) -> JointFaults:
@@ -75,13 +76,10 @@ class JointFaults:
                 out[names.index(name)] = value
             return out
 
+        backlash = per_joint(um.backlash_rad, 0.0)
         return cls(per_joint(um.torque_bias_nm, 0.0), per_joint(um.torque_gain, 1.0),
-                   per_joint(um.joint_offset_rad, 0.0), per_joint(um.backlash_rad, 0.0),
-                   int(round(um.actuator_delay_s / timestep_s)))
-
-    @property
-    def has_backlash(self) -> bool:
-        return bool(self.backlash.any())
+                   per_joint(um.joint_offset_rad, 0.0), backlash, int(round(um.actuator_delay_s / timestep_s)),
+                   bool(backlash.any()))
 
 
 @dataclass
