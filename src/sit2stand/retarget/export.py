@@ -12,6 +12,10 @@ robot is the packaged profile whose actuated joints the states name (``robot``: 
   and ``dof_vel`` (N, n) [rad, rad/s], ``body_names``, ``body_pos`` (N, B, 3) [m, world], ``foot_contacts`` (N, 2:
   left, right; a sole carrying more than ``CONTACT_FORCE_N``), ``com`` (N, 3) [m] (the model's COM, CAD inertias).
 
+Both are in the robot's URDF file's own frames and joint senses, the file a pipeline loads: a robot whose file
+sit2stand reads turned or with joints reversed (iCub's: :mod:`~sit2stand.robot.conventions`) has its root
+orientation turned back and those joints negated.
+
 Frames are at ``t0 + k / rate_hz`` for the ``round(span * rate_hz)`` instants the states cover (``span``: the first
 to the last state plus one state period). An instant that falls on a state takes it exactly; others interpolate
 linearly (the quaternion normalised).
@@ -19,7 +23,7 @@ linearly (the quaternion normalised).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +33,7 @@ from ..errors import InputError
 from ..io.bag import BagReader
 from ..io.messages import stamp_ns
 from ..io.topics import ROBOT_BASE_POSE_TOPIC, ROBOT_JOINT_STATES_TOPIC, ft_topic
+from ..robot.conventions import Conventions
 from ..robot.model import SIDES, PlantConfig, actuated_joint_names, controller_model
 from ..robot.profile import RobotProfile, load_profile, packaged_names
 
@@ -125,6 +130,16 @@ def in_model_order(states: StateSeries, profile: RobotProfile) -> tuple[pin.Mode
                               pick(states.qd), states.feet_fz)
 
 
+def in_file_sense(states: StateSeries, conventions: Conventions) -> StateSeries:
+    """``states`` in the URDF file's own base frame and joint senses (sit2stand's turned back)."""
+    if not conventions.changed:
+        return states
+    sign = np.array([-1.0 if n in conventions.flipped else 1.0 for n in states.joint_names])
+    turn = pin.Quaternion(pin.utils.rpyToMatrix(0.0, 0.0, conventions.base_yaw_rad))
+    quat = np.array([(pin.Quaternion(np.asarray(x)) * turn).coeffs() for x in states.root_quat_xyzw])
+    return replace(states, root_quat_xyzw=quat, q=states.q * sign, qd=None if states.qd is None else states.qd * sign)
+
+
 def write_csv(states: StateSeries, path: Path) -> int:
     """The CSV rows (see the module docstring), every number to full precision; the row count."""
     rows = np.hstack([states.root_pos, states.root_quat_xyzw, states.q])
@@ -133,8 +148,10 @@ def write_csv(states: StateSeries, path: Path) -> int:
     return len(rows)
 
 
-def write_npz(states: StateSeries, model: pin.Model, rate_hz: float, path: Path) -> int:
-    """The NPZ arrays (see the module docstring); the frame count."""
+def write_npz(states: StateSeries, model: pin.Model, rate_hz: float, path: Path,
+              conventions: Conventions | None = None) -> int:
+    """The NPZ arrays (see the module docstring; ``states`` in sit2stand's conventions, written in the file's); the
+    frame count."""
     data = model.createData()
     bodies = [f for f in range(model.nframes) if model.frames[f].type == pin.FrameType.BODY and f > 0]
     body_pos = np.empty((len(states.t_s), len(bodies), 3))
@@ -144,12 +161,14 @@ def write_npz(states: StateSeries, model: pin.Model, rate_hz: float, path: Path)
         pin.framesForwardKinematics(model, data, x)
         body_pos[k] = [data.oMf[f].translation for f in bodies]
         com[k] = pin.centerOfMass(model, data, x)
-    qd = states.qd if states.qd is not None else np.gradient(states.q, states.t_s, axis=0)
+    if states.qd is None:
+        states = replace(states, qd=np.gradient(states.q, states.t_s, axis=0))
+    states = in_file_sense(states, conventions or Conventions())
     contacts = states.feet_fz > CONTACT_FORCE_N if states.feet_fz is not None else \
         np.zeros((len(states.t_s), 2), bool)
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(path, fps=float(rate_hz), joint_names=np.array(states.joint_names), root_pos=states.root_pos,
-             root_quat_xyzw=states.root_quat_xyzw, dof_pos=states.q, dof_vel=qd,
+             root_quat_xyzw=states.root_quat_xyzw, dof_pos=states.q, dof_vel=states.qd,
              body_names=np.array([model.frames[f].name for f in bodies]), body_pos=body_pos,
              foot_contacts=contacts, com=com)
     return len(states.t_s)
@@ -163,6 +182,7 @@ def export(run: Path, out: Path, fmt: str = "csv", rate_hz: float = 50.0, robot:
     profile = robot_of(states.joint_names, robot)
     model, ordered = in_model_order(states, profile)
     _, frames = resample(ordered, rate_hz)
-    n = write_csv(frames, out) if fmt == "csv" else write_npz(frames, model, rate_hz, out)
+    n = write_csv(in_file_sense(frames, profile.conventions), out) if fmt == "csv" else \
+        write_npz(frames, model, rate_hz, out, profile.conventions)
     return {"robot": profile.name, "frames": n, "rate_hz": rate_hz, "duration_s": n / rate_hz,
             "joints": len(frames.joint_names), "out": str(out)}

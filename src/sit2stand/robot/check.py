@@ -15,7 +15,7 @@ A profile that fails (a name not in the URDF, a posture outside the limits) rais
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import mujoco
 import numpy as np
@@ -49,6 +49,7 @@ class RobotCheck:
     knee_limit_nm: float
     trunk_torque_nm: float
     trunk_limit_nm: float
+    conventions: list[str] = field(default_factory=list)   # how the URDF was brought to REP-103 (robot.conventions)
 
     @property
     def knee_share(self) -> float:
@@ -65,6 +66,7 @@ class RobotCheck:
 
     def lines(self) -> list[str]:
         return [f"robot {self.robot} ({self.urdf}): {self.mass_kg:.1f} kg, {self.actuated_joints} actuated joints",
+                *(f"URDF brought to sit2stand's conventions: {line}" for line in self.conventions),
                 f"standing (straight legs): pelvis {self.standing_pelvis_m:.3f} m, COM {self.standing_com_m:.3f} m",
                 f"seated: pelvis {self.seated_pelvis_m:.3f} m on a {self.seat_height_m:.3f} m chair; "
                 + ("stays seated" if self.sits else f"does not stay seated (moved {self.seated_drift_m:.3f} m)"),
@@ -98,7 +100,7 @@ def check_robot(robot: str, plant: str | None = None) -> RobotCheck:
                       float(standing[2]), float(com[2]), float(sim.q_seated[2]), sim.seat_height_m,
                       drift < SEATED_DRIFT_M and not sim.fallen, drift, float(knee),
                       float(sim.joints.effort[names.index(profile.leg("left", "knee"))]), float(trunk),
-                      float(sim.joints.effort[names.index(profile.trunk_pitch)]))
+                      float(sim.joints.effort[names.index(profile.trunk_pitch)]), profile.conventions.lines())
 
 
 def seat_off_torques(sim: Plant) -> np.ndarray:

@@ -39,7 +39,6 @@ import pinocchio as pin
 from ..errors import Sit2StandError
 from ..io.topics import LAB_FRAME, WORLD_FRAME, sole_world_aligned_frame
 from ..vectors import xyzw_from_wxyz
-from .model import floating_base_removed
 from .packages import mesh_uris_to_files
 from .profile import SIDES, RobotProfile, load_profile
 
@@ -66,8 +65,9 @@ them and no ROS environment (``package://`` needs ``ROS_PACKAGE_PATH``, which a 
 
 
 def robot_description(robot: str | RobotProfile = "talos", meshes: str = "package") -> str:
-    """The URDF of a robot profile's robot, as its file has it, less a floating joint from a ``world`` link (the
-    frame tree puts the root link in the world).
+    """The URDF of a robot profile's robot as sit2stand reads it (``RobotProfile.urdf_text``: the file's, less a
+    floating joint from a ``world`` link, which the frame tree replaces, and brought to REP-103 where it is not, as
+    the joint states it goes with are).
 
     Args:
         robot: a robot profile (a packaged name, a file, or the profile).
@@ -79,7 +79,7 @@ def robot_description(robot: str | RobotProfile = "talos", meshes: str = "packag
     if meshes not in ("package", "file"):
         raise DescriptionError(f"meshes {meshes!r}: use 'package' or 'file'")
     profile = load_profile(robot)
-    text = floating_base_removed(profile.urdf.read_text())
+    text = profile.urdf_text()
     if meshes == "package":
         return text
     local = mesh_uris_to_files(text, profile.urdf)

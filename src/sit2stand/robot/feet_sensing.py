@@ -21,7 +21,25 @@ import pinocchio as pin
 from ..dynamics import G
 from ..errors import InputError
 from ..vectors import cross
-from .model import SIDES, PlantConfig
+from .model import SIDES, PlantConfig, compiled_robot
+
+
+def below_sensor(controller: pin.Model, cfg: PlantConfig, side: str) -> tuple[float, np.ndarray]:
+    """The mass [kg] hanging below a foot's sensor and its COM in the sensor's frame [m], as the controller models
+    it. A sensor at the ankle's last joint (the foot link is that joint's body: TALOS, G1) carries the joint's whole
+    body; one on a link welded further down (iCub's sole frame) carries that link and those welded below it (the
+    CAD model's: the identification keeps the feet's)."""
+    profile = cfg.profile
+    foot = controller.frames[controller.getFrameId(profile.foot_links[side], pin.FrameType.BODY)]
+    if foot.placement.isIdentity():
+        body = controller.inertias[foot.parentJoint]
+        return float(body.mass), np.array(body.lever)
+    cad, _ = compiled_robot(cfg, plant=False)
+    data = mujoco.MjData(cad)
+    mujoco.mj_forward(cad, data)
+    b = cad.body(profile.foot_links[side]).id
+    lever = data.xmat[b].reshape(3, 3).T @ (data.subtree_com[b] - data.xpos[b])
+    return float(cad.body_subtreemass[b]), lever
 
 
 @dataclass(frozen=True)
@@ -52,15 +70,15 @@ class FeetSensing:
         both = np.concatenate([um.ft_force_bias_n, um.ft_torque_bias_nm])
         adr = [(model.sensor_adr[model.sensor(f"force_{s}").id], model.sensor_adr[model.sensor(f"torque_{s}").id])
                for s in SIDES]
-        feet = [controller.inertias[controller.getJointId(cfg.profile.foot_joint(s))] for s in SIDES]
+        feet = [below_sensor(controller, cfg, s) for s in SIDES]
         return FeetSensing(
             np.array([[*range(f, f + 3), *range(t, t + 3)] for f, t in adr]),
             np.array([model.site(f"{k}_{s}").id for k in ("ft", "sole") for s in SIDES]),
             # what the sensor reads, from the wrench in its modelled axes: the transpose of its mounting's turn
             np.array([pin.exp3(np.asarray(um.ft_rotation_rad.get(s, np.zeros(3)), float)) for s in SIDES]),
             np.array([both + np.asarray(um.ft_bias.get(s, np.zeros(6)), float) for s in SIDES]),
-            np.outer([float(f.mass) * G for f in feet], (0.0, 0.0, 1.0)),
-            np.array([f.lever for f in feet]),
+            np.outer([mass * G for mass, _ in feet], (0.0, 0.0, 1.0)),
+            np.array([lever for _, lever in feet]),
             np.tile([cfg.ft_force_noise_n] * 3 + [cfg.ft_torque_noise_nm] * 3, len(SIDES)))
 
     @property

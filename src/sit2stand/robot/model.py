@@ -27,6 +27,7 @@ import yaml
 
 from ..data import DataFileNotFound, plant_path
 from ..errors import Sit2StandError
+from .meshes import readable_mesh_files
 from .packages import mesh_uris_to_files
 from .profile import SIDES, RobotProfile, load_profile, profile_of
 
@@ -62,22 +63,44 @@ MUJOCO_COMPILER = ('<mujoco><compiler strippath="false" fusestatic="false" disca
 """Keep the sole and F/T frames (fusestatic would drop them) and meshes of the same file name in two folders."""
 
 
-def floating_base_removed(urdf: str) -> str:
-    """The URDF without a ``world`` link and the floating joint that hangs the robot from it (G1's file has them;
-    sit2stand adds its own free joint, and the root link is the profile's)."""
-    floating = re.search(r'<joint\b[^>]*type="floating"[^>]*>.*?</joint>', urdf, flags=re.S)
-    if floating is None:
-        return urdf
-    parent = re.search(r'<parent\s+link="([^"]+)"', floating.group(0))
-    urdf = urdf.replace(floating.group(0), "")
-    if parent is not None:
-        urdf = re.sub(rf'<link\s+name="{re.escape(parent.group(1))}"\s*(/>|>\s*</link>)', "", urdf)
-    return urdf
+POINT_MASS_RADIUS_M = 0.01
+"""A link whose URDF inertia MuJoCo refuses gets that of a solid ball of this radius about its centre of mass, 0.4 m
+r^2 on each axis (0.75 kg: 3e-5 kg m^2): a point mass moved by a joint, or moments written with rounding errors (a
+negative one, products of inertia about zero moments), as iCub's hip and ankle links have. MuJoCo takes a zero
+inertia on a link welded to its parent (TALOS's sensor frames), which is left as it is."""
+_INERTIA = re.compile(r'<inertia\b[^>]*/>')
+_INERTIA_VALUE = re.compile(r'\b(i[xyz]{2})\s*=\s*"([^"]*)"')
+
+
+def point_masses_given_inertia(urdf: str) -> str:
+    """The URDF with each link inertia that MuJoCo would refuse (see :data:`POINT_MASS_RADIUS_M`) given a small
+    ball's; every other one unchanged, character for character."""
+    moved = set(re.findall(r'<joint\b[^>]*type="(?!fixed)[^"]*"[^>]*>.*?<child\s+link="([^"]+)"', urdf, flags=re.S))
+
+    def fixed(link: re.Match) -> str:
+        block = link.group(0)
+        tensor, mass = _INERTIA.search(block), re.search(r'<mass\s+value="([^"]+)"', block)
+        if tensor is None or mass is None:
+            return block
+        v = {k: float(x) for k, x in _INERTIA_VALUE.findall(tensor.group(0))}
+        m = np.array([[v.get("ixx", 0), v.get("ixy", 0), v.get("ixz", 0)],
+                      [v.get("ixy", 0), v.get("iyy", 0), v.get("iyz", 0)],
+                      [v.get("ixz", 0), v.get("iyz", 0), v.get("izz", 0)]])
+        least = np.linalg.eigvalsh(m).min()
+        products = bool(m[0, 1] or m[0, 2] or m[1, 2])
+        if least > 1e-12 or (least == 0.0 and not products and link.group(1) not in moved):
+            return block
+        i = max(0.4 * float(mass.group(1)) * POINT_MASS_RADIUS_M ** 2, 1e-9)
+        return block.replace(tensor.group(0), f'<inertia ixx="{i:.6g}" ixy="0" ixz="0" iyy="{i:.6g}" iyz="0" '
+                                              f'izz="{i:.6g}"/>')
+    return re.sub(r'<link\s+name="([^"]+)"\s*>.*?</link>', fixed, urdf, flags=re.S)
 
 
 def urdf_for_mujoco(profile: RobotProfile) -> str:
-    """The profile's URDF with absolute mesh paths, no floating base and the MuJoCo compiler options it needs."""
-    text = floating_base_removed(mesh_uris_to_files(profile.urdf.read_text(), profile.urdf))
+    """The profile's URDF as sit2stand reads it (:meth:`RobotProfile.urdf_text`) with absolute mesh paths (COLLADA
+    ones converted: :mod:`~sit2stand.robot.meshes`) and the MuJoCo compiler options it needs."""
+    text = readable_mesh_files(mesh_uris_to_files(profile.urdf_text(), profile.urdf))
+    text = point_masses_given_inertia(text)
     return re.sub(r"(<robot\b[^>]*>)", r"\1" + MUJOCO_COMPILER, text, count=1)
 
 
@@ -201,8 +224,12 @@ class PlantConfig:
 
     @property
     def seated(self) -> dict[str, float]:
-        """The seated posture: joint glob -> angle [rad] (the plant file's, else the profile's)."""
-        return self.seated_posture if self.seated_posture is not None else self.profile.seated_posture
+        """The seated posture: joint glob -> angle [rad] (the plant file's, else the profile's), in sit2stand's sense
+        (both files give the URDF's: :mod:`~sit2stand.robot.conventions`)."""
+        if self.seated_posture is None:
+            return self.profile.seated_posture
+        return self.profile.in_own_sense(self.seated_posture) if self.profile.conventions.changed else \
+            self.seated_posture
 
     def chair(self, dimension: str) -> float:
         """The chair's ``front_gap_m``, ``depth_m`` or ``width_m`` [m]: the plant file's, else the profile's."""
@@ -437,25 +464,33 @@ def controller_model(cfg: PlantConfig | None = None, link_parameters: dict | Non
         Path(path).unlink(missing_ok=True)
     model.name = profile.name               # profile_of(model) finds the profile by it
     for side in SIDES:
-        jid = model.getJointId(profile.foot_joint(side))
-        below = np.array([0, 0, -profile.sole.below_foot_m])
-        model.addFrame(pin.Frame(f"sole_{side}", jid, pin.SE3(np.eye(3), below), pin.FrameType.OP_FRAME))
-        model.addFrame(pin.Frame(f"ft_{side}", jid, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
+        _place_foot_frames(model, profile, side)
     if link_parameters:
         apply_link_parameters(model, link_parameters)
     return model
 
 
-SEAT_POINT_BEHIND_HIPS_M = 0.05
-"""Where a seat supports the pelvis: on the seat surface, this far behind the hip joints (the ischial tuberosities'
-place on a human; on TALOS the lowest points of the pelvis and thighs)."""
+def _place_foot_frames(model: pin.Model, profile: RobotProfile, side: str) -> None:
+    """The ``sole_{side}`` and ``ft_{side}`` frames on the foot link's frame, as the plant's sites are: the ankle's
+    own (TALOS, G1) or one welded below it (iCub's sole frame). The MJCF's sites come in as frames already, but
+    Pinocchio 4.0's MJCF parser put the sites of iCub's welded sole body 5.5 cm from where MuJoCo has them: where it
+    differs, the site frame is put where its body says."""
+    foot = model.frames[model.getFrameId(profile.foot_links[side], pin.FrameType.BODY)]
+    below = pin.SE3(np.eye(3), np.array([0.0, 0.0, -profile.sole.below_foot_m]))
+    for name, placement in ((f"sole_{side}", foot.placement * below), (f"ft_{side}", foot.placement)):
+        if not model.existFrame(name):
+            model.addFrame(pin.Frame(name, foot.parentJoint, placement, pin.FrameType.OP_FRAME))
+            continue
+        frame = model.frames[model.getFrameId(name)]
+        if frame.parentJoint != foot.parentJoint or not frame.placement.isApprox(placement, 1e-9):
+            frame.parentJoint, frame.placement = foot.parentJoint, placement
 
 
 def add_seat_frame(model, seat_top_z_m: float, base_z_m: float) -> int:
     """Add the frame ``seat`` on the pelvis where a seat of top height ``seat_top_z_m`` supports it when the base is
-    at height ``base_z_m`` (upright); returns its id."""
+    at height ``base_z_m`` (upright), ``seat_point_x_m`` along the base's x (the robot profile's); returns its id."""
     return model.addFrame(pin.Frame("seat", 1, pin.SE3(np.eye(3), np.array(
-        [-SEAT_POINT_BEHIND_HIPS_M, 0.0, seat_top_z_m - base_z_m])), pin.FrameType.OP_FRAME))
+        [profile_of(model).seat_point_x_m, 0.0, seat_top_z_m - base_z_m])), pin.FrameType.OP_FRAME))
 
 
 def actuated_joint_names(model) -> list[str]:

@@ -19,6 +19,7 @@ Pinocchio model built by :func:`sit2stand.robot.model.controller_model` (its ``n
 
 from __future__ import annotations
 
+import dataclasses
 import fnmatch
 import os
 import re
@@ -31,6 +32,7 @@ import yaml
 
 from ..data import folder as data_folder
 from ..errors import Sit2StandError
+from .conventions import ConventionError, Conventions, brought_to_conventions, floating_base_removed
 from .packages import resolve_uri
 
 SIDES = ("left", "right")
@@ -44,6 +46,11 @@ TRUNK_ROLES = ("pitch", "yaw", "roll")
 CHAIR_FIELDS = ("front_gap_m", "depth_m", "width_m")
 MARKER_GROUPS = ("pelvis", "trunk", "head", "arm", "thigh", "shank", "foot")
 PROFILE_SUFFIXES = (".yaml", ".yml")
+DEFAULT_SEAT_POINT_X_M = -0.05
+"""Where a seat supports the seated robot unless its profile says (``seat_point_x_m``): on the seat's surface, this
+far along the base's x from its origin (5 cm behind the hip joints: the ischial tuberosities' place on a human; on
+TALOS and G1 the lowest points of the pelvis and thighs). The whole-body controller and the plan take the seat's
+force there; a robot that sits on its thighs alone, ahead of its hips (iCub), says so."""
 
 
 class ProfileError(Sit2StandError, ValueError):
@@ -93,6 +100,7 @@ class RobotProfile:
     seat_links: tuple[str, ...]                # link globs: what rests on the seat (its lowest point sets its height)
     seated_posture: dict[str, float]           # joint glob -> rad
     fall_pelvis_height_m: float
+    seat_point_x_m: float                      # where the seat supports the robot, along the base's x [m]
     chair: dict[str, float]                    # front_gap_m (behind the heels), depth_m, width_m
     marker_links: dict[str, tuple[str, ...]]   # marker group -> joint globs ({side}: the marker's side)
     posture_ranges: PostureRanges
@@ -103,6 +111,21 @@ class RobotProfile:
     plants: dict[str, str] = field(default_factory=dict)   # generic plant name -> the packaged plant of this robot
     _joints: dict[str, tuple[str, str]] | None = field(default=None, repr=False)
     _efforts: dict[str, float] = field(default_factory=dict, repr=False)   # moving joint -> URDF effort [N m]
+    conventions: Conventions = field(default_factory=Conventions)   # how its URDF was brought to REP-103
+    _urdf_text: str | None = field(default=None, repr=False)
+
+    def urdf_text(self) -> str:
+        """The URDF as sit2stand reads it: no floating base, its base frame and sagittal joints brought to the
+        conventions (:mod:`~sit2stand.robot.conventions`; the file's text where they hold already)."""
+        if self._urdf_text is None:
+            self._urdf_text = floating_base_removed(self.urdf.read_text())
+        return self._urdf_text
+
+    def in_own_sense(self, pattern_values: dict[str, float]) -> dict[str, float]:
+        """Joint globs -> angles [rad] of the URDF's sense, as joint -> angle in sit2stand's (later globs win)."""
+        moving = sorted(self.moving_joints())
+        return {name: self.conventions.angle(name, float(value))
+                for pattern, value in pattern_values.items() for name in fnmatch.filter(moving, pattern)}
 
     # -- names by role ----------------------------------------------------------------------------------------
     def leg(self, side: str, role: str) -> str:
@@ -255,6 +278,7 @@ def load_profile(name_or_path: str | os.PathLike | RobotProfile = "talos") -> Ro
         raise ProfileError(f"{path}: a robot profile is a YAML mapping of fields")
     profile = _parse(doc, path)
     check_against_urdf(profile)
+    _bring_to_conventions(profile)
     known = _LOADED.get(profile.name)
     if known is not None and Path(known.source).resolve() != path.resolve():
         raise ProfileError(f"{path}: a robot named {profile.name!r} is loaded already from {known.source}; "
@@ -273,6 +297,27 @@ def profile_of(model) -> RobotProfile:
     except ProfileError:
         raise ProfileError(f"model {name!r} was not built from a robot profile loaded here "
                            f"(sit2stand.robot.model.controller_model names its model after its profile)") from None
+
+
+def _bring_to_conventions(profile: RobotProfile) -> None:
+    """The profile's URDF text and its angles in sit2stand's conventions (:mod:`~sit2stand.robot.conventions`).
+
+    Raises:
+        ProfileError: naming the file and the field, where the URDF cannot be brought to them.
+    """
+    sagittal = {profile.leg(s, r): f"legs.{r}" for s in SIDES for r in SAGITTAL_LEG_ROLES}
+    sagittal[profile.trunk_pitch] = "trunk.pitch"
+    try:
+        text, conventions = brought_to_conventions(profile.urdf_text(), profile.foot_links, sagittal)
+    except ConventionError as err:
+        raise ProfileError(f"{profile.source}: field {err.field!r}: {err} (URDF {profile.urdf.name})") from None
+    if not conventions.changed:
+        return
+    profile.conventions, profile._urdf_text = conventions, text
+    profile.seated_posture = profile.in_own_sense(profile.seated_posture)
+    ankle = profile.leg("left", "ankle_pitch")
+    profile.posture_ranges = dataclasses.replace(
+        profile.posture_ranges, ankle=conventions.interval(ankle, *profile.posture_ranges.ankle))
 
 
 def check_against_urdf(profile: RobotProfile) -> None:
@@ -402,7 +447,8 @@ def _parse(doc: dict, path: Path) -> RobotProfile:
         sole=Sole(half, f.number("sole.centre_x_m"), f.number("sole.below_foot_m")), trunk=trunk,
         upper_limbs=f.names("upper_limbs"), colliding_links=f.names("colliding_links"),
         seat_links=f.names("seat_links"), seated_posture={str(k): float(v) for k, v in seated.items()},
-        fall_pelvis_height_m=fall, chair={k: f.number(f"chair.{k}") for k in CHAIR_FIELDS}, marker_links=markers,
+        fall_pelvis_height_m=fall, seat_point_x_m=f.number("seat_point_x_m", default=DEFAULT_SEAT_POINT_X_M),
+        chair={k: f.number(f"chair.{k}") for k in CHAIR_FIELDS}, marker_links=markers,
         posture_ranges=ranges, title=str(f.get("title", default="")),
         sensors=str(f.get("sensors", default="")), gap=dict(f.get("gap", dict, default={})), sides=side_names,
         plants={str(k): str(v) for k, v in f.get("plants", dict, default={}).items()})
@@ -412,8 +458,8 @@ def _parse(doc: dict, path: Path) -> RobotProfile:
 
 
 _FIELDS = ("name", "title", "urdf", "root_link", "sides", "legs", "foot_link", "sole", "trunk", "upper_limbs",
-           "colliding_links", "seat_links", "seated_posture", "fall_pelvis_height_m", "chair", "marker_links",
-           "posture_ranges", "sensors", "gap", "plants")
+           "colliding_links", "seat_links", "seated_posture", "fall_pelvis_height_m", "seat_point_x_m", "chair",
+           "marker_links", "posture_ranges", "sensors", "gap", "plants")
 
 
 def _resolve_urdf(f: _Fields) -> Path:

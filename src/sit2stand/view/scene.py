@@ -32,6 +32,7 @@ from ..io.topics import (CHAIR_PLATE_TOPIC, FEET_PLATE_TOPIC, HUMAN_COM_TOPIC, H
                          ROBOT_PLANNED_ZMP_TOPIC)
 from ..retarget.export import StateSeries, read_states, resample, robot_of
 from ..retarget.compare import flexion_deg, matched_times
+from ..robot.meshes import readable_mesh
 from ..robot.model import SIDES, PlantConfig, sole_corners_local
 from ..robot.plant import Plant
 from ..robot.packages import package_share
@@ -300,9 +301,9 @@ def _robot_motion(states: StateSeries, robot: str | None) -> tuple[RobotMotion, 
     """The robot posed at :data:`VIEW_RATE_HZ` from its sensed states, and its chair."""
     profile = robot_of(states.joint_names, robot)
     t, s = resample(states, VIEW_RATE_HZ)
-    model = pin.buildModelFromUrdf(str(profile.urdf), pin.JointModelFreeFlyer())
-    visuals = pin.buildGeomFromUrdf(model, str(profile.urdf), pin.GeometryType.VISUAL,
-                                    package_dirs=_package_dirs())
+    urdf = profile.urdf_text()            # the joint states' sense (robot.conventions)
+    model = pin.buildModelFromXML(urdf, pin.JointModelFreeFlyer())
+    visuals = pin.buildGeomFromUrdfString(model, urdf, pin.GeometryType.VISUAL, package_dirs=_package_dirs())
     data, gdata = model.createData(), visuals.createData()
     idx = {model.names[j]: model.joints[j].idx_q for j in range(2, model.njoints)}
     cols = [idx[n] for n in s.joint_names if n in idx]
@@ -322,8 +323,8 @@ def _robot_motion(states: StateSeries, robot: str | None) -> tuple[RobotMotion, 
         place[:, k] = [g.homogeneous for g in gdata.oMg]
         com[k] = pin.centerOfMass(model, data, q, False)
         soles[k] = [[data.oMf[f].act(c) for c in sole_local] for f in foot]
-    meshes = [Visual(g.name, Path(g.meshPath), np.asarray(g.meshScale, float), np.asarray(g.meshColor, float),
-                     place[i, :, :3, 3], place[i, :, :3, :3])
+    meshes = [Visual(g.name, readable_mesh(Path(g.meshPath)), np.asarray(g.meshScale, float),
+                     np.asarray(g.meshColor, float), place[i, :, :3, 3], place[i, :, :3, :3])
               for i, g in enumerate(visuals.geometryObjects) if g.meshPath and Path(g.meshPath).is_file()]
     angles = flexion_deg(s.joint_names, s.q, profile.sagittal_flexion())
     return RobotMotion(profile, t, meshes, com, soles, angles), _chair(robot or profile.name, profile)
