@@ -18,9 +18,9 @@ from .calibration import MarkerMap
 @dataclass(frozen=True)
 class ComMap:
     """The forward COM map (Mistry et al. 2010 map the COM relative to the left foot): the human COM's x relative to
-    its left ankle, scaled by the leg-length ratio ``scale`` (robot / human), through a monotone piecewise-linear map
-    with knots ``knots_h`` -> ``knots_r`` (seated COM, heel, ankle) to the robot's x relative to its left ankle [m];
-    one to one beyond the ankle."""
+    its left ankle, scaled by the leg-length ratio ``scale`` (robot / human), through a monotone (non-decreasing)
+    piecewise-linear map with knots ``knots_h`` -> ``knots_r`` (seated COM, heel, ankle) to the robot's x relative to
+    its left ankle [m]; one to one beyond the ankle."""
 
     scale: float
     human_ankle_x_m: float

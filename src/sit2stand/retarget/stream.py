@@ -218,6 +218,9 @@ class Retargeter:
             float(ax - SEATED_COM_BEHIND_ANKLE_THIGHS * thigh)
         h = [scale * (seated_com_x - ax), scale * (heel[0] - ax), 0.0]
         r = [self.com_seated[0] - rx, self.robot.heel_x_m + self.cfg.seat_off_fraction * foot - rx, 0.0]
+        # a seat-off knot ahead of the ankle (an ankle near the heel: iCub's is 3 cm from it, and 30 % of its foot
+        # 1.7 cm ahead of it) is held until the human's COM passes its ankle: the map stays monotone
+        r[2] = max(r[2], r[1])
         if not (h[0] < h[1] < h[2]) or not (r[0] < r[1] <= r[2] + 0.05):
             raise InputError(f"calibration frame: the human's seated COM ({seated_com_x:.3f} m), heel "
                              f"({heel[0]:.3f} m) and ankle ({ax:.3f} m) are not in that order along x")
