@@ -26,7 +26,7 @@ IMPORT_TO_DIST = {"numpy": "numpy", "scipy": "scipy", "matplotlib": "matplotlib"
                   "rosbags": "rosbags", "mcap": "mcap", "rclpy": "ros-jazzy-rclpy",
                   "zstandard": "mcap", "lz4": "mcap",   # mcap's own dependencies (MCAP chunk compressions)
                   "qtm_rt": "qtm-rt", "natnet": "natnet", "foxglove": "foxglove-sdk", "rerun": "rerun-sdk",
-                  "ray": "ray", "pandas": "pandas",
+                  "ray": "ray", "pandas": "pandas", "collada": "pycollada",
                   "crocoddyl": "crocoddyl",
                   "mink": "mink", "pink": "pin-pink"}     # bench.ik_rivals: the bench-ik extra, in its own venv
 # ROS interface packages and where they come from on PyPI (sit2stand_msgs and tf2_msgs: msgs/, built with colcon)
@@ -35,7 +35,7 @@ COMMON_INTERFACES = {"std_msgs", "std_srvs", "sensor_msgs", "geometry_msgs", "tr
                      "visualization_msgs"}
 RUNTIME_DISTS = {"ros-jazzy-rclpy", "ros-jazzy-common-interfaces", "ros-jazzy-rmw-fastrtps-cpp", "rosbags", "mcap",
                  "ezc3d", "pin", "proxsuite", "daqp", "mujoco", "example-robot-data", "numpy", "scipy", "matplotlib",
-                 "pyyaml", "qtm-rt", "natnet", "foxglove-sdk"}
+                 "pyyaml", "qtm-rt", "natnet", "foxglove-sdk", "pycollada"}
 
 
 def _dist_name(requirement: str) -> str:

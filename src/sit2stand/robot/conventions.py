@@ -32,6 +32,8 @@ from ..errors import Sit2StandError
 AXIS_TOLERANCE = 0.9
 """A sagittal joint's axis must have at least this component along y (either sense) in the neutral pose."""
 QUARTER_TURN_SNAP_RAD = math.radians(2.0)
+"""A base turn this close to a quarter turn is that quarter turn: files are drawn at right angles, their feet may be
+placed a little apart."""
 
 
 @dataclass(frozen=True)
