@@ -104,7 +104,7 @@ def test_a_copied_profile_of_the_same_robot_loads_by_path(tmp_path):
     ({"legs.knee": None}, "legs", "no knee"),
     ({"seated_posture": {"*_knee_joint": 3.2}}, "seated_posture", "left_knee_joint at 3.2 rad is outside its limits"),
     ({"foot_link": "{side}_foot"}, "foot_link", "'left_foot' is not a link of the URDF"),
-    ({"trunk": {"yaw": "waist_yaw_joint"}}, "trunk", "pitch required"),
+    ({"trunk": {"bend": "waist_pitch_joint"}}, "trunk", "names the trunk's joints by role (pitch, yaw, roll)"),
     ({"colliding_links": ["*_shin_link"]}, "colliding_links", "'*_shin_link' matches nothing"),
     ({"sole.half_size_m": [0.09, 0.035]}, "sole.half_size_m", "expected 3 numbers"),
     ({"urdf": "nowhere.urdf"}, "urdf", "no such file"),

@@ -40,7 +40,7 @@ class Places:
     leg_pitch_joints: tuple[str, ...]
     bias_joints: tuple[str, ...]
     leg_length_links: tuple[str, ...]       # thigh and shank links, one side ({side}: "left"/"right"/"*" below)
-    trunk_pitch: str
+    trunk_pitch: str                        # the trunk's pitch joint, or the left hip's where the trunk has none
 
 
 def places(robot: str = DEFAULT_ROBOT) -> Places:
@@ -48,10 +48,11 @@ def places(robot: str = DEFAULT_ROBOT) -> Places:
     profile = load_profile(robot)
     leg_pitch = tuple(profile.leg(s, r) for s in SIDES for r in ("hip_pitch", "knee", "ankle_pitch"))
     moving = tuple(profile.gap.get("moving_joints", ()))
-    return Places(tuple(profile.gap.get("mass_links", ())), moving, (profile.trunk_pitch,) + leg_pitch, leg_pitch,
+    trunk = (profile.trunk_pitch,) if profile.trunk_pitch else ()
+    return Places(tuple(profile.gap.get("mass_links", ())), moving, trunk + leg_pitch, leg_pitch,
                   moving + tuple(profile.gap.get("still_joints", ())),
                   tuple(profile.child_link(profile.leg("left", r)) for r in ("knee", "ankle_pitch")),
-                  profile.trunk_pitch)
+                  profile.trunk_pitch or profile.leg("left", "hip_pitch"))
 
 
 @dataclass

@@ -87,8 +87,9 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
     targets = [data.oMf[f].copy() for f in soles]
     corners = sole_corners_world(model, data)[:, :2]
     profile = profile_of(model)
-    hip, knee, ankle = (data.oMi[model.getJointId(profile.leg("left", role))].translation
-                        for role in ("hip_pitch", "knee", "ankle_roll"))
+    hip, knee, ankle = (data.oMi[model.getJointId(joint)].translation
+                        for joint in (profile.leg("left", "hip_pitch"), profile.leg("left", "knee"),
+                                      profile.foot_joint("left")))
     ankle_floor = targets[0].translation.copy()
     return RobotSetup(model, list(model.names[2:]), q, soles, targets, support_polygon(corners),
                       float(corners[:, 0].min()), float(corners[:, 0].max()), ankle_floor,

@@ -71,13 +71,19 @@ class RobotCheck:
                 f"seated: pelvis {self.seated_pelvis_m:.3f} m on a {self.seat_height_m:.3f} m chair; "
                 + ("stays seated" if self.sits else f"does not stay seated (moved {self.seated_drift_m:.3f} m)"),
                 f"seat-off (COM {100 * SEAT_OFF_COM_FRACTION:.0f} % along the feet), static torques: knee "
-                f"{self.knee_torque_nm:.0f} of {self.knee_limit_nm:.0f} N m ({100 * self.knee_share:.0f} %), trunk "
-                f"pitch {self.trunk_torque_nm:.0f} of {self.trunk_limit_nm:.0f} N m ({100 * self.trunk_share:.0f} %)",
+                f"{self.knee_torque_nm:.0f} of {self.knee_limit_nm:.0f} N m ({100 * self.knee_share:.0f} %), "
+                + (f"trunk pitch {self.trunk_torque_nm:.0f} of {self.trunk_limit_nm:.0f} N m "
+                   f"({100 * self.trunk_share:.0f} %)" if np.isfinite(self.trunk_limit_nm) else
+                   "no trunk pitch joint (the hips lean the trunk)"),
                 "ok: it can sit on its chair and has torque to rise" if self.ok else
                 "not ok: see the lines above"]
 
     def as_dict(self) -> dict:
-        return {**asdict(self), "ok": self.ok}
+        """The figures for JSON (a robot without a trunk pitch joint: its limit None)."""
+        out = {**asdict(self), "ok": self.ok}
+        if not np.isfinite(self.trunk_limit_nm):
+            out["trunk_limit_nm"] = None
+        return out
 
 
 def check_robot(robot: str, plant: str | None = None) -> RobotCheck:
@@ -95,12 +101,13 @@ def check_robot(robot: str, plant: str | None = None) -> RobotCheck:
     tau = seat_off_torques(sim)
     names = sim.joint_names
     knee = max(abs(tau[names.index(profile.leg(s, "knee"))]) for s in SIDES)
-    trunk = abs(tau[names.index(profile.trunk_pitch)])
+    trunk = abs(tau[names.index(profile.trunk_pitch)]) if profile.trunk_pitch else 0.0
     return RobotCheck(profile.name, str(profile.urdf), float(pin.computeTotalMass(model)), sim.n,
                       float(standing[2]), float(com[2]), float(sim.q_seated[2]), sim.seat_height_m,
                       drift < SEATED_DRIFT_M and not sim.fallen, drift, float(knee),
                       float(sim.joints.effort[names.index(profile.leg("left", "knee"))]), float(trunk),
-                      float(sim.joints.effort[names.index(profile.trunk_pitch)]), profile.conventions.lines())
+                      float(sim.joints.effort[names.index(profile.trunk_pitch)]) if profile.trunk_pitch else np.inf,
+                      profile.conventions.lines())
 
 
 def seat_off_torques(sim: Plant) -> np.ndarray:

@@ -62,7 +62,8 @@ def planar_segment_joints(model: pin.Model) -> dict[str, list[str]]:
         if role == "root":
             out[segment] = [model.names[1]]
         elif role == "trunk_pitch":
-            out[segment] = [profile.trunk_pitch]
+            if profile.trunk_pitch:              # without one, the torso is the pelvis's: one rigid body
+                out[segment] = [profile.trunk_pitch]
         else:
             out[segment] = [profile.leg(s, role) for s in SIDES]
     return out
@@ -99,7 +100,8 @@ def cad_planar_parameters(model: pin.Model) -> np.ndarray:
 def planar_joint_rows(model: pin.Model) -> list[str]:
     """The joints whose torques the planar model explains: the trunk pitch, then each leg's hip, knee, ankle pitch."""
     profile = profile_of(model)
-    return [profile.trunk_pitch] + [profile.leg(s, r) for s in SIDES for r in ("hip_pitch", "knee", "ankle_pitch")]
+    trunk = [profile.trunk_pitch] if profile.trunk_pitch else []
+    return trunk + [profile.leg(s, r) for s in SIDES for r in ("hip_pitch", "knee", "ankle_pitch")]
 
 
 class IdentificationError(Sit2StandError, ValueError):
@@ -293,7 +295,8 @@ def identify_full(data: PostureData, eval_fraction: float = 0.1, seed: int = 0, 
 
 
 def planar_columns(model: pin.Model, Y: np.ndarray) -> np.ndarray:
-    """(nv, 15) columns of the planar5 parameters (m, m c_x, m c_z per link; legs left = right)."""
+    """(nv, 15) columns of the planar5 parameters (m, m c_x, m c_z per link; legs left = right; 12 without a trunk
+    pitch joint)."""
     cols = []
     for joints in planar_segment_joints(model).values():
         for a in (0, 1, 3):     # m, m c_x, m c_z of the segment's frame body
@@ -321,12 +324,12 @@ def identify_planar5(data: PostureData, eval_fraction: float = 0.1, seed: int = 
     rank, cond = _check_data(data, train, A)
     w = np.tile(np.r_[[1 / wrench_sd] * 3, [1 / tau_sd_nm] * len(rows)], len(train))
     res = constrained_lsq(A, b, weights=w, prior=cad_planar_parameters(model),
-                          prior_weights=np.full(15, PLANAR_PRIOR_WEIGHT))
+                          prior_weights=np.full(A.shape[1], PLANAR_PRIOR_WEIGHT))
     theta = res.x
     # covariance of weighted least squares, from the training residual
     Aw = A * w[:, None]
     resid = Aw @ theta - b * w
-    dof = max(1, len(b) - 15)
+    dof = max(1, len(b) - A.shape[1])
     cov = np.linalg.pinv(Aw.T @ Aw) * (resid @ resid / dof)
 
     def predict(k: int) -> float:

@@ -14,6 +14,7 @@ import hashlib
 import os
 import re
 import tempfile
+import warnings
 from pathlib import Path
 
 import collada
@@ -72,6 +73,12 @@ def collada_triangles(path: Path) -> tuple[np.ndarray, np.ndarray]:
     Raises:
         MeshError: naming the file, when it cannot be parsed or holds no triangles.
     """
+    with warnings.catch_warnings():       # pycollada 0.9 builds numpy.matrix objects, which numpy warns about
+        warnings.simplefilter("ignore", PendingDeprecationWarning)
+        return _triangles(path)
+
+
+def _triangles(path: Path) -> tuple[np.ndarray, np.ndarray]:
     try:
         doc = collada.Collada(str(path), ignore=[collada.common.DaeUnsupportedError,
                                                  collada.common.DaeBrokenRefError])

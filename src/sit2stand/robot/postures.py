@@ -59,7 +59,7 @@ class PostureSample:
 
 def _set_leg(plant: Plant, q: np.ndarray, hip: float, knee: float, ankle: float, torso: float) -> np.ndarray:
     """``q`` with both legs' sagittal joints at ``hip``, ``knee``, ``ankle``, the trunk pitch at ``torso`` [rad]
-    and the legs' and trunk's lateral joints at zero."""
+    (a robot without one: its trunk is leaned by the hips alone) and the legs' and trunk's lateral joints at zero."""
     profile = plant.cfg.profile
     q = q.copy()
     at = lambda joint: plant.qadr[plant.joint_names.index(joint)]  # noqa: E731
@@ -68,7 +68,8 @@ def _set_leg(plant: Plant, q: np.ndarray, hip: float, knee: float, ankle: float,
             q[at(profile.leg(s, role))] = value
     for joint in profile.lateral_joints():
         q[at(joint)] = 0.0
-    q[at(profile.trunk_pitch)] = torso
+    if profile.trunk_pitch:
+        q[at(profile.trunk_pitch)] = torso
     return q
 
 

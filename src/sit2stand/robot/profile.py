@@ -2,7 +2,8 @@
 
 A profile (``sit2stand/data/robots/<name>.yaml``, or a user's file) names the robot's URDF and says, in the paper's
 terms, which of its joints and links play which part: per leg the hip yaw, roll and pitch, the knee, the ankle pitch
-and roll and the foot link; the trunk's pitch (and yaw, roll) joints; which joints are the upper limbs; the sole
+(and roll, where it has one) and the foot link; the trunk's pitch, yaw and roll joints, those it has; which joints are
+the upper limbs; the sole
 box the feet stand on; which links touch the floor and the seat; the seated posture; the fall threshold; the links
 each marker group of the human may be fixed to; and the joint ranges of the identification's static postures. No
 code outside the profile files names a joint or a link of a particular robot.
@@ -42,6 +43,8 @@ LEG_ROLES = ("hip_yaw", "hip_roll", "hip_pitch", "knee", "ankle_pitch", "ankle_r
 negative angle and the knee with a positive one (REP-103), as TALOS and G1 do."""
 SAGITTAL_LEG_ROLES = ("hip_pitch", "knee", "ankle_pitch")
 LATERAL_LEG_ROLES = ("hip_yaw", "hip_roll", "ankle_roll")
+OPTIONAL_LEG_ROLES = ("ankle_roll",)
+"""A leg may lack these (Unitree H1's ankle only pitches): the foot then hangs on the ankle pitch."""
 TRUNK_ROLES = ("pitch", "yaw", "roll")
 CHAIR_FIELDS = ("front_gap_m", "depth_m", "width_m")
 MARKER_GROUPS = ("pelvis", "trunk", "head", "arm", "thigh", "shank", "foot")
@@ -94,7 +97,7 @@ class RobotProfile:
     legs: dict[str, dict[str, str]]            # side -> role -> joint
     foot_links: dict[str, str]                 # side -> link
     sole: Sole
-    trunk: dict[str, str]                      # role -> joint (pitch required)
+    trunk: dict[str, str]                      # role -> joint (those the robot has)
     upper_limbs: tuple[str, ...]               # joint globs
     colliding_links: tuple[str, ...]           # link globs: with the floor and the seat
     seat_links: tuple[str, ...]                # link globs: what rests on the seat (its lowest point sets its height)
@@ -133,22 +136,25 @@ class RobotProfile:
         return self.legs[side][role]
 
     def leg_joints(self, roles: tuple[str, ...] = LEG_ROLES) -> list[str]:
-        """Both legs' joints of ``roles``, left leg first."""
-        return [self.legs[s][r] for s in SIDES for r in roles]
+        """Both legs' joints of ``roles`` (those the legs have: :data:`OPTIONAL_LEG_ROLES`), left leg first."""
+        return [self.legs[s][r] for s in SIDES for r in roles if r in self.legs[s]]
 
     def foot_joint(self, side: str) -> str:
-        """The joint that carries the foot link (the ankle's last): the F/T sensor and the sole hang on it."""
-        return self.legs[side]["ankle_roll"]
+        """The joint that carries the foot link (the ankle's last: its roll, else its pitch): the F/T sensor and the
+        sole hang on it."""
+        return self.legs[side].get("ankle_roll") or self.legs[side]["ankle_pitch"]
 
     @property
-    def trunk_pitch(self) -> str:
-        return self.trunk["pitch"]
+    def trunk_pitch(self) -> str | None:
+        """The trunk's pitch joint; None for a robot whose trunk only turns (G1's 23-DoF waist: the hips lean it)."""
+        return self.trunk.get("pitch")
 
     def sagittal_flexion(self) -> dict[str, tuple[tuple[str, ...], float]]:
         """The sagittal flexions as :data:`sit2stand.human.skeleton.SAGITTAL_FLEXION` names them for the human:
         label -> (joints, sign that makes flexion positive: the trunk forward, hip and knee flexion, ankle
         dorsiflexion). Sagittal joints turn about +y (see :data:`LEG_ROLES`)."""
-        return {"trunk": ((self.trunk_pitch,), 1.0),
+        trunk = {"trunk": ((self.trunk_pitch,), 1.0)} if self.trunk_pitch else {}
+        return {**trunk,
                 "hip": (tuple(self.leg(s, "hip_pitch") for s in SIDES), -1.0),
                 "knee": (tuple(self.leg(s, "knee") for s in SIDES), 1.0),
                 "ankle": (tuple(self.leg(s, "ankle_pitch") for s in SIDES), -1.0)}
@@ -306,7 +312,8 @@ def _bring_to_conventions(profile: RobotProfile) -> None:
         ProfileError: naming the file and the field, where the URDF cannot be brought to them.
     """
     sagittal = {profile.leg(s, r): f"legs.{r}" for s in SIDES for r in SAGITTAL_LEG_ROLES}
-    sagittal[profile.trunk_pitch] = "trunk.pitch"
+    if profile.trunk_pitch:
+        sagittal[profile.trunk_pitch] = "trunk.pitch"
     try:
         text, conventions = brought_to_conventions(profile.urdf_text(), profile.foot_links, sagittal)
     except ConventionError as err:
@@ -416,13 +423,14 @@ def _parse(doc: dict, path: Path) -> RobotProfile:
     side_names = {s: str(f.get(f"sides.{s}", default=s)) for s in SIDES}
     per_side = lambda text: {s: text.replace("{side}", side_names[s]) for s in SIDES}  # noqa: E731
     legs_doc = f.get("legs", dict)
-    missing = [r for r in LEG_ROLES if r not in legs_doc]
+    missing = [r for r in LEG_ROLES if r not in legs_doc and r not in OPTIONAL_LEG_ROLES]
     if missing:
-        raise f.fail("legs", f"no {', '.join(missing)} (a leg names: {', '.join(LEG_ROLES)})")
-    legs = {s: {r: per_side(str(f.get(f"legs.{r}", str)))[s] for r in LEG_ROLES} for s in SIDES}
+        raise f.fail("legs", f"no {', '.join(missing)} (a leg names: {', '.join(LEG_ROLES)}; "
+                             f"{', '.join(OPTIONAL_LEG_ROLES)} where it has one)")
+    legs = {s: {r: per_side(str(f.get(f"legs.{r}", str)))[s] for r in LEG_ROLES if r in legs_doc} for s in SIDES}
     trunk = {r: str(v) for r, v in f.get("trunk", dict).items()}
-    if "pitch" not in trunk or set(trunk) - set(TRUNK_ROLES):
-        raise f.fail("trunk", f"names the trunk's joints by role ({', '.join(TRUNK_ROLES)}; pitch required)")
+    if set(trunk) - set(TRUNK_ROLES):
+        raise f.fail("trunk", f"names the trunk's joints by role ({', '.join(TRUNK_ROLES)}), those it has")
     arms = {str(k): tuple(f.numbers(f"posture_ranges.arms.{k}", 2)) for k in f.get("posture_ranges.arms", dict)}
     ranges = PostureRanges(f.number("posture_ranges.hip"), f.number("posture_ranges.knee"),
                            f.number("posture_ranges.trunk"), f.numbers("posture_ranges.ankle", 2), arms,
