@@ -76,6 +76,7 @@ def test_ankles_that_only_pitch_carry_the_foot_and_the_plan_is_made(no_ankle_rol
     assert "left_ankle_roll_joint" not in profile.lateral_joints()
     assert check_robot(str(no_ankle_roll)).ok
     out = tmp_path / "rt"
-    assert sit2stand(["retarget", str(ROOT / "bags" / "natural"), "--robot", str(no_ankle_roll), "--out", str(out)]) == 0
+    bag = str(ROOT / "bags" / "natural")
+    assert sit2stand(["retarget", bag, "--robot", str(no_ankle_roll), "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["robot_seat_off_frame"] is not None and summary["time_scale"] <= 1.1, summary
