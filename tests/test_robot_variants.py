@@ -69,8 +69,8 @@ def test_a_trunk_that_only_turns_leans_with_the_hips_and_stands_up(no_trunk_pitc
 
 
 def test_ankles_that_only_pitch_carry_the_foot_and_the_plan_is_made(no_ankle_roll, tmp_path):
-    """A leg without an ankle roll loads, sits and is planned for; simulated, it falls at the rise (a known gap:
-    the whole-body QP's torques chatter in double support with 5-DoF legs), so only the plan is asserted here."""
+    """A leg without an ankle roll loads, sits and is planned for; simulated, it falls at the rise (a known gap,
+    docs/robots.md "Fewer joints"), so only the plan is asserted here."""
     profile = load_profile(str(no_ankle_roll))
     assert "ankle_roll" not in profile.legs["left"] and profile.foot_joint("left") == "left_ankle_pitch_joint"
     assert "left_ankle_roll_joint" not in profile.lateral_joints()
