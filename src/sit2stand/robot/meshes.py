@@ -33,6 +33,17 @@ CONVERSION = 2
 """Mesh formats converted to OBJ (MuJoCo reads STL, OBJ and MSH; Rerun STL, OBJ, glTF and GLB)."""
 
 
+UNCOLOURED_RGBA = np.array([0.8, 0.8, 0.8, 1.0])
+"""How a mesh its URDF leaves transparent or black is shown (iCub's file colours every mesh black, which vanishes
+against the viewers' dark backgrounds)."""
+
+
+def shown_rgba(rgba) -> np.ndarray:
+    """A URDF mesh colour as the viewers show it: itself, or :data:`UNCOLOURED_RGBA` for a transparent or black one."""
+    rgba = np.clip(np.asarray(rgba, float), 0.0, 1.0)
+    return rgba if rgba[3] > 0 and rgba[:3].any() else UNCOLOURED_RGBA.copy()
+
+
 class MeshError(Sit2StandError, ValueError):
     """A mesh file that cannot be read or converted (the message names it)."""
 

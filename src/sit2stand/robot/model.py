@@ -27,7 +27,7 @@ import yaml
 
 from ..data import DataFileNotFound, plant_path
 from ..errors import Sit2StandError
-from .meshes import readable_mesh_files
+from .meshes import readable_mesh_files, shown_rgba
 from .packages import mesh_uris_to_files
 from .profile import SIDES, RobotProfile, load_profile, profile_of
 
@@ -319,6 +319,9 @@ def build_spec(cfg: PlantConfig, *, plant: bool) -> mujoco.MjSpec:
     _add_soles(spec, profile)
     root.add_site(name="pelvis", pos=[0, 0, 0])
     _add_contacts_and_floor(spec, cfg, profile)
+    for geom in spec.geoms:                # drawing only: a black mesh vanishes in the rendered frames
+        if geom.type == mujoco.mjtGeom.mjGEOM_MESH:
+            geom.rgba = shown_rgba(geom.rgba)
     if plant:
         _add_unmodeled(spec, cfg, names)
     return spec

@@ -33,6 +33,7 @@ import rerun.blueprint as rrb
 from rerun.experimental import ViewerClient
 
 from ..errors import Sit2StandError
+from ..robot.meshes import shown_rgba
 from .scene import PointSeries, Scene
 
 TIMELINE = "time"
@@ -87,11 +88,6 @@ def _time(t_s: np.ndarray) -> rr.TimeColumn:
     return rr.TimeColumn(TIMELINE, duration=np.asarray(t_s, float))
 
 
-UNCOLOURED = np.array([0.8, 0.8, 0.8, 1.0])
-"""A mesh the URDF leaves transparent or black (iCub's file colours all of them black) is drawn this light grey: black
-vanishes against the viewer's background."""
-
-
 def _log_robot(scene: Scene, rec: rr.RecordingStream) -> None:
     robot = scene.robot
     t = _time(robot.t_s)
@@ -101,7 +97,7 @@ def _log_robot(scene: Scene, rec: rr.RecordingStream) -> None:
                                                                             mat3x3=v.rotation), recording=rec)
         if not np.allclose(v.scale, 1.0):
             rec.log(f"{path}/mesh", rr.Transform3D(scale=v.scale), static=True)
-        rgba = np.clip(v.rgba, 0, 1) if v.rgba[3] > 0 and v.rgba[:3].any() else UNCOLOURED
+        rgba = shown_rgba(v.rgba)
         rec.log(f"{path}/mesh", rr.Asset3D(path=v.mesh, albedo_factor=(rgba * 255).astype(np.uint8)), static=True)
     rr.send_columns("/world/robot/com", indexes=[t], columns=rr.Points3D.columns(positions=robot.com), recording=rec)
     floor = robot.com * [1.0, 1.0, 0.0]
