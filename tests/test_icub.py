@@ -18,7 +18,8 @@ from sit2stand.cli import main as sit2stand
 from sit2stand.robot.conventions import floating_base_removed
 from sit2stand.robot.feet_sensing import below_sensor
 from sit2stand.robot.meshes import MeshError, collada_triangles, readable_mesh
-from sit2stand.robot.model import PlantConfig, controller_model, point_masses_given_inertia
+from sit2stand.robot.model import PlantConfig, controller_model
+from sit2stand.robot.mujoco_urdf import point_masses_given_inertia
 from sit2stand.robot.plant import Plant
 from sit2stand.robot.profile import ProfileError, load_profile
 
