@@ -35,7 +35,7 @@ from ..retarget.compare import flexion_deg, matched_times
 from ..robot.meshes import readable_mesh
 from ..robot.model import SIDES, PlantConfig, sole_corners_local
 from ..robot.plant import Plant
-from ..robot.packages import package_share
+from ..robot.packages import mesh_uris_to_files, package_share
 from ..robot.profile import RobotProfile
 
 VIEW_RATE_HZ = 50.0
@@ -301,7 +301,8 @@ def _robot_motion(states: StateSeries, robot: str | None) -> tuple[RobotMotion, 
     """The robot posed at :data:`VIEW_RATE_HZ` from its sensed states, and its chair."""
     profile = robot_of(states.joint_names, robot)
     t, s = resample(states, VIEW_RATE_HZ)
-    urdf = profile.urdf_text()            # the joint states' sense (robot.conventions)
+    # the joint states' sense (robot.conventions), its meshes by absolute path (a file's relative ones too)
+    urdf = mesh_uris_to_files(profile.urdf_text(), profile.urdf)
     model = pin.buildModelFromXML(urdf, pin.JointModelFreeFlyer())
     visuals = pin.buildGeomFromUrdfString(model, urdf, pin.GeometryType.VISUAL, package_dirs=_package_dirs())
     data, gdata = model.createData(), visuals.createData()
