@@ -221,7 +221,7 @@ class Retargeter:
         # a seat-off knot ahead of the ankle (an ankle near the heel: iCub's is 3 cm from it, and 30 % of its foot
         # 1.7 cm ahead of it) is held until the human's COM passes its ankle: the map stays monotone
         r[2] = max(r[2], r[1])
-        if not (h[0] < h[1] < h[2]) or not (r[0] < r[1] <= r[2] + 0.05):
+        if not (h[0] < h[1] < h[2]) or not r[0] < r[1]:
             raise InputError(f"calibration frame: the human's seated COM ({seated_com_x:.3f} m), heel "
                              f"({heel[0]:.3f} m) and ankle ({ax:.3f} m) are not in that order along x")
         weights = np.array([0.0 if n not in frames else self.cfg.weights.get(roles.group(n), 0.0) for n in names])

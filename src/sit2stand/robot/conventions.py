@@ -92,9 +92,13 @@ def floating_base_removed(urdf: str) -> str:
 def brought_to_conventions(urdf: str, feet: dict[str, str], sagittal: dict[str, str]) -> tuple[str, Conventions]:
     """``urdf`` (no floating base) in sit2stand's conventions, and what was changed; the text itself when nothing
     is. ``feet``: side -> foot link; ``sagittal``: joint -> the profile field that names it."""
-    yaw = _base_yaw(pin.buildModelFromXML(urdf), feet)
-    text = _turned(urdf, yaw) if yaw else urdf
-    flipped = _reversed_joints(pin.buildModelFromXML(text), sagittal)
+    model = pin.buildModelFromXML(urdf)
+    yaw = _base_yaw(model, feet)
+    text = urdf
+    if yaw:                          # the turned file is parsed again; one already in the conventions is not
+        text = _turned(urdf, yaw)
+        model = pin.buildModelFromXML(text)
+    flipped = _reversed_joints(model, sagittal)
     if flipped:
         text = _reversed(text, flipped)
     return text, Conventions(yaw, tuple(flipped))
