@@ -109,4 +109,9 @@ if ! stamp_ok package "$pkg_hash" || ! "$VPY" -c 'import sit2stand' 2>/dev/null;
   stamp_set package "$pkg_hash"
 fi
 
+# --- 6. The compiled IK kernels (sit2stand.native: C99, the host's cc; cached by a hash of the source) -------------
+# Built here once, not inside the first IK call; without a C compiler the IK keeps its NumPy path, and says so.
+"$VPY" -c 'import sys; from sit2stand import native; sys.exit(native.kernels() is None)' \
+  || say "no compiled IK kernels (no C compiler as \$CC or cc, or the build failed): the IK runs its NumPy path"
+
 say "ready in $(( $(date +%s) - t_start )) s: $VENV ($("$VPY" -c 'import sys; print(sys.version.split()[0])'))"

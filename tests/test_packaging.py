@@ -93,6 +93,7 @@ def test_the_wheel_declares_the_runtime_stack_scripts_and_data(wheel):
         for name in names(kind):
             assert f"sit2stand/data/{kind}/{name}.yaml" in files, f"{kind}/{name}.yaml is not in the wheel"
     assert "sit2stand/nodes/replayer_fastdds.xml" in files
+    assert "sit2stand/native/ik_kernels.c" in files, "the IK kernels' source, compiled on first use"
 
 
 def test_every_third_party_import_of_src_is_a_declared_dependency():

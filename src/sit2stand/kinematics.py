@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from . import native
+
 
 _CROSS_AT = [4, 5, 9, 11, 15, 16]
 """Entries of a point's (3, 6) row-major block [I | -[p]x] that hold p's coordinates ``_CROSS_FROM`` with
@@ -38,7 +40,9 @@ def _block_layout(m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarra
 class PointSet:
     """What a set of M frames needs precomputed (:meth:`PointJacobians.point_set`): their distinct parent joints,
     where each frame's position lies in the product of the joints' placements with all offsets, the offsets, the
-    rows' support masks and the blocks [I | -[p]x] (M * 3, 6) whose p-entries are refilled per call."""
+    rows' support masks and the blocks [I | -[p]x] (M * 3, 6) whose p-entries are refilled per call; and for the
+    compiled kernel (:mod:`sit2stand.native`) each frame's row in ``joints``, its offset (M, 3) and each joint's
+    supporting tangent indices (``dofs[dof_start[j]:dof_start[j] + dof_count[j]]``)."""
 
     size: int
     joints: list[int]
@@ -49,6 +53,19 @@ class PointSet:
     fill: np.ndarray          # flat indices of the p-entries in ``blocks``
     source: np.ndarray        # flat indices into P (M, 3) that fill them
     sign: np.ndarray          # and their signs
+    joint_id: np.ndarray      # (M,) int32: each frame's parent joint (Pinocchio's index)
+    joint_row: np.ndarray     # (M,) int32: its place in ``joints``
+    offsets_m: np.ndarray     # (M, 3) offsets in the parent joints' frames [m]
+    dofs: np.ndarray          # int32, the joints' supporting tangent indices, one run per joint
+    dof_start: np.ndarray     # (len(joints),) int32
+    dof_count: np.ndarray     # (len(joints),) int32
+
+    @functools.cached_property
+    def kernel_block(self):
+        """The compiled kernel's view of the set (:class:`sit2stand.native.PointerBlock`): joint ids and rows,
+        offsets, dofs, their starts and counts."""
+        return native.PointerBlock(self.joint_id, self.joint_row, self.offsets_m, self.dofs, self.dof_start,
+                                   self.dof_count)
 
 
 class PointJacobians:
@@ -77,13 +94,9 @@ class PointJacobians:
         of frames (a marker lost or found) is then laid out from them in a few products."""
         known = self._frames.get(frame_id)
         if known is None:
-            model = self.model
-            frame = model.frames[frame_id]
-            mask = np.zeros(self.nv)
-            for j in model.supports[frame.parentJoint]:
-                if j > 0:
-                    mask[model.joints[j].idx_v:model.joints[j].idx_v + model.joints[j].nv] = 1.0
-            known = self._frames[frame_id] = (frame.parentJoint, np.array([*frame.placement.translation, 1.0]), mask)
+            frame = self.model.frames[frame_id]
+            known = self._frames[frame_id] = (frame.parentJoint, np.array([*frame.placement.translation, 1.0]),
+                                              self.joint_support_mask(frame.parentJoint))
         return known
 
     def point_set(self, frame_ids) -> PointSet:
@@ -103,8 +116,29 @@ class PointJacobians:
             offsets = np.array([offset for _, offset, _ in frames]).reshape(m, 4).T
             masks = np.repeat(np.array([mask for _, _, mask in frames]).reshape(m, self.nv), 3, axis=0)
             blocks, fill, source, sign = _block_layout(m)
-            layout = self._layouts[key] = PointSet(m, joints, take, offsets, masks, blocks.copy(), fill, source, sign)
+            supports = [np.flatnonzero(self.joint_support_mask(j)).astype(np.int32) for j in joints]
+            counts = np.array([len(s) for s in supports], np.int32)
+            layout = self._layouts[key] = PointSet(
+                m, joints, take, offsets, masks, blocks.copy(), fill, source, sign,
+                np.array([parent for parent, _, _ in frames], np.int32), column.astype(np.int32),
+                np.ascontiguousarray(offsets[:3].T), np.concatenate([np.zeros(0, np.int32), *supports]),
+                (np.cumsum(counts) - counts).astype(np.int32), counts)
         return layout
+
+    def joint_support_mask(self, joint: int) -> np.ndarray:
+        """(nv,) 1 on the velocity coordinates that move ``joint``'s frame."""
+        model = self.model
+        mask = np.zeros(self.nv)
+        for j in model.supports[joint]:
+            if j > 0:
+                mask[model.joints[j].idx_v:model.joints[j].idx_v + model.joints[j].nv] = 1.0
+        return mask
+
+    def placements(self, data: pin.Data, layout: PointSet) -> np.ndarray:
+        """The homogeneous world placements (len(joints), 4, 4) of the set's parent joints (after
+        ``pin.forwardKinematics``)."""
+        oMi = data.oMi.tolist()          # one call: indexing Pinocchio's vector costs ~0.6 us per element
+        return np.array([oMi[j].homogeneous for j in layout.joints])
 
     def positions(self, data: pin.Data, frame_ids) -> np.ndarray:
         """World positions (M, 3) [m] of ``frame_ids`` (or their :class:`PointSet`), from their joints' placements
@@ -113,9 +147,7 @@ class PointJacobians:
         layout = self.point_set(frame_ids)
         if not layout.size:
             return np.zeros((0, 3))
-        oMi = data.oMi.tolist()          # one call: indexing Pinocchio's vector costs ~0.6 us per element
-        X = np.array([oMi[j].homogeneous for j in layout.joints])
-        return (X.reshape(-1, 4) @ layout.offsets).take(layout.take)
+        return (self.placements(data, layout).reshape(-1, 4) @ layout.offsets).take(layout.take)
 
     def __call__(self, data: pin.Data, frame_ids, row_weights: np.ndarray | None = None
                  ) -> tuple[np.ndarray, np.ndarray]:

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import daqp
 import numpy as np
 import proxsuite   # at import (~0.1 s), not inside a live node's first solve
+from . import native
 from .errors import InputError
 
 
@@ -119,15 +120,22 @@ class WarmQp:
         self._models: dict[tuple[int, int, int], daqp.Model] = {}     # one workspace per shape
         self._sense: dict[tuple[int, int, int], np.ndarray] = {}
         self._last: tuple | None = None     # H, g, rows, x, multipliers of the last solved problem
+        lib = native.kernels()
+        self._native = None if lib is None else native.ActiveSetQp(lib)
 
     def solve(self, H: np.ndarray, g: np.ndarray, A: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray,
               C: np.ndarray | None = None, d: np.ndarray | None = None) -> np.ndarray | None:
         n = len(g)
         key = (n, len(b), 0 if C is None else len(d))
+        rows = A if C is None else np.vstack((A, C))
+        if self._native is not None:
+            solved = self._native.solve(H, g, A, b, lo, hi, C, d)
+            if solved is not None:
+                self._last = (H, g, rows, *solved)
+                return solved[0]
         if C is None:
-            rows, upper, lower = A, np.concatenate((hi, b)), np.concatenate((lo, b))
+            upper, lower = np.concatenate((hi, b)), np.concatenate((lo, b))
         else:
-            rows = np.vstack((A, C))
             upper, lower = np.concatenate((hi, b, np.full(len(d), 1e30))), np.concatenate((lo, b, d))
         model = self._models.get(key)
         if model is None:
@@ -150,6 +158,8 @@ class WarmQp:
             self._last = None
             return None
         self._last = (H, g, rows, x, info["lam"])
+        if self._native is not None:
+            self._native.remember(x, info["lam"], *key[1:])
         return x
 
     def dual_residual(self) -> float:

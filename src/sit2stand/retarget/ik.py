@@ -56,6 +56,7 @@ from functools import cached_property
 import numpy as np
 import pinocchio as pin
 
+from .. import native
 from ..kinematics import PointJacobians, PointSet
 from ..optim import WarmQp
 from ..robot.profile import profile_of
@@ -226,6 +227,8 @@ class ComIk:
         self.box = JointBox.of(model, velocity_limit, dt)
         self._qp = WarmQp()
         self.points = PointJacobians(model)
+        self._native = native.MarkerTerms.of(self.data, self._diagonal)       # None: the NumPy paths
+        self._native_soles = native.SoleRows.of(model, self.data, self.soles, self.points.joint_support_mask)
         self.momentum_weight = momentum_weight
         self._weight_g = float(pin.computeTotalMass(model)) * 9.81
         self._L_prev: np.ndarray | None = None      # the previous frame's angular momentum [kg m^2/s]
@@ -316,12 +319,7 @@ class ComIk:
 
     def _soft_tasks(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, np.ndarray]:
         """Hessian and gradient of the markers, sum w ||J dq + e||^2 [m^2], and the posture prior, at q."""
-        nv = self.nv
-        P, Jw = self.points(self.data, f.points, f.root_weights)
-        Jw = Jw.reshape(-1, nv)
-        H = Jw.T @ Jw
-        g = Jw.T @ (f.root_weights * (P - f.targets).ravel())
-        H.flat[::nv + 1] += self._diagonal
+        H, g = self._marker_terms(f)
         g += self.mu * pin.difference(self.model, f.q_ref, q)      # mu is 0 on the base
         for i, angle, w in f.joint_targets:          # q's index of a 1-DoF joint is its tangent index + 1
             H[i, i] += w
@@ -336,6 +334,18 @@ class ComIk:
             g += self.momentum_weight * As.T @ e
         return H, g
 
+    def _marker_terms(self, f: _Frame) -> tuple[np.ndarray, np.ndarray]:
+        """The markers' Hessian J' W J plus the damping and posture diagonal, and their gradient J' W (p - t), at the
+        data's joint Jacobians: by the compiled kernel (:mod:`sit2stand.native`), else NumPy."""
+        nv, layout = self.nv, f.points
+        if self._native is None or not layout.size:
+            P, Jw = self.points(self.data, layout, f.root_weights)
+            Jw = Jw.reshape(-1, nv)
+            H = Jw.T @ Jw
+            H.flat[::nv + 1] += self._diagonal
+            return H, Jw.T @ (f.root_weights * (P - f.targets).ravel())
+        return self._native(layout, f.weights, f.targets)
+
     def _hard_rows(self, q: np.ndarray, f: _Frame, H: np.ndarray, g: np.ndarray, Jc: np.ndarray,
                    e_com: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Equality rows A dq = b: the feet (J_sole dq = -log(X_target^-1 X)), a held base x, z, then the COM's
@@ -344,10 +354,14 @@ class ComIk:
         base = f.base_xz is not None and f.base_weight is None
         n = n_soles + 2 * base
         A, b = np.empty((n + len(e_com), self.nv)), np.empty(n + len(e_com))
-        for k, (fid, target) in enumerate(zip(self.soles, f.sole_targets)):
-            b[6 * k:6 * k + 6] = pin.log6(target.actInv(pin.updateFramePlacement(self.model, data, fid))).vector
-            A[6 * k:6 * k + 6] = pin.getFrameJacobian(self.model, data, fid, pin.LOCAL)
-        np.negative(b[:n_soles], out=b[:n_soles])
+        feet = None if self._native_soles is None else self._native_soles(f.sole_targets)
+        if feet is not None:
+            A[:n_soles], b[:n_soles] = feet
+        else:
+            for k, (fid, target) in enumerate(zip(self.soles, f.sole_targets)):
+                b[6 * k:6 * k + 6] = pin.log6(target.actInv(pin.updateFramePlacement(self.model, data, fid))).vector
+                A[6 * k:6 * k + 6] = pin.getFrameJacobian(self.model, data, fid, pin.LOCAL)
+            np.negative(b[:n_soles], out=b[:n_soles])
         if f.base_xz is not None:     # base linear velocity is in the base frame: world rows are R[[0, 2]]
             rb = np.zeros((2, self.nv))
             rb[:, :3] = data.oMi[1].rotation[[0, 2]]

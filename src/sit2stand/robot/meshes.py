@@ -20,6 +20,7 @@ from pathlib import Path
 import collada
 import numpy as np
 
+from .. import cache
 from ..errors import Sit2StandError
 from .packages import MESH_FILENAME
 
@@ -50,8 +51,7 @@ class MeshError(Sit2StandError, ValueError):
 
 def cache_folder() -> Path:
     """Where converted meshes are kept."""
-    root = os.environ.get("SIT2STAND_CACHE") or Path.home() / ".cache" / "sit2stand"
-    return Path(root) / "meshes"
+    return cache.cache_folder("meshes")
 
 
 def readable_mesh(path: Path) -> Path:

@@ -1,0 +1,266 @@
+"""sit2stand's compiled kernels (``ik_kernels.c``, plain C99): the per-frame IK's marker terms and its QP.
+
+Built on first use with the host's C compiler (``$CC``, else ``cc``) into the cache folder (:mod:`sit2stand.cache`),
+named after a hash of the source, the flags, the compiler and the machine, and loaded with ctypes; ``make setup``
+builds it once. Where no compiler works, or ``SIT2STAND_NATIVE=0``, :func:`kernels` is None and the callers keep
+their NumPy path, which the tests hold the kernels to (``tests/test_native.py``).
+
+The calls pass small ints and one prepared pointer block per set of arrays (an array of the arrays' addresses,
+kept with them): a ctypes call converts each declared argument in Python, ~0.2 us apiece, which at the kernels'
+size would cost as much as their work.
+
+Why compiled: at the IK's size (38 unknowns, 31 markers, 15 equalities) a Gauss-Newton step is ~40 small NumPy and
+Pinocchio calls, and their per-call cost, not the arithmetic, set its time; the QP's setup in DAQP refactorises the
+whole problem from Python on every step.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import hashlib
+import logging
+import os
+import platform
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from ..cache import cache_folder
+
+SOURCE = Path(__file__).with_name("ik_kernels.c")
+FLAGS = ("-O3", "-std=c99", "-fopenmp-simd", "-shared", "-fPIC")
+"""``-fopenmp-simd``: the dot products' ``omp simd`` reductions run in SIMD lanes (no OpenMP runtime). No
+``-march=native``: the cache may be shared by hosts of different CPUs."""
+DISABLE = "SIT2STAND_NATIVE"
+"""Set to 0 to run the NumPy paths only."""
+
+_log = logging.getLogger(__name__)
+RESULT_TYPES = {"marker_terms": None, "sole_rows": ctypes.c_int, "box_qp": ctypes.c_int}
+"""The kernels and their return types; arguments go undeclared (ints, and ctypes pointers made once)."""
+
+
+def compiler() -> str | None:
+    """The C compiler's path, or None."""
+    return shutil.which(os.environ.get("CC") or "cc")
+
+
+def library_path(cc: str) -> Path:
+    """Where the kernels built by ``cc`` from today's source are kept."""
+    key = hashlib.sha1(SOURCE.read_bytes() + repr((FLAGS, cc, platform.machine())).encode()).hexdigest()[:16]
+    return cache_folder("native") / f"ik_kernels-{key}.so"
+
+
+def build(cc: str, out: Path) -> None:
+    """Compile the kernels to ``out`` (a temporary file renamed into place: builds in parallel processes do not
+    see each other's half-written library). CalledProcessError with the compiler's message if it fails."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.NamedTemporaryFile(dir=out.parent, suffix=".so", delete=False) as f:
+        tmp = Path(f.name)
+    try:
+        subprocess.run([cc, *FLAGS, "-o", str(tmp), str(SOURCE), "-lm"], check=True, capture_output=True,
+                       text=True)
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+@functools.lru_cache(maxsize=1)
+def kernels() -> ctypes.CDLL | None:
+    """The loaded kernels (built if need be), or None: disabled, no compiler, or a build that failed (logged)."""
+    if os.environ.get(DISABLE, "1") == "0":
+        return None
+    cc = compiler()
+    if cc is None:
+        _log.info("no C compiler (%s): the IK runs its NumPy path", os.environ.get("CC") or "cc")
+        return None
+    out = library_path(cc)
+    if not out.is_file():
+        try:
+            build(cc, out)
+        except (OSError, subprocess.CalledProcessError) as e:
+            _log.warning("building %s failed, the IK runs its NumPy path: %s", SOURCE.name,
+                         getattr(e, "stderr", None) or e)
+            return None
+    lib = ctypes.CDLL(str(out))
+    for name, result in RESULT_TYPES.items():
+        getattr(lib, name).restype = result
+    return lib
+
+
+class PointerBlock:
+    """The addresses of some arrays, as one array the kernels index (``void *const *``), with the arrays held so
+    that the addresses stay theirs. ``pointer`` is the argument to pass."""
+
+    def __init__(self, *arrays) -> None:
+        self.arrays = arrays
+        self._addresses = np.array([a if isinstance(a, int) else a.ctypes.data for a in arrays], np.uint64)
+        self.pointer = ctypes.c_void_p(self._addresses.ctypes.data)
+
+
+SE3_DOUBLES = 12
+"""A placement in Pinocchio's ``data.oMi``: its rotation (column-major), then its translation."""
+
+
+def placements_address(data: pin.Data) -> int | None:
+    """The address of ``data.oMi``'s storage, where the kernels read the joints' placements without a Python call
+    per joint; None unless every placement lies where :data:`SE3_DOUBLES` says (then the NumPy path runs)."""
+    oMi = data.oMi
+    base = oMi[0].rotation.ctypes.data
+    for j in range(len(oMi)):
+        X = oMi[j]
+        if X.rotation.ctypes.data != base + 8 * SE3_DOUBLES * j or X.translation.ctypes.data != \
+                base + 8 * (SE3_DOUBLES * j + 9) or not X.rotation.flags.f_contiguous:
+            return None
+    return base
+
+
+def _on_data(data: pin.Data) -> tuple[ctypes.CDLL, int] | None:
+    """The kernels and the address of ``data``'s placements, or None (no kernels, or another layout)."""
+    lib = kernels()
+    oMi = None if lib is None else placements_address(data)
+    return None if oMi is None else (lib, oMi)
+
+
+class MarkerTerms:
+    """The markers' Hessian J' W J plus a diagonal, and their gradient J' W (p - t) (``marker_terms`` of the
+    kernels), on one Pinocchio model and data after ``computeJointJacobians``. The data's Jacobian and placements
+    stay where they are for the data's life, so their addresses are taken once; the outputs go to buffers of its
+    own and come back as copies."""
+
+    def __init__(self, lib: ctypes.CDLL, data: pin.Data, diagonal: np.ndarray, oMi: int) -> None:
+        J = data.J
+        self._lib, self.nv = lib, J.shape[1]
+        self._data = data                         # keeps the Jacobian and the placements alive
+        self._strides = (J.strides[0] // 8, J.strides[1] // 8)
+        self._fixed = (J.ctypes.data, oMi, np.ascontiguousarray(diagonal, float))
+        self._H, self._g, self._work = np.empty((self.nv, self.nv)), np.empty(self.nv), np.empty(3 * self.nv)
+        self._grow(0)
+
+    def _grow(self, m: int) -> None:
+        self._capacity = m
+        self._P, self._w, self._t = np.empty((m, 3)), np.empty(m), np.empty((m, 3))
+        J, oMi, diagonal = self._fixed
+        self._block = PointerBlock(J, oMi, self._w, self._t, diagonal, self._P, self._H, self._g, self._work)
+
+    @classmethod
+    def of(cls, data: pin.Data, diagonal: np.ndarray) -> MarkerTerms | None:
+        """The kernel's terms, or None where there is no kernel or the placements are not laid out as it reads
+        them."""
+        found = _on_data(data)
+        return None if found is None else cls(found[0], data, diagonal, found[1])
+
+    def __call__(self, layout, weights: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(H (nv, nv), g (nv,)) for the frames of ``layout`` (a :class:`~sit2stand.kinematics.PointSet`) with
+        their weights (M,) [1/m^2] and targets (M, 3) [m]."""
+        m = layout.size
+        if m > self._capacity:
+            self._grow(m)
+        self._w[:m] = weights
+        self._t[:m] = targets
+        self._lib.marker_terms(self.nv, m, *self._strides, self._block.pointer, layout.kernel_block.pointer)
+        return self._H.copy(), self._g.copy()
+
+
+class SoleRows:
+    """The feet's equality rows (``sole_rows`` of the kernels): per sole frame, its LOCAL frame Jacobian (6, nv)
+    and -log6(target^-1 X), on one Pinocchio model and data after ``computeJointJacobians`` (as
+    ``pin.getFrameJacobian(model, data, f, pin.LOCAL)`` and ``pin.log6``)."""
+
+    def __init__(self, lib: ctypes.CDLL, model: pin.Model, data: pin.Data, frames: list[int], supports, oMi: int
+                 ) -> None:
+        J = data.J
+        self._lib, self.nv, self.count = lib, model.nv, len(frames)
+        self._data = data
+        self._strides = (J.strides[0] // 8, J.strides[1] // 8)
+        frame = [model.frames[f] for f in frames]
+        self._target = np.empty((len(frames), 12))
+        dofs = [np.flatnonzero(supports(f.parentJoint)).astype(np.int32) for f in frame]
+        count = np.array([len(d) for d in dofs], np.int32)
+        self._A, self._b = np.empty((6 * len(frames), model.nv)), np.empty(6 * len(frames))
+        self._block = PointerBlock(
+            J.ctypes.data, oMi, np.array([f.parentJoint for f in frame], np.int32),
+            np.array([_row_major(f.placement) for f in frame]), self._target,
+            np.concatenate([np.zeros(0, np.int32), *dofs]), (np.cumsum(count) - count).astype(np.int32), count,
+            self._A, self._b)
+        self._targets: list[pin.SE3] = []
+
+    @classmethod
+    def of(cls, model: pin.Model, data: pin.Data, frames: list[int], supports) -> SoleRows | None:
+        """The kernel's rows, or None (see :meth:`MarkerTerms.of`); ``supports(joint)``: the (nv,) mask of the
+        tangent indices that move the joint."""
+        found = _on_data(data)
+        return None if found is None else cls(found[0], model, data, frames, supports, found[1])
+
+    def __call__(self, targets: list[pin.SE3]) -> tuple[np.ndarray, np.ndarray] | None:
+        """(A (6 * soles, nv), b (6 * soles)) for the soles' target placements, or None (a rotation error near pi:
+        ask Pinocchio)."""
+        if len(targets) != len(self._targets) or any(a is not b for a, b in zip(targets, self._targets)):
+            self._target[:] = [_row_major(X) for X in targets]
+            self._targets = list(targets)        # held: the identities compared next call stay theirs
+        if not self._lib.sole_rows(self.nv, self.count, *self._strides, self._block.pointer):
+            return None
+        return self._A, self._b
+
+
+def _row_major(X: pin.SE3) -> np.ndarray:
+    """A placement as the kernels read it: rotation row-major, then translation (12,)."""
+    return np.concatenate((X.rotation.ravel(), X.translation))
+
+
+class ActiveSetQp:
+    """``box_qp`` of the kernels: min 1/2 x'Hx + g'x s.t. A x = b, C x >= d, lo <= x <= hi by a primal-dual active
+    set started from the working set of the last problem of the same shape (n, rows of A, rows of C). Its answer
+    is exact where it returns one; None sends the caller to a general solver (then :meth:`remember` seeds the
+    next start from that solver's answer)."""
+
+    MAX_ITERATIONS = 12
+    TOLERANCE = ctypes.c_double(1e-9)
+    """Primal feasibility [units of x] and the multipliers' sign."""
+
+    def __init__(self, lib: ctypes.CDLL) -> None:
+        self._lib = lib
+        self._shapes: dict[tuple[int, int, int], _QpBuffers] = {}
+
+    def solve(self, H, g, A, b, lo, hi, C=None, d=None) -> tuple[np.ndarray, np.ndarray] | None:
+        """(x, multipliers in DAQP's convention: H x + g + lam[:n] + [A; C]' lam[n:] = 0), or None."""
+        n, me, mi = len(g), len(b), 0 if C is None else len(d)
+        buf = self._shapes.get((n, me, mi))
+        if buf is None:
+            buf = self._shapes[n, me, mi] = _QpBuffers(n, me, mi)
+        buf.fill(H, g, A, b, lo, hi, C, d)
+        if not self._lib.box_qp(n, me, mi, self.MAX_ITERATIONS, self.TOLERANCE, buf.block.pointer):
+            return None
+        return buf.x.copy(), buf.lam.copy()
+
+    def remember(self, x: np.ndarray, lam: np.ndarray, me: int, mi: int) -> None:
+        """Start the next problem of this shape from another solver's answer: the bounds and rows with a nonzero
+        multiplier held (DAQP's sign: negative at a lower bound)."""
+        n = len(x)
+        buf = self._shapes.get((n, me, mi))
+        if buf is not None:
+            buf.bound[:] = np.sign(lam[:n])
+            buf.row[:] = lam[n + me:] != 0.0
+
+
+class _QpBuffers:
+    """One QP shape's inputs, outputs, working set and scratch, allocated once, in one pointer block."""
+
+    def __init__(self, n: int, me: int, mi: int) -> None:
+        m = me + mi
+        self.H, self.g, self.A, self.b = np.empty((n, n)), np.empty(n), np.empty((me, n)), np.empty(me)
+        self.C, self.d, self.lo, self.hi = np.empty((mi, n)), np.empty(mi), np.empty(n), np.empty(n)
+        self.x, self.lam = np.zeros(n), np.zeros(n + m)
+        self.bound, self.row = np.zeros(n, np.int32), np.zeros(mi, np.int32)
+        self.block = PointerBlock(self.H, self.g, self.A, self.b, self.C, self.d, self.lo, self.hi, self.x,
+                                  self.lam, self.bound, self.row, np.empty((m, n)),
+                                  np.empty(5 * n + n * n + m * (n + m + 4) + 16))
+
+    def fill(self, H, g, A, b, lo, hi, C, d) -> None:
+        self.H[:], self.g[:], self.A[:], self.b[:], self.lo[:], self.hi[:] = H, g, A, b, lo, hi
+        if C is not None:
+            self.C[:], self.d[:] = C, d

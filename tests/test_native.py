@@ -1,0 +1,146 @@
+"""sit2stand.native: the compiled kernels give the NumPy and Pinocchio answers they replace, the QP kernel gives
+the general solver's answers or none, and the IK is the same with or without them."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from sit2stand import native
+from sit2stand.kinematics import PointJacobians
+from sit2stand.optim import WarmQp
+from sit2stand.retarget.ik import ComIk, MarkerTargets
+from sit2stand.retarget.robot import robot_setup
+
+from test_optim import proxsuite_answer, random_qp
+
+pytestmark = pytest.mark.skipif(native.kernels() is None, reason="no C compiler: the kernels are not built")
+
+
+def random_q(model, rng):
+    q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
+    q[3:7] = rng.normal(size=4)
+    q[3:7] /= np.linalg.norm(q[3:7])
+    return q
+
+
+@pytest.fixture(scope="module", params=["talos", "g1"])
+def robot(request):
+    return robot_setup(robot=request.param)
+
+
+def test_marker_terms_equal_numpys(robot):
+    """H = J'WJ + diag and g = J'W(p - t) of random marker subsets at random configurations, as the NumPy path."""
+    model = robot.model
+    rng = np.random.default_rng(0)
+    data = model.createData()
+    diagonal = rng.uniform(0, 1e-2, model.nv)
+    terms = native.MarkerTerms.of(data, diagonal)
+    assert terms is not None, "Pinocchio's placements are laid out as the kernel reads them"
+    points = PointJacobians(model)
+    for size in (1, 7, 25):
+        q = random_q(model, rng)
+        pin.computeJointJacobians(model, data, q)
+        layout = points.point_set(np.array(sorted(rng.choice(range(1, model.nframes), size, replace=False))))
+        w, t = rng.uniform(0.5, 20, size), rng.normal(size=(size, 3))
+        P, J = points(data, layout)
+        J = J.reshape(-1, model.nv) * np.repeat(np.sqrt(w), 3)[:, None]
+        H, g = terms(layout, w, t)
+        assert np.abs(H - (J.T @ J + np.diag(diagonal))).max() < 1e-10
+        assert np.abs(g - J.T @ (np.repeat(np.sqrt(w), 3) * (P - t).ravel())).max() < 1e-10
+
+
+def test_sole_rows_equal_pinocchios_frame_jacobian_and_log(robot):
+    """The feet's rows: LOCAL frame Jacobians and -log6(target^-1 X), targets near and far (2.5 rad) from the
+    soles; a rotation error near pi is handed back to Pinocchio (None)."""
+    model = robot.model
+    rng = np.random.default_rng(1)
+    data = model.createData()
+    soles = list(robot.sole_frames)
+    rows = native.SoleRows.of(model, data, soles, PointJacobians(model).joint_support_mask)
+    for scale in (1e-7, 1e-2, 0.5, 2.5):
+        q = random_q(model, rng)
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        targets = [data.oMf[f] * pin.exp6(pin.Motion(rng.normal(size=6) * scale / np.sqrt(6))) for f in soles]
+        A, b = rows(targets)
+        for k, (f, X) in enumerate(zip(soles, targets)):
+            assert np.abs(A[6 * k:6 * k + 6] - pin.getFrameJacobian(model, data, f, pin.LOCAL)).max() < 1e-12
+            assert np.abs(b[6 * k:6 * k + 6] + pin.log6(X.actInv(data.oMf[f])).vector).max() < 1e-9
+    flipped = [data.oMf[f] * pin.SE3(pin.exp3(np.array([0.0, 0.0, 3.13])), np.zeros(3)) for f in soles]
+    assert rows(flipped) is None
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_the_qp_kernel_answers_as_proxsuite_warm_or_not_at_all(seed):
+    """Random QPs and their neighbours: every answer the kernel gives is proxsuite's; after the first, the
+    neighbours are solved by the kernel from the last working set."""
+    rng = np.random.default_rng(seed)
+    qp = native.ActiveSetQp(native.kernels())
+    problem = random_qp(rng)
+    solved = 0
+    for _ in range(5):
+        H, g, A, b, lo, hi, C, d = problem
+        answer = qp.solve(*problem)
+        if answer is not None:
+            x, lam = answer
+            solved += 1
+            assert np.abs(x - proxsuite_answer(*problem)).max() < 1e-7
+            assert np.abs(H @ x + g + lam[:len(x)] + np.vstack((A, C)).T @ lam[len(x):]).max() < 1e-7
+        problem = (H, g + rng.normal(size=len(g)) * 0.05, A, b + rng.normal(size=len(b)) * 0.005, lo, hi, C, d)
+    assert solved >= 4
+
+
+def test_the_qp_kernel_gives_no_answer_to_contradicting_equalities():
+    rng = np.random.default_rng(1)
+    H, g, _, _, lo, hi, _, _ = random_qp(rng, n=6, m=0, rows=0)
+    A = np.array([[1.0, 0, 0, 0, 0, 0], [1.0, 0, 0, 0, 0, 0]])
+    assert native.ActiveSetQp(native.kernels()).solve(H, g, A, np.array([0.01, 0.02]), lo, hi) is None
+
+
+def test_the_ik_is_the_same_with_or_without_the_kernels(robot):
+    """A sequence of frames (markers on links, a COM target and the feet held, a speed-limited box): the same
+    configurations, to round-off, whichever path runs."""
+    model = robot.model
+    rng = np.random.default_rng(2)
+    solvers = [ComIk(model, list(robot.sole_frames), dt=0.01, posture_weight=1e-3) for _ in range(2)]
+    solvers[1]._native = solvers[1]._native_soles = solvers[1]._qp._native = None
+    assert solvers[0]._native is not None and solvers[0]._qp._native is not None
+    q0, feet = robot.q_seated, list(robot.sole_targets)
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q0)
+    fids = np.array(sorted(rng.choice(range(1, model.nframes), 20, replace=False)))
+    base = np.array([data.oMf[int(f)].translation for f in fids])
+    com0 = pin.centerOfMass(model, data, q0)
+    qs = [q0.copy(), q0.copy()]
+    for k in range(20):
+        markers = MarkerTargets(fids, base + 0.002 * k * rng.normal(size=base.shape), np.full(len(fids), 10.0))
+        com = com0 + np.array([0.001 * k, 0.0, -0.002 * k])
+        qs = [ik.solve(q, markers, com, feet, q_prev=q, max_iterations=2).q for ik, q in zip(solvers, qs)]
+        assert np.abs(qs[0] - qs[1]).max() < 1e-8
+
+
+def test_warm_qp_falls_back_to_daqp_where_the_kernel_gives_up():
+    """A QP the kernel cannot finish (one iteration allowed): the general solver's answer, and its working set
+    seeds the next call, which the kernel then finishes."""
+    rng = np.random.default_rng(4)
+    solver = WarmQp()
+    solver._native.MAX_ITERATIONS = 1
+    problem = random_qp(rng)
+    x = solver.solve(*problem)
+    assert x is not None and np.abs(x - proxsuite_answer(*problem)).max() < 1e-6
+    assert solver._native.solve(*problem) is not None, "seeded from DAQP's answer, one iteration finishes it"
+
+
+def test_no_compiler_or_disabled_means_no_kernels(monkeypatch, tmp_path):
+    monkeypatch.setenv("SIT2STAND_CACHE", str(tmp_path))
+    try:
+        for env in ({"SIT2STAND_NATIVE": "0"}, {"CC": str(tmp_path / "no-such-cc")}):
+            native.kernels.cache_clear()
+            with monkeypatch.context() as m:
+                for k, v in env.items():
+                    m.setenv(k, v)
+                assert native.kernels() is None
+        native.kernels.cache_clear()
+        assert native.kernels() is not None and len(list((tmp_path / "native").glob("*.so"))) == 1
+    finally:
+        native.kernels.cache_clear()
