@@ -6,6 +6,19 @@
 #include <math.h>
 #include <string.h>
 
+/* The entry points are compiled twice on x86-64, for the baseline and for x86-64-v3 (AVX2, FMA), and the loader
+ * picks the one the CPU runs (GCC's and Clang's function multiversioning): the cache may be shared by hosts of
+ * different CPUs, and at these sizes the wider units take a third off the QP. Helpers are inlined into each. */
+#if defined(__x86_64__) && defined(__has_attribute)
+#if __has_attribute(target_clones)
+#define CLONED __attribute__((target_clones("arch=x86-64-v3", "default")))
+#endif
+#endif
+#ifndef CLONED
+#define CLONED
+#endif
+#define HELPER static inline __attribute__((always_inline))
+
 /* The markers' Gauss-Newton terms.
  *
  *   P_k   = R_j o_k + t_j                                   (marker k on joint j: world position [m])
@@ -19,7 +32,7 @@
  * H (nv x nv) and g (nv) are overwritten: H = diag + sum_k w_k J_k' J_k. P (m x 3) receives the positions.
  * fixed: J, oMi, weight (m), target (m x 3), diag (nv), P, H, g, work (3 nv); layout: joint_id, joint_row, offset
  * (m x 3), dofs, dof_start, dof_count. */
-void marker_terms(int nv, int m, int j_row, int j_col, void *const *fixed, void *const *layout)
+CLONED void marker_terms(int nv, int m, int j_row, int j_col, void *const *fixed, void *const *layout)
 {
     const double *J = fixed[0], *oMi = fixed[1], *weight = fixed[2], *target = fixed[3], *diag = fixed[4];
     double *P = fixed[5], *H = fixed[6], *g = fixed[7], *work = fixed[8];       /* work: 3 nv */
@@ -61,7 +74,7 @@ void marker_terms(int nv, int m, int j_row, int j_col, void *const *fixed, void 
 }
 
 /* x . y over n entries; the reduction's order is free (-fopenmp-simd), so it runs in SIMD lanes. */
-static inline double dot(int n, const double *x, const double *y)
+HELPER double dot(int n, const double *x, const double *y)
 {
     double s = 0.0;
 #pragma omp simd reduction(+ : s)
@@ -71,7 +84,7 @@ static inline double dot(int n, const double *x, const double *y)
 }
 
 /* y += alpha x over n entries. */
-static inline void axpy(int n, double alpha, const double *x, double *y)
+HELPER void axpy(int n, double alpha, const double *x, double *y)
 {
 #pragma omp simd
     for (int k = 0; k < n; ++k)
@@ -81,7 +94,7 @@ static inline void axpy(int n, double alpha, const double *x, double *y)
 /* In-place Cholesky U' U of the n x n matrix at a (row stride lda; its upper triangle read and overwritten by U,
  * row-major, so that every inner loop runs along a row), and the reciprocals of U's diagonal in inv (n): the
  * solves multiply by them. 0 if not positive definite. */
-static int cholesky(int n, double *a, int lda, double *inv)
+HELPER int cholesky(int n, double *a, int lda, double *inv)
 {
     for (int j = 0; j < n; ++j) {
         double *uj = a + (size_t)j * lda;
@@ -98,7 +111,7 @@ static int cholesky(int n, double *a, int lda, double *inv)
 }
 
 /* Solve U' Y = Y in place for nr right-hand sides at once: Y (n x nr, row stride ldy), each row one unknown. */
-static void forward(int n, int nr, const double *U, int lda, const double *inv, double *Y, int ldy)
+HELPER void forward(int n, int nr, const double *U, int lda, const double *inv, double *Y, int ldy)
 {
     for (int k = 0; k < n; ++k) {
         double *yk = Y + (size_t)k * ldy;
@@ -111,7 +124,7 @@ static void forward(int n, int nr, const double *U, int lda, const double *inv, 
 }
 
 /* Solve U x = b in place (one right-hand side). */
-static void backward(int n, const double *U, int lda, const double *inv, double *b)
+HELPER void backward(int n, const double *U, int lda, const double *inv, double *b)
 {
     for (int i = n - 1; i >= 0; --i) {
         const double *ui = U + (size_t)i * lda;
@@ -123,7 +136,7 @@ static void backward(int n, const double *U, int lda, const double *inv, double 
  * rows of E (ne x n: A, then the active inequality rows) held at e. x (n) and lam (ne) out; 0 if the reduced
  * Hessian or the rows' Schur complement is singular. With H_FF = U'U, Y = U'^-1 E_F', z = U'^-1 r:
  * (Y'Y) lam = e - E_W x_W + Y'z, x_F = U^-1 (Y lam - z). */
-static int working_set_solve(int n, int ne, const double *H, const double *g, const double *E, const double *e,
+HELPER int working_set_solve(int n, int ne, const double *H, const double *g, const double *E, const double *e,
                              const double *lo, const double *hi, const int *bound, double *x, double *lam,
                              double *work)
 {
@@ -191,7 +204,7 @@ static int working_set_solve(int n, int ne, const double *H, const double *g, co
  * lam (n + me + mi) receives the multipliers in DAQP's convention: H x + g + lam[:n] + [A; C]' lam[n:] = 0.
  * p: H, g, A, b, C, d, lo, hi, x, lam, bound, row, E ((me + mi) x n), work (5 n + n n + (me + mi) (n + me + mi
  * + 4) doubles). */
-int box_qp(int n, int me, int mi, int max_iter, double tol, void *const *p)
+CLONED int box_qp(int n, int me, int mi, int max_iter, double tol, void *const *p)
 {
     const double *H = p[0], *g = p[1], *A = p[2], *b = p[3], *C = p[4], *d = p[5], *lo = p[6], *hi = p[7];
     double *x = p[8], *lam = p[9], *E = p[12], *work = p[13];
@@ -245,7 +258,7 @@ int box_qp(int n, int me, int mi, int max_iter, double tol, void *const *p)
 
 /* log of a rotation (3 x 3, row-major) as a rotation vector w [rad]; 0 when the angle is too close to pi for the
  * formula's accuracy (the caller then asks Pinocchio). */
-static int log3(const double *R, double *w, double *theta_out)
+HELPER int log3(const double *R, double *w, double *theta_out)
 {
     const double c = 0.5 * (R[0] + R[4] + R[8] - 1.0);
     if (c < -0.99)
@@ -266,7 +279,7 @@ static int log3(const double *R, double *w, double *theta_out)
  * (12 doubles per frame: rotation row-major, translation), and `target` the same layout. dofs / dof_start /
  * dof_count as in marker_terms, one run per frame. Returns 0 if a rotation error is too close to pi.
  * p: J, oMi, joint_id, placement, target, dofs, dof_start, dof_count, A, b. */
-int sole_rows(int nv, int count, int j_row, int j_col, void *const *p)
+CLONED int sole_rows(int nv, int count, int j_row, int j_col, void *const *p)
 {
     const double *J = p[0], *oMi = p[1], *placement = p[3], *target = p[4];
     const int *joint_id = p[2], *dofs = p[5], *dof_start = p[6], *dof_count = p[7];
