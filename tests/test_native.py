@@ -7,13 +7,20 @@ import pytest
 
 from sit2stand import native
 from sit2stand.kinematics import PointJacobians
-from sit2stand.optim import WarmQp
+from sit2stand.optim import QpProblem, WarmQp
 from sit2stand.retarget.ik import ComIk, MarkerTargets
 from sit2stand.retarget.robot import robot_setup
 
 from test_optim import proxsuite_answer, random_qp
 
 pytestmark = pytest.mark.skipif(native.kernels() is None, reason="no C compiler: the kernels are not built")
+
+
+def filled(H, g, A, b, lo, hi, C, d, into: QpProblem | None = None) -> QpProblem:
+    """A QP problem of the shape (``into``, or a new one), filled."""
+    p = QpProblem(len(g), len(b), len(d)) if into is None else into
+    p.H[:], p.g[:], p.A[:], p.b[:], p.lo[:], p.hi[:], p.C[:], p.d[:] = H, g, A, b, lo, hi, C, d
+    return p
 
 
 def random_q(model, rng):
@@ -44,7 +51,9 @@ def test_marker_terms_equal_numpys(robot):
         w, t = rng.uniform(0.5, 20, size), rng.normal(size=(size, 3))
         P, J = points(data, layout)
         J = J.reshape(-1, model.nv) * np.repeat(np.sqrt(w), 3)[:, None]
-        H, g = terms(layout, w, t)
+        H, g = np.empty((model.nv, model.nv)), np.empty(model.nv)
+        terms.load(layout, w, t)
+        terms(H, g)
         assert np.abs(H - (J.T @ J + np.diag(diagonal))).max() < 1e-10
         assert np.abs(g - J.T @ (np.repeat(np.sqrt(w), 3) * (P - t).ravel())).max() < 1e-10
 
@@ -62,12 +71,15 @@ def test_sole_rows_equal_pinocchios_frame_jacobian_and_log(robot):
         pin.computeJointJacobians(model, data, q)
         pin.updateFramePlacements(model, data)
         targets = [data.oMf[f] * pin.exp6(pin.Motion(rng.normal(size=6) * scale / np.sqrt(6))) for f in soles]
-        A, b = rows(targets)
+        A, b = np.empty((6 * len(soles) + 3, model.nv)), np.empty(6 * len(soles) + 3)
+        rows.load(targets)
+        assert rows(A, b)
         for k, (f, X) in enumerate(zip(soles, targets)):
             assert np.abs(A[6 * k:6 * k + 6] - pin.getFrameJacobian(model, data, f, pin.LOCAL)).max() < 1e-12
             assert np.abs(b[6 * k:6 * k + 6] + pin.log6(X.actInv(data.oMf[f])).vector).max() < 1e-9
     flipped = [data.oMf[f] * pin.SE3(pin.exp3(np.array([0.0, 0.0, 3.13])), np.zeros(3)) for f in soles]
-    assert rows(flipped) is None
+    rows.load(flipped)
+    assert not rows(A, b)
 
 
 @pytest.mark.parametrize("seed", range(10))
@@ -77,10 +89,11 @@ def test_the_qp_kernel_answers_as_proxsuite_warm_or_not_at_all(seed):
     rng = np.random.default_rng(seed)
     qp = native.ActiveSetQp(native.kernels())
     problem = random_qp(rng)
-    solved = 0
+    solved, p = 0, None
     for _ in range(5):
         H, g, A, b, lo, hi, C, d = problem
-        answer = qp.solve(*problem)
+        p = filled(*problem, into=p)
+        answer = qp.solve_problem(p)
         if answer is not None:
             x, lam = answer
             solved += 1
@@ -94,7 +107,8 @@ def test_the_qp_kernel_gives_no_answer_to_contradicting_equalities():
     rng = np.random.default_rng(1)
     H, g, _, _, lo, hi, _, _ = random_qp(rng, n=6, m=0, rows=0)
     A = np.array([[1.0, 0, 0, 0, 0, 0], [1.0, 0, 0, 0, 0, 0]])
-    assert native.ActiveSetQp(native.kernels()).solve(H, g, A, np.array([0.01, 0.02]), lo, hi) is None
+    qp = filled(H, g, A, np.array([0.01, 0.02]), lo, hi, np.zeros((0, 6)), np.zeros(0))
+    assert native.ActiveSetQp(native.kernels()).solve_problem(qp) is None
 
 
 def test_the_ik_is_the_same_with_or_without_the_kernels(robot):
@@ -128,7 +142,8 @@ def test_warm_qp_falls_back_to_daqp_where_the_kernel_gives_up():
     problem = random_qp(rng)
     x = solver.solve(*problem)
     assert x is not None and np.abs(x - proxsuite_answer(*problem)).max() < 1e-6
-    assert solver._native.solve(*problem) is not None, "seeded from DAQP's answer, one iteration finishes it"
+    qp = next(iter(solver._problems.values()))
+    assert solver._native.solve_problem(qp) is not None, "seeded from DAQP's answer, one iteration finishes it"
 
 
 def test_no_compiler_or_disabled_means_no_kernels(monkeypatch, tmp_path):

@@ -102,38 +102,79 @@ def effective_fraction(r: np.ndarray, series_id: np.ndarray | None) -> float:
     return (1 - rho) / (1 + rho)
 
 
+class QpProblem:
+    """One QP shape's arrays, allocated once (:meth:`WarmQp.problem`) and filled in place by the caller, step after
+    step: H (n, n), g (n,), A (me, n), b (me,), C (mi, n), d (mi,), lo, hi (n,). ``kernel`` holds the compiled
+    solver's state for the shape (:class:`sit2stand.native.ActiveSetQp`)."""
+
+    def __init__(self, n: int, me: int, mi: int) -> None:
+        self.shape = (n, me, mi)
+        self.H, self.g, self.A, self.b = np.zeros((n, n)), np.zeros(n), np.zeros((me, n)), np.zeros(me)
+        self.C, self.d, self.lo, self.hi = np.zeros((mi, n)), np.zeros(mi), np.zeros(n), np.zeros(n)
+        self.kernel = None
+
+    def rows(self) -> np.ndarray:
+        """[A; C]."""
+        return np.vstack((self.A, self.C)) if len(self.C) else self.A
+
+
 class WarmQp:
     """A small dense QP, warm-started from one call to the next:
 
         minimise  1/2 x' H x + g' x   subject to  A x = b,  C x >= d,  lo <= x <= hi      (H positive definite)
 
-    DAQP (a dual active-set solver: Arnstrom, Bemporad, Axehill, IEEE TAC 2022; the bounds first, then the rows,
-    equalities as rows with equal bounds), one workspace per problem shape, set up once and updated with each
-    problem: a solve starts from the last one's active set (between the Gauss-Newton steps of one frame and the
-    frames of a motion the bounds that hold change little) and allocates nothing; ~20 us at 38 unknowns, and with
-    the caches cold (other work between the calls) 50 us against 85 for a fresh solve. A warm start that fails is
-    solved again from the equalities alone; a problem with no solution (equalities the bounds cannot meet) gets
-    None.
+    First by the compiled primal-dual active set (:class:`sit2stand.native.ActiveSetQp`) from the last problem's
+    working set: between the Gauss-Newton steps of one frame and the frames of a motion the bounds that hold change
+    little, and 999 of 1000 of a retargeting run's QPs are solved there in one iteration. Where it gives up, or
+    without a C compiler, DAQP (a dual active-set solver: Arnstrom, Bemporad, Axehill, IEEE TAC 2022; the bounds
+    first, then the rows, equalities as rows with equal bounds), one workspace per problem shape, set up once and
+    updated with each problem, started from its last active set; a warm start that fails is solved again from the
+    equalities alone. A problem with no solution (equalities the bounds cannot meet) gets None.
+
+    A caller that solves one shape again and again fills its :meth:`problem` in place and calls
+    :meth:`solve_problem` (nothing copied); :meth:`solve` takes arrays.
     """
 
     def __init__(self) -> None:
-        self._models: dict[tuple[int, int, int], daqp.Model] = {}     # one workspace per shape
+        self._problems: dict[tuple[int, int, int], QpProblem] = {}
+        self._models: dict[tuple[int, int, int], daqp.Model] = {}     # one DAQP workspace per shape
         self._sense: dict[tuple[int, int, int], np.ndarray] = {}
         self._last: tuple | None = None     # H, g, rows, x, multipliers of the last solved problem
         lib = native.kernels()
         self._native = None if lib is None else native.ActiveSetQp(lib)
 
+    def problem(self, n: int, me: int, mi: int) -> QpProblem:
+        """The arrays of the shape (n unknowns, me equalities, mi inequality rows), to fill in place."""
+        p = self._problems.get((n, me, mi))
+        if p is None:
+            p = self._problems[n, me, mi] = QpProblem(n, me, mi)
+        return p
+
     def solve(self, H: np.ndarray, g: np.ndarray, A: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray,
               C: np.ndarray | None = None, d: np.ndarray | None = None) -> np.ndarray | None:
-        n = len(g)
-        key = (n, len(b), 0 if C is None else len(d))
-        rows = A if C is None else np.vstack((A, C))
+        """x, or None if the problem has no solution."""
+        p = self.problem(len(g), len(b), 0 if C is None else len(d))
+        p.H[:], p.g[:], p.A[:], p.b[:], p.lo[:], p.hi[:] = H, g, A, b, lo, hi
+        if C is not None:
+            p.C[:], p.d[:] = C, d
+        return self.solve_problem(p)
+
+    def solve_problem(self, p: QpProblem) -> np.ndarray | None:
+        """x (its own array), or None if the problem has no solution. The multipliers are kept for
+        :meth:`dual_residual`, which reads the problem's arrays: ask it before filling them again."""
         if self._native is not None:
-            solved = self._native.solve(H, g, A, b, lo, hi, C, d)
+            solved = self._native.solve_problem(p)
             if solved is not None:
-                self._last = (H, g, rows, *solved)
+                self._last = (p.H, p.g, None, p, *solved)
                 return solved[0]
-        if C is None:
+        return self._daqp(p)
+
+    def _daqp(self, p: QpProblem) -> np.ndarray | None:
+        H, g, b, C, d, lo, hi = p.H, p.g, p.b, p.C, p.d, p.lo, p.hi
+        key = p.shape
+        n = key[0]
+        rows = p.rows()
+        if not len(C):
             upper, lower = np.concatenate((hi, b)), np.concatenate((lo, b))
         else:
             upper, lower = np.concatenate((hi, b, np.full(len(d), 1e30))), np.concatenate((lo, b, d))
@@ -157,15 +198,16 @@ class WarmQp:
             model.update(sense=self._sense[key])           # the next problem starts clean
             self._last = None
             return None
-        self._last = (H, g, rows, x, info["lam"])
+        self._last = (H, g, rows, p, x, info["lam"])
         if self._native is not None:
-            self._native.remember(x, info["lam"], *key[1:])
+            self._native.remember(p, info["lam"])
         return x
 
     def dual_residual(self) -> float:
         """The last solve's stationarity residual max |H x + g + multipliers' forces| (inf if it found none)."""
         if self._last is None:
             return float("inf")
-        H, g, rows, x, lam = self._last
+        H, g, rows, p, x, lam = self._last
+        rows = p.rows() if rows is None else rows
         n = len(x)
         return float(np.abs(H @ x + g + lam[:n] + rows.T @ lam[n:]).max())

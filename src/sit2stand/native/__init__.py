@@ -126,11 +126,24 @@ def _on_data(data: pin.Data) -> tuple[ctypes.CDLL, int] | None:
     return None if oMi is None else (lib, oMi)
 
 
+class _Outputs:
+    """Pointer blocks of the two output arrays a kernel writes into, one per pair of arrays (held with it)."""
+
+    def __init__(self) -> None:
+        self._blocks: dict[tuple[int, int], PointerBlock] = {}
+
+    def __call__(self, a: np.ndarray, b: np.ndarray) -> ctypes.c_void_p:
+        block = self._blocks.get((id(a), id(b)))
+        if block is None:
+            block = self._blocks[id(a), id(b)] = PointerBlock(a, b)
+        return block.pointer
+
+
 class MarkerTerms:
     """The markers' Hessian J' W J plus a diagonal, and their gradient J' W (p - t) (``marker_terms`` of the
     kernels), on one Pinocchio model and data after ``computeJointJacobians``. The data's Jacobian and placements
-    stay where they are for the data's life, so their addresses are taken once; the outputs go to buffers of its
-    own and come back as copies."""
+    stay where they are for the data's life, so their addresses are taken once. A frame's markers are loaded once
+    (:meth:`load`); each Gauss-Newton step then writes the terms into arrays of the caller's (:meth:`__call__`)."""
 
     def __init__(self, lib: ctypes.CDLL, data: pin.Data, diagonal: np.ndarray, oMi: int) -> None:
         J = data.J
@@ -138,14 +151,16 @@ class MarkerTerms:
         self._data = data                         # keeps the Jacobian and the placements alive
         self._strides = (J.strides[0] // 8, J.strides[1] // 8)
         self._fixed = (J.ctypes.data, oMi, np.ascontiguousarray(diagonal, float))
-        self._H, self._g, self._work = np.empty((self.nv, self.nv)), np.empty(self.nv), np.empty(3 * self.nv)
+        self._work = np.empty(3 * self.nv)
+        self._outputs = _Outputs()
+        self._layout = None
         self._grow(0)
 
     def _grow(self, m: int) -> None:
         self._capacity = m
         self._P, self._w, self._t = np.empty((m, 3)), np.empty(m), np.empty((m, 3))
         J, oMi, diagonal = self._fixed
-        self._block = PointerBlock(J, oMi, self._w, self._t, diagonal, self._P, self._H, self._g, self._work)
+        self._block = PointerBlock(J, oMi, self._w, self._t, diagonal, self._P, self._work)
 
     @classmethod
     def of(cls, data: pin.Data, diagonal: np.ndarray) -> MarkerTerms | None:
@@ -154,22 +169,29 @@ class MarkerTerms:
         found = _on_data(data)
         return None if found is None else cls(found[0], data, diagonal, found[1])
 
-    def __call__(self, layout, weights: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(H (nv, nv), g (nv,)) for the frames of ``layout`` (a :class:`~sit2stand.kinematics.PointSet`) with
-        their weights (M,) [1/m^2] and targets (M, 3) [m]."""
+    def load(self, layout, weights: np.ndarray, targets: np.ndarray) -> None:
+        """A frame's markers: the frames of ``layout`` (a :class:`~sit2stand.kinematics.PointSet`), their weights
+        (M,) [1/m^2] and targets (M, 3) [m]."""
         m = layout.size
         if m > self._capacity:
             self._grow(m)
         self._w[:m] = weights
         self._t[:m] = targets
-        self._lib.marker_terms(self.nv, m, *self._strides, self._block.pointer, layout.kernel_block.pointer)
-        return self._H.copy(), self._g.copy()
+        self._layout = layout
+
+    def __call__(self, H: np.ndarray, g: np.ndarray) -> None:
+        """H (nv, nv) and g (nv,), C-contiguous, overwritten with the loaded markers' terms at the data's
+        Jacobians."""
+        layout = self._layout
+        self._lib.marker_terms(self.nv, layout.size, *self._strides, self._block.pointer,
+                               layout.kernel_block.pointer, self._outputs(H, g))
 
 
 class SoleRows:
     """The feet's equality rows (``sole_rows`` of the kernels): per sole frame, its LOCAL frame Jacobian (6, nv)
     and -log6(target^-1 X), on one Pinocchio model and data after ``computeJointJacobians`` (as
-    ``pin.getFrameJacobian(model, data, f, pin.LOCAL)`` and ``pin.log6``)."""
+    ``pin.getFrameJacobian(model, data, f, pin.LOCAL)`` and ``pin.log6``). Targets are loaded once a frame
+    (:meth:`load`)."""
 
     def __init__(self, lib: ctypes.CDLL, model: pin.Model, data: pin.Data, frames: list[int], supports, oMi: int
                  ) -> None:
@@ -178,16 +200,14 @@ class SoleRows:
         self._data = data
         self._strides = (J.strides[0] // 8, J.strides[1] // 8)
         frame = [model.frames[f] for f in frames]
-        self._target = np.empty((len(frames), 12))
+        self._target = np.empty((len(frames), 4, 4))
         dofs = [np.flatnonzero(supports(f.parentJoint)).astype(np.int32) for f in frame]
         count = np.array([len(d) for d in dofs], np.int32)
-        self._A, self._b = np.empty((6 * len(frames), model.nv)), np.empty(6 * len(frames))
         self._block = PointerBlock(
             J.ctypes.data, oMi, np.array([f.parentJoint for f in frame], np.int32),
-            np.array([_row_major(f.placement) for f in frame]), self._target,
-            np.concatenate([np.zeros(0, np.int32), *dofs]), (np.cumsum(count) - count).astype(np.int32), count,
-            self._A, self._b)
-        self._targets: list[pin.SE3] = []
+            np.array([f.placement.homogeneous for f in frame]), self._target,
+            np.concatenate([np.zeros(0, np.int32), *dofs]), (np.cumsum(count) - count).astype(np.int32), count)
+        self._outputs = _Outputs()
 
     @classmethod
     def of(cls, model: pin.Model, data: pin.Data, frames: list[int], supports) -> SoleRows | None:
@@ -196,27 +216,22 @@ class SoleRows:
         found = _on_data(data)
         return None if found is None else cls(found[0], model, data, frames, supports, found[1])
 
-    def __call__(self, targets: list[pin.SE3]) -> tuple[np.ndarray, np.ndarray] | None:
-        """(A (6 * soles, nv), b (6 * soles)) for the soles' target placements, or None (a rotation error near pi:
-        ask Pinocchio)."""
-        if len(targets) != len(self._targets) or any(a is not b for a, b in zip(targets, self._targets)):
-            self._target[:] = [_row_major(X) for X in targets]
-            self._targets = list(targets)        # held: the identities compared next call stay theirs
-        if not self._lib.sole_rows(self.nv, self.count, *self._strides, self._block.pointer):
-            return None
-        return self._A, self._b
+    def load(self, targets: list[pin.SE3]) -> None:
+        """The soles' target placements, one per frame."""
+        self._target[:] = [X.homogeneous for X in targets]
 
-
-def _row_major(X: pin.SE3) -> np.ndarray:
-    """A placement as the kernels read it: rotation row-major, then translation (12,)."""
-    return np.concatenate((X.rotation.ravel(), X.translation))
+    def __call__(self, A: np.ndarray, b: np.ndarray) -> bool:
+        """The rows written into the first 6 * soles rows of A (rows, nv) and entries of b, both C-contiguous;
+        False if a rotation error is near pi (ask Pinocchio)."""
+        return bool(self._lib.sole_rows(self.nv, self.count, *self._strides, self._block.pointer,
+                                        self._outputs(A, b)))
 
 
 class ActiveSetQp:
     """``box_qp`` of the kernels: min 1/2 x'Hx + g'x s.t. A x = b, C x >= d, lo <= x <= hi by a primal-dual active
-    set started from the working set of the last problem of the same shape (n, rows of A, rows of C). Its answer
-    is exact where it returns one; None sends the caller to a general solver (then :meth:`remember` seeds the
-    next start from that solver's answer)."""
+    set, on a :class:`~sit2stand.optim.QpProblem` (its arrays read where they are), started from the working set
+    of the problem's last solve. Its answer is exact where it returns one; None sends the caller to a general
+    solver (then :meth:`remember` seeds the next start from that solver's answer)."""
 
     MAX_ITERATIONS = 12
     TOLERANCE = ctypes.c_double(1e-9)
@@ -224,43 +239,36 @@ class ActiveSetQp:
 
     def __init__(self, lib: ctypes.CDLL) -> None:
         self._lib = lib
-        self._shapes: dict[tuple[int, int, int], _QpBuffers] = {}
 
-    def solve(self, H, g, A, b, lo, hi, C=None, d=None) -> tuple[np.ndarray, np.ndarray] | None:
-        """(x, multipliers in DAQP's convention: H x + g + lam[:n] + [A; C]' lam[n:] = 0), or None."""
-        n, me, mi = len(g), len(b), 0 if C is None else len(d)
-        buf = self._shapes.get((n, me, mi))
-        if buf is None:
-            buf = self._shapes[n, me, mi] = _QpBuffers(n, me, mi)
-        buf.fill(H, g, A, b, lo, hi, C, d)
-        if not self._lib.box_qp(n, me, mi, self.MAX_ITERATIONS, self.TOLERANCE, buf.block.pointer):
+    def solve_problem(self, p) -> tuple[np.ndarray, np.ndarray] | None:
+        """(x, multipliers in DAQP's convention: H x + g + lam[:n] + [A; C]' lam[n:] = 0), or None. x is a copy;
+        the multipliers are the problem's own array, rewritten by its next solve."""
+        state = p.kernel
+        if state is None:
+            state = p.kernel = _KernelState(p)
+        if not self._lib.box_qp(*p.shape, self.MAX_ITERATIONS, self.TOLERANCE, state.block.pointer):
             return None
-        return buf.x.copy(), buf.lam.copy()
+        return state.x.copy(), state.lam
 
-    def remember(self, x: np.ndarray, lam: np.ndarray, me: int, mi: int) -> None:
-        """Start the next problem of this shape from another solver's answer: the bounds and rows with a nonzero
+    def remember(self, p, lam: np.ndarray) -> None:
+        """Start the problem's next solve from another solver's answer: the bounds and rows with a nonzero
         multiplier held (DAQP's sign: negative at a lower bound)."""
-        n = len(x)
-        buf = self._shapes.get((n, me, mi))
-        if buf is not None:
-            buf.bound[:] = np.sign(lam[:n])
-            buf.row[:] = lam[n + me:] != 0.0
+        n, me, _ = p.shape
+        state = p.kernel
+        if state is None:
+            state = p.kernel = _KernelState(p)
+        state.bound[:] = np.sign(lam[:n])
+        state.row[:] = lam[n + me:] != 0.0
 
 
-class _QpBuffers:
-    """One QP shape's inputs, outputs, working set and scratch, allocated once, in one pointer block."""
+class _KernelState:
+    """One problem's outputs, working set and scratch for ``box_qp``, with the problem's arrays in one pointer
+    block."""
 
-    def __init__(self, n: int, me: int, mi: int) -> None:
+    def __init__(self, p) -> None:
+        n, me, mi = p.shape
         m = me + mi
-        self.H, self.g, self.A, self.b = np.empty((n, n)), np.empty(n), np.empty((me, n)), np.empty(me)
-        self.C, self.d, self.lo, self.hi = np.empty((mi, n)), np.empty(mi), np.empty(n), np.empty(n)
         self.x, self.lam = np.zeros(n), np.zeros(n + m)
         self.bound, self.row = np.zeros(n, np.int32), np.zeros(mi, np.int32)
-        self.block = PointerBlock(self.H, self.g, self.A, self.b, self.C, self.d, self.lo, self.hi, self.x,
-                                  self.lam, self.bound, self.row, np.empty((m, n)),
-                                  np.empty(5 * n + n * n + m * (n + m + 4) + 16))
-
-    def fill(self, H, g, A, b, lo, hi, C, d) -> None:
-        self.H[:], self.g[:], self.A[:], self.b[:], self.lo[:], self.hi[:] = H, g, A, b, lo, hi
-        if C is not None:
-            self.C[:], self.d[:] = C, d
+        self.block = PointerBlock(p.H, p.g, p.A, p.b, p.C, p.d, p.lo, p.hi, self.x, self.lam, self.bound, self.row,
+                                  np.empty((m, n)), np.empty(5 * n + n * n + m * (n + m + 4) + 16))

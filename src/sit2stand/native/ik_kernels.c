@@ -30,12 +30,13 @@
  * joint (rotation column-major, then translation). joint_id: each marker's joint in oMi; joint_row: its row in
  * dof_start / dof_count, whose run of `dofs` lists the tangent indices that move that joint.
  * H (nv x nv) and g (nv) are overwritten: H = diag + sum_k w_k J_k' J_k. P (m x 3) receives the positions.
- * fixed: J, oMi, weight (m), target (m x 3), diag (nv), P, H, g, work (3 nv); layout: joint_id, joint_row, offset
- * (m x 3), dofs, dof_start, dof_count. */
-CLONED void marker_terms(int nv, int m, int j_row, int j_col, void *const *fixed, void *const *layout)
+ * fixed: J, oMi, weight (m), target (m x 3), diag (nv), P, work (3 nv); layout: joint_id, joint_row, offset
+ * (m x 3), dofs, dof_start, dof_count; out: H, g. */
+CLONED void marker_terms(int nv, int m, int j_row, int j_col, void *const *fixed, void *const *layout,
+                         void *const *out)
 {
     const double *J = fixed[0], *oMi = fixed[1], *weight = fixed[2], *target = fixed[3], *diag = fixed[4];
-    double *P = fixed[5], *H = fixed[6], *g = fixed[7], *work = fixed[8];       /* work: 3 nv */
+    double *P = fixed[5], *work = fixed[6], *H = out[0], *g = out[1];       /* work: 3 nv */
     const int *joint_id = layout[0], *joint_row = layout[1], *dofs = layout[3], *dof_start = layout[4],
               *dof_count = layout[5];
     const double *offset = layout[2];
@@ -276,30 +277,29 @@ HELPER int log3(const double *R, double *w, double *theta_out)
 /* The feet's equality rows: for each of `count` frames (a sole), its 6 rows of the LOCAL frame Jacobian
  * (linear, angular) into A (count * 6 x nv, row-major) and -log6(target^-1 X) into b (count * 6), where X is the
  * frame's world placement: joint_id's placement in oMi (Pinocchio's layout, see marker_terms) times `placement`
- * (12 doubles per frame: rotation row-major, translation), and `target` the same layout. dofs / dof_start /
+ * (a 4 x 4 homogeneous matrix per frame, row-major), and `target` the same layout. dofs / dof_start /
  * dof_count as in marker_terms, one run per frame. Returns 0 if a rotation error is too close to pi.
- * p: J, oMi, joint_id, placement, target, dofs, dof_start, dof_count, A, b. */
-CLONED int sole_rows(int nv, int count, int j_row, int j_col, void *const *p)
+ * p: J, oMi, joint_id, placement, target, dofs, dof_start, dof_count; out: A, b (its first 6 count rows). */
+CLONED int sole_rows(int nv, int count, int j_row, int j_col, void *const *p, void *const *out)
 {
     const double *J = p[0], *oMi = p[1], *placement = p[3], *target = p[4];
     const int *joint_id = p[2], *dofs = p[5], *dof_start = p[6], *dof_count = p[7];
-    double *A = p[8], *b = p[9];
+    double *A = out[0], *b = out[1];
     memset(A, 0, sizeof(double) * 6 * count * nv);
     for (int f = 0; f < count; ++f) {
         const double *Ri = oMi + 12 * joint_id[f], *ti = Ri + 9;       /* column-major rotation */
-        const double *Rf = placement + 12 * f, *tf = Rf + 9;           /* row-major */
-        const double *Rt = target + 12 * f, *tt = Rt + 9;
+        const double *Mf = placement + 16 * f, *Mt = target + 16 * f;  /* homogeneous, row-major */
         double R[9], p[3], Re[9], pe[3], d[3];
         for (int r = 0; r < 3; ++r) {
             for (int c = 0; c < 3; ++c)
-                R[3 * r + c] = Ri[r] * Rf[c] + Ri[r + 3] * Rf[3 + c] + Ri[r + 6] * Rf[6 + c];
-            p[r] = Ri[r] * tf[0] + Ri[r + 3] * tf[1] + Ri[r + 6] * tf[2] + ti[r];
-            d[r] = p[r] - tt[r];
+                R[3 * r + c] = Ri[r] * Mf[c] + Ri[r + 3] * Mf[4 + c] + Ri[r + 6] * Mf[8 + c];
+            p[r] = Ri[r] * Mf[3] + Ri[r + 3] * Mf[7] + Ri[r + 6] * Mf[11] + ti[r];
+            d[r] = p[r] - Mt[4 * r + 3];
         }
         for (int r = 0; r < 3; ++r) {                                  /* target^-1 X */
             for (int c = 0; c < 3; ++c)
-                Re[3 * r + c] = Rt[r] * R[c] + Rt[3 + r] * R[3 + c] + Rt[6 + r] * R[6 + c];
-            pe[r] = Rt[r] * d[0] + Rt[3 + r] * d[1] + Rt[6 + r] * d[2];
+                Re[3 * r + c] = Mt[r] * R[c] + Mt[4 + r] * R[3 + c] + Mt[8 + r] * R[6 + c];
+            pe[r] = Mt[r] * d[0] + Mt[4 + r] * d[1] + Mt[8 + r] * d[2];
         }
         double w[3], theta;
         if (!log3(Re, w, &theta))

@@ -64,6 +64,8 @@ from ..robot.profile import profile_of
 
 STOP_TOLERANCE_RAD = 1e-3
 """A joint this close to a limit is on its stop (the steps clip exactly to the limits)."""
+FREE = 1e20
+"""A bound that does not bind (the QP solvers' infinity)."""
 LIFT_TORQUE_SHARE = 1.0
 """The share of its effort limit a trunk joint's plan may spend lifting the trunk against gravity: see
 ``lift_torque_share``. The whole limit: at 0.9 the plan held the leaned trunk back so long that a real child's fast
@@ -145,20 +147,17 @@ class MarkerTargets:
 @dataclass(frozen=True)
 class JointBox:
     """The joints' limits [rad] (nq - 7), their speed limits [rad/s] (nv - 6) and the most they travel in a frame
-    [rad]; a step's bounds on the base's six are free (+-1e20)."""
+    [rad]. A step's bounds on the base's six are free (:data:`FREE`)."""
 
     q_lo: np.ndarray
     q_hi: np.ndarray
     v_max: np.ndarray
     travel: np.ndarray
-    free_base_lo: np.ndarray
-    free_base_hi: np.ndarray
 
     @classmethod
     def of(cls, model: pin.Model, velocity_limit: float | np.ndarray, dt: float) -> JointBox:
         v_max = np.broadcast_to(np.asarray(velocity_limit, float), (model.nv - 6,)).copy()
-        return cls(model.lowerPositionLimit[7:].copy(), model.upperPositionLimit[7:].copy(), v_max, v_max * dt,
-                   np.full(model.nv, -1e20), np.full(model.nv, 1e20))
+        return cls(model.lowerPositionLimit[7:].copy(), model.upperPositionLimit[7:].copy(), v_max, v_max * dt)
 
     def of_frame(self, q_prev: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """The joints' box over a frame's steps: their limits and, from the previous frame, their speed limits."""
@@ -191,7 +190,6 @@ class _Frame:
     points: PointSet | None = None    # the markers' frames, laid out for :class:`PointJacobians`
 
     def __post_init__(self) -> None:
-        self.root_weights = np.repeat(np.sqrt(self.weights), 3)     # per coordinate: H = (sqrt(W) J)' (sqrt(W) J)
         self.axes = np.asarray(self.axes, int)
 
 
@@ -268,6 +266,10 @@ class ComIk:
                        q0 if q_ref is None else q_ref, q_prev, base_xz, base_weight, base_pitch_min, base_z_min,
                        joint_targets=list(joint_targets or ()))
         frame.points = self.points.point_set(frame.fids)
+        if self._native is not None:          # the frame's markers and feet targets, once for all its steps
+            self._native.load(frame.points, frame.weights, frame.targets)
+        if self._native_soles is not None:
+            self._native_soles.load(sole_targets)
         frame.lift_speed_prev = self._lift_speed_prev(q_prev)
         frame.q_lo, frame.q_hi = self.box.of_frame(q_prev)
         self._lift_inertia = None        # the trunk's inertia about its joints, once per frame (see _bound_lift)
@@ -292,21 +294,23 @@ class ComIk:
 
     def _step(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, bool]:
         """One Gauss-Newton step dq (tangent) from q (zero if no QP could be solved); whether the COM equality
-        was kept."""
+        was kept. The QP is filled in place (:meth:`~sit2stand.optim.WarmQp.problem`)."""
         model, data = self.model, self.data
         pin.computeJointJacobians(model, data, q)          # with the joints' placements (the markers need no more)
         Jc = pin.jacobianCenterOfMass(model, data, False).take(f.axes, 0)
         e_com = (f.com_target - data.com[0]).take(f.axes)
-        H, g = self._soft_tasks(q, f)
-        A, b = self._hard_rows(q, f, H, g, Jc, e_com)
-        n_feet = len(b) - len(e_com)
-        A_feet, b_feet = A[:n_feet], b[:n_feet]
-        lo, hi = self._bounds(q, f)
-        C, d = self._base_height_row(q, f)
-        dq, ok = self._solve_qp(H, g, A, b, lo, hi, C, d)
-        if ok:
+        n_feet = 6 * len(self.soles) + 2 * (f.base_xz is not None and f.base_weight is None)
+        qp = self._qp.problem(self.nv, n_feet + len(e_com), 0 if f.base_z_min is None else 1)
+        self._soft_tasks(q, f, qp.H, qp.g)
+        self._hard_rows(q, f, qp, Jc, e_com)
+        self._bounds(q, f, qp.lo, qp.hi)
+        self._base_height_row(q, f, qp)
+        dq = self._qp.solve_problem(qp)
+        if dq is not None:
             return dq, True
         # COM infeasible with the feet fixed and the limits: COM as a heavily weighted soft task
+        H, g, A_feet, b_feet, lo, hi = qp.H, qp.g, qp.A[:n_feet], qp.b[:n_feet], qp.lo, qp.hi
+        C, d = (qp.C, qp.d) if len(qp.d) else (None, None)
         Hs = H + 1e4 * Jc.T @ Jc
         gs = g - 1e4 * Jc.T @ e_com
         dq, ok = self._solve_qp(Hs, gs, A_feet, b_feet, lo, hi, C, d)
@@ -317,9 +321,10 @@ class ComIk:
             dq, ok = self._solve_qp(Hs, gs, np.zeros((0, self.nv)), np.zeros(0), lo, hi, C, d)
         return dq, False
 
-    def _soft_tasks(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, np.ndarray]:
-        """Hessian and gradient of the markers, sum w ||J dq + e||^2 [m^2], and the posture prior, at q."""
-        H, g = self._marker_terms(f)
+    def _soft_tasks(self, q: np.ndarray, f: _Frame, H: np.ndarray, g: np.ndarray) -> None:
+        """Hessian H and gradient g (filled in place) of the markers, sum w ||J dq + e||^2 [m^2], and the posture
+        prior, at q."""
+        self._marker_terms(f, H, g)
         g += self.mu * pin.difference(self.model, f.q_ref, q)      # mu is 0 on the base
         for i, angle, w in f.joint_targets:          # q's index of a 1-DoF joint is its tangent index + 1
             H[i, i] += w
@@ -332,32 +337,27 @@ class ComIk:
             As = A / (self.dt * self._weight_g)
             H += self.momentum_weight * As.T @ As
             g += self.momentum_weight * As.T @ e
-        return H, g
 
-    def _marker_terms(self, f: _Frame) -> tuple[np.ndarray, np.ndarray]:
-        """The markers' Hessian J' W J plus the damping and posture diagonal, and their gradient J' W (p - t), at the
-        data's joint Jacobians: by the compiled kernel (:mod:`sit2stand.native`), else NumPy."""
-        nv, layout = self.nv, f.points
-        if self._native is None or not layout.size:
-            P, Jw = self.points(self.data, layout, f.root_weights)
-            Jw = Jw.reshape(-1, nv)
-            H = Jw.T @ Jw
-            H.flat[::nv + 1] += self._diagonal
-            return H, Jw.T @ (f.root_weights * (P - f.targets).ravel())
-        return self._native(layout, f.weights, f.targets)
+    def _marker_terms(self, f: _Frame, H: np.ndarray, g: np.ndarray) -> None:
+        """H = the markers' J' W J plus the damping and posture diagonal and g = their J' W (p - t), in place, at
+        the data's joint Jacobians: by the compiled kernel (:mod:`sit2stand.native`), else NumPy."""
+        if self._native is not None:
+            self._native(H, g)
+            return
+        nv, layout, root_weights = self.nv, f.points, np.repeat(np.sqrt(f.weights), 3)
+        P, Jw = self.points(self.data, layout, root_weights)
+        Jw = Jw.reshape(-1, nv)
+        np.matmul(Jw.T, Jw, out=H)
+        H.flat[::nv + 1] += self._diagonal
+        np.matmul(Jw.T, root_weights * (P - f.targets).ravel(), out=g)
 
-    def _hard_rows(self, q: np.ndarray, f: _Frame, H: np.ndarray, g: np.ndarray, Jc: np.ndarray,
-                   e_com: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Equality rows A dq = b: the feet (J_sole dq = -log(X_target^-1 X)), a held base x, z, then the COM's
-        (``Jc``, ``e_com``); a soft base hold (``base_weight``) goes into H and g instead, in place."""
-        data, n_soles = self.data, 6 * len(self.soles)
-        base = f.base_xz is not None and f.base_weight is None
-        n = n_soles + 2 * base
-        A, b = np.empty((n + len(e_com), self.nv)), np.empty(n + len(e_com))
-        feet = None if self._native_soles is None else self._native_soles(f.sole_targets)
-        if feet is not None:
-            A[:n_soles], b[:n_soles] = feet
-        else:
+    def _hard_rows(self, q: np.ndarray, f: _Frame, qp, Jc: np.ndarray, e_com: np.ndarray) -> None:
+        """The equality rows A dq = b of ``qp``, in place: the feet (J_sole dq = -log(X_target^-1 X)), a held base
+        x, z, then the COM's (``Jc``, ``e_com``); a soft base hold (``base_weight``) goes into its H and g
+        instead."""
+        data, n_soles, A, b = self.data, 6 * len(self.soles), qp.A, qp.b
+        n = len(b) - len(e_com)
+        if self._native_soles is None or not self._native_soles(A, b):
             for k, (fid, target) in enumerate(zip(self.soles, f.sole_targets)):
                 b[6 * k:6 * k + 6] = pin.log6(target.actInv(pin.updateFramePlacement(self.model, data, fid))).vector
                 A[6 * k:6 * k + 6] = pin.getFrameJacobian(self.model, data, fid, pin.LOCAL)
@@ -366,26 +366,25 @@ class ComIk:
             rb = np.zeros((2, self.nv))
             rb[:, :3] = data.oMi[1].rotation[[0, 2]]
             eb = (np.asarray(f.base_xz, float) - q[:3])[[0, 2]]
-            if base:
+            if n > n_soles:
                 A[n_soles:n], b[n_soles:n] = rb, eb
             else:
-                H += f.base_weight * rb.T @ rb
-                g -= f.base_weight * rb.T @ eb
+                qp.H += f.base_weight * rb.T @ rb
+                qp.g -= f.base_weight * rb.T @ eb
         A[n:], b[n:] = Jc, e_com
-        return A, b
 
-    def _base_height_row(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """The inequality C dq >= d keeping the base's world z at or above ``base_z_min`` (None, None without it):
-        the base's linear velocity is in its own frame, so the world z row is R[2]."""
-        if f.base_z_min is None:
-            return None, None
-        C = np.zeros((1, self.nv))
-        C[0, :3] = self.data.oMi[1].rotation[2]
-        return C, np.array([f.base_z_min - q[2]])
+    def _base_height_row(self, q: np.ndarray, f: _Frame, qp) -> None:
+        """The inequality C dq >= d of ``qp`` (in place) keeping the base's world z at or above ``base_z_min`` (its
+        problem has no row without it): the base's linear velocity is in its own frame, so the world z row is
+        R[2]."""
+        if f.base_z_min is not None:
+            qp.C[0, :3] = self.data.oMi[1].rotation[2]
+            qp.d[0] = f.base_z_min - q[2]
 
-    def _bounds(self, q: np.ndarray, f: _Frame) -> tuple[np.ndarray, np.ndarray]:
-        """Step bounds from the joint limits, the speed limits from the previous frame and the base pitch [rad]."""
-        lo, hi = self.box.free_base_lo.copy(), self.box.free_base_hi.copy()
+    def _bounds(self, q: np.ndarray, f: _Frame, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Step bounds (in place) from the joint limits, the speed limits from the previous frame and the base
+        pitch [rad]; the base's other five free."""
+        lo[:6], hi[:6] = -FREE, FREE
         qj = q[7:]
         np.subtract(f.q_lo, qj, out=lo[6:])
         np.subtract(f.q_hi, qj, out=hi[6:])
@@ -394,9 +393,8 @@ class ComIk:
             lo[4] = min(0.0, f.base_pitch_min - np.arctan2(R[0, 2], R[2, 2]))
         if len(self.stop_dofs):
             self._hold_on_stops(q, f, lo, hi)
-        lo[6:] = np.minimum(lo[6:], 0.0)   # a configuration just past a limit may always move back inside
-        hi[6:] = np.maximum(hi[6:], 0.0)
-        return lo, hi
+        np.minimum(lo[6:], 0.0, out=lo[6:])   # a configuration just past a limit may always move back inside
+        np.maximum(hi[6:], 0.0, out=hi[6:])
 
     def _hold_on_stops(self, q: np.ndarray, f: _Frame, lo: np.ndarray, hi: np.ndarray) -> None:
         """Step bounds (in place) keeping on its stop each joint that gravity presses there past
