@@ -35,7 +35,8 @@ from ..cache import cache_folder
 SOURCE = Path(__file__).with_name("ik_kernels.c")
 FLAGS = ("-O3", "-std=c99", "-fopenmp-simd", "-shared", "-fPIC")
 """``-fopenmp-simd``: the dot products' ``omp simd`` reductions run in SIMD lanes (no OpenMP runtime). No
-``-march=native``: the cache may be shared by hosts of different CPUs."""
+``-march=native``: the cache may be shared by hosts of different CPUs; the source has its entry points compiled
+for x86-64-v3 beside the baseline instead, picked per CPU when loaded."""
 DISABLE = "SIT2STAND_NATIVE"
 """Set to 0 to run the NumPy paths only."""
 
@@ -79,14 +80,18 @@ def kernels() -> ctypes.CDLL | None:
         _log.info("no C compiler (%s): the IK runs its NumPy path", os.environ.get("CC") or "cc")
         return None
     out = library_path(cc)
-    if not out.is_file():
-        try:
+    try:
+        if not out.is_file():
             build(cc, out)
-        except (OSError, subprocess.CalledProcessError) as e:
-            _log.warning("building %s failed, the IK runs its NumPy path: %s", SOURCE.name,
-                         getattr(e, "stderr", None) or e)
-            return None
-    lib = ctypes.CDLL(str(out))
+        try:
+            lib = ctypes.CDLL(str(out))
+        except OSError:              # a damaged file in the cache: built again
+            build(cc, out)
+            lib = ctypes.CDLL(str(out))
+    except (OSError, subprocess.CalledProcessError) as e:
+        _log.warning("building %s failed, the IK runs its NumPy path: %s", SOURCE.name,
+                     getattr(e, "stderr", None) or e)
+        return None
     for name, result in RESULT_TYPES.items():
         getattr(lib, name).restype = result
     return lib
