@@ -32,9 +32,9 @@ def _table(header: list[str], rows: list[list]) -> list[str]:
 def ik(doc: dict) -> list[str]:
     """`make bench-ik`: per-frame IK against mink and pink."""
     lines = [_stamp(doc.get("measured")), "",
-             f"{doc['frames']} frames of `{Path(doc['bag']).name}` ({doc['robot']}), per solver time per frame and "
-             f"its ratio to ours (theirs / ours); the answers' marker cost relative to ours (median) and the largest "
-             f"COM residual. Interleaved: each frame by every solver in turn; blocked: each solver over all frames.",
+             f"{doc['frames']} frames of `{Path(doc['bag']).name}` ({doc['robot']}): time per frame, its ratio to "
+             f"ours (theirs / ours), marker cost against ours (median), largest COM residual. Interleaved: each "
+             f"frame by every solver in turn; blocked: each solver over all frames.",
              ""]
     rows = []
     for mode, solvers in doc["modes"].items():

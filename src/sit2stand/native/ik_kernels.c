@@ -1,5 +1,6 @@
 /* sit2stand's compiled kernels for the per-frame COM-hard IK (sit2stand.retarget.ik): the markers' least-squares
- * terms and the step's QP. Plain C99, no dependency beyond libm; loaded with ctypes (sit2stand.native).
+ * terms, the feet's equality rows and the step's QP. Plain C99, no dependency beyond libm; loaded with ctypes
+ * (sit2stand.native), each taking its arrays as one block of pointers.
  *
  * Layouts: matrices row-major unless a stride says otherwise; indices are C ints (int32). Units SI, world frame.
  */

@@ -11,10 +11,11 @@ Each frame solves, by damped Gauss-Newton steps on the configuration q (Pinocchi
                 q_j accelerates against gravity within its motor's room               (trunk lift-off)
                 z_base(q) >= z_min                                                    (hips clear of the seat)
 
-with one dense QP (:class:`~sit2stand.optim.WarmQp`: DAQP, started from the last step's active set) per step in the
-tangent step dq:
+with one dense QP (:class:`~sit2stand.optim.WarmQp`: an active set started from the last step's working set) per
+step in the tangent step dq:
 ``min 1/2 dq' H dq + g' dq  s.t.  A dq = b,  C dq >= d,  l <= dq <= u`` built from the frame, COM and sole
-Jacobians.
+Jacobians, in place in the QP's arrays. The markers' terms, the soles' rows and the QP run in compiled kernels
+(:mod:`sit2stand.native`) where the host has a C compiler, else in NumPy and DAQP, to the same answers.
 Iterations are warm-started from the previous frame's solution. If the COM target cannot be met with the feet
 fixed and within limits, the COM is made a heavily weighted soft task instead, and the frame is flagged infeasible;
 the returned q always respects the joint limits and is finite.
