@@ -139,7 +139,7 @@ class WarmQp:
         self._problems: dict[tuple[int, int, int], QpProblem] = {}
         self._models: dict[tuple[int, int, int], daqp.Model] = {}     # one DAQP workspace per shape
         self._sense: dict[tuple[int, int, int], np.ndarray] = {}
-        self._last: tuple | None = None     # H, g, rows, x, multipliers of the last solved problem
+        self._last: tuple | None = None     # the last solved problem, its x and multipliers
         lib = native.kernels()
         self._native = None if lib is None else native.ActiveSetQp(lib)
 
@@ -165,7 +165,7 @@ class WarmQp:
         if self._native is not None:
             solved = self._native.solve_problem(p)
             if solved is not None:
-                self._last = (p.H, p.g, None, p, *solved)
+                self._last = (p, *solved)
                 return solved[0]
         return self._daqp(p)
 
@@ -198,7 +198,7 @@ class WarmQp:
             model.update(sense=self._sense[key])           # the next problem starts clean
             self._last = None
             return None
-        self._last = (H, g, rows, p, x, info["lam"])
+        self._last = (p, x, info["lam"])
         if self._native is not None:
             self._native.remember(p, info["lam"])
         return x
@@ -207,7 +207,6 @@ class WarmQp:
         """The last solve's stationarity residual max |H x + g + multipliers' forces| (inf if it found none)."""
         if self._last is None:
             return float("inf")
-        H, g, rows, p, x, lam = self._last
-        rows = p.rows() if rows is None else rows
+        p, x, lam = self._last
         n = len(x)
-        return float(np.abs(H @ x + g + lam[:n] + rows.T @ lam[n:]).max())
+        return float(np.abs(p.H @ x + p.g + lam[:n] + p.rows().T @ lam[n:]).max())
