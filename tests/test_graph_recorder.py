@@ -128,13 +128,15 @@ def test_a_killed_recorder_does_not_hold_up_the_replayers_clock(run_node, tmp_pa
         start_s, end_s = reader.start_ns * 1e-9, reader.end_ns * 1e-9
     rec = run_node("sit2stand.nodes.recorder", "--ros-args", "-p", f"output:={tmp_path / 'rec'}",
                    "-p", "regex:=^/(mocap|force_plate)/")
+    # the replayer waits for the recorder on every played topic and for this test's /clock watch: a watch matched
+    # only after the 2 s of playing saw its first stamp past the bag's end (DDS discovery on a loaded host)
     play = run_node("sit2stand.nodes.replayer", "--ros-args", "-p", f"bag:={bag}", "-p", "rate:=2.0",
                     "-p", "topics:=['/mocap/markers', '/force_plate/chair', '/force_plate/feet']",
-                    "-p", "wait_for_subscribers:=1", "-p", "wait_timeout_s:=60.0", "-p", "at_end:=idle",
-                    "-p", "clock_after_end:=true")
+                    "-p", "wait_for:=['/mocap/markers:1', '/force_plate/chair:1', '/force_plate/feet:1', '/clock:1']",
+                    "-p", "wait_timeout_s:=60.0", "-p", "at_end:=idle", "-p", "clock_after_end:=true")
     with ClockWatch() as clock:
         # the clock leaves the bag's start once the replayer plays, i.e. once the recorder subscribes to every
-        # played topic (wait_for_subscribers): the recorder is then a subscriber that will never acknowledge
+        # played topic (wait_for): the recorder is then a subscriber that will never acknowledge
         assert clock.spin_until(lambda s: s[-1] > start_s + 0.1, 90), play.output
         rec.proc.send_signal(signal.SIGKILL)
         killed_at = clock.stamps[-1]
