@@ -112,11 +112,13 @@ def test_the_qp_kernel_gives_no_answer_to_contradicting_equalities():
 
 
 def test_the_ik_is_the_same_with_or_without_the_kernels(robot):
-    """A sequence of frames (markers on links, a COM target and the feet held, a speed-limited box): the same
-    configurations, to round-off, whichever path runs."""
+    """A sequence of frames (markers on links, a COM target and the feet held, a speed-limited box; the stops, the
+    trunk's lift, the momentum term, base holds hard and soft, the base's floor and a joint target in turn): the
+    same configurations, to round-off, whichever path runs."""
     model = robot.model
     rng = np.random.default_rng(2)
-    solvers = [ComIk(model, list(robot.sole_frames), dt=0.01, posture_weight=1e-3) for _ in range(2)]
+    solvers = [ComIk(model, list(robot.sole_frames), dt=0.01, posture_weight=1e-3, momentum_weight=1e-3,
+                     stop_torque_share=1.0, lift_torque_share=1.0) for _ in range(2)]
     solvers[1]._native = solvers[1]._native_soles = solvers[1]._qp._native = None
     assert solvers[0]._native is not None and solvers[0]._qp._native is not None
     q0, feet = robot.q_seated, list(robot.sole_targets)
@@ -129,7 +131,9 @@ def test_the_ik_is_the_same_with_or_without_the_kernels(robot):
     for k in range(20):
         markers = MarkerTargets(fids, base + 0.002 * k * rng.normal(size=base.shape), np.full(len(fids), 10.0))
         com = com0 + np.array([0.001 * k, 0.0, -0.002 * k])
-        qs = [ik.solve(q, markers, com, feet, q_prev=q, max_iterations=2).q for ik, q in zip(solvers, qs)]
+        rules = [{}, {"base_xz": q0[:3]}, {"base_xz": q0[:3], "base_weight": 1e3, "base_pitch_min": -0.2},
+                 {"base_z_min": q0[2] - 0.01, "joint_targets": [(model.nv - 1, 0.1, 3.0)]}][k % 4]
+        qs = [ik.solve(q, markers, com, feet, q_prev=q, max_iterations=2, **rules).q for ik, q in zip(solvers, qs)]
         assert np.abs(qs[0] - qs[1]).max() < 1e-8
 
 
