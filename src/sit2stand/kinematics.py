@@ -96,7 +96,7 @@ class PointJacobians:
         if known is None:
             frame = self.model.frames[frame_id]
             known = self._frames[frame_id] = (frame.parentJoint, np.array([*frame.placement.translation, 1.0]),
-                                              self.joint_support_mask(frame.parentJoint))
+                                              self._joint_mask(frame.parentJoint))
         return known
 
     def point_set(self, frame_ids) -> PointSet:
@@ -116,7 +116,7 @@ class PointJacobians:
             offsets = np.array([offset for _, offset, _ in frames]).reshape(m, 4).T
             masks = np.repeat(np.array([mask for _, _, mask in frames]).reshape(m, self.nv), 3, axis=0)
             blocks, fill, source, sign = _block_layout(m)
-            supports = [np.flatnonzero(self.joint_support_mask(j)).astype(np.int32) for j in joints]
+            supports = [np.flatnonzero(self._joint_mask(j)).astype(np.int32) for j in joints]
             counts = np.array([len(s) for s in supports], np.int32)
             layout = self._layouts[key] = PointSet(
                 m, joints, take, offsets, masks, blocks.copy(), fill, source, sign,
@@ -125,7 +125,7 @@ class PointJacobians:
                 (np.cumsum(counts) - counts).astype(np.int32), counts)
         return layout
 
-    def joint_support_mask(self, joint: int) -> np.ndarray:
+    def _joint_mask(self, joint: int) -> np.ndarray:
         """(nv,) 1 on the velocity coordinates that move ``joint``'s frame."""
         model = self.model
         mask = np.zeros(self.nv)

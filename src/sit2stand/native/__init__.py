@@ -198,28 +198,24 @@ class SoleRows:
     ``pin.getFrameJacobian(model, data, f, pin.LOCAL)`` and ``pin.log6``). Targets are loaded once a frame
     (:meth:`load`)."""
 
-    def __init__(self, lib: ctypes.CDLL, model: pin.Model, data: pin.Data, frames: list[int], supports, oMi: int
+    def __init__(self, lib: ctypes.CDLL, model: pin.Model, data: pin.Data, frames: list[int], soles, oMi: int
                  ) -> None:
         J = data.J
-        self._lib, self.nv, self.count = lib, model.nv, len(frames)
-        self._data = data
+        self._lib, self.nv, self.count = lib, model.nv, soles.size
+        self._data, self._soles = data, soles                   # keep what the pointer block points into
         self._strides = (J.strides[0] // 8, J.strides[1] // 8)
-        frame = [model.frames[f] for f in frames]
-        self._target = np.empty((len(frames), 4, 4))
-        dofs = [np.flatnonzero(supports(f.parentJoint)).astype(np.int32) for f in frame]
-        count = np.array([len(d) for d in dofs], np.int32)
-        self._block = PointerBlock(
-            J.ctypes.data, oMi, np.array([f.parentJoint for f in frame], np.int32),
-            np.array([f.placement.homogeneous for f in frame]), self._target,
-            np.concatenate([np.zeros(0, np.int32), *dofs]), (np.cumsum(count) - count).astype(np.int32), count)
+        self._target = np.empty((soles.size, 4, 4))
+        self._block = PointerBlock(J.ctypes.data, oMi, soles.joint_id,
+                                   np.array([model.frames[f].placement.homogeneous for f in frames]), self._target,
+                                   soles.joint_row, soles.dofs, soles.dof_start, soles.dof_count)
         self._outputs = _Outputs()
 
     @classmethod
-    def of(cls, model: pin.Model, data: pin.Data, frames: list[int], supports) -> SoleRows | None:
-        """The kernel's rows, or None (see :meth:`MarkerTerms.of`); ``supports(joint)``: the (nv,) mask of the
-        tangent indices that move the joint."""
+    def of(cls, model: pin.Model, data: pin.Data, frames: list[int], soles) -> SoleRows | None:
+        """The kernel's rows for the sole ``frames``, laid out as their point set ``soles``
+        (:meth:`~sit2stand.kinematics.PointJacobians.point_set`), or None (see :meth:`MarkerTerms.of`)."""
         found = _on_data(data)
-        return None if found is None else cls(found[0], model, data, frames, supports, found[1])
+        return None if found is None else cls(found[0], model, data, frames, soles, found[1])
 
     def load(self, targets: list[pin.SE3]) -> None:
         """The soles' target placements, one per frame."""
@@ -248,9 +244,7 @@ class ActiveSetQp:
     def solve_problem(self, p) -> tuple[np.ndarray, np.ndarray] | None:
         """(x, multipliers in DAQP's convention: H x + g + lam[:n] + [A; C]' lam[n:] = 0), or None. x is a copy;
         the multipliers are the problem's own array, rewritten by its next solve."""
-        state = p.kernel
-        if state is None:
-            state = p.kernel = _KernelState(p)
+        state = _KernelState.of(p)
         if not self._lib.box_qp(*p.shape, self.MAX_ITERATIONS, self.TOLERANCE, state.block.pointer):
             return None
         return state.x.copy(), state.lam
@@ -259,9 +253,7 @@ class ActiveSetQp:
         """Start the problem's next solve from another solver's answer: the bounds and rows with a nonzero
         multiplier held (DAQP's sign: negative at a lower bound)."""
         n, me, _ = p.shape
-        state = p.kernel
-        if state is None:
-            state = p.kernel = _KernelState(p)
+        state = _KernelState.of(p)
         state.bound[:] = np.sign(lam[:n])
         state.row[:] = lam[n + me:] != 0.0
 
@@ -277,3 +269,10 @@ class _KernelState:
         self.bound, self.row = np.zeros(n, np.int32), np.zeros(mi, np.int32)
         self.block = PointerBlock(p.H, p.g, p.A, p.b, p.C, p.d, p.lo, p.hi, self.x, self.lam, self.bound, self.row,
                                   np.empty((m, n)), np.empty(5 * n + n * n + m * (n + m + 4) + 16))
+
+    @classmethod
+    def of(cls, p) -> _KernelState:
+        """The problem's state, made on first use."""
+        if p.kernel is None:
+            p.kernel = cls(p)
+        return p.kernel

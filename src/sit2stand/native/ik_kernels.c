@@ -278,13 +278,14 @@ HELPER int log3(const double *R, double *w, double *theta_out)
 /* The feet's equality rows: for each of `count` frames (a sole), its 6 rows of the LOCAL frame Jacobian
  * (linear, angular) into A (count * 6 x nv, row-major) and -log6(target^-1 X) into b (count * 6), where X is the
  * frame's world placement: joint_id's placement in oMi (Pinocchio's layout, see marker_terms) times `placement`
- * (a 4 x 4 homogeneous matrix per frame, row-major), and `target` the same layout. dofs / dof_start /
- * dof_count as in marker_terms, one run per frame. Returns 0 if a rotation error is too close to pi.
- * p: J, oMi, joint_id, placement, target, dofs, dof_start, dof_count; out: A, b (its first 6 count rows). */
+ * (a 4 x 4 homogeneous matrix per frame, row-major), and `target` the same layout. Returns 0 if a rotation error
+ * is too close to pi.
+ * p: J, oMi, joint_id, placement, target, and the frames' joint_row, dofs, dof_start, dof_count as a point set
+ * lays them out (see marker_terms); out: A, b (its first 6 count rows). */
 CLONED int sole_rows(int nv, int count, int j_row, int j_col, void *const *p, void *const *out)
 {
     const double *J = p[0], *oMi = p[1], *placement = p[3], *target = p[4];
-    const int *joint_id = p[2], *dofs = p[5], *dof_start = p[6], *dof_count = p[7];
+    const int *joint_id = p[2], *joint_row = p[5], *dofs = p[6], *dof_start = p[7], *dof_count = p[8];
     double *A = out[0], *b = out[1];
     memset(A, 0, sizeof(double) * 6 * count * nv);
     for (int f = 0; f < count; ++f) {
@@ -320,9 +321,9 @@ CLONED int sole_rows(int nv, int count, int j_row, int j_col, void *const *p, vo
             bf[r] = -(pe[r] - 0.5 * wx[r] + a * wxx[r]);
             bf[3 + r] = -w[r];
         }
-        const int *idx = dofs + dof_start[f];
+        const int *idx = dofs + dof_start[joint_row[f]];
         double *Af = A + (size_t)6 * f * nv;
-        for (int k = 0; k < dof_count[f]; ++k) {
+        for (int k = 0; k < dof_count[joint_row[f]]; ++k) {
             const int c = idx[k];
             const double vx = J[c * j_col], vy = J[j_row + c * j_col], vz = J[2 * j_row + c * j_col];
             const double ox = J[3 * j_row + c * j_col], oy = J[4 * j_row + c * j_col], oz = J[5 * j_row + c * j_col];

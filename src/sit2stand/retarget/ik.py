@@ -227,7 +227,7 @@ class ComIk:
         self._qp = WarmQp()
         self.points = PointJacobians(model)
         self._native = native.MarkerTerms.of(self.data, self._diagonal)       # None: the NumPy paths
-        self._native_soles = native.SoleRows.of(model, self.data, self.soles, self.points.joint_support_mask)
+        self._native_soles = native.SoleRows.of(model, self.data, self.soles, self.points.point_set(self.soles))
         self.momentum_weight = momentum_weight
         self._weight_g = float(pin.computeTotalMass(model)) * 9.81
         self._L_prev: np.ndarray | None = None      # the previous frame's angular momentum [kg m^2/s]
