@@ -13,11 +13,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rclpy
+from geometry_msgs.msg import PointStamped
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.experimental import EventsExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 from conftest import NodeProcess
 from sit2stand.io.bag import BagReader
+from sit2stand.io.losses import WithMessageInfo
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -118,6 +122,29 @@ def test_messages_the_recorder_missed_are_counted_and_fail_it(run_node, run_publ
     assert f"lost {2000 - kept} messages (/robot/cop: {2000 - kept})" in rec.output
     with BagReader(out) as bag:
         assert bag.custom_data["lost_messages"] == f"/robot/cop: {2000 - kept}"
+
+
+@pytest.mark.parametrize("executor", [EventsExecutor, SingleThreadedExecutor])
+def test_the_recorders_callback_gets_each_samples_publication_sequence_number(executor, ros_env):
+    # the recorder's gap count reads them; rclpy's two executors pass message info differently
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = rclpy.create_node("sequence_numbers", context=context)
+        got = []
+        node.create_subscription(PointStamped, "numbered", WithMessageInfo(
+            lambda data, info: got.append((type(data), info["publication_sequence_number"]))), 10, raw=True)
+        pub = node.create_publisher(PointStamped, "numbered", 10)
+        spin = executor(context=context)
+        spin.add_node(node)
+        for _ in range(3):
+            pub.publish(PointStamped())
+        deadline = time.monotonic() + 30
+        while len(got) < 3 and time.monotonic() < deadline:
+            spin.spin_once(timeout_sec=0.1)
+        assert got == [(bytes, 1), (bytes, 2), (bytes, 3)]
+    finally:
+        rclpy.try_shutdown(context=context)
 
 
 def test_a_killed_recorder_does_not_hold_up_the_replayers_clock(run_node, tmp_path):

@@ -11,11 +11,11 @@ subscribe anew. Other topics are found by polling the graph. Subscriptions take 
 cleanly (summary and metadata.yaml written).
 
 Losses are counted, never silent: each subscription keeps up to 100,000 samples not yet taken (recorder_fastdds.xml);
-a sample a publisher dropped before the recorder had it (DDS's message-lost status) is counted per topic at close,
-logged, stored in the bag's ``custom_data`` as ``lost_messages``, and makes the node exit 1. The status is read at
-close only: the pinned rmw_fastrtps (8.4.3) can deadlock taking that event while DDS reports a new loss (ros2/
-rmw_fastrtps#890). A latched state topic (depth 1) keeps only its newest sample by design: a replaced sample is
-stored as ``superseded_latched_messages``, not an error.
+a sample that never reached the recorder (DDS's message-lost status, or a gap in its writer's publication sequence
+numbers: :mod:`sit2stand.io.losses`) is counted per topic at close, logged, stored in the bag's ``custom_data`` as
+``lost_messages``, and makes the node exit 1. The status is read at close only: the pinned rmw_fastrtps (8.4.3) can
+deadlock taking that event while DDS reports a new loss (ros2/rmw_fastrtps#890). A latched state topic (depth 1)
+keeps only its newest sample by design: a replaced sample is stored as ``superseded_latched_messages``, not an error.
 """
 
 from __future__ import annotations
@@ -28,37 +28,19 @@ from pathlib import Path
 from rclpy.event_handler import QoSSubscriptionEventType
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 
 from ..io.topics import (CLOCK_TOPIC, ESTIMATE_TOPICS, GRAPH_TOPIC, LATCHED_TOPICS, RUN_ID_ENV, TOPIC_TYPES, bag_name,
                          ros_name)
 from ..io.bag import BagError, BagWriter
+from ..io.losses import TopicLosses, WithMessageInfo
 from .runtime import IdleDrain, NodeError, declare, message_class, node_main, steady_timer
-from .qos import qos_matching_publishers, qos_to_bag
+from .qos import known_topic_qos, matches_publishers, qos_matching_publishers, qos_to_bag
 
 # the deep reader queues (read when rclpy creates its DDS participant; a profile the user names wins)
 os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(Path(__file__).with_name("recorder_fastdds.xml")))
 
 DEFAULT_EXCLUDE = r"^/rosout$|^/parameter_events$"
-
-
-def known_topic_qos(latched: bool) -> QoSProfile:
-    """The subscription QoS of a topic of :data:`TOPIC_TYPES` before its publishers are seen: what every sit2stand
-    publisher offers (reliable; transient local when latched or an estimate, :data:`ESTIMATE_TOPICS`: a volatile
-    reader matched late lost the first 0.3 s of /human/com in 2 of 5 replays), keep-all as a recorder should."""
-    return QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
-
-
-def matches_publishers(qos: QoSProfile, infos) -> bool:
-    """Whether a subscription of ``qos`` connects to every publisher in ``infos`` (DDS request/offer rules)."""
-    for info in infos:
-        if qos.reliability == ReliabilityPolicy.RELIABLE and info.qos_profile.reliability != ReliabilityPolicy.RELIABLE:
-            return False
-        if qos.durability == DurabilityPolicy.TRANSIENT_LOCAL and \
-                info.qos_profile.durability != DurabilityPolicy.TRANSIENT_LOCAL:
-            return False
-    return True
 
 
 class Recorder(Node):
@@ -96,6 +78,7 @@ class Recorder(Node):
         self.subs = {}
         self.unconfirmed: dict[str, tuple[str, QoSProfile]] = {}   # subscribed before a publisher was seen
         self.lost: dict[str, int] = {}
+        self.losses = TopicLosses()
         self.lost_status: dict[str, object] = {}     # topic -> its subscription's message-lost status (DDS)
         self.superseded: dict[str, int] = {}      # latched states replaced before the recorder took them
         self.skipped: set[str] = set()
@@ -156,6 +139,7 @@ class Recorder(Node):
         self.get_logger().info(f"subscribing to {topic} anew: its publishers offer {msgtype}, "
                                f"{'best effort' if qos.reliability == 1 else 'reliable'} or volatile")
         self.lost_status.pop(topic, None)      # it matched no publisher: it took nothing, it lost nothing
+        self.losses.forget(topic)
         self.destroy_subscription(self.subs.pop(topic))
         return True
 
@@ -174,20 +158,23 @@ class Recorder(Node):
                                f"{'reliable' if qos.reliability == 1 else 'best effort'})")
 
     def _subscribe(self, topic: str, name: str, cls, qos: QoSProfile) -> None:
-        sub = self.create_subscription(cls, name, lambda data, t=topic: self._on_message(t, data), qos, raw=True)
+        sub = self.create_subscription(cls, name, WithMessageInfo(lambda data, info, t=topic: self._on_message(
+            t, data, info)), qos, raw=True)
         self.subs[topic] = sub
         with sub.handle:        # read at close only (see the module docstring), never put in the executor's wait set
             self.lost_status[topic] = _rclpy.EventHandle(sub.handle,
                                                          QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST)
 
     def _take_lost(self) -> None:
-        """Each subscription's message-lost count since it was made, into ``lost`` / ``superseded``."""
+        """Each subscription's losses since it was made, into ``lost`` / ``superseded``."""
         for topic, event in self.lost_status.items():
             with event:
                 info = event.take_event()
             if info is not None and info.total_count:
-                self._on_lost(topic, info.total_count)
+                self.losses.dds_lost(topic, info.total_count)
         self.lost_status.clear()
+        for topic, count in self.losses.lost().items():
+            self._on_lost(topic, count)
 
     def _add_to_bag(self, topic: str, msgtype: str, qos: QoSProfile) -> None:
         self.writer.add_topic(topic, msgtype, [qos_to_bag(qos)])
@@ -199,7 +186,8 @@ class Recorder(Node):
         self.lost[topic] = self.lost.get(topic, 0) + count
         self.exit_code = 1
 
-    def _on_message(self, topic: str, data: bytes) -> None:
+    def _on_message(self, topic: str, data: bytes, info: dict) -> None:
+        self.losses.see(topic, info.get("publication_sequence_number"), self.subs[topic].get_publisher_count)
         if not self.writer.has_topic(topic):      # a known topic's first message, before its publisher was polled
             msgtype, qos = self.unconfirmed[topic]
             self._add_to_bag(topic, msgtype, qos)
