@@ -111,6 +111,40 @@ def test_the_qp_kernel_gives_no_answer_to_contradicting_equalities():
     assert native.ActiveSetQp(native.kernels()).solve_problem(qp) is None
 
 
+def first_step_qp(solver: ComIk, *args, **kwargs) -> tuple[np.ndarray, ...]:
+    """H, g, A, b, lo, hi of the QP of ``solver.solve(*args, **kwargs)``'s first step (copies)."""
+    taken = []
+
+    def capture(qp):
+        taken.append(tuple(a.copy() for a in (qp.H, qp.g, qp.A, qp.b, qp.lo, qp.hi)))
+        return np.zeros(solver.nv)
+
+    solver._qp.solve_problem = capture
+    solver.solve(*args, max_iterations=1, **kwargs)
+    return taken[0]
+
+
+def test_a_steps_terms_in_one_call_equal_the_numpy_paths(robot):
+    """The QP of one Gauss-Newton step, H, g, A, b, lo and hi, written by ``step_terms`` (markers, feet, posture,
+    COM on two axes, the joints' box) as the NumPy path writes them, at random configurations (joints past their
+    box among them) and targets."""
+    model = robot.model
+    rng = np.random.default_rng(3)
+    mu = rng.uniform(1e-4, 1e-2, model.nv)
+    solvers = [ComIk(model, list(robot.sole_frames), dt=0.01, posture_weight=mu) for _ in range(2)]
+    solvers[1]._native = None
+    assert solvers[0]._native is not None
+    fids = np.array(sorted(rng.choice(range(1, model.nframes), 12, replace=False)))
+    for _ in range(3):
+        q, q_prev, q_ref = random_q(model, rng), random_q(model, rng), random_q(model, rng)
+        markers = MarkerTargets(fids, rng.normal(size=(len(fids), 3)), rng.uniform(1, 20, len(fids)))
+        feet = [pin.SE3(pin.exp3(rng.normal(size=3) * 0.3), rng.normal(size=3)) for _ in robot.sole_frames]
+        args = (q, markers, rng.normal(size=3), feet)
+        kernel, numpy = (first_step_qp(s, *args, q_ref=q_ref, q_prev=q_prev, com_axes=(0, 2)) for s in solvers)
+        for name, a, b in zip(("H", "g", "A", "b", "lo", "hi"), kernel, numpy):
+            assert np.abs(a - b).max() <= 1e-9 * max(1.0, np.abs(b).max()), name
+
+
 def test_the_ik_is_the_same_with_or_without_the_kernels(robot):
     """A sequence of frames (markers on links, a COM target and the feet held, a speed-limited box; the stops, the
     trunk's lift, the momentum term, base holds hard and soft, the base's floor and a joint target in turn): the

@@ -41,7 +41,7 @@ DISABLE = "SIT2STAND_NATIVE"
 """Set to 0 to run the NumPy paths only."""
 
 _log = logging.getLogger(__name__)
-RESULT_TYPES = {"marker_terms": None, "sole_rows": ctypes.c_int, "box_qp": ctypes.c_int}
+RESULT_TYPES = {"marker_terms": None, "sole_rows": ctypes.c_int, "box_qp": ctypes.c_int, "step_terms": ctypes.c_int}
 """The kernels and their return types; arguments go undeclared (ints, and ctypes pointers made once)."""
 
 
@@ -132,15 +132,16 @@ def _on_data(data: pin.Data) -> tuple[ctypes.CDLL, int] | None:
 
 
 class _Outputs:
-    """Pointer blocks of the two output arrays a kernel writes into, one per pair of arrays (held with it)."""
+    """Pointer blocks of the output arrays a kernel writes into, one per set of arrays (held with it)."""
 
     def __init__(self) -> None:
-        self._blocks: dict[tuple[int, int], PointerBlock] = {}
+        self._blocks: dict[tuple[int, ...], PointerBlock] = {}
 
-    def __call__(self, a: np.ndarray, b: np.ndarray) -> ctypes.c_void_p:
-        block = self._blocks.get((id(a), id(b)))
+    def __call__(self, *arrays: np.ndarray) -> ctypes.c_void_p:
+        key = tuple(map(id, arrays))
+        block = self._blocks.get(key)
         if block is None:
-            block = self._blocks[id(a), id(b)] = PointerBlock(a, b)
+            block = self._blocks[key] = PointerBlock(*arrays)
         return block.pointer
 
 
@@ -226,6 +227,66 @@ class SoleRows:
         False if a rotation error is near pi (ask Pinocchio)."""
         return bool(self._lib.sole_rows(self.nv, self.count, *self._strides, self._block.pointer,
                                         self._outputs(A, b)))
+
+
+class StepTerms:
+    """A Gauss-Newton step's QP terms in one kernel call (``step_terms``): the markers' terms
+    (:class:`MarkerTerms`), the feet's rows (:class:`SoleRows`), the posture prior's gradient, the COM's rows and
+    the joints' step box, written into a :class:`~sit2stand.optim.QpProblem`, after ``computeJointJacobians`` and
+    ``jacobianCenterOfMass`` on the data (whose ``Jcom`` and ``com[0]`` it reads where they lie). A frame's targets
+    are loaded once (:meth:`load`)."""
+
+    FREE = ctypes.c_double(1e20)
+    """The base's step bounds (the QP solvers' infinity)."""
+
+    def __init__(self, markers: MarkerTerms, soles: SoleRows, model: pin.Model, data: pin.Data,
+                 posture_weight: np.ndarray) -> None:
+        self.markers, self.soles = markers, soles
+        Jcom = data.Jcom
+        self._jc_strides = (Jcom.strides[0] // 8, Jcom.strides[1] // 8)
+        self._q, self._q_ref, self._c_target = np.empty(model.nq), np.empty(model.nq), np.empty(3)
+        self._axes, self._n_axes = np.zeros(3, np.int32), 0
+        self._q_lo, self._q_hi = np.empty(model.nv - 6), np.empty(model.nv - 6)
+        self._block = PointerBlock(self._q, self._q_ref, np.ascontiguousarray(posture_weight, float),
+                                   Jcom.ctypes.data, data.com[0].ctypes.data, self._c_target, self._axes,
+                                   self._q_lo, self._q_hi)
+        self._outputs = _Outputs()
+
+    @classmethod
+    def of(cls, model: pin.Model, data: pin.Data, diagonal: np.ndarray, posture_weight: np.ndarray,
+           frames: list[int], soles) -> StepTerms | None:
+        """The kernel's terms (``diagonal``, ``frames`` and ``soles`` as :class:`MarkerTerms` and
+        :class:`SoleRows` take them; ``posture_weight`` (nv) 0 on the base), or None: no kernel, placements laid
+        out otherwise, a COM Jacobian not in place, or a joint past the base with other than one coordinate."""
+        markers, sole_rows = MarkerTerms.of(data, diagonal), SoleRows.of(model, data, frames, soles)
+        if markers is None or sole_rows is None or data.Jcom.shape != (3, model.nv) or \
+                any(j.nq != 1 or j.nv != 1 for j in model.joints[2:]):
+            return None
+        return cls(markers, sole_rows, model, data, posture_weight)
+
+    def load(self, layout, weights: np.ndarray, targets: np.ndarray, sole_targets: list[pin.SE3],
+             q_ref: np.ndarray, com_target: np.ndarray, axes: np.ndarray, q_lo: np.ndarray,
+             q_hi: np.ndarray) -> None:
+        """A frame's targets: markers (as :meth:`MarkerTerms.load`), the soles' placements, the posture reference
+        (nq), the COM target [m] on ``axes``, and the joints' box over its steps [rad] (nq - 7)."""
+        self.markers.load(layout, weights, targets)
+        self.soles.load(sole_targets)
+        self._q_ref[:] = q_ref
+        self._c_target[:] = com_target
+        self._n_axes = len(axes)
+        self._axes[:self._n_axes] = axes
+        self._q_lo[:] = q_lo
+        self._q_hi[:] = q_hi
+
+    def __call__(self, q: np.ndarray, p, com_row: int) -> bool:
+        """``p``'s H, g, A, b, lo and hi at ``q`` (its COM rows from ``com_row``); False if a foot's rotation
+        error is near pi (its rows are then the caller's to write, with Pinocchio)."""
+        self._q[:] = q
+        m, s = self.markers, self.soles
+        return bool(m._lib.step_terms(m.nv, m._layout.size, s.count, self._n_axes, com_row, *m._strides,
+                                      *self._jc_strides, self.FREE, m._block.pointer, m._layout.kernel_block.pointer,
+                                      s._block.pointer, self._block.pointer,
+                                      self._outputs(p.H, p.g, p.A, p.b, p.lo, p.hi)))
 
 
 class ActiveSetQp:

@@ -33,8 +33,8 @@
  * H (nv x nv) and g (nv) are overwritten: H = diag + sum_k w_k J_k' J_k. P (m x 3) receives the positions.
  * fixed: J, oMi, weight (m), target (m x 3), diag (nv), P, work (3 nv); layout: joint_id, joint_row, offset
  * (m x 3), dofs, dof_start, dof_count; out: H, g. */
-CLONED void marker_terms(int nv, int m, int j_row, int j_col, void *const *fixed, void *const *layout,
-                         void *const *out)
+HELPER void markers_(int nv, int m, int j_row, int j_col, void *const *fixed, void *const *layout,
+                     void *const *out)
 {
     const double *J = fixed[0], *oMi = fixed[1], *weight = fixed[2], *target = fixed[3], *diag = fixed[4];
     double *P = fixed[5], *work = fixed[6], *H = out[0], *g = out[1];       /* work: 3 nv */
@@ -73,6 +73,12 @@ CLONED void marker_terms(int nv, int m, int j_row, int j_col, void *const *fixed
     }
     for (int i = 0; i < nv; ++i)
         H[(size_t)i * nv + i] += diag[i];
+}
+
+CLONED void marker_terms(int nv, int m, int j_row, int j_col, void *const *fixed, void *const *layout,
+                         void *const *out)
+{
+    markers_(nv, m, j_row, j_col, fixed, layout, out);
 }
 
 /* x . y over n entries; the reduction's order is free (-fopenmp-simd), so it runs in SIMD lanes. */
@@ -282,7 +288,7 @@ HELPER int log3(const double *R, double *w, double *theta_out)
  * is too close to pi.
  * p: J, oMi, joint_id, placement, target, and the frames' joint_row, dofs, dof_start, dof_count as a point set
  * lays them out (see marker_terms); out: A, b (its first 6 count rows). */
-CLONED int sole_rows(int nv, int count, int j_row, int j_col, void *const *p, void *const *out)
+HELPER int soles_(int nv, int count, int j_row, int j_col, void *const *p, void *const *out)
 {
     const double *J = p[0], *oMi = p[1], *placement = p[3], *target = p[4];
     const int *joint_id = p[2], *joint_row = p[5], *dofs = p[6], *dof_start = p[7], *dof_count = p[8];
@@ -336,4 +342,50 @@ CLONED int sole_rows(int nv, int count, int j_row, int j_col, void *const *p, vo
         }
     }
     return 1;
+}
+
+CLONED int sole_rows(int nv, int count, int j_row, int j_col, void *const *p, void *const *out)
+{
+    return soles_(nv, count, j_row, j_col, p, out);
+}
+
+/* A whole Gauss-Newton step's QP terms but for the rules a caller adds, in one call, after computeJointJacobians
+ * and jacobianCenterOfMass on the data: the markers' terms into H and g (marker_terms), the feet's rows into the
+ * first 6 count rows of A and b (sole_rows), then
+ *   g[i] += mu[i] (q[i + 1] - q_ref[i + 1]), i >= 6        the posture prior (1-DoF joints; mu is 0 on the base)
+ *   A[r0 + a] = Jcom[axis_a], b[r0 + a] = c_target[axis_a] - com[axis_a]          the COM's rows, a < n_axes
+ *   lo[i] = -free, hi[i] = free, i < 6                     the base's step is free
+ *   lo[6 + j] = min(q_lo[j] - q[7 + j], 0), hi[6 + j] = max(q_hi[j] - q[7 + j], 0)   the joints' box; a joint
+ *                                                          just past a limit may always move back inside
+ * step: q, q_ref (nq), mu (nv), Jcom (3 x nv, element (r, c) at Jcom[r jc_row + c jc_col]: data.Jcom), com (3:
+ * data.com[0]), c_target (3), axes (n_axes ints), q_lo, q_hi (nv - 6); out: H, g, A, b, lo, hi.
+ * Returns sole_rows's answer (0: a foot's rotation error is near pi, its rows are the caller's to write). */
+CLONED int step_terms(int nv, int m, int count, int n_axes, int r0, int j_row, int j_col, int jc_row, int jc_col,
+                      double free_, void *const *markers, void *const *layout, void *const *soles,
+                      void *const *step, void *const *out)
+{
+    const double *q = step[0], *q_ref = step[1], *mu = step[2], *Jcom = step[3], *com = step[4],
+                 *c_target = step[5], *q_lo = step[7], *q_hi = step[8];
+    const int *axes = step[6];
+    double *g = out[1], *A = out[2], *b = out[3], *lo = out[4], *hi = out[5];
+    markers_(nv, m, j_row, j_col, markers, layout, out);
+    const int soles_ok = soles_(nv, count, j_row, j_col, soles, out + 2);
+    for (int i = 6; i < nv; ++i)
+        g[i] += mu[i] * (q[i + 1] - q_ref[i + 1]);
+    for (int a = 0; a < n_axes; ++a) {
+        double *row = A + (size_t)(r0 + a) * nv;
+        for (int c = 0; c < nv; ++c)
+            row[c] = Jcom[axes[a] * jc_row + c * jc_col];
+        b[r0 + a] = c_target[axes[a]] - com[axes[a]];
+    }
+    for (int i = 0; i < 6; ++i) {
+        lo[i] = -free_;
+        hi[i] = free_;
+    }
+    for (int j = 0; j < nv - 6; ++j) {
+        const double l = q_lo[j] - q[7 + j], h = q_hi[j] - q[7 + j];
+        lo[6 + j] = l < 0.0 ? l : 0.0;
+        hi[6 + j] = h > 0.0 ? h : 0.0;
+    }
+    return soles_ok;
 }

@@ -27,21 +27,16 @@ to the next, and measured on the shipped natural rise that swung dL_y/dt by +-18
 cm off). ``momentum_weight`` weighs it as a ZMP shift [m] against the markers' metres.
 
 Stops that hold: a joint no foot hangs from (the torso's, the head's, the arms') carries only its own subtree, so
-the torque it needs to hold still is the gravity torque g_j(q), whatever the contacts bear. Where g_j presses the
-joint onto its mechanical stop harder than ``stop_torque_share`` of its URDF effort limit, its motor cannot lift it off
-the stop: the step may not move it off (it may still press harder). The plan then leaves it there until the rest of
-the body has turned it to where its motor can, as the robot would have to. Without it a human's trunk lean put
-TALOS's torso pitch on its 45 degree stop, where the trunk needs ~120 N m against the joint's 78 N m, and the plan
-lifted the trunk off with the hips still flexed: under joint PD the trunk lagged the plan by 0.55 rad at the end of
-the extension, and the robot tipped forward over its toes (2 of 30 population cases fell).
+the torque it needs to hold still is the gravity torque g_j(q). Where g_j presses the joint onto its stop harder than
+``stop_torque_share`` of its effort limit, its motor cannot lift it off: the step may not move it off. Without it the
+plan lifted TALOS's leaned trunk off its 45 degree stop (~120 N m needed against 78) and, under joint PD, the trunk
+lagged and 2 of 30 population rises tipped forward (docs/method.md).
 
 Trunk lift-off: a trunk joint (the torso pitch) may accelerate against gravity only as fast as its motor's room
 above gravity allows, (``lift_torque_share`` x effort limit - |g_j|) / M_jj (M_jj the joint-space inertia's
-diagonal; the parent's motion left out), from its speed into the previous frame. Without it the plan lifted the
-trunk off its 45 degree stop at up to the speed limit the moment the stop rule released it, where the motor has next
-to nothing above gravity: a step the player could only stretch to its cap. Only the pitch: bounding the arms too
-(they are overloaded by the plan's pace at the human's timing anyway) doubled the population's COM tracking p90 to
-1.6 cm, and bounding the torso yaw perturbed a fast rise enough that the whole-body controller lost it.
+diagonal), from its speed into the previous frame. Without it the plan lifted the trunk off its stop at up to the
+speed limit where the motor has next to nothing above gravity. Only the pitch: bounding the arms too doubled the
+population's COM tracking p90, bounding the torso yaw lost a fast rise.
 
 Units SI; frames by Pinocchio frame id; positions in the world frame (REP-103).
 """
@@ -226,8 +221,8 @@ class ComIk:
         self.box = JointBox.of(model, velocity_limit, dt)
         self._qp = WarmQp()
         self.points = PointJacobians(model)
-        self._native = native.MarkerTerms.of(self.data, self._diagonal)       # None: the NumPy paths
-        self._native_soles = native.SoleRows.of(model, self.data, self.soles, self.points.point_set(self.soles))
+        self._native = native.StepTerms.of(model, self.data, self._diagonal, self.mu, self.soles,
+                                           self.points.point_set(self.soles))       # None: the NumPy paths
         self.momentum_weight = momentum_weight
         self._weight_g = float(pin.computeTotalMass(model)) * 9.81
         self._L_prev: np.ndarray | None = None      # the previous frame's angular momentum [kg m^2/s]
@@ -238,12 +233,6 @@ class ComIk:
             lift_torque_share * model.effortLimit[self.lift_dofs]
         self._last_solve: tuple[np.ndarray, np.ndarray] | None = None    # (q_prev, solution) of the last frame
         self._lift_inertia: np.ndarray | None = None
-
-    def _solve_qp(self, H, g, A, b, lo, hi, C=None, d=None) -> tuple[np.ndarray, bool]:
-        """min 1/2 dq' H dq + g' dq s.t. A dq = b, C dq >= d, lo <= dq <= hi: dq (zero if it has no solution) and
-        whether it was solved (:class:`~sit2stand.optim.WarmQp`)."""
-        dq = self._qp.solve(H, g, A, b, lo, hi, C, d)
-        return (np.zeros(self.nv), False) if dq is None else (dq, True)
 
     def solve(self, q0: np.ndarray, markers: MarkerTargets | list[tuple[int, np.ndarray, float]],
               com_target: np.ndarray, sole_targets: list[pin.SE3], q_ref: np.ndarray | None = None,
@@ -267,12 +256,11 @@ class ComIk:
                        q0 if q_ref is None else q_ref, q_prev, base_xz, base_weight, base_pitch_min, base_z_min,
                        joint_targets=list(joint_targets or ()))
         frame.points = self.points.point_set(frame.fids)
-        if self._native is not None:          # the frame's markers and feet targets, once for all its steps
-            self._native.load(frame.points, frame.weights, frame.targets)
-        if self._native_soles is not None:
-            self._native_soles.load(sole_targets)
         frame.lift_speed_prev = self._lift_speed_prev(q_prev)
         frame.q_lo, frame.q_hi = self.box.of_frame(q_prev)
+        if self._native is not None:          # the frame's targets, once for all its steps
+            self._native.load(frame.points, frame.weights, frame.targets, sole_targets, frame.q_ref, com_target,
+                              frame.axes, frame.q_lo, frame.q_hi)
         self._lift_inertia = None        # the trunk's inertia about its joints, once per frame (see _bound_lift)
         q = q0.copy()
         feasible = True
@@ -298,35 +286,47 @@ class ComIk:
         was kept. The QP is filled in place (:meth:`~sit2stand.optim.WarmQp.problem`)."""
         model, data = self.model, self.data
         pin.computeJointJacobians(model, data, q)          # with the joints' placements (the markers need no more)
-        Jc = pin.jacobianCenterOfMass(model, data, False).take(f.axes, 0)
-        e_com = (f.com_target - data.com[0]).take(f.axes)
+        Jc = pin.jacobianCenterOfMass(model, data, False)
         n_feet = 6 * len(self.soles) + 2 * (f.base_xz is not None and f.base_weight is None)
-        qp = self._qp.problem(self.nv, n_feet + len(e_com), 0 if f.base_z_min is None else 1)
-        self._soft_tasks(q, f, qp.H, qp.g)
-        self._hard_rows(q, f, qp, Jc, e_com)
-        self._bounds(q, f, qp.lo, qp.hi)
+        qp = self._qp.problem(self.nv, n_feet + len(f.axes), 0 if f.base_z_min is None else 1)
+        if self._native is not None:
+            if not self._native(q, qp, n_feet):
+                self._sole_rows(f, qp.A, qp.b)
+            self._soft_rules(q, f, qp.H, qp.g)
+            self._base_rows(q, f, qp, n_feet)
+            self._bound_rules(q, f, qp.lo, qp.hi)
+        else:
+            e_com = (f.com_target - data.com[0]).take(f.axes)          # before the momentum term's pass
+            self._soft_tasks(q, f, qp.H, qp.g)
+            self._hard_rows(q, f, qp, Jc.take(f.axes, 0), e_com)
+            self._bounds(q, f, qp.lo, qp.hi)
         self._base_height_row(q, f, qp)
         dq = self._qp.solve_problem(qp)
         if dq is not None:
             return dq, True
         # COM infeasible with the feet fixed and the limits: COM as a heavily weighted soft task
         H, g, A_feet, b_feet, lo, hi = qp.H, qp.g, qp.A[:n_feet], qp.b[:n_feet], qp.lo, qp.hi
+        Jc, e_com = qp.A[n_feet:], qp.b[n_feet:]
         C, d = (qp.C, qp.d) if len(qp.d) else (None, None)
         Hs = H + 1e4 * Jc.T @ Jc
         gs = g - 1e4 * Jc.T @ e_com
-        dq, ok = self._solve_qp(Hs, gs, A_feet, b_feet, lo, hi, C, d)
-        if not ok:     # not even the feet: everything soft; the box and the floor are always feasible (0 is inside
-            #            the joints' box, and the floor's row has only the unbounded base translation)
+        dq = self._qp.solve(Hs, gs, A_feet, b_feet, lo, hi, C, d)
+        if dq is None:     # not even the feet: everything soft; the box and the floor are always feasible (0 is
+            #                inside the joints' box, and the floor's row has only the unbounded base translation)
             Hs += 1e6 * A_feet.T @ A_feet
             gs -= 1e6 * A_feet.T @ b_feet
-            dq, ok = self._solve_qp(Hs, gs, np.zeros((0, self.nv)), np.zeros(0), lo, hi, C, d)
-        return dq, False
+            dq = self._qp.solve(Hs, gs, np.zeros((0, self.nv)), np.zeros(0), lo, hi, C, d)
+        return (np.zeros(self.nv) if dq is None else dq), False
 
     def _soft_tasks(self, q: np.ndarray, f: _Frame, H: np.ndarray, g: np.ndarray) -> None:
-        """Hessian H and gradient g (filled in place) of the markers, sum w ||J dq + e||^2 [m^2], and the posture
-        prior, at q."""
+        """Hessian H and gradient g (filled in place) of the markers, sum w ||J dq + e||^2 [m^2], the posture
+        prior and the frame's other soft terms, at q."""
         self._marker_terms(f, H, g)
         g += self.mu * pin.difference(self.model, f.q_ref, q)      # mu is 0 on the base
+        self._soft_rules(q, f, H, g)
+
+    def _soft_rules(self, q: np.ndarray, f: _Frame, H: np.ndarray, g: np.ndarray) -> None:
+        """The joint targets' and the angular momentum's terms, added to H and g."""
         for i, angle, w in f.joint_targets:          # q's index of a 1-DoF joint is its tangent index + 1
             H[i, i] += w
             g[i] += w * (q[i + 1] - angle)
@@ -341,10 +341,7 @@ class ComIk:
 
     def _marker_terms(self, f: _Frame, H: np.ndarray, g: np.ndarray) -> None:
         """H = the markers' J' W J plus the damping and posture diagonal and g = their J' W (p - t), in place, at
-        the data's joint Jacobians: by the compiled kernel (:mod:`sit2stand.native`), else NumPy."""
-        if self._native is not None:
-            self._native(H, g)
-            return
+        the data's joint Jacobians."""
         nv, layout, root_weights = self.nv, f.points, np.repeat(np.sqrt(f.weights), 3)
         P, Jw = self.points(self.data, layout, root_weights)
         Jw = Jw.reshape(-1, nv)
@@ -356,23 +353,31 @@ class ComIk:
         """The equality rows A dq = b of ``qp``, in place: the feet (J_sole dq = -log(X_target^-1 X)), a held base
         x, z, then the COM's (``Jc``, ``e_com``); a soft base hold (``base_weight``) goes into its H and g
         instead."""
-        data, n_soles, A, b = self.data, 6 * len(self.soles), qp.A, qp.b
-        n = len(b) - len(e_com)
-        if self._native_soles is None or not self._native_soles(A, b):
-            for k, (fid, target) in enumerate(zip(self.soles, f.sole_targets)):
-                b[6 * k:6 * k + 6] = pin.log6(target.actInv(pin.updateFramePlacement(self.model, data, fid))).vector
-                A[6 * k:6 * k + 6] = pin.getFrameJacobian(self.model, data, fid, pin.LOCAL)
-            np.negative(b[:n_soles], out=b[:n_soles])
-        if f.base_xz is not None:     # base linear velocity is in the base frame: world rows are R[[0, 2]]
-            rb = np.zeros((2, self.nv))
-            rb[:, :3] = data.oMi[1].rotation[[0, 2]]
-            eb = (np.asarray(f.base_xz, float) - q[:3])[[0, 2]]
-            if n > n_soles:
-                A[n_soles:n], b[n_soles:n] = rb, eb
-            else:
-                qp.H += f.base_weight * rb.T @ rb
-                qp.g -= f.base_weight * rb.T @ eb
-        A[n:], b[n:] = Jc, e_com
+        n = len(qp.b) - len(e_com)
+        self._sole_rows(f, qp.A, qp.b)
+        self._base_rows(q, f, qp, n)
+        qp.A[n:], qp.b[n:] = Jc, e_com
+
+    def _sole_rows(self, f: _Frame, A: np.ndarray, b: np.ndarray) -> None:
+        """The feet's rows J_sole dq = -log(X_target^-1 X), in place in the first rows of A and b."""
+        for k, (fid, target) in enumerate(zip(self.soles, f.sole_targets)):
+            b[6 * k:6 * k + 6] = -pin.log6(target.actInv(pin.updateFramePlacement(self.model, self.data, fid))).vector
+            A[6 * k:6 * k + 6] = pin.getFrameJacobian(self.model, self.data, fid, pin.LOCAL)
+
+    def _base_rows(self, q: np.ndarray, f: _Frame, qp, n: int) -> None:
+        """A held base x, z: rows n - 2 and n - 1 of ``qp``'s equalities after the feet's, or, with
+        ``base_weight``, a soft task in its H and g."""
+        if f.base_xz is None:
+            return
+        n_soles = 6 * len(self.soles)      # base linear velocity is in the base frame: world rows are R[[0, 2]]
+        rb = np.zeros((2, self.nv))
+        rb[:, :3] = self.data.oMi[1].rotation[[0, 2]]
+        eb = (np.asarray(f.base_xz, float) - q[:3])[[0, 2]]
+        if n > n_soles:
+            qp.A[n_soles:n], qp.b[n_soles:n] = rb, eb
+        else:
+            qp.H += f.base_weight * rb.T @ rb
+            qp.g -= f.base_weight * rb.T @ eb
 
     def _base_height_row(self, q: np.ndarray, f: _Frame, qp) -> None:
         """The inequality C dq >= d of ``qp`` (in place) keeping the base's world z at or above ``base_z_min`` (its
@@ -383,19 +388,24 @@ class ComIk:
             qp.d[0] = f.base_z_min - q[2]
 
     def _bounds(self, q: np.ndarray, f: _Frame, lo: np.ndarray, hi: np.ndarray) -> None:
-        """Step bounds (in place) from the joint limits, the speed limits from the previous frame and the base
-        pitch [rad]; the base's other five free."""
+        """Step bounds (in place) from the joint limits, the speed limits from the previous frame and the frame's
+        rules (:meth:`_bound_rules`); the base free."""
         lo[:6], hi[:6] = -FREE, FREE
         qj = q[7:]
         np.subtract(f.q_lo, qj, out=lo[6:])
         np.subtract(f.q_hi, qj, out=hi[6:])
+        self._bound_rules(q, f, lo, hi)
+        _clamp_to_zero(lo, hi)
+
+    def _bound_rules(self, q: np.ndarray, f: _Frame, lo: np.ndarray, hi: np.ndarray) -> None:
+        """The base pitch's bound [rad] and the joints' stop and lift rules, on step bounds (in place) whose
+        joints' part is clamped to zero after (:func:`_clamp_to_zero`; clamped before too, the same answer)."""
         if f.base_pitch_min is not None:
             R = self.data.oMi[1].rotation
             lo[4] = min(0.0, f.base_pitch_min - np.arctan2(R[0, 2], R[2, 2]))
         if len(self.stop_dofs):
             self._hold_on_stops(q, f, lo, hi)
-        np.minimum(lo[6:], 0.0, out=lo[6:])   # a configuration just past a limit may always move back inside
-        np.maximum(hi[6:], 0.0, out=hi[6:])
+            _clamp_to_zero(lo, hi)
 
     def _hold_on_stops(self, q: np.ndarray, f: _Frame, lo: np.ndarray, hi: np.ndarray) -> None:
         """Step bounds (in place) keeping on its stop each joint that gravity presses there past
@@ -477,6 +487,12 @@ class ComIk:
         """The last step's QP stationarity residual max |H dq + g + multipliers' forces| (inf if it had no
         solution): a check of the solve, computed when asked."""
         return self._qp.dual_residual()
+
+
+def _clamp_to_zero(lo: np.ndarray, hi: np.ndarray) -> None:
+    """Joints' step bounds with zero inside (in place): a configuration just past a limit may always move back."""
+    np.minimum(lo[6:], 0.0, out=lo[6:])
+    np.maximum(hi[6:], 0.0, out=hi[6:])
 
 
 def _norm(v: np.ndarray) -> float:
