@@ -1,4 +1,4 @@
-"""sit2stand's compiled kernels (``ik_kernels.c``, plain C99): the per-frame IK's marker terms and its QP.
+"""sit2stand's compiled kernels (``ik_kernels.c``, plain C99): the per-frame IK's step terms and its QP.
 
 Built on first use with the host's C compiler (``$CC``, else ``cc``) into the cache folder (:mod:`sit2stand.cache`),
 named after a hash of the source, the flags, the compiler and the machine, and loaded with ctypes; ``make setup``
