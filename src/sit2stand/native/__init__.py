@@ -229,6 +229,12 @@ class SoleRows:
                                         self._outputs(A, b)))
 
 
+def _held_in_place(a: np.ndarray, b: np.ndarray, shape: tuple[int, ...]) -> bool:
+    """Whether two reads of one data member (``a``, ``b``, both alive) are the same storage of ``shape``: a view
+    the kernel may keep the address of, not a copy made per read."""
+    return a.shape == shape and a.ctypes.data == b.ctypes.data
+
+
 class StepTerms:
     """A Gauss-Newton step's QP terms in one kernel call (``step_terms``): the markers' terms
     (:class:`MarkerTerms`), the feet's rows (:class:`SoleRows`), the posture prior's gradient, the COM's rows and
@@ -236,12 +242,10 @@ class StepTerms:
     ``jacobianCenterOfMass`` on the data (whose ``Jcom`` and ``com[0]`` it reads where they lie). A frame's targets
     are loaded once (:meth:`load`)."""
 
-    FREE = ctypes.c_double(1e20)
-    """The base's step bounds (the QP solvers' infinity)."""
-
     def __init__(self, markers: MarkerTerms, soles: SoleRows, model: pin.Model, data: pin.Data,
-                 posture_weight: np.ndarray) -> None:
+                 posture_weight: np.ndarray, free: float) -> None:
         self.markers, self.soles = markers, soles
+        self._free = ctypes.c_double(free)
         Jcom = data.Jcom
         self._jc_strides = (Jcom.strides[0] // 8, Jcom.strides[1] // 8)
         self._q, self._q_ref, self._c_target = np.empty(model.nq), np.empty(model.nq), np.empty(3)
@@ -254,15 +258,17 @@ class StepTerms:
 
     @classmethod
     def of(cls, model: pin.Model, data: pin.Data, diagonal: np.ndarray, posture_weight: np.ndarray,
-           frames: list[int], soles) -> StepTerms | None:
+           frames: list[int], soles, free: float) -> StepTerms | None:
         """The kernel's terms (``diagonal``, ``frames`` and ``soles`` as :class:`MarkerTerms` and
-        :class:`SoleRows` take them; ``posture_weight`` (nv) 0 on the base), or None: no kernel, placements laid
-        out otherwise, a COM Jacobian not in place, or a joint past the base with other than one coordinate."""
+        :class:`SoleRows` take them; ``posture_weight`` (nv) 0 on the base; ``free``: the base's step bounds, the
+        QP's infinity), or None: no kernel, placements laid out otherwise, a COM and its Jacobian not where the
+        data keeps them, or a joint past the base with other than one coordinate."""
         markers, sole_rows = MarkerTerms.of(data, diagonal), SoleRows.of(model, data, frames, soles)
-        if markers is None or sole_rows is None or data.Jcom.shape != (3, model.nv) or \
+        if markers is None or sole_rows is None or not _held_in_place(data.Jcom, data.Jcom, (3, model.nv)) or \
+                not _held_in_place(data.com[0], data.com[0], (3,)) or \
                 any(j.nq != 1 or j.nv != 1 for j in model.joints[2:]):
             return None
-        return cls(markers, sole_rows, model, data, posture_weight)
+        return cls(markers, sole_rows, model, data, posture_weight, free)
 
     def load(self, layout, weights: np.ndarray, targets: np.ndarray, sole_targets: list[pin.SE3],
              q_ref: np.ndarray, com_target: np.ndarray, axes: np.ndarray, q_lo: np.ndarray,
@@ -284,7 +290,7 @@ class StepTerms:
         self._q[:] = q
         m, s = self.markers, self.soles
         return bool(m._lib.step_terms(m.nv, m._layout.size, s.count, self._n_axes, com_row, *m._strides,
-                                      *self._jc_strides, self.FREE, m._block.pointer, m._layout.kernel_block.pointer,
+                                      *self._jc_strides, self._free, m._block.pointer, m._layout.kernel_block.pointer,
                                       s._block.pointer, self._block.pointer,
                                       self._outputs(p.H, p.g, p.A, p.b, p.lo, p.hi)))
 

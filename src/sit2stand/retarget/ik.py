@@ -222,7 +222,7 @@ class ComIk:
         self._qp = WarmQp()
         self.points = PointJacobians(model)
         self._native = native.StepTerms.of(model, self.data, self._diagonal, self.mu, self.soles,
-                                           self.points.point_set(self.soles))       # None: the NumPy paths
+                                           self.points.point_set(self.soles), FREE)     # None: the NumPy paths
         self.momentum_weight = momentum_weight
         self._weight_g = float(pin.computeTotalMass(model)) * 9.81
         self._L_prev: np.ndarray | None = None      # the previous frame's angular momentum [kg m^2/s]
