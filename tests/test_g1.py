@@ -50,6 +50,8 @@ def test_g1_stands_up_from_the_natural_demonstration_near_the_humans_timing(tmp_
     assert summary["pelvis_final_m"] > 0.6                          # G1's pelvis: 0.385 m seated, 0.79 m straight
     # standing, not squatting: knees within 15 degrees of the human's at the end (measured 13.6 against 12.0)
     assert summary["standing_knees_match"] and summary["final_pelvis_height_ratio"] > 0.9, summary
+    # and its pelvis upright within 15 degrees (measured 9.5 forward; a robot leaning back reads negative)
+    assert abs(summary["final_pelvis_pitch_deg"]) < 15, summary
     with BagReader(out / "retarget") as bag:
         _, first = bag.read("/robot/joint_command")[0]
     assert first.header.frame_id == "pelvis" and "left_knee_joint" in first.joint_names

@@ -47,3 +47,11 @@ _POSE_XYZW = np.array([0, 1, 2, 4, 5, 6, 3])
 def wxyz_from_xyzw(q_xyzw: np.ndarray) -> np.ndarray:
     """Quaternions (..., 4) in Pinocchio's and ROS's order (x, y, z, w) as MuJoCo's (w, x, y, z)."""
     return np.asarray(q_xyzw, dtype=float)[..., [3, 0, 1, 2]]
+
+
+def pitch_deg(q_xyzw: np.ndarray) -> float:
+    """The pitch [deg] of a body whose orientation is the quaternion ``q_xyzw`` (x, y, z, w): how far its z axis
+    leans toward +x about y (forward positive, REP-103), 0 upright."""
+    x, y, z, w = np.asarray(q_xyzw, dtype=float)
+    r02, r22 = 2.0 * (x * z + w * y), 1.0 - 2.0 * (x * x + y * y)      # the rotation matrix's (0, 2) and (2, 2)
+    return float(np.degrees(np.arctan2(r02, r22)))

@@ -34,6 +34,7 @@ from ..robot.identify import read_link_parameters
 from ..robot.model import SIDES, PlantConfig
 from ..robot.plant import DEFAULT_CONTROLLER, Plant
 from ..robot.postures import standing_pelvis_height_m
+from ..vectors import pitch_deg, xyzw_from_wxyz
 from ..robot.profile import profile_of
 from ..robot.wbc import WbcGains
 from .dynamic import DynamicsFilter
@@ -327,9 +328,9 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
     with the robot's lag behind the plan (the COM feedback's error), then hold the last one. Returns (commands,
     figures). Writes ``simulation.npy``: t, true COM (3), planned COM (3), COP (3), pelvis z, pelvis x, planned
     pelvis x, largest joint tracking error [rad] and its joint index, chair force [N], COM of the measured state
-    with the controller's model (3), COM feedback offset (x, y) [m]. ``stabiliser``: a
-    :class:`~sit2stand.retarget.stabiliser.ComStabiliser` correcting each command for the plant's measured state
-    (None: the commands as planned). Writes the robot's sensed state once per command period into the bag
+    with the controller's model (3), COM feedback offset (x, y) [m], pelvis pitch [deg], knee flexion [rad].
+    ``stabiliser``: a :class:`~sit2stand.retarget.stabiliser.ComStabiliser` correcting each command for the plant's
+    measured state (None: the commands as planned). Writes the robot's sensed state once per command period into the bag
     ``robot`` (the driver's topics, stamped from ``t0_s`` on the commands' clock): what ``sit2stand export``
     reads. ``human_posture``: the human's, to give the simulated robot's posture RMS against it
     (:func:`~sit2stand.retarget.compare.posture_rms_deg`)."""
@@ -368,7 +369,7 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
         rows.append([plant.t_s, *plant.true_com(), *c.com,
                      *s.cop_m, plant.data.qpos[2], plant.data.qpos[0], c.q[0],
                      float(np.abs(err).max()), float(np.argmax(np.abs(err))), plant.chair_force_n(),
-                     *plant.model_com(), *offset,
+                     *plant.model_com(), *offset, pitch_deg(xyzw_from_wxyz(plant.data.qpos[3:7])),
                      float(np.mean(plant.data.qpos[knees]))])
         if plant.fallen:
             while not player.done:      # the rest of the plan, for its bag and figures
@@ -385,6 +386,7 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
                   "pelvis_final_m": float(arr[-1, 10]), "pelvis_planned_final_m": float(cmds[-1].q[2]),
                   "final_knee_flexion_deg_robot": float(np.degrees(arr[up, -1])),
                   "final_pelvis_height_ratio": float(arr[up, 10] / standing_pelvis_height_m(plant)),
+                  "final_pelvis_pitch_deg": float(arr[up, -2]),
                   "com_tracking_rms_m": float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))),
                   "com_feedback_max_offset_m": float(np.abs(arr[:, 19:21]).max()), **_torques(plant, np.array(torque)),
                   **_qp_times(plant), **_robot_posture_rms(plant, arr, sensed, human_posture)}

@@ -42,6 +42,7 @@ from ..robot.model import DEFAULT_ROBOT, PlantConfig, controller_model, sole_cor
 from ..human.skeleton import SAGITTAL_FLEXION
 from ..robot.plant import Plant
 from ..robot.postures import standing_pelvis_height_m
+from ..vectors import pitch_deg
 from ..robot.profile import SIDES
 from .compare import cycle_rows, flexion_deg, posture_rms_deg
 
@@ -163,15 +164,17 @@ def _support_x(model: pin.Model, q: np.ndarray) -> tuple[float, float]:
 
 def _end_posture(cfg: PlantConfig, model: pin.Model, q: np.ndarray, human_joints: list, sat_down: bool | None
                  ) -> dict:
-    """The robot's final knee flexion [deg] and pelvis height over its straight-legged stance's, beside the human's
-    last knee flexion (its skeleton's, when the run has ``/human/joint_states``), and whether the knees match within
+    """The robot's final knee flexion [deg], pelvis height over its straight-legged stance's and pelvis pitch [deg,
+    forward positive: a robot standing with its pelvis tipped back shows here], beside the human's last knee flexion
+    (its skeleton's, when the run has ``/human/joint_states``), and whether the knees match within
     ``KNEE_TOLERANCE_DEG``. A run that sat back down is judged standing: the robot where its pelvis was highest, the
     human at its most extended knee."""
     profile = cfg.profile
     knees = [model.joints[model.getJointId(profile.leg(s, "knee"))].idx_q for s in SIDES]
     up = int(np.argmax(q[:, 2])) if sat_down else -1
     out = {"final_knee_flexion_deg_robot": float(np.degrees(np.mean(q[up, knees]))),
-           "final_pelvis_height_ratio": float(q[up, 2] / standing_pelvis_height_m(Plant(cfg, with_chair=False)))}
+           "final_pelvis_height_ratio": float(q[up, 2] / standing_pelvis_height_m(Plant(cfg, with_chair=False))),
+           "final_pelvis_pitch_deg": pitch_deg(q[up, 3:7])}
     if human_joints:
         judged = human_joints if sat_down else human_joints[-1:]
         flexion = flexion_deg(list(judged[0][1].name), np.array([m.position for _, m in judged]),
