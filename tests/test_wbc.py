@@ -225,7 +225,7 @@ def test_the_robot_stands_up_at_the_humans_timing_under_whole_body_torque_contro
                   controller="wbc")
     assert summary["controller"] == "wbc" and summary["stood_up"] and summary["fall"] is None
     # measured 1.10 (1.07 with the plan smoothed over 0.2 s instead of player.SMOOTH_S's 0.3 s, which stands the
-    # identified rises and the population faster: docs/results.md, session 19)
+    # identified rises and the population faster: docs/results.md)
     assert summary["time_scale"] <= 1.15
     assert summary["torque_demand_peak_ratio"] <= 1.0 + 1e-9
     assert summary["com_tracking_rms_m"] < 0.015   # measured 0.97 cm (1.9 cm before the seated base weight and
