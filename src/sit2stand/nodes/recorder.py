@@ -187,7 +187,9 @@ class Recorder(Node):
         self.exit_code = 1
 
     def _on_message(self, topic: str, data: bytes, info: dict) -> None:
-        self.losses.see(topic, info.get("publication_sequence_number"), self.subs[topic].get_publisher_count)
+        sub = self.subs.get(topic)        # None: a sample of a subscription just made anew (no gap counted)
+        publishers = int if sub is None else sub.get_publisher_count
+        self.losses.see(topic, info.get("publication_sequence_number"), publishers)
         if not self.writer.has_topic(topic):      # a known topic's first message, before its publisher was polled
             msgtype, qos = self.unconfirmed[topic]
             self._add_to_bag(topic, msgtype, qos)
