@@ -295,6 +295,8 @@ class ComIk:
             self._soft_rules(q, f, qp.H, qp.g)
             self._base_rows(q, f, qp, n_feet)
             self._bound_rules(q, f, qp.lo, qp.hi)
+            if len(self.stop_dofs):    # the kernel clamped the box, the stop and lift rules may move it
+                _clamp_to_zero(qp.lo, qp.hi)
         else:
             e_com = (f.com_target - data.com[0]).take(f.axes)          # before the momentum term's pass
             self._soft_tasks(q, f, qp.H, qp.g)
@@ -391,21 +393,19 @@ class ComIk:
         """Step bounds (in place) from the joint limits, the speed limits from the previous frame and the frame's
         rules (:meth:`_bound_rules`); the base free."""
         lo[:6], hi[:6] = -FREE, FREE
-        qj = q[7:]
-        np.subtract(f.q_lo, qj, out=lo[6:])
-        np.subtract(f.q_hi, qj, out=hi[6:])
+        np.subtract(f.q_lo, q[7:], out=lo[6:])
+        np.subtract(f.q_hi, q[7:], out=hi[6:])
         self._bound_rules(q, f, lo, hi)
         _clamp_to_zero(lo, hi)
 
     def _bound_rules(self, q: np.ndarray, f: _Frame, lo: np.ndarray, hi: np.ndarray) -> None:
-        """The base pitch's bound [rad] and the joints' stop and lift rules, on step bounds (in place) whose
-        joints' part is clamped to zero after (:func:`_clamp_to_zero`; clamped before too, the same answer)."""
+        """The base pitch's bound [rad] and the joints' stop and lift rules, on step bounds (in place); the caller
+        clamps the joints' part to zero after (:func:`_clamp_to_zero`; clamped before too, the same answer)."""
         if f.base_pitch_min is not None:
             R = self.data.oMi[1].rotation
             lo[4] = min(0.0, f.base_pitch_min - np.arctan2(R[0, 2], R[2, 2]))
         if len(self.stop_dofs):
             self._hold_on_stops(q, f, lo, hi)
-            _clamp_to_zero(lo, hi)
 
     def _hold_on_stops(self, q: np.ndarray, f: _Frame, lo: np.ndarray, hi: np.ndarray) -> None:
         """Step bounds (in place) keeping on its stop each joint that gravity presses there past
