@@ -8,11 +8,12 @@ import yaml
 from sit2stand.human.marker_sets import load_marker_set
 from sit2stand.human.offline import read_trial
 from sit2stand.retarget.calibration import (MarkerMap, calibrate_markers, map_com, map_frame, marker_group,
-                                            marker_roles)
+                                            marker_roles, posed_like)
 from sit2stand.retarget.robot import robot_setup
 from sit2stand.retarget.stream import RetargetConfig, Retargeter
 from sit2stand.robot.model import PlantConfig
 from sit2stand.robot.plant import Plant
+from sit2stand.robot.profile import profile_of
 
 EXPECTED = {"LASI": ["root"], "RPSI": ["root"], "C7": ["torso_2_joint", "head_1_joint"],
             "LFHD": ["head_1_joint", "head_2_joint"], "LKNE": ["leg_left_3_joint", "leg_left_4_joint"],
@@ -135,3 +136,29 @@ def test_a_marker_on_a_joint_between_two_links_goes_to_the_distal_one_even_when_
     nowhere = calibrate_markers(model, q, names, positions, valid, 0.4, 0.4, allowed_links=lambda *_: ("none",))
     assert nowhere.links["LKNE"] == "leg_left_4_joint"
     assert nowhere.links["LASI"] != nowhere.links["LKNE"]
+
+
+@pytest.mark.parametrize("robot", ["talos", "g1"])
+def test_the_robot_posed_like_a_humans_flexions_keeps_its_soles_flat_and_its_left_ankle(robot):
+    setup = robot_setup(robot=robot)
+    model, q0 = setup.model, setup.q_seated
+    flexion = {"trunk": 15.0, "hip": 60.0, "knee": 70.0, "ankle": 20.0}
+    q = posed_like(model, q0, flexion)
+    profile = profile_of(model)
+    for label, (joints, sign) in profile.sagittal_flexion().items():
+        for name in joints:
+            i = model.joints[model.getJointId(name)].idx_q
+            want = np.clip(sign * np.radians(flexion[label]), model.lowerPositionLimit[i], model.upperPositionLimit[i])
+            assert q[i] == pytest.approx(want), name
+    poses = []
+    for config in (q0, q):
+        data = model.createData()
+        pin.framesForwardKinematics(model, data, config)
+        poses.append([data.oMf[f].copy() for f in setup.sole_frames] +
+                     [data.oMi[model.getJointId(profile.leg("left", "ankle_pitch"))].copy()])
+    for after in poses[1][:-1]:
+        assert np.degrees(np.arccos(np.clip(after.rotation[2, 2], -1, 1))) < 0.5, "the soles stay flat"
+    assert np.linalg.norm(poses[1][-1].translation - poses[0][-1].translation) < 1e-9, "the left ankle stays"
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    assert data.oMi[1].translation[2] > q0[2] + 0.05, "the pelvis rises out of the seat"

@@ -242,6 +242,28 @@ def test_a_recording_that_starts_after_seat_off_is_led_in_from_the_robots_seat(e
     assert abs(first.com_target[0] - targets[-1]) < 0.01
 
 
+def test_a_lead_in_to_a_posed_calibration_leads_the_marker_targets_from_the_seated_robots_sites(elderly):
+    """A frame after seat-off is overlaid on the robot posed like the human: the lead-in's marker targets start at
+    the seated robot's marker sites and end at the frame's own targets, so nothing pulls at the seated robot."""
+    trial, com_h, _ = elderly
+    heel = trial.positions[0, trial.marker_names.index("LHEE"), 0]
+    k0 = int(np.argmax(com_h[:, 0] > heel + 0.02))
+    robot = robot_setup()
+    rt = Retargeter(robot)
+    rt.calibrate(trial.marker_names, trial.positions[k0], trial.valid[k0], com_h[k0],
+                 human_flexion_deg={"trunk": 25.0, "hip": 80.0, "knee": 70.0, "ankle": 15.0})
+    assert rt.markers.robot_pelvis0_m[2] > robot.q_seated[2] + 0.05, "overlaid on the robot posed, not seated"
+    lead = rt.lead_in(float(trial.marker_t_s[k0]), 0.01, trial.positions[k0], trial.valid[k0], com_h[k0])
+    data = rt.model.createData()
+    pin.framesForwardKinematics(rt.model, data, robot.q_seated)
+    early, last = lead[1].markers, lead[-1].markers
+    seated_sites = np.array([data.oMf[int(f)].translation for f in early.frame_ids])
+    assert np.abs(early.targets_m - seated_sites).max() < 0.005
+    frame = rt.markers.targets(trial.positions[k0], rt.markers.scale)[np.isin(rt.markers.frame_ids, last.frame_ids)]
+    gap = np.abs(frame - seated_sites).max()
+    assert gap > 0.1 and np.abs(last.targets_m - frame).max() < 0.01 * gap
+
+
 def test_a_recording_that_starts_seated_gets_no_lead_in(retargeted, elderly):
     trial, com_h, _ = elderly
     _, rt, frames, *_ = retargeted

@@ -237,6 +237,35 @@ def robot_links(model: pin.Model, marker: str, roles: MarkerRoles | None = None)
     return profile_of(model).marker_joints(group, side, list(model.names[1:]))
 
 
+def posed_like(model: pin.Model, q_seated: np.ndarray, flexion_deg: dict[str, float]) -> np.ndarray:
+    """The robot's seated configuration with its sagittal joints at a human's flexions [deg] (labels of
+    :data:`~sit2stand.human.skeleton.SAGITTAL_FLEXION`, both legs alike, within the joints' limits), its base
+    pitched to keep the soles flat and moved to keep the left ankle where it was: the robot on its feet in the
+    human's posture."""
+    q = q_seated.copy()
+    profile = profile_of(model)
+    data = model.createData()
+    pin.forwardKinematics(model, data, q_seated)
+    ankle = model.getJointId(profile.leg("left", "ankle_pitch"))
+    before = data.oMi[ankle].translation.copy()
+    leg_turn = 0.0
+    for label, (joints, sign) in profile.sagittal_flexion().items():
+        if not np.isfinite(flexion_deg.get(label, np.nan)):
+            continue
+        for name in joints:
+            i = model.joints[model.getJointId(name)].idx_q
+            angle = float(np.clip(sign * np.radians(flexion_deg[label]), model.lowerPositionLimit[i],
+                                  model.upperPositionLimit[i]))
+            if label != "trunk" and name == joints[0]:
+                leg_turn += angle - q[i]
+            q[i] = angle
+    turn = pin.AngleAxis(-leg_turn, np.array([0.0, 1.0, 0.0])).matrix()
+    q[3:7] = pin.Quaternion(turn @ pin.Quaternion(q[6], *q[3:6]).matrix()).coeffs()
+    pin.forwardKinematics(model, data, q)
+    q[:3] -= data.oMi[ankle].translation - before
+    return q
+
+
 def calibrate_markers(model: pin.Model, q_robot: np.ndarray, names: list[str], positions_m: np.ndarray,
                       valid: np.ndarray, human_thigh_m: float, robot_thigh_m: float,
                       allowed_links=robot_links, roles: MarkerRoles | None = None) -> MarkerMap:

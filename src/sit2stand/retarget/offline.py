@@ -173,8 +173,10 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     seated = (int(standing[0]) if len(standing) else len(phases.labels)) if phases.starts_seated else 0
     where = map_frame(trial.marker_t_s, trial.positions, trial.valid, seated, calibration_frame)
     k = where.first
-    rt.calibrate(trial.marker_names, trial.positions[k], trial.valid[k], com_h[k],
-                 frame_period_s=dt).save(out / "marker_map.yaml")
+    flexion = None if human_posture is None else \
+        {label: float(np.interp(trial.marker_t_s[k], human_posture[0], v)) for label, v in human_posture[2].items()}
+    rt.calibrate(trial.marker_names, trial.positions[k], trial.valid[k], com_h[k], frame_period_s=dt,
+                 human_flexion_deg=flexion).save(out / "marker_map.yaml")
     dynamics = DynamicsFilter(robot.model, dt, robot.support_xy, gains=gains) if dynamic else None
     player = PlanPlayer(robot.model, dt, robot.support_xy, margin_m=margin_m, fixed_time_scale=time_scale,
                         max_time_scale=max_time_scale, seat_off_dwell_s=seat_off_dwell_s, dynamics=dynamics,

@@ -45,7 +45,7 @@ from ..io.frame_rate import MIN_RATE_HZ
 from ..robot.model import (SIDES)
 from ..robot.profile import profile_of
 from ..human.marker_sets import choose_marker_set
-from .calibration import MarkerMap, calibrate_markers, left_leg_points, marker_roles
+from .calibration import MarkerMap, calibrate_markers, left_leg_points, marker_roles, posed_like
 from .demonstration import ComMap, HumanSeated, HumanWatch, MarkerTasks, RobotSeatOff, knee_flexion
 from .robot import RobotSetup
 from .ik import LIFT_TORQUE_SHARE, ComIk, IkResult, MarkerTargets
@@ -176,7 +176,8 @@ class Retargeter:
 
     # -- calibration -------------------------------------------------------------------------------------------
     def calibrate(self, names: list[str], positions_m: np.ndarray, valid: np.ndarray, human_com_m: np.ndarray,
-                  marker_map: MarkerMap | None = None, frame_period_s: float = 0.01) -> MarkerMap:
+                  marker_map: MarkerMap | None = None, frame_period_s: float = 0.01,
+                  human_flexion_deg: dict[str, float] | None = None) -> MarkerMap:
         """Fix the markers to the robot (or use ``marker_map``) from one seated frame; note the human's references.
 
         ``frame_period_s``: the capture's frame period [s], the time one frame stands for. The IK's joint-speed
@@ -184,6 +185,8 @@ class Retargeter:
 
         The marker set (``cfg.marker_set``, else chosen from ``names``) says which markers are the pelvis, the left
         knee, ankle and heel, and each marker's body part (:func:`~sit2stand.retarget.calibration.marker_roles`).
+        A frame after the human's seat-off is overlaid on the robot posed at the human's sagittal flexions
+        ``human_flexion_deg`` (:func:`~sit2stand.retarget.calibration.posed_like`; None: on its seated posture).
 
         Raises:
             ValueError: a marker the calibration needs (pelvis, left knee, ankle, heel) is missing in the frame.
@@ -196,8 +199,11 @@ class Retargeter:
         thigh = float(np.linalg.norm(knee - pelvis))
         human_leg = float(np.linalg.norm(knee - pelvis) + np.linalg.norm(ankle - knee))
         scale = self.robot.leg_length_m / human_leg
+        started_seated = human_com_m[0] < heel[0] and heel[0] < ankle[0]
+        overlay = self.robot.q_seated if started_seated or human_flexion_deg is None else \
+            posed_like(self.robot.model, self.robot.q_seated, human_flexion_deg)
         if marker_map is None:
-            marker_map = calibrate_markers(self.robot.model, self.robot.q_seated, names, positions_m, valid,
+            marker_map = calibrate_markers(self.robot.model, overlay, names, positions_m, valid,
                                            human_leg, self.robot.leg_length_m, roles=roles)
         frames = marker_map.add_frames(self.model)
         self.data = self.model.createData()
@@ -211,7 +217,6 @@ class Retargeter:
         foot = self.robot.toe_x_m - self.robot.heel_x_m
         # a frame whose COM is not behind the heel is after the human's seat-off: the seated knot then comes from
         # the body's proportions, and a lead-in (see :meth:`lead_in`) takes the robot from its seat to this frame
-        started_seated = human_com_m[0] < heel[0] and heel[0] < ax
         # a recording that starts mid-rise has no seated pelvis to scale the rise from: leg lengths alone
         rise = self._rise_scale(pelvis, knee, ankle, human_leg, scale) if started_seated else scale
         seated_com_x = float(human_com_m[0]) if started_seated else \
@@ -227,7 +232,7 @@ class Retargeter:
         weights = np.array([0.0 if n not in frames else self.cfg.weights.get(roles.group(n), 0.0) for n in names])
         self.markers = MarkerTasks(marker_map, frames, list(names), weights,
                                    np.array([frames.get(n, -1) for n in names], int), pel, knee_ankle,
-                                   np.array([scale, scale, rise]), pelvis, self.robot.q_seated[:3].copy())
+                                   np.array([scale, scale, rise]), pelvis, overlay[:3].copy())
         self.human = HumanSeated(thigh, knee_seated, seated_com_x, started_seated)
         self.watch = HumanWatch(pelvis, seat_off=not started_seated)
         self.com_map = ComMap(scale, ax, rx, np.array(h), np.array(r))
@@ -283,7 +288,8 @@ class Retargeter:
 
         The human COM is led from the seated knot to the first frame's along a cubic (at rest at the start, at the
         frame's own forward velocity at the end) over ``max(MIN_LEAD_IN_S, distance / LEAD_IN_COM_SPEED_MPS)``,
-        while the first frame's markers fade in (weight 0 -> 1, smoothstep); the hips stay on the seat until the
+        while the first frame's markers fade in (weight 0 -> 1, smoothstep) and their targets move from the seated
+        robot's marker sites to the frame's along the same smoothstep; the hips stay on the seat until the
         robot's COM target passes the seat-off knot, as in a recording that starts seated. The frames are stamped
         before ``t0_s``, every ``dt``; ``on_frame`` is called with each as it is made.
         """
@@ -292,23 +298,35 @@ class Retargeter:
         x0, x1 = self.human.com_x_m, float(human_com_m[0])
         duration = max(MIN_LEAD_IN_S, (x1 - x0) / LEAD_IN_COM_SPEED_MPS)
         n = int(round(duration / dt))
+        gap = self._targets_from_here(positions_m)
         frames = []
         for k in range(n):
             u = k / n
             ease = smoothstep(u)       # Hermite: from rest at x0 to x1, arriving with the human's COM velocity
             x = x0 + (x1 - x0) * ease + human_com_vx_mps * duration * (u**3 - u**2)
             com = np.array([x, human_com_m[1], human_com_m[2]])
-            frames.append(self.step(t0_s - (n - k) * dt, positions_m, valid, com, None, marker_weight=ease))
+            frames.append(self.step(t0_s - (n - k) * dt, positions_m, valid, com, None, marker_weight=ease,
+                                    marker_shift_m=-(1.0 - ease) * gap))
             if on_frame is not None:
                 on_frame(frames[-1])
         return frames
 
+    def _targets_from_here(self, positions_m: np.ndarray) -> np.ndarray:
+        """(M, 3) [m] each marker's target for ``positions_m`` less its robot site in the current pose (0: a marker
+        not on the robot, or not seen)."""
+        mk, gap = self.markers, np.zeros((len(self.markers.names), 3))
+        pin.framesForwardKinematics(self.model, self.data, self.q)
+        on = np.flatnonzero(mk.frame_ids >= 0)
+        gap[on] = mk.targets(positions_m[on], mk.scale) - [self.data.oMf[int(mk.frame_ids[i])].translation for i in on]
+        return np.where(np.isfinite(gap), gap, 0.0)
+
     # -- per frame ---------------------------------------------------------------------------------------------
     def step(self, t_s: float, positions_m: np.ndarray, valid: np.ndarray, human_com_m: np.ndarray,
-             chair_force_n: float | None = None, marker_weight: float = 1.0) -> RetargetFrame:
+             chair_force_n: float | None = None, marker_weight: float = 1.0,
+             marker_shift_m: np.ndarray | None = None) -> RetargetFrame:
         """Retarget one frame (the first call calibrates). ``chair_force_n``: the chair plate's vertical force, if
         there is a chair plate (None: seat-off from the pelvis markers). ``marker_weight`` scales every marker's
-        weight (the lead-in fades the first frame's markers in)."""
+        weight and ``marker_shift_m`` (M, 3) [m] moves their targets (the lead-in's)."""
         if not self.calibrated:
             raise RuntimeError("Retargeter.step before calibrate")
         cfg, robot, mk = self.cfg, self.robot, self.markers
@@ -335,7 +353,7 @@ class Retargeter:
             axes = (0, 1)
             y0 = self.seat_off.com_y_m
             target[1] = y0 + self._since_seat_off(t_s, cfg.y_ramp_s) * (mid_y - y0)
-        markers, knees, flexion = self._marker_tasks(positions_m, ok, pelvis_now, marker_weight)
+        markers, knees, flexion = self._marker_tasks(positions_m, ok, pelvis_now, marker_weight, marker_shift_m)
         # hips on the seat: pelvis x and z held (hard); after seat-off the hold fades out as a soft task, so that
         # the pose does not jump to where the human's pelvis already is
         hold, weight, z_min = self.base_seated, None, None
@@ -381,8 +399,8 @@ class Retargeter:
         self.seat_off = RobotSeatOff(t_s, float(self.data.com[0][1]), mk.scale * (pelvis_now - mk.human_pelvis0_m),
                                      pelvis_now[2])
 
-    def _marker_tasks(self, positions_m: np.ndarray, ok: np.ndarray, pelvis_now: np.ndarray,
-                      marker_weight: float) -> tuple[MarkerTargets, list, float | None]:
+    def _marker_tasks(self, positions_m: np.ndarray, ok: np.ndarray, pelvis_now: np.ndarray, marker_weight: float,
+                      shift_m: np.ndarray | None = None) -> tuple[MarkerTargets, list, float | None]:
         """The frame's marker targets (the calibration's similarity, fixed for the whole demonstration), the knee
         targets, and the human's knee flexion [rad]."""
         mk, watch = self.markers, self.watch
@@ -391,7 +409,7 @@ class Retargeter:
         if self.sat_down or watch.rise_peak_m - rise > KNEE_RELEASE_DROP_M:   # sitting back down
             share = np.clip(rise / max(watch.rise_peak_m, 1e-6), 0.0, 1.0)
             scale[2] = self.com_map.scale + share * (scale[2] - self.com_map.scale)
-        tgt = mk.targets(positions_m, scale)
+        tgt = mk.targets(positions_m, scale) + (0.0 if shift_m is None else shift_m)
         knees = []
         flexion = mk.knee_flexion(positions_m, ok, pelvis_now)
         if not self.seated:
