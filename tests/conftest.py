@@ -174,6 +174,15 @@ def elderly_standup(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess
 
 
 @pytest.fixture(scope="session")
+def elderly_calibration(tmp_path_factory) -> Path:
+    """The shipped elderly demonstration's skeleton calibration (``sit2stand human-calibrate bags/elderly``), made
+    once per session and worker for the live graph tests that stream it."""
+    out = tmp_path_factory.mktemp("elderly_calibration") / "calibration.yaml"
+    assert sit2stand_main(["human-calibrate", str(ROOT / "bags" / "elderly"), "--out", str(out)]) == 0
+    return out
+
+
+@pytest.fixture(scope="session")
 def g1_simulated_run(tmp_path_factory) -> Path:
     """``sit2stand retarget bags/natural --robot g1 --simulate --plan frames`` (once per session and worker): its
     output folder (the per-frame plan: what its users check is the run's files, not the planner)."""

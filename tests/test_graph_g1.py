@@ -1,8 +1,6 @@
 """Unitree G1 in the live capture graph: serve-c3d -> mocap_bridge -> human_com -> retargeter -> driver (G1) ->
 recorder, with ``robot:=g1`` the only change; the bag carries G1's description and frame tree."""
 
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -14,10 +12,8 @@ pytestmark = pytest.mark.graph
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_g1_stands_up_live_and_its_bag_carries_its_urdf_and_frames(tmp_path, ros_env):
-    calibration = tmp_path / "calibration.yaml"
-    subprocess.run([sys.executable, "-m", "sit2stand.cli", "human-calibrate", str(ROOT / "bags" / "elderly"),
-                    "--out", str(calibration)], check=True, env=ros_env, capture_output=True, timeout=120)
+def test_g1_stands_up_live_and_its_bag_carries_its_urdf_and_frames(tmp_path, ros_env, elderly_calibration):
+    calibration = elderly_calibration
     try:
         run = run_live(tmp_path, ros_env, calibration, ROOT / "bags" / "elderly", robot="g1")
     except LiveRunError as err:

@@ -80,10 +80,9 @@ def _wait_for(log: Path, text: str, timeout_s: float) -> bool:
     return False
 
 
-def test_the_live_stand_up_runs_with_capture_control_and_robot_on_three_hosts(tmp_path, ros_env, lab):
-    calibration = tmp_path / "calibration.yaml"
-    subprocess.run([sys.executable, "-m", "sit2stand.cli", "human-calibrate", str(ROOT / "bags" / "elderly"),
-                    "--out", str(calibration)], check=True, env=ros_env, capture_output=True, timeout=120)
+def test_the_live_stand_up_runs_with_capture_control_and_robot_on_three_hosts(tmp_path, ros_env, lab,
+                                                                              elderly_calibration):
+    calibration = elderly_calibration
     # UDP only: the namespaces share /dev/shm, and Fast DDS would otherwise pass samples through shared memory,
     # past the virtual network (separate machines have no shared memory to take)
     env = {**ros_env, "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_STATIC_PEERS": ";".join(HOSTS.values()),

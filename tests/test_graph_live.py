@@ -2,8 +2,6 @@
 driver -> recorder."""
 
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -22,10 +20,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.parametrize("protocol", PROTOCOL_ARGS)
-def test_the_robot_stands_up_from_a_live_stream_of_the_shipped_elderly_demonstration(tmp_path, ros_env, protocol):
-    calibration = tmp_path / "calibration.yaml"
-    subprocess.run([sys.executable, "-m", "sit2stand.cli", "human-calibrate", str(ROOT / "bags" / "elderly"),
-                    "--out", str(calibration)], check=True, env=ros_env, capture_output=True, timeout=120)
+def test_the_robot_stands_up_from_a_live_stream_of_the_shipped_elderly_demonstration(tmp_path, ros_env, protocol,
+                                                                                     elderly_calibration):
+    calibration = elderly_calibration
     try:
         run = run_live(tmp_path, ros_env, calibration, ROOT / "bags" / "elderly", graph_args=PROTOCOL_ARGS[protocol],
                        protocol=protocol)
