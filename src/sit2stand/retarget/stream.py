@@ -2,8 +2,8 @@
 
 :class:`Retargeter` (per frame, no look-ahead):
 
-1. **Calibration** on the first frame (the human seated, else the robot posed like the human): markers fixed to the
-   robot's links (:func:`sit2stand.retarget.calibration.calibrate_markers`), the human's left ankle, heel, COM noted.
+1. **Calibration** on the first frame (the human seated): markers fixed to the robot's links
+   (:func:`sit2stand.retarget.calibration.calibrate_markers`), the human's left ankle, heel and seated COM noted.
 2. **COM target**. The human COM's forward position, relative to the human's left ankle and scaled by the leg-length
    ratio (Mistry et al. 2010 map the COM relative to the left foot), goes through a monotone piecewise-linear map to
    the robot's, relative to the robot's left ankle, with three knots:
@@ -14,13 +14,15 @@
      carried by momentum, which a joint-controlled robot cannot do);
    * human ankle and forward -> the robot's ankle and forward, one to one.
 
-   Before the robot's seat-off (the human has left the seat, by the chair plate or the pelvis rising, and the robot's
-   target has reached its seat-off knot) the hips stay on the seat (pelvis x and z held: hard) and only COM x is
-   constrained (with the hips seated, COM height and x are one degree of freedom). After it, COM x and y are hard; y
-   ramps to the feet's midline over ``y_ramp_s``. The COM height is left to the markers, above one floor: the pelvis
-   rises ``seat_clearance_m`` clear of its seat over ``seat_clearance_s`` and stays that high (hard) until the human
-   sits back down (the markers alone kept the hips at the seat, which they then bounced on; 2 cm because over the
-   seat's edge a thigh rises about a quarter as much as the pelvis). Measured in docs/results.md.
+   Before the robot's seat-off (both: the human has left the seat, by the chair plate or the pelvis rising, and the
+   robot's target has reached its seat-off knot) the hips stay on the seat (pelvis x and z held: hard) and only the
+   COM's x is constrained: with the hips on the seat COM height and COM x are one degree of freedom. After it, COM x and
+   y are hard; y ramps to the midline between the feet over ``y_ramp_s``. The COM height is left to the markers,
+   above one floor: the pelvis rises ``seat_clearance_m`` clear of its seated height over ``seat_clearance_s`` and
+   stays at least that high (hard) until the human sits back down: the markers alone can keep the hips at the
+   seat's height, or dip them into it, after the plan has the robot on its feet, and the robot's hips then bounce on
+   the seat. 2 cm because over the seat's front edge a thigh rises only about a quarter as much as the pelvis (it
+   turns about the knee). Measured in docs/results.md.
 3. **IK** (:class:`sit2stand.retarget.ik.ComIk`): markers soft (weights by body part; their targets the human's
    scaled by leg length, vertically by the robot's rise to its stance over the human's), COM and feet hard, joint
    and speed limits; after seat-off both knees pulled toward the human's as it stands; warm-started from the
@@ -57,11 +59,9 @@ LEAD_IN_COM_SPEED_MPS = 0.2
 """Mean forward COM speed [m/s] of the lead-in that a recording starting mid-rise gets (the shipped natural rise
 moves its COM 0.26 m in ~1.3 s)."""
 MIN_LEAD_IN_S = 0.5
-LEAD_IN_RISE_SPEED_MPS = 0.3
-"""The lead-in's pelvis rise [m/s] to a first frame posed above the seat (TALOS on the real child: markers 18 cm off at
-the first frame when the rise was left to the frames, which brought the child's own rise too; held until risen, 3)."""
 RISE_SCALE_RANGE = (0.8, 1.5)
-"""The markers' vertical scale stays within these multiples of the leg-length scale (``Retargeter._rise_scale``)."""
+"""The markers' vertical scale stays within these multiples of the leg-length scale (see ``Retargeter._rise_scale``).
+"""
 REARM_ABOVE_SEAT_M = 0.01
 """After a sit-down, a plan whose pelvis is back within this of its seated height is seated again, its hips held on
 the seat and its COM target no further back than there: the next rise plays as the first (a trial of several
@@ -260,9 +260,11 @@ class Retargeter:
 
     def _rise_scale(self, pelvis: np.ndarray, knee: np.ndarray, ankle: np.ndarray, human_leg: float,
                     scale: float) -> float:
-        """The markers' vertical scale: the robot's pelvis rise from seat to straight-legged stance (ankle height plus
-        leg length) over the human's, within ``RISE_SCALE_RANGE`` of ``scale``. By leg length alone the robot ended
-        bowed, pelvis at 84-92 % of its stance (TALOS's seated shanks lean 40 degrees back); the human's seated leg
+        """The markers' vertical scale: the robot's pelvis rise from its seat to its straight-legged stance over the
+        human's (each stance estimated as the ankle's height plus the leg's length, from a seated frame), within
+        ``RISE_SCALE_RANGE`` of the leg-length ``scale``. Scaled by leg length alone, the rise fell short (a robot's
+        seated posture is not the human's: TALOS's shanks lean 40 degrees back), and the robot ended bowed at the
+        hips with its pelvis at 84-92 % of its stance. The human's seated leg (pelvis centre -> knee -> ankle)
         underestimates its standing one, so on the shipped demonstrations the ratio meets the range's top."""
         robot = self.robot
         data = robot.model.createData()
@@ -288,25 +290,22 @@ class Retargeter:
         frame's own forward velocity at the end) over ``max(MIN_LEAD_IN_S, distance / LEAD_IN_COM_SPEED_MPS)``,
         while the first frame's markers fade in (weight 0 -> 1, smoothstep) and their targets move from the seated
         robot's marker sites to the frame's along the same smoothstep; the hips stay on the seat until the
-        robot's COM target passes the seat-off knot, as when seated; a frame posed above the seat (:meth:`calibrate`)
-        is then held, COM at rest, while the pelvis rises to it at ``LEAD_IN_RISE_SPEED_MPS``. The frames are
-        stamped before ``t0_s``, every ``dt``; ``on_frame`` is called with each as it is made.
+        robot's COM target passes the seat-off knot, as in a recording that starts seated. The frames are stamped
+        before ``t0_s``, every ``dt``; ``on_frame`` is called with each as it is made.
         """
         if self.human.started_seated:
             return []
         x0, x1 = self.human.com_x_m, float(human_com_m[0])
         duration = max(MIN_LEAD_IN_S, (x1 - x0) / LEAD_IN_COM_SPEED_MPS)
         n = int(round(duration / dt))
-        rise = max(0.0, self.markers.robot_pelvis0_m[2] - self.robot.q_seated[2])   # to a posed overlay
-        m = int(round(rise / LEAD_IN_RISE_SPEED_MPS / dt))
-        vx = human_com_vx_mps if m == 0 else 0.0
-        gap, frames = self._targets_from_here(positions_m), []
-        for k in range(n + m):
-            u = min(k / n, 1.0)
-            ease = smoothstep(u)       # Hermite: from rest at x0 to x1, arriving with velocity vx
-            x = x0 + (x1 - x0) * ease + vx * duration * (u**3 - u**2)
+        gap = self._targets_from_here(positions_m)
+        frames = []
+        for k in range(n):
+            u = k / n
+            ease = smoothstep(u)       # Hermite: from rest at x0 to x1, arriving with the human's COM velocity
+            x = x0 + (x1 - x0) * ease + human_com_vx_mps * duration * (u**3 - u**2)
             com = np.array([x, human_com_m[1], human_com_m[2]])
-            frames.append(self.step(t0_s - (n + m - k) * dt, positions_m, valid, com, None, marker_weight=ease,
+            frames.append(self.step(t0_s - (n - k) * dt, positions_m, valid, com, None, marker_weight=ease,
                                     marker_shift_m=-(1.0 - ease) * gap))
             if on_frame is not None:
                 on_frame(frames[-1])
