@@ -2,8 +2,9 @@
 
 :class:`Retargeter` (per frame, no look-ahead):
 
-1. **Calibration** on the first frame (the human seated): markers fixed to the robot's links
-   (:func:`sit2stand.retarget.calibration.calibrate_markers`), the human's left ankle, heel and seated COM noted.
+1. **Calibration** on the first frame (the human seated; after seat-off, given the human's flexions, the robot posed
+   like them): markers fixed to the robot's links (:func:`sit2stand.retarget.calibration.calibrate_markers`), the
+   human's left ankle, heel and seated COM noted.
 2. **COM target**. The human COM's forward position, relative to the human's left ankle and scaled by the leg-length
    ratio (Mistry et al. 2010 map the COM relative to the left foot), goes through a monotone piecewise-linear map to
    the robot's, relative to the robot's left ankle, with three knots:
