@@ -69,6 +69,7 @@ def test_the_problem_keeps_torques_in_their_limits_and_ends_at_the_ik_standing_p
     problem = WholeRiseProblem(model, WholeRiseConfig(iterations=30))
     result = problem.solve(RisePlan(q, com, seated, [[] for _ in range(n)], 0.01))
     assert result.feasible and result.time_scale == 1.0
+    assert result.knots == 21                                  # a knot per 20 ms
     assert np.all(np.abs(result.tau) <= model.effortLimit[6:] + 1e-9)
     assert np.abs(pin.difference(model, result.q[-1], q[-1])[6:]).max() < 0.02
     assert result.knot_t_s[-1] == pytest.approx((n - 1) * 0.01)
@@ -80,6 +81,11 @@ def test_a_plan_longer_than_the_optimisation_is_given_is_played_frame_by_frame_a
     assert summary["plan"] == "frames" and "whole_rise_time_scale" not in summary
     assert summary["whole_rise_skipped"] == "196 knots, over the 50 the optimisation is given (max_knots)"
     assert summary["time_scale"] == pytest.approx(summary["plan_ratio_frames"], abs=1e-9)
+
+
+def test_knots_are_spaced_in_time_whatever_the_capture_rate():
+    config = WholeRiseConfig()
+    assert [config.frames_per_knot(dt) for dt in (0.01, 0.005, 1 / 60, 0.05)] == [2, 4, 1, 1]
 
 
 def test_the_cli_offers_the_plans_the_planner_has():
