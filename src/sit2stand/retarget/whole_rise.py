@@ -5,12 +5,13 @@ forces, so played at the human's speed it can ask for torques past the motors' l
 outside the soles. Here the whole rise is one multiple-shooting optimal-control problem (Crocoddyl's contact forward
 dynamics, solved by box-FDDP): a knot every ``knot_period_s``; while the plan is seated the feet and the seat
 carry the robot (6D contacts at the soles, a 3D contact at the ``seat`` frame under the buttocks), after the human's
-seat-off the feet alone. Every knot costs the COM's distance to the plan's (the mapped human COM), the markers'
-distances to the human's (the IK's marker tasks, with their weights), the posture's and velocity's distance to the
-IK's, and the torques over their limits; the contact wrenches are kept in their cones (friction, centre of pressure
-``cop_margin_m`` inside the soles, the seat's friction cone) by barriers; torques are boxed by the URDF's limits and
-joint speeds by ``max_joint_speed``. The last knot is the IK's standing end posture, at rest. The problem is
-warm-started from the plan player's smoothed poses and velocities, with contact-consistent inverse-dynamics torques.
+seat-off the feet alone. It spans the plan's motion (:meth:`WholeRiseProblem.moving`); the still seated start and
+standing end keep the plan's poses. Every knot costs the COM's distance to the plan's (the mapped human COM), the
+markers' distances to the human's (the IK's marker tasks, with their weights), the posture's and velocity's distance
+to the IK's, and the torques over their limits; the contact wrenches are kept in their cones (friction, centre of
+pressure ``cop_margin_m`` inside the soles, the seat's friction cone) by barriers; torques are boxed by the URDF's
+limits and joint speeds by ``max_joint_speed``. The last knot is the IK's standing end posture, at rest. The problem
+is warm-started from the plan player's smoothed poses and velocities, with contact-consistent inverse-dynamics torques.
 
 The rise is played at the human's timing when the solution is one: dynamically consistent, the contact forces inside
 their cones, every loaded sole's centre of pressure at least half ``cop_side_margin_m`` inside it, the COM within
@@ -119,6 +120,10 @@ class WholeRiseConfig:
     force_tolerance_n: float = 5.0       # a solution's largest contact force outside its cone [N]
     scale_step: float = 0.05             # how much slower each retry is played
     max_time_scale: float = 1.5
+    still_joint_rad: float = 0.035       # the plan is still while every joint is this close to its first (or its
+    #                                      last) pose [rad] (2 deg; the smoothed plan's own start and end move ~0.5)
+    still_margin_s: float = 0.2          # the still frames kept before the plan's motion [s]
+    still_end_s: float = 0.8             # ... and after it, where the last knot is at rest [s]
     max_knots: int = 400                 # longer plans are not optimised: a knot holds ~8 MB (each cost term keeps
     #                                      its own derivatives; 196 knots: 1.7 GB), and a five-cycle trial ran out
 
@@ -144,6 +149,7 @@ class WholeRise:
     com_error_max_m: float
     torque_saturated_share: float  # knots with a joint torque at its limit
     cop_margin_min_m: float        # the smallest centre-of-pressure margin inside a sole on the feet
+    span: tuple[int, int] = (0, 0)  # the first and last plan frames optimised (:meth:`WholeRiseProblem.moving`)
     tries: list[tuple[float, bool]] = dataclasses.field(default_factory=list)   # (time scale, feasible)
 
     def summary(self) -> dict:
@@ -153,7 +159,7 @@ class WholeRise:
                 "whole_rise_solve_s": self.solve_s, "whole_rise_knots": self.knots,
                 "whole_rise_com_error_rms_m": self.com_error_rms_m, "whole_rise_com_error_max_m": self.com_error_max_m,
                 "whole_rise_torque_saturated_share": self.torque_saturated_share,
-                "whole_rise_cop_margin_min_m": self.cop_margin_min_m,
+                "whole_rise_cop_margin_min_m": self.cop_margin_min_m, "whole_rise_span_frames": list(self.span),
                 "whole_rise_tries": [[s, ok] for s, ok in self.tries]}
 
 
@@ -228,17 +234,41 @@ class WholeRiseProblem:
             del solver           # its problem's data (~8 MB a knot) before the next try's
             scale = round(scale + cfg.scale_step, 6)
 
+    def moving(self, plan: RisePlan) -> tuple[int, int]:
+        """The first and last plan frames the problem spans: ``still_margin_s`` before the first frame with a joint
+        ``still_joint_rad`` off the pose ``still_margin_s`` in, to ``still_end_s`` after the last with one that far off
+        the pose ``still_margin_s`` before the end (the last knot is at rest). Before and after, the plan is still
+        (seated, or standing at the end), its poses statically feasible as they are: of the shipped natural rise's
+        3.9 s, 0.74 s seated and 0.7 s standing; of the elderly's 5.4 s, 0.87 s and 0.1 s. The poses nearer the ends
+        than the margin are the player's smoothing settling (2.5 deg in its first 5 frames)."""
+        n, margin = len(plan.q), int(round(self.cfg.still_margin_s / plan.dt))
+        if n <= 4 * margin + 2:
+            return 0, n - 1
+
+        def off(ref: np.ndarray, frames: range) -> np.ndarray:
+            return np.array([np.abs(pin.difference(self.model, ref, plan.q[k])[6:]).max() for k in frames])
+        left = np.flatnonzero(off(plan.q[margin], range(margin, n)) > self.cfg.still_joint_rad)
+        right = np.flatnonzero(off(plan.q[n - 1 - margin], range(n - margin)) > self.cfg.still_joint_rad)
+        lo = int(left[0]) if len(left) else 0        # margin + left[0] is the first frame off; lo a margin before
+        hi = int(right[-1]) + int(round(self.cfg.still_end_s / plan.dt)) if len(right) else n - 1
+        return (max(0, lo), min(n - 1, hi)) if hi - lo >= 2 else (0, n - 1)
+
+    def knots(self, plan: RisePlan) -> list[int]:
+        """The plan frames the problem has a knot at (see :meth:`moving`)."""
+        lo, hi = self.moving(plan)
+        return [lo + k for k in knot_frames(hi - lo + 1, self.cfg.frames_per_knot(plan.dt))]
+
     def _solve_at(self, plan: RisePlan, scale: float):
         cr = crocoddyl
         hold_openmp_threads(1)
-        knots = knot_frames(len(plan.q), self.cfg.frames_per_knot(plan.dt))
+        knots = self.knots(plan)
         v = self._velocities(plan, knots, scale)
-        pin.framesForwardKinematics(self.model, self.data, plan.q[0])
+        pin.framesForwardKinematics(self.model, self.data, plan.q[knots[0]])
         feet = [self.data.oMf[i].copy() for i in self.sole_ids]
         running = [self._knot(plan, knots[i], v[i], feet, (knots[i + 1] - knots[i]) * plan.dt * scale)
                    for i in range(len(knots) - 1)]
         terminal = self._knot(plan, knots[-1], np.zeros(self.model.nv), feet, 0.0, end=True)
-        x0 = np.concatenate([plan.q[0], np.zeros(self.model.nv)])
+        x0 = np.concatenate([plan.q[knots[0]], np.zeros(self.model.nv)])
         problem = cr.ShootingProblem(x0, running, terminal)
         problem.nthreads = self.cfg.threads
         xs = [np.concatenate([plan.q[k], v[i]]) for i, k in enumerate(knots)]
@@ -339,11 +369,12 @@ class WholeRiseProblem:
         margins, violation = self._contact_figures(solver)
         feasible = (solver.ffeas <= 1e-5 and violation <= cfg.force_tolerance_n
                     and margins >= 0.5 * cfg.cop_side_margin_m and float(err.max()) <= cfg.com_tolerance_m)
-        return WholeRise(self._resampled(xs[:, :nq], knots, len(plan.q)), us, np.array(knots) * plan.dt * scale,
+        return WholeRise(self._resampled(xs[:, :nq], knots, plan.q), us, (np.array(knots) - knots[0]) * plan.dt * scale,
                          scale, bool(solver.isFeasible and
                          solver.stop <= solver.th_stop), bool(feasible), solver.iter, 0.0, len(knots),
                          float(np.sqrt(np.mean(err ** 2))), float(err.max()),
-                         float(np.mean(np.any(np.abs(us) >= 0.999 * self.limit, axis=1))), margins)
+                         float(np.mean(np.any(np.abs(us) >= 0.999 * self.limit, axis=1))), margins,
+                         (knots[0], knots[-1]))
 
     def _contact_figures(self, solver) -> tuple[float, float]:
         """(the smallest centre-of-pressure margin inside a sole that carries load (:data:`COP_LOAD_SHARE`) over
@@ -361,14 +392,17 @@ class WholeRiseProblem:
                     margin = min(margin, float(min(half[0] - abs(cop[0]), half[1] - abs(cop[1]))))
         return margin, violation
 
-    def _resampled(self, qs: np.ndarray, knots: list[int], n: int) -> np.ndarray:
-        """The knots' poses at every plan frame (interpolated on the configuration space)."""
-        out = np.zeros((n, self.model.nq))
+    def _resampled(self, qs: np.ndarray, knots: list[int], plan_q: np.ndarray) -> np.ndarray:
+        """The knots' poses at every plan frame (interpolated on the configuration space); before the first knot the
+        plan's own poses (the first knot is the plan's pose there), after the last the plan's motion from there
+        added to the last knot's pose."""
+        out = plan_q.copy()
         for i in range(len(knots) - 1):
             lo, hi = knots[i], knots[i + 1]
             for k in range(lo, hi):
                 out[k] = pin.interpolate(self.model, qs[i], qs[i + 1], (k - lo) / (hi - lo))
-        out[-1] = qs[-1]
+        for k in range(knots[-1], len(plan_q)):
+            out[k] = pin.integrate(self.model, qs[-1], pin.difference(self.model, plan_q[knots[-1]], plan_q[k]))
         return out
 
 
@@ -383,11 +417,12 @@ def optimised_player(model: pin.Model, frames, player: PlanPlayer, *, config: Wh
     plan's played ratio for the summary)."""
     cfg = config or WholeRiseConfig()
     figures = {"plan_ratio_frames": player.played_ratio()}
-    knots = len(knot_frames(len(frames), cfg.frames_per_knot(player.dt)))
+    problem, plan = WholeRiseProblem(model, cfg), RisePlan.of_frames(frames, player.dt, player.smoothed())
+    knots = len(problem.knots(plan))
     if knots > cfg.max_knots:
         return None, player, {"plan": "frames", **figures, "whole_rise_skipped":
                               f"{knots} knots, over the {cfg.max_knots} the optimisation is given (max_knots)"}
-    result = WholeRiseProblem(model, cfg).solve(RisePlan.of_frames(frames, player.dt, player.smoothed()), first_scale)
+    result = problem.solve(plan, first_scale)
     if not result.feasible:
         return result, player, {"plan": "frames", **figures}
     played = player.like(planned_time_scale=result.time_scale)
