@@ -34,7 +34,7 @@ def test_the_natural_rise_has_a_solution_at_the_humans_timing_and_the_shorter_pl
     # the optimised rise keeps the mapped human COM (the IK's) within the tolerance, its COP inside the soles
     assert summary["whole_rise_com_error_rms_m"] < 0.01 and summary["whole_rise_com_error_max_m"] <= 0.03
     assert summary["whole_rise_cop_margin_min_m"] >= 0.015
-    # the problem spans the rise: the still seated start (0.85 s) and standing end (1.3 s) keep the per-frame poses
+    # the problem spans the rise: the still seated start (0.74 s) and standing end (0.7 s) keep the per-frame poses
     first, last = summary["whole_rise_span_frames"]
     assert 40 < first < summary["human_seat_off_frame"] - 40 and 40 < summary["frames"] - 1 - last
     # both plans checked by the player; the one that plays shorter is played, and its commands are the bag's

@@ -63,7 +63,7 @@ def hold_openmp_threads(n: int) -> None:
 
 def knot_frames(n: int, every: int) -> list[int]:
     """The plan frames (of ``n``) the problem has a knot at: every ``every``-th, and the last."""
-    knots = list(range(0, n, max(1, every)))
+    knots = list(range(0, n, every))
     return knots if knots[-1] == n - 1 else [*knots, n - 1]
 
 
@@ -95,7 +95,7 @@ class WholeRiseError(Sit2StandError, RuntimeError):
 class WholeRiseConfig:
     """The whole-rise problem's settings (weights are Crocoddyl's: cost = 0.5 w |r|^2)."""
 
-    knot_period_s: float = 0.02          # a knot every this long at the human's timing (whole plan frames) [s]
+    knot_period_s: float = 0.02          # a knot every this long at the human's timing, in whole frames [s]
     threads: int = 1                     # Crocoddyl's threads for the knots (2: a solve 1.4x faster alone, but
     #                                      they spin against another busy process on 2 cores)
     iterations: int = 100                # box-FDDP iterations per time scale tried, at most
@@ -225,9 +225,9 @@ class WholeRiseProblem:
         slower scale that has one (see the module docstring); the last tried when none up to ``max_time_scale``
         has."""
         cfg, tries, spent, iters = self.cfg, [], 0.0, 0
-        scale = float(first_scale)
+        scale, knots = float(first_scale), self.knots(plan)
         while True:
-            solver, knots, t = self._solve_at(plan, scale)
+            solver, t = self._solve_at(plan, knots, scale)
             spent += t
             iters += solver.iter
             result = self._result(plan, solver, knots, scale)
@@ -261,10 +261,9 @@ class WholeRiseProblem:
         lo, hi = self.moving(plan)
         return [lo + k for k in knot_frames(hi - lo + 1, self.cfg.frames_per_knot(plan.dt))]
 
-    def _solve_at(self, plan: RisePlan, scale: float):
+    def _solve_at(self, plan: RisePlan, knots: list[int], scale: float):
         cr = crocoddyl
         hold_openmp_threads(1)
-        knots = self.knots(plan)
         v = self._velocities(plan, knots, scale)
         pin.framesForwardKinematics(self.model, self.data, plan.q[knots[0]])
         feet = [self.data.oMf[i].copy() for i in self.sole_ids]
@@ -280,7 +279,7 @@ class WholeRiseProblem:
         solver = self._solver(problem)
         t0 = time.perf_counter()
         solver.solve(xs, us, self.cfg.iterations, False, self.cfg.regularisation)
-        return solver, knots, time.perf_counter() - t0
+        return solver, time.perf_counter() - t0
 
     def _solver(self, problem):
         solver = crocoddyl.SolverBoxFDDP(problem)
