@@ -108,6 +108,8 @@ class WholeRiseConfig:
     com_weight: float = 1e4              # per knot, on the COM [m]
     marker_weight: float = 10.0          # per knot, times each marker task's own weight, on the position [m]
     posture_weight: float = 1.0          # on the joints' distance to the IK's [rad]
+    lateral_weight: float = 10.0         # ... on the lateral joints' (trunk and hip yaw and roll, ankle roll:
+    #                                      RobotProfile.lateral_joints), which the IK holds near the seated pose
     velocity_weight: float = 0.1         # on the joints' speed's distance to the IK's [rad/s]
     torque_weight: float = 1e-2          # on (tau / limit)^2
     torque_share: float = 1.0            # the torques' box: this share of the URDF limits (the rest: the robot's
@@ -212,6 +214,16 @@ class WholeRiseProblem:
         self.nu = self.actuation.nu
         self.limit = self.cfg.torque_share * self.model.effortLimit[6:]
         self.cop_load_n = COP_LOAD_SHARE * float(pin.computeTotalMass(self.model)) * G
+        self.posture_w = self._posture_weights()
+
+    def _posture_weights(self) -> np.ndarray:
+        """(nv - 6,) the posture cost's weight per joint velocity coordinate: ``lateral_weight`` on the lateral
+        joints, ``posture_weight`` on the rest."""
+        w = np.full(self.model.nv - 6, self.cfg.posture_weight)
+        for name in self.profile.lateral_joints():
+            if self.model.existJointName(name):
+                w[self.model.joints[self.model.getJointId(name)].idx_v - 6] = self.cfg.lateral_weight
+        return w
 
     def _sole_centre(self, side: str, centre_x_m: float) -> int:
         """A frame at the middle of a sole (the wrench cone's centre of pressure box is centred on its frame)."""
@@ -341,10 +353,9 @@ class WholeRiseProblem:
             costs.addCost(f"marker_{fid}", cr.CostModelResidual(
                 state, cr.ResidualModelFrameTranslation(state, fid, np.asarray(target, float), nu)),
                 cfg.marker_weight * float(weight))
-        w = np.concatenate([np.zeros(6), np.full(nv - 6, cfg.posture_weight), np.zeros(6),
-                            np.full(nv - 6, cfg.velocity_weight)])
+        w = np.concatenate([np.zeros(6), self.posture_w, np.zeros(6), np.full(nv - 6, cfg.velocity_weight)])
         if end:
-            w = np.concatenate([np.zeros(6), np.full(nv - 6, cfg.posture_weight), np.ones(nv)]) * cfg.end_weight
+            w = np.concatenate([np.zeros(6), self.posture_w, np.ones(nv)]) * cfg.end_weight
         x_ref = np.concatenate([plan.q[k], v])
         costs.addCost("posture", cr.CostModelResidual(state, cr.ActivationModelWeightedQuad(w ** 2),
                                                       cr.ResidualModelState(state, x_ref, nu)), 1.0)
