@@ -426,8 +426,11 @@ def optimised_player(model: pin.Model, frames, player: PlanPlayer, *, config: Wh
     ``player`` (which has had all the frames pushed and is closed), or ``player`` itself, the per-frame plan, where the
     problem has no solution up to ``max_time_scale``, the per-frame plan plays shorter, or the plan is longer than
     ``max_knots`` (then not optimised: None). Both are checked by the player's own criteria (ZMP margin, joint speeds,
-    torques: :meth:`PlanPlayer.frame_scale`). Returns (the optimisation's result, the player, ``plan`` and each
-    plan's played ratio for the summary)."""
+    torques: :meth:`PlanPlayer.frame_scale`). The optimised torques are in their limits by construction, but the
+    player's torque criterion (the contact wrench split by least squares) stays on: without it TALOS's 30 digital
+    humans played 1.009 median instead of 1.018, and G1 fell on 13 of the 14 it then played optimised (CAD
+    parameters, 6.6 kg hidden: plans at the limits leave its controller nothing). Returns (the optimisation's
+    result, the player, ``plan`` and each plan's played ratio for the summary)."""
     cfg = config or WholeRiseConfig()
     figures = {"plan_ratio_frames": player.played_ratio()}
     problem, plan = WholeRiseProblem(model, cfg), RisePlan.of_frames(frames, player.dt, player.smoothed())
