@@ -51,10 +51,16 @@ def test_a_rise_too_fast_for_the_motors_is_slowed_by_the_least_step_that_has_a_s
     try is a ``scale_step`` slower, and the first with a solution is played."""
     bag = tmp_path / "fast"
     assert sit2stand(["synth-human", "--duration", "0.8", "--out", str(bag)]) == 0
-    config = WholeRiseConfig(scale_step=0.25, max_time_scale=2.0)
-    summary = offline.run(bag, tmp_path / "rt", plan="whole", whole_rise=config)
+    config, lines = WholeRiseConfig(scale_step=0.25, max_time_scale=2.0), []
+    summary = offline.run(bag, tmp_path / "rt", plan="whole", whole_rise=config, progress=lines.append)
     tries = summary["whole_rise_tries"]
     assert tries[0] == [1.0, False] and tries[-1][1] and not any(ok for _, ok in tries[:-1])
+    # each try is told as it starts and ends, with the cost every 10 iterations between
+    starts = [line for line in lines if line.startswith("whole-rise optimisation: ")]
+    assert [float(line.rsplit(" ", 1)[1]) for line in starts] == [s for s, _ in tries]
+    ends = [line for line in lines if line.endswith(" solution")]
+    assert [line.endswith(": a solution") for line in ends] == [ok for _, ok in tries]
+    assert any(line.startswith("  iteration 10: cost ") for line in lines)
     assert summary["whole_rise_time_scale"] == tries[-1][0] > 1.0
     # played no faster than the optimisation found a solution for
     assert summary["plan_ratio_whole"] >= summary["whole_rise_time_scale"] - 0.02

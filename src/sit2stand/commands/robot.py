@@ -26,6 +26,7 @@ ROBOT_HELP = "robot profile: a packaged one (talos, g1, icub) or a YAML file (de
 
 
 def _retarget(args: argparse.Namespace) -> int:
+    from ..gap.workflow import progress_printer
     from ..retarget.offline import run
     from ..retarget.stream import RetargetConfig
 
@@ -36,6 +37,7 @@ def _retarget(args: argparse.Namespace) -> int:
                   **({"max_time_scale": args.max_time_scale} if args.max_time_scale else {}),
                   simulate=args.simulate, com_feedback=not args.no_com_feedback, whole=args.whole,
                   dynamic=args.dynamic, controller=args.controller, retiming=args.retiming, plan=args.plan,
+                  progress=progress_printer,
                   **({"seat_off_dwell_s": args.seat_off_dwell} if args.seat_off_dwell is not None else {}))
     print(json.dumps(summary, indent=2))
     if args.simulate:

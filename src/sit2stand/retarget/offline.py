@@ -46,7 +46,7 @@ from .stabiliser import ComStabiliser, StabiliserConfig, com_feedback_applies, c
 from .calibration import map_frame
 from .robot import robot_model, robot_setup
 from .stream import RetargetConfig, Retargeter, retarget_sequence
-from .whole_rise import WholeRiseConfig, optimised_player
+from .whole_rise import Progress, WholeRiseConfig, optimised_player
 
 PLANS = ("whole", "frames")
 DEFAULT_PLAN = "frames"
@@ -126,7 +126,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
         dynamic: bool = False, controller: str = DEFAULT_CONTROLLER, seat_off_dwell_s: float = SEAT_OFF_DWELL_S,
         gains: WbcGains | None = None, calibration_frame: int | None = None, static: Path | None = None,
         retiming: str = "local", robot: str | None = None, plan: str = DEFAULT_PLAN,
-        whole_rise: WholeRiseConfig | None = None) -> dict:
+        whole_rise: WholeRiseConfig | None = None, progress: Progress | None = None) -> dict:
     """Retarget ``bag`` into ``out`` (see the module docstring); returns the summary. ``com_feedback``: the
     simulated robot's commands are corrected by :class:`~sit2stand.retarget.stabiliser.ComStabiliser` (gains
     ``stabiliser``, default :class:`~sit2stand.retarget.stabiliser.StabiliserConfig`), as the node does.
@@ -144,7 +144,8 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     26 kg hidden); parameters identified on one and simulated on the other are a model error of 26 kg. ``robot``:
     the robot profile (a packaged name or a file; None: the plant's, TALOS where it names none). ``plan``: "whole"
     (the rise also optimised as a whole, :mod:`sit2stand.retarget.whole_rise`, settings ``whole_rise``, and the plan
-    that plays shorter played) or "frames" (the per-frame plan, retimed by the player)."""
+    that plays shorter played; ``progress`` told how the optimisation goes) or "frames" (the per-frame plan, retimed
+    by the player)."""
     if plan not in PLANS:
         raise InputError(f"plan {plan!r}: one of {', '.join(PLANS)}")
     refuse_existing_bag(out / "retarget")
@@ -186,7 +187,7 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     optimised, chosen = None, {"plan": "frames"}
     if plan == "whole":
         optimised, player, chosen = optimised_player(rt.model, frames, player, config=whole_rise,
-                                                     first_scale=time_scale or 1.0)
+                                                     first_scale=time_scale or 1.0, progress=progress)
         while sim is None and not player.done:
             cmds.append(player.pull())
     simulated = {}

@@ -27,6 +27,7 @@ from __future__ import annotations
 import ctypes
 import dataclasses
 import time
+from collections.abc import Callable
 
 import crocoddyl
 import numpy as np
@@ -67,19 +68,29 @@ def knot_frames(n: int, every: int) -> list[int]:
     return knots if knots[-1] == n - 1 else [*knots, n - 1]
 
 
+Progress = Callable[[str], None]
+"""A progress callback: one line of text per call."""
+PROGRESS_EVERY = 10
+"""Iterations between two progress lines of a solve."""
+
+
 class CostPlateau(crocoddyl.CallbackAbstract):
     """Ends a Crocoddyl solve once its rollout is feasible and its cost fell less than ``share`` over the last
     ``iterations`` iterations. The solver calls its callbacks just before its own stopping test, which then passes
     (its threshold raised). On the natural rise box-FDDP's gradient measure cycles between 5e-5 and 5e-2 once
     the cost is flat to four digits (the step lengths between 1 and 1/512), never under its 1e-6: ~40 % of a
-    100-iteration solve changes the cost by under 0.3 %."""
+    100-iteration solve changes the cost by under 0.3 %. ``progress``: told the cost every ``PROGRESS_EVERY``
+    iterations."""
 
-    def __init__(self, iterations: int, share: float) -> None:
+    def __init__(self, iterations: int, share: float, progress: Progress | None = None) -> None:
         super().__init__()
-        self.iterations, self.share, self.costs = int(iterations), float(share), []
+        self.iterations, self.share, self.costs, self.progress = int(iterations), float(share), [], progress
 
     def __call__(self, solver) -> None:
         self.costs.append(float(solver.cost) if solver.isFeasible else np.inf)
+        if self.progress is not None and len(self.costs) % PROGRESS_EVERY == 0:
+            self.progress(f"  iteration {len(self.costs)}: cost {solver.cost:.4g}"
+                          f"{'' if solver.isFeasible else ', gaps still open'}")
         if len(self.costs) <= self.iterations:
             return
         before, now = self.costs[-1 - self.iterations], self.costs[-1]
@@ -232,18 +243,22 @@ class WholeRiseProblem:
         return self.model.addFrame(pin.Frame(f"sole_centre_{side}", f.parentJoint, at, pin.FrameType.OP_FRAME))
 
     # -- the problem -------------------------------------------------------------------------------------------
-    def solve(self, plan: RisePlan, first_scale: float = 1.0) -> WholeRise:
+    def solve(self, plan: RisePlan, first_scale: float = 1.0, progress: Progress | None = None) -> WholeRise:
         """The rise at the human's timing (``first_scale`` x slower) when it has a solution there, else at the least
         slower scale that has one (see the module docstring); the last tried when none up to ``max_time_scale``
-        has."""
+        has. ``progress``: told each try and, during it, the cost (:class:`CostPlateau`)."""
         cfg, tries, spent, iters = self.cfg, [], 0.0, 0
         scale, knots = float(first_scale), self.knots(plan)
         while True:
-            solver, t = self._solve_at(plan, knots, scale)
+            if progress is not None:
+                progress(f"whole-rise optimisation: {len(knots)} knots at time scale {scale:.2f}")
+            solver, t = self._solve_at(plan, knots, scale, progress)
             spent += t
             iters += solver.iter
             result = self._result(plan, solver, knots, scale)
             tries.append((scale, result.feasible))
+            if progress is not None:
+                progress(f"  {solver.iter} iterations, {t:.1f} s: {'a' if result.feasible else 'no'} solution")
             if result.feasible or scale + cfg.scale_step > cfg.max_time_scale + 1e-9:
                 return dataclasses.replace(result, iterations=iters, solve_s=spent, tries=tries)
             del solver           # its problem's data (~8 MB a knot) before the next try's
@@ -273,7 +288,7 @@ class WholeRiseProblem:
         lo, hi = self.moving(plan)
         return [lo + k for k in knot_frames(hi - lo + 1, self.cfg.frames_per_knot(plan.dt))]
 
-    def _solve_at(self, plan: RisePlan, knots: list[int], scale: float):
+    def _solve_at(self, plan: RisePlan, knots: list[int], scale: float, progress: Progress | None = None):
         cr = crocoddyl
         hold_openmp_threads(1)
         v = self._velocities(plan, knots, scale)
@@ -288,15 +303,15 @@ class WholeRiseProblem:
         xs = [np.concatenate([plan.q[k], v[i]]) for i, k in enumerate(knots)]
         xs[0] = x0
         us = self._warm_torques(plan, knots, v, scale) if plan.a is not None else list(problem.quasiStatic(xs[:-1]))
-        solver = self._solver(problem)
+        solver = self._solver(problem, progress)
         t0 = time.perf_counter()
         solver.solve(xs, us, self.cfg.iterations, False, self.cfg.regularisation)
         return solver, time.perf_counter() - t0
 
-    def _solver(self, problem):
+    def _solver(self, problem, progress: Progress | None = None):
         solver = crocoddyl.SolverBoxFDDP(problem)
         solver.th_stop = 1e-6
-        solver.setCallbacks([CostPlateau(self.cfg.plateau_iterations, self.cfg.plateau_cost_share)])
+        solver.setCallbacks([CostPlateau(self.cfg.plateau_iterations, self.cfg.plateau_cost_share, progress)])
         return solver
 
     def _warm_torques(self, plan: RisePlan, knots: list[int], v: np.ndarray, scale: float) -> list[np.ndarray]:
@@ -420,7 +435,8 @@ class WholeRiseProblem:
 
 
 def optimised_player(model: pin.Model, frames, player: PlanPlayer, *, config: WholeRiseConfig | None = None,
-                     first_scale: float = 1.0) -> tuple[WholeRise | None, PlanPlayer, dict]:
+                     first_scale: float = 1.0, progress: Progress | None = None
+                     ) -> tuple[WholeRise | None, PlanPlayer, dict]:
     """The whole rise of ``frames`` (:class:`~sit2stand.retarget.stream.RetargetFrame` s, the retargeter's
     ``model``) optimised, and the player to play: one of the optimised poses at their time scale, made like
     ``player`` (which has had all the frames pushed and is closed), or ``player`` itself, the per-frame plan, where the
@@ -438,7 +454,7 @@ def optimised_player(model: pin.Model, frames, player: PlanPlayer, *, config: Wh
     if knots > cfg.max_knots:
         return None, player, {"plan": "frames", **figures, "whole_rise_skipped":
                               f"{knots} knots, over the {cfg.max_knots} the optimisation is given (max_knots)"}
-    result = problem.solve(plan, first_scale)
+    result = problem.solve(plan, first_scale, progress)
     if not result.feasible:
         return result, player, {"plan": "frames", **figures}
     played = player.like(planned_time_scale=result.time_scale)
