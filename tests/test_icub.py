@@ -113,12 +113,11 @@ def test_icub_identification_finds_its_hidden_mass(tmp_path):
 
 
 def test_icub_stands_up_on_the_optimised_plan_its_lateral_joints_held(tmp_path, capsys):
-    """Optimised as a whole (``--plan whole``), which plays shorter than the per-frame plan on iCub; the optimisation
-    holds the lateral joints near the IK's (``WholeRiseConfig.lateral_weight``): free, it swung the torso's roll
-    from -13 to +10 degrees and the hips' roll 13 degrees apart, and the robot fell back."""
+    """By default the rise is optimised as a whole (``--plan whole``), which plays shorter than the per-frame plan on
+    iCub; the optimisation holds the lateral joints near the IK's (``WholeRiseConfig.lateral_weight``): free, it swung
+    the torso's roll from -13 to +10 degrees and the hips' roll 13 degrees apart, and the robot fell back."""
     out = tmp_path / "rt"
-    code = sit2stand(["retarget", str(ROOT / "bags" / "natural"), "--robot", "icub", "--simulate", "--plan", "whole",
-                      "--out", str(out)])
+    code = sit2stand(["retarget", str(ROOT / "bags" / "natural"), "--robot", "icub", "--simulate", "--out", str(out)])
     summary = json.loads((out / "summary.json").read_text())
     assert code == 0 and "stood up" in capsys.readouterr().out, summary
     # default plant, CAD parameters; measured: the optimised plan played at 1.003 (the per-frame plan's checks 1.07),
@@ -127,9 +126,11 @@ def test_icub_stands_up_on_the_optimised_plan_its_lateral_joints_held(tmp_path, 
     assert summary["time_scale"] <= 1.05 and summary["standing_knees_match"], summary
 
 
-def test_icub_stands_up_from_the_natural_demonstration(tmp_path, capsys):
+def test_icub_stands_up_from_the_natural_demonstration_on_the_per_frame_plan(tmp_path, capsys):
+    """``--plan frames``: the per-frame plan the live retargeter runs, without the optimisation."""
     out = tmp_path / "rt"
-    code = sit2stand(["retarget", str(ROOT / "bags" / "natural"), "--robot", "icub", "--simulate", "--out", str(out)])
+    code = sit2stand(["retarget", str(ROOT / "bags" / "natural"), "--robot", "icub", "--simulate", "--plan", "frames",
+                      "--out", str(out)])
     summary = json.loads((out / "summary.json").read_text())
     assert code == 0 and "stood up" in capsys.readouterr().out, summary
     assert summary["robot_seat_off_frame"] is not None

@@ -233,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="the digital humans' capture rate [Hz] (default 100; divides the plates' 1000 Hz)")
     parser.add_argument("--robot", default=DEFAULT_ROBOT, help="robot profile: talos (default), g1 or a file")
     parser.add_argument("--plan", choices=PLANS, default=DEFAULT_PLAN,
-                        help="how each case is planned (sit2stand retarget --plan; default frames)")
+                        help="how each case is planned (sit2stand retarget --plan; default whole)")
     parser.add_argument("--out", type=Path, default=None, help="default: bench/results/standup (G1: standup_g1)")
     args = parser.parse_args(argv)
     args.out = args.out or project_folder() / (DEFAULT_OUT if args.robot == DEFAULT_ROBOT else

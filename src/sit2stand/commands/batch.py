@@ -77,7 +77,7 @@ def add_batch(sub) -> None:
     p.add_argument("--params", help="standup: identified parameters (default: make demo's, else CAD)")
     p.add_argument("--cad", action="store_true", help="standup: plan and control with the CAD model")
     p.add_argument("--plan", choices=PLAN_CHOICES, default=DEFAULT_PLAN,
-                   help="standup: how each case is planned (sit2stand retarget --plan; default frames)")
+                   help="standup: how each case is planned (sit2stand retarget --plan; default whole)")
     p.add_argument("--workers", type=int, help="Ray workers on this machine (default: one per CPU; 1: no Ray, "
                                                "this process)")
     p.add_argument("--address", help="join a Ray cluster (ray start --head on one machine, ray start --address on "

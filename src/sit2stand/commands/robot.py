@@ -17,7 +17,7 @@ CONTROLLER_CHOICES = ("inverse_dynamics", "wbc")
 stack (a test keeps the two equal)."""
 DEFAULT_CONTROLLER = "wbc"
 """``robot.plant.DEFAULT_CONTROLLER``, spelled here for the same reason (the same test keeps them equal)."""
-PLAN_CHOICES, DEFAULT_PLAN = ("whole", "frames"), "frames"
+PLAN_CHOICES, DEFAULT_PLAN = ("whole", "frames"), "whole"
 """``retarget.offline.PLANS`` and ``DEFAULT_PLAN``, spelled here for the same reason (a test keeps them equal)."""
 
 
@@ -164,9 +164,10 @@ def add_retarget(sub) -> None:
     p.add_argument("--seat-off-dwell", type=float, default=None,
                    help="the player's wait at the robot's seat-off [s] (default: retarget.player.SEAT_OFF_DWELL_S, 0)")
     p.add_argument("--plan", choices=PLAN_CHOICES, default=DEFAULT_PLAN,
-                   help="frames: the per-frame IK retimed frame by frame, as the live retargeter plans (default); "
-                        "whole: also the rise optimised as one problem (contacts, friction and COP cones, torque "
-                        "limits) at the human's timing, and the plan that plays shorter played")
+                   help="whole: also the rise optimised as one problem (contacts, friction and COP cones, torque "
+                        "limits) at the human's timing, and the plan that plays shorter played (default; 2-7x the "
+                        "rise's duration); frames: the per-frame IK retimed frame by frame, as the live retargeter "
+                        "plans")
     p.add_argument("--retiming", choices=("local", "uniform"), default="local",
                    help="local: slower only where a frame needs it (default); uniform: one growing factor")
     p.add_argument("--marker-set", help="marker set: plug_in_gait, plug_in_gait_lower, gait2392 or a YAML file "
