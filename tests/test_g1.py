@@ -48,6 +48,7 @@ def test_g1_stands_up_from_the_natural_demonstration_near_the_humans_timing(tmp_
     assert summary["robot"] == "g1" and summary["stood_up"] and summary["fall"] is None
     # the rise optimised by default; on G1 the per-frame plan plays shorter (measured 1.018 against 1.049)
     assert summary["whole_rise_feasible"] and summary["plan"] == "frames", summary
+    assert not summary["controller_plan_torques"], "the per-frame plan has no torques of its own"
     assert summary["time_scale"] <= 1.1 and summary["com_tracking_rms_m"] < 0.03, summary
     assert summary["pelvis_final_m"] > 0.6                          # G1's pelvis: 0.385 m seated, 0.79 m straight
     # standing, not squatting: knees within 15 degrees of the human's at the end (measured 13.6 against 12.0)

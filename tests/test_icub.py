@@ -123,6 +123,7 @@ def test_icub_stands_up_on_the_optimised_plan_its_lateral_joints_held(tmp_path, 
     # default plant, CAD parameters; measured: the optimised plan played at 1.003 (the per-frame plan's checks 1.07),
     # knees 12.4 degrees (the human's 12.0), COM 0.6 cm
     assert summary["plan"] == "whole" and summary["plan_ratio_frames"] > summary["plan_ratio_whole"], summary
+    assert summary["controller_plan_torques"], "the controller is given the optimised torques"
     assert summary["time_scale"] <= 1.05 and summary["standing_knees_match"], summary
 
 

@@ -254,3 +254,24 @@ def test_a_seat_known_as_a_force_gives_the_torques_of_a_seat_contact_with_that_f
     b = known.solve(q, v, _at_rest(plant.ctrl, q), seat_force_known_n=seat)
     assert a.solved and b.solved and np.all(b.seat_force == 0.0)
     assert np.allclose(a.tau, b.tau, atol=1e-6) and np.allclose(a.feet_forces, b.feet_forces, atol=1e-6)
+
+
+def test_the_plans_torques_pull_the_qps_where_the_contacts_leave_it_a_choice(plant):
+    """Standing on both feet, the soles can squeeze the floor between them without moving the robot: a plan's
+    torques that ask for such a squeeze are met (its posture at rest kept), and without them the QP is as before."""
+    model = plant.ctrl
+    q = _standing(plant)
+    ref = _at_rest(model, q)
+    qp = WholeBodyQP(model, plant.onboard.seat_frame)
+    plain = qp.solve(q, np.zeros(model.nv), ref)
+    squeeze = np.zeros((qp.n_f // 3, 3))                    # [N] per point: the soles' corners, then the seat
+    squeeze[:4, 1], squeeze[4:8, 1] = 20.0, -20.0           # the left sole pushed left, the right pushed right
+    planned = plain.tau - qp._ws.Jf[:, 6:].T @ squeeze.ravel()
+    ref.tau = planned
+    tracked = WholeBodyQP(model, plant.onboard.seat_frame).solve(q, np.zeros(model.nv), ref)
+    assert tracked.solved and np.abs(tracked.a).max() < 1e-2
+    assert np.linalg.norm(tracked.tau - planned) < 0.2 * np.linalg.norm(plain.tau - planned)
+    assert tracked.feet_forces[:4, 1].sum() > 40.0 and tracked.feet_forces[4:, 1].sum() < -40.0
+    ref.tau = None
+    np.testing.assert_allclose(WholeBodyQP(model, plant.onboard.seat_frame).solve(q, np.zeros(model.nv), ref).tau,
+                               plain.tau, atol=1e-9)

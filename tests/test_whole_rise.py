@@ -16,7 +16,7 @@ from sit2stand.io.topics import ROBOT_JOINT_COMMAND_TOPIC
 from sit2stand.retarget import offline
 from sit2stand.robot.model import PlantConfig, controller_model
 from sit2stand.retarget.robot import robot_model
-from sit2stand.retarget.whole_rise import RisePlan, WholeRiseConfig, WholeRiseError, WholeRiseProblem
+from sit2stand.retarget.whole_rise import RisePlan, WholeRise, WholeRiseConfig, WholeRiseError, WholeRiseProblem
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -108,3 +108,13 @@ def test_bad_plans_and_models_are_refused(tmp_path):
     bare = controller_model(PlantConfig.load(None, "talos"))        # the robot without the retargeter's seat frame
     with pytest.raises(WholeRiseError, match="no 'seat' frame"):
         WholeRiseProblem(bare)
+
+
+def test_the_optimised_torques_are_given_at_the_human_time_each_command_plays():
+    """Knots 10 and 12 frames in (10 ms frames), solved 2x slower: each interval's torques at its middle in human
+    time, linear between, none outside the span."""
+    result = WholeRise(np.zeros((20, 3)), np.array([[1.0], [3.0]]), np.array([0.0, 0.02, 0.04]), 2.0, True, True,
+                       10, 1.0, 3, 0.0, 0.0, 0.0, 0.05, span=(10, 12))
+    at = [result.torque_at(t, 0.01) for t in (0.099, 0.1, 0.105, 0.11, 0.115, 0.12, 0.121)]
+    assert at[0] is None and at[-1] is None
+    np.testing.assert_allclose(np.concatenate(at[1:-1]), [1.0, 1.0, 2.0, 3.0, 3.0])

@@ -5,14 +5,15 @@ itself; else the offline estimator is run), streams every frame through the same
 :class:`~sit2stand.retarget.stream.Retargeter` and :class:`~sit2stand.retarget.stream.PlanPlayer` the node uses, and
 writes into DIR: ``retarget`` (a bag: ``/robot/joint_command``, ``/robot/planned_com``, ``/robot/planned_zmp``),
 ``marker_map.yaml``, ``summary.json`` and ``retarget.png``. With ``--simulate`` the commands drive the MuJoCo plant
-under its on-board controller (whole-body torque control by default, with the same COM parameters) and the summary
-says whether it stood up.
+under its on-board controller (whole-body torque control by default, with the same COM parameters; an optimised
+plan's torques go with its commands) and the summary says whether it stood up.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -196,9 +197,12 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     if sim is not None:      # the commands pulled as the robot moves: a robot that trails its plan slows it
         com_feedback = com_feedback_applies(com_feedback, controller)
         stab = ComStabiliser(robot.model, robot.sole_frames, robot.sole_targets, stabiliser) if com_feedback else None
+        torques = None if chosen["plan"] != "whole" else (lambda t: optimised.torque_at(t, dt))
         cmds, simulated = _simulate(sim, player, dt, out, stabiliser=stab, controller=controller,
-                                    t0_s=float(trial.marker_t_s[0]), human_posture=human_posture)
-        simulated = {"com_feedback": bool(com_feedback), "controller": controller, **simulated}
+                                    t0_s=float(trial.marker_t_s[0]), human_posture=human_posture,
+                                    plan_torques=torques)
+        simulated = {"com_feedback": bool(com_feedback), "controller": controller,
+                     "controller_plan_torques": torques is not None, **simulated}
     ik_ms = np.array([f.ik.seconds for f in frames]) * 1e3
     feasible = np.array([f.ik.feasible for f in frames])
     com_err = np.array([f.ik.com_error_m for f in frames])
@@ -328,7 +332,8 @@ def physics_steps_due(commands: int, dt: float, timestep_s: float, taken: int) -
 
 def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3.0,
               stabiliser: ComStabiliser | None = None, *, controller: str, t0_s: float = 0.0,
-              human_posture: HumanPosture | None = None) -> tuple[list, dict]:
+              human_posture: HumanPosture | None = None,
+              plan_torques: Callable[[float], np.ndarray | None] | None = None) -> tuple[list, dict]:
     """Drive the plant with the player's commands (PD + inverse-dynamics feed-forward), pulled one per frame period
     with the robot's lag behind the plan (the COM feedback's error), then hold the last one. Returns (commands,
     figures). Writes ``simulation.npy``: t, true COM (3), planned COM (3), COP (3), pelvis z, pelvis x, planned
@@ -338,7 +343,8 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
     measured state (None: the commands as planned). Writes the robot's sensed state once per command period into the bag
     ``robot`` (the driver's topics, stamped from ``t0_s`` on the commands' clock): what ``sit2stand export``
     reads. ``human_posture``: the human's, to give the simulated robot's posture RMS against it
-    (:func:`~sit2stand.retarget.compare.posture_rms_deg`)."""
+    (:func:`~sit2stand.retarget.compare.posture_rms_deg`). ``plan_torques``: the joint torques [N m] the plan asks
+    at a human time (the optimisation's; None outside its span), given to the controller with each command."""
     ticks = taken = 0
     sensed = []
     rows, cmds, torque = [], [], []
@@ -361,7 +367,8 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
             elif c.on_feet:      # no COM feedback (torque control has its own COM task, or it is off): the plan
                 #                  still waits for a robot behind it, from the measured state
                 lag = com_lag_m(c.com - plant.model_com())
-            plant.command(q[7:], c.v[6:], c.a[6:], feedforward=controller)
+            tau = None if plan_torques is None or held else plan_torques(c.t_plan_s)
+            plant.command(q[7:], c.v[6:], c.a[6:], feedforward=controller, tau=tau)
         ticks += 1
         steps = physics_steps_due(ticks, dt, plant.cfg.timestep_s, taken)
         plant.step(steps)

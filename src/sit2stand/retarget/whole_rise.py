@@ -168,6 +168,16 @@ class WholeRise:
     span: tuple[int, int] = (0, 0)  # the first and last plan frames optimised (:meth:`WholeRiseProblem.moving`)
     tries: list[tuple[float, bool]] = dataclasses.field(default_factory=list)   # (time scale, feasible)
 
+    def torque_at(self, t_plan_s: float, frame_period_s: float) -> np.ndarray | None:
+        """The joint torques [N m] the optimisation asks at the plan's human time ``t_plan_s`` [s from its first
+        frame] (each knot interval's torques at its middle, linear between; frames ``frame_period_s`` apart), or
+        None outside the span it optimised."""
+        knot_t = self.span[0] * frame_period_s + self.knot_t_s / self.time_scale
+        if not knot_t[0] <= t_plan_s <= knot_t[-1] or len(self.tau) == 0:
+            return None
+        middle = 0.5 * (knot_t[:-1] + knot_t[1:])
+        return np.array([np.interp(t_plan_s, middle, self.tau[:, j]) for j in range(self.tau.shape[1])])
+
     def summary(self) -> dict:
         """The figures for ``summary.json`` (``whole_rise_*``)."""
         return {"whole_rise_time_scale": self.time_scale, "whole_rise_feasible": self.feasible,

@@ -91,6 +91,7 @@ class JointReference:
     qd: np.ndarray
     qdd: np.ndarray
     t_s: float = 0.0
+    tau: np.ndarray | None = None    # the joint torques the plan asks [N m], when it has them (torque control)
 
     @classmethod
     def holding(cls, q: np.ndarray, t_s: float) -> JointReference:

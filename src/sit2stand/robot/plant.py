@@ -261,16 +261,17 @@ class Plant:
         return float(self.data.time)
 
     def command(self, q: np.ndarray, qd: np.ndarray | None = None, qdd: np.ndarray | None = None,
-                feedforward: str | None = None, refresh: bool = True) -> None:
+                feedforward: str | None = None, refresh: bool = True, tau: np.ndarray | None = None) -> None:
         """Set the joint reference; ``feedforward``: "none", "gravity" or "inverse_dynamics" (joint PD with that
         feed-forward), or "wbc" (whole-body torque control, the servos off); ``refresh=False``
-        keeps the feed-forward's own refresh rate (for references interpolated at every physics step)."""
+        keeps the feed-forward's own refresh rate (for references interpolated at every physics step); ``tau``: the
+        joint torques the plan asks [N m], which whole-body torque control tracks (``WbcGains.torque_weight``)."""
         q = np.asarray(q, float)
         if q.shape != (self.n,):
             raise InputError(f"joint command has {q.shape} positions, the robot has {self.n} joints")
         self.ref = JointReference(q.copy(), np.zeros(self.n) if qd is None else np.asarray(qd, float).copy(),
                                   np.zeros(self.n) if qdd is None else np.asarray(qdd, float).copy(),
-                                  float(self.data.time))
+                                  float(self.data.time), None if tau is None else np.asarray(tau, float).copy())
         if feedforward is not None:
             if (feedforward == "wbc") != (self.feedforward == "wbc") and not self.limp:
                 self._servos(feedforward != "wbc")
@@ -314,7 +315,8 @@ class Plant:
             seat = 0.0
             if feedforward_seated(s.qpos[2], ob.seated_base_z_m, feet_fz, ob.mass_kg):
                 seat = max(0.0, ob.mass_kg * G - feet_fz)
-            ff.tau, ff.age = self._within_effort(self.wbc.torques(q, v, q_t, qd_t, self.ref.qdd, seat)), 0
+            ff.tau, ff.age = self._within_effort(self.wbc.torques(q, v, q_t, qd_t, self.ref.qdd, seat,
+                                                                       self.ref.tau)), 0
         ff.age += 1
         return self.data.qpos.take(self.qadr), ff.tau
 

@@ -89,16 +89,18 @@ class WholeBodyController:
             self.oM_sole = self.sole_flat * pin.exp6(share * delta)
 
     def torques(self, q: np.ndarray, v: np.ndarray, q_ref: np.ndarray, v_ref: np.ndarray,
-                a_ref: np.ndarray, seat_load_n: float = 0.0) -> np.ndarray:
+                a_ref: np.ndarray, seat_load_n: float = 0.0, tau_ref: np.ndarray | None = None) -> np.ndarray:
         """Joint torques [N m] at the measured state (q, v) (Pinocchio order; base velocity in the base frame)
         tracking the joint reference (q_ref, v_ref, a_ref); ``seat_load_n``: the seat's vertical force on the pelvis
-        as estimated from the feet's force sensors (the weight they do not carry) [N]."""
+        as estimated from the feet's force sensors (the weight they do not carry) [N]; ``tau_ref``: the joint torques
+        the plan asks [N m] (its optimisation's), tracked with ``WbcGains.torque_weight``."""
         if self.oM_sole is None:
             self.anchor(q)
         self._move_anchor(seat_load_n)
         q_full = q.copy()
         q_full[7:] = q_ref
         ref = feet_anchored_reference(self.model, self.data, q_full, v_ref, a_ref, self.oM_sole, self.sole)
+        ref.tau = tau_ref
         seat = np.array([0.0, 0.0, seat_load_n]) if seat_load_n > 0 else None
         res = self.qp.solve(q, v, ref, 0.0, seat)
         self.qp_times_s.append(res.qp_s)
