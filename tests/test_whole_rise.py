@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
+import yaml
 
 from sit2stand.cli import main as sit2stand
 from sit2stand.commands.robot import DEFAULT_PLAN as CLI_DEFAULT_PLAN
@@ -44,6 +45,29 @@ def test_the_natural_rise_has_a_solution_at_the_humans_timing_and_the_shorter_pl
     with BagReader(out / "retarget") as bag:
         commands = bag.read(ROBOT_JOINT_COMMAND_TOPIC)
     assert len(commands) == summary["commands"]
+
+
+def test_with_identified_parameters_the_optimised_torques_are_the_plans_torque_check(natural, tmp_path, monkeypatch):
+    """The optimised torques are in their limits by construction. With CAD parameters the player checks them again
+    (the contact wrench split by least squares: a margin for what the model does not know); with identified ones the
+    optimisation's model is the robot's, and its torques are the check. A 1.1 s rise of a robot whose trunk was
+    identified 30 % heavier than CAD's: the same solution at the human's timing plays 1.01 checked by the
+    optimisation, 1.04 checked again by the player."""
+    assert natural[0]["whole_rise_torque_check"] == "player"                   # CAD parameters
+    bag = tmp_path / "brisk"
+    assert sit2stand(["synth-human", "--duration", "1.1", "--out", str(bag)]) == 0
+    model, _, _ = robot_model(robot="talos")
+    trunk = model.inertias[model.getJointId("torso_2_joint")]
+    params = tmp_path / "identified_full.yaml"
+    params.write_text(yaml.safe_dump({"robot": "talos", "model": "full", "links": {
+        "torso_2_joint": {"mass": 1.3 * float(trunk.mass), "com": [float(c) for c in trunk.lever]}}}))
+    trusted = offline.run(bag, tmp_path / "trusted", params=params, plan="whole")
+    optimised_player = offline.optimised_player
+    monkeypatch.setattr(offline, "optimised_player", lambda *a, **k: optimised_player(*a, **{**k, "identified": False}))
+    checked = offline.run(bag, tmp_path / "checked", params=params, plan="whole")
+    assert trusted["whole_rise_torque_check"] == "optimisation" and checked["whole_rise_torque_check"] == "player"
+    assert trusted["whole_rise_tries"] == checked["whole_rise_tries"] == [[1.0, True]]
+    assert trusted["plan"] == "whole" and trusted["time_scale"] < 1.02 < checked["plan_ratio_whole"]
 
 
 def test_a_rise_too_fast_for_the_motors_is_slowed_by_the_least_step_that_has_a_solution(tmp_path):

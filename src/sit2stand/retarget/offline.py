@@ -55,8 +55,8 @@ DEFAULT_PLAN = "whole"
 (:mod:`sit2stand.retarget.whole_rise`), and of that plan and the per-frame one the one that plays shorter played. On
 every population measured (30 digital humans each: TALOS, G1 and iCub with CAD parameters, TALOS and G1 with
 identified ones) it stood as often as the per-frame plan and played at an equal or lower median time scale (iCub 1.002
-against 1.05, TALOS identified 1.070 and 1.076 in two runs against 1.078). A solve costs 2-7x the rise's duration;
-"frames" is what the live retargeter runs, and skips it."""
+against 1.05; TALOS identified 1.000 against 1.078, the optimised torques then their own check). A solve costs
+2-7x the rise's duration; "frames" is what the live retargeter runs, and skips it."""
 
 HumanPosture = tuple[np.ndarray, np.ndarray, dict]
 """The human over the trial as :func:`~sit2stand.retarget.compare.posture_rms_deg` compares it: times [s], COM
@@ -190,7 +190,8 @@ def run(bag: Path, out: Path, *, params: Path | None = None, plant: Path | None 
     optimised, chosen = None, {"plan": "frames"}
     if plan == "whole":
         optimised, player, chosen = optimised_player(rt.model, frames, player, config=whole_rise,
-                                                     first_scale=time_scale or 1.0, progress=progress)
+                                                     first_scale=time_scale or 1.0, identified=links is not None,
+                                                     progress=progress)
         while sim is None and not player.done:
             cmds.append(player.pull())
     simulated = {}

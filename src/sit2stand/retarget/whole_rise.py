@@ -445,18 +445,21 @@ class WholeRiseProblem:
 
 
 def optimised_player(model: pin.Model, frames, player: PlanPlayer, *, config: WholeRiseConfig | None = None,
-                     first_scale: float = 1.0, progress: Progress | None = None
+                     first_scale: float = 1.0, identified: bool = False, progress: Progress | None = None
                      ) -> tuple[WholeRise | None, PlanPlayer, dict]:
     """The whole rise of ``frames`` (:class:`~sit2stand.retarget.stream.RetargetFrame` s, the retargeter's
     ``model``) optimised, and the player to play: one of the optimised poses at their time scale, made like
     ``player`` (which has had all the frames pushed and is closed), or ``player`` itself, the per-frame plan, where the
     problem has no solution up to ``max_time_scale``, the per-frame plan plays shorter, or the plan is longer than
     ``max_knots`` (then not optimised: None). Both are checked by the player's own criteria (ZMP margin, joint speeds,
-    torques: :meth:`PlanPlayer.frame_scale`). The optimised torques are in their limits by construction, but the
-    player's torque criterion (the contact wrench split by least squares) stays on: without it TALOS's 30 digital
-    humans played 1.009 median instead of 1.018, and G1 fell on 13 of the 14 it then played optimised (CAD
-    parameters, 6.6 kg hidden: plans at the limits leave its controller nothing). Returns (the optimisation's
-    result, the player, ``plan`` and each plan's played ratio for the summary)."""
+    torques: :meth:`PlanPlayer.frame_scale`). The optimised torques are in their limits by construction; the
+    player's torque criterion (the contact wrench split by least squares, not the optimisation's split) checks them
+    again unless ``model`` is ``identified``: with CAD parameters the robot carries what the model does not know, and
+    without the criterion G1 fell on 13 of the 14 digital humans it then played optimised (6.6 kg hidden: plans at
+    the limits leave its controller nothing). With identified parameters the optimisation's model is the robot's as
+    far as anyone knows, and the criterion stretched plans the robot stands at the human's timing (TALOS, 30 digital
+    humans: see docs/method.md). Returns (the optimisation's result, the player, ``plan``, each plan's played ratio
+    and ``whole_rise_torque_check`` for the summary)."""
     cfg = config or WholeRiseConfig()
     figures = {"plan_ratio_frames": player.played_ratio()}
     problem, plan = WholeRiseProblem(model, cfg), RisePlan.of_frames(frames, player.dt, player.smoothed())
@@ -467,7 +470,8 @@ def optimised_player(model: pin.Model, frames, player: PlanPlayer, *, config: Wh
     result = problem.solve(plan, first_scale, progress)
     if not result.feasible:
         return result, player, {"plan": "frames", **figures}
-    played = player.like(planned_time_scale=result.time_scale)
+    figures["whole_rise_torque_check"] = "optimisation" if identified else "player"
+    played = player.like(planned_time_scale=result.time_scale, torque_limited=not identified)
     for q, f in zip(result.q, frames):
         played.push(q, not f.seated)
     played.close()
