@@ -70,24 +70,41 @@ def test_with_identified_parameters_the_optimised_torques_are_the_plans_torque_c
     assert trusted["plan"] == "whole" and trusted["time_scale"] < 1.02 < checked["plan_ratio_whole"]
 
 
-def test_a_rise_too_fast_for_the_motors_is_slowed_by_the_least_step_that_has_a_solution(tmp_path):
+def test_a_rise_too_fast_for_the_motors_is_slowed_by_the_least_step_that_has_a_solution(tmp_path, monkeypatch):
     """A 0.8 s rise (the natural style's 1.6 s, twice as fast) has no solution at the human's timing on TALOS: each
-    try is a ``scale_step`` slower, and the first with a solution is played."""
+    try is a ``scale_step`` slower, and the first with a solution is the result. ``sit2stand retarget`` stops trying
+    at the per-frame plan's played ratio (1.15 here): an optimised plan found slower would not be played."""
     bag = tmp_path / "fast"
     assert sit2stand(["synth-human", "--duration", "0.8", "--out", str(bag)]) == 0
-    config, lines = WholeRiseConfig(scale_step=0.25, max_time_scale=2.0), []
+    config, lines, seen = WholeRiseConfig(scale_step=0.25, max_time_scale=2.0), [], {}
+    optimised_player = offline.optimised_player
+
+    def remember(model, frames, player, **kw):
+        seen.update(model=model, frames=frames, player=player)
+        return optimised_player(model, frames, player, **kw)
+    monkeypatch.setattr(offline, "optimised_player", remember)
     summary = offline.run(bag, tmp_path / "rt", plan="whole", whole_rise=config, progress=lines.append)
-    tries = summary["whole_rise_tries"]
-    assert tries[0] == [1.0, False] and tries[-1][1] and not any(ok for _, ok in tries[:-1])
+    assert summary["whole_rise_tries"] == [[1.0, False]] and summary["plan"] == "frames"
+    assert 1.0 < summary["plan_ratio_frames"] < 1.25
+    # the same problem with no such bound: 1.25 has a solution
+    lines.clear()
+    plan = RisePlan.of_frames(seen["frames"], seen["player"].dt, seen["player"].smoothed())
+    result = WholeRiseProblem(seen["model"], config).solve(plan, progress=lines.append)
+    tries = result.tries
+    assert tries[0] == (1.0, False) and tries[-1][1] and not any(ok for _, ok in tries[:-1])
     # each try is told as it starts and ends, with the cost every 10 iterations between
     starts = [line for line in lines if line.startswith("whole-rise optimisation: ")]
     assert [float(line.rsplit(" ", 1)[1]) for line in starts] == [s for s, _ in tries]
     ends = [line for line in lines if line.endswith(" solution")]
     assert [line.endswith(": a solution") for line in ends] == [ok for _, ok in tries]
     assert any(line.startswith("  iteration 10: cost ") for line in lines)
-    assert summary["whole_rise_time_scale"] == tries[-1][0] > 1.0
+    assert result.time_scale == tries[-1][0] > summary["plan_ratio_frames"]
     # played no faster than the optimisation found a solution for
-    assert summary["plan_ratio_whole"] >= summary["whole_rise_time_scale"] - 0.02
+    played = seen["player"].like(planned_time_scale=result.time_scale)
+    for q, f in zip(result.q, seen["frames"]):
+        played.push(q, not f.seated)
+    played.close()
+    assert played.played_ratio() >= result.time_scale - 0.02
 
 
 def test_the_problem_keeps_torques_in_their_limits_and_ends_at_the_ik_standing_pose(natural):

@@ -253,12 +253,15 @@ class WholeRiseProblem:
         return self.model.addFrame(pin.Frame(f"sole_centre_{side}", f.parentJoint, at, pin.FrameType.OP_FRAME))
 
     # -- the problem -------------------------------------------------------------------------------------------
-    def solve(self, plan: RisePlan, first_scale: float = 1.0, progress: Progress | None = None) -> WholeRise:
+    def solve(self, plan: RisePlan, first_scale: float = 1.0, progress: Progress | None = None,
+              max_time_scale: float | None = None) -> WholeRise:
         """The rise at the human's timing (``first_scale`` x slower) when it has a solution there, else at the least
         slower scale that has one (see the module docstring); the last tried when none up to ``max_time_scale``
-        has. ``progress``: told each try and, during it, the cost (:class:`CostPlateau`)."""
+        (default and at most the config's; the first scale is always tried) has. ``progress``: told each try and,
+        during it, the cost (:class:`CostPlateau`)."""
         cfg, tries, spent, iters = self.cfg, [], 0.0, 0
         scale, knots = float(first_scale), self.knots(plan)
+        last = min(cfg.max_time_scale, max_time_scale or np.inf)
         while True:
             if progress is not None:
                 progress(f"whole-rise optimisation: {len(knots)} knots at time scale {scale:.2f}")
@@ -269,7 +272,7 @@ class WholeRiseProblem:
             tries.append((scale, result.feasible))
             if progress is not None:
                 progress(f"  {solver.iter} iterations, {t:.1f} s: {'a' if result.feasible else 'no'} solution")
-            if result.feasible or scale + cfg.scale_step > cfg.max_time_scale + 1e-9:
+            if result.feasible or scale + cfg.scale_step > last + 1e-9:
                 return dataclasses.replace(result, iterations=iters, solve_s=spent, tries=tries)
             del solver           # its problem's data (~8 MB a knot) before the next try's
             scale = round(scale + cfg.scale_step, 6)
@@ -451,7 +454,9 @@ def optimised_player(model: pin.Model, frames, player: PlanPlayer, *, config: Wh
     ``model``) optimised, and the player to play: one of the optimised poses at their time scale, made like
     ``player`` (which has had all the frames pushed and is closed), or ``player`` itself, the per-frame plan, where the
     problem has no solution up to ``max_time_scale``, the per-frame plan plays shorter, or the plan is longer than
-    ``max_knots`` (then not optimised: None). Both are checked by the player's own criteria (ZMP margin, joint speeds,
+    ``max_knots`` (then not optimised: None). Slower tries stop at the per-frame plan's played ratio: an optimised
+    plan plays at least at its own scale, so one found slower would not be played (TALOS's identified digital humans
+    spent up to 320 s on tries past it). Both are checked by the player's own criteria (ZMP margin, joint speeds,
     torques: :meth:`PlanPlayer.frame_scale`). The optimised torques are in their limits by construction; the
     player's torque criterion (the contact wrench split by least squares, not the optimisation's split) checks them
     again unless ``model`` is ``identified``: with CAD parameters the robot carries what the model does not know, and
@@ -467,7 +472,7 @@ def optimised_player(model: pin.Model, frames, player: PlanPlayer, *, config: Wh
     if knots > cfg.max_knots:
         return None, player, {"plan": "frames", **figures, "whole_rise_skipped":
                               f"{knots} knots, over the {cfg.max_knots} the optimisation is given (max_knots)"}
-    result = problem.solve(plan, first_scale, progress)
+    result = problem.solve(plan, first_scale, progress, max_time_scale=figures["plan_ratio_frames"])
     if not result.feasible:
         return result, player, {"plan": "frames", **figures}
     figures["whole_rise_torque_check"] = "optimisation" if identified else "player"
