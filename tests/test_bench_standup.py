@@ -97,6 +97,19 @@ def test_the_torque_controllers_qp_times_are_reported_only_where_it_ran():
     assert joint_pd["share_qp_p99_le_1_ms"] is None and "QP" not in B.summary_text(joint_pd)
 
 
+def test_the_optimisations_time_is_reported_per_case_and_per_second_of_the_humans_rise():
+    def row(i, plan, extra):
+        return {"case": {"index": i, "style": "natural", "seed": i}, "stood_up": True, "time_scale": 1.0,
+                "duration_ratio": 1.0, "wall_s": 9.0, "synth_seed": i, "plan": plan, **extra}
+    rows = [row(0, "whole", {"whole_rise_solve_s": 8.0, "human_rise_s": 1.6}),
+            row(1, "frames", {"whole_rise_solve_s": 30.0, "human_rise_s": 3.0}), row(2, "frames", {})]
+    agg = B.aggregate(rows)
+    assert agg["optimised_plans_played"] == 1 and agg["whole_rise_solve_s"]["max"] == 30.0
+    assert agg["whole_rise_solve_per_rise"]["max"] == pytest.approx(10.0)
+    assert "optimised plan played in 1 cases" in B.summary_text(agg)
+    assert "optimisation" not in B.summary_text(B.aggregate([row(0, "frames", {})]))
+
+
 def test_a_population_captured_at_another_rate_is_the_same_people():
     slow, fast = B.sample_population(6, seed=0), B.sample_population(6, seed=0, marker_rate_hz=200.0)
     assert [dataclasses.replace(c, marker_rate_hz=100.0) for c in fast] == slow

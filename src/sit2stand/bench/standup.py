@@ -110,6 +110,11 @@ def aggregate(rows: list[dict]) -> dict:
         "controller_qp_ms_p99": _spread(col("controller_qp_ms_p99")),
         "controller_qp_cpu_ms_p99": _spread(col("controller_qp_cpu_ms_p99")),
         "share_qp_p99_le_1_ms": _share(col("controller_qp_ms_p99"), QP_TARGET_MS),
+        # the whole-rise optimisation: the plans played, its wall time a case [s] and per second of the human's rise
+        "optimised_plans_played": sum(r.get("plan") == "whole" for r in rows),
+        "whole_rise_solve_s": _spread(col("whole_rise_solve_s")),
+        "whole_rise_solve_per_rise": _spread([r["whole_rise_solve_s"] / r["human_rise_s"] for r in rows
+                                              if r.get("whole_rise_solve_s") is not None and r.get("human_rise_s")]),
     }
 
 
@@ -186,6 +191,10 @@ def summary_text(agg: dict) -> str:
         f"{agg['torque_saturated_cases']} cases; share of commands clamped "
         f"{s(agg['torque_saturated_share'], 100, '.0f')} %",
         f"wall per case [s]  {s(agg['wall_s'], 1, '.0f')}; total {agg['wall_s']['total']:.0f} s"]
+        + ([f"optimised plan played in {agg['optimised_plans_played']} cases; optimisation a case [s] "
+            f"{s(agg['whole_rise_solve_s'], 1, '.1f')}, per second of the human's rise "
+            f"{s(agg['whole_rise_solve_per_rise'], 1, '.1f')} (real time: 1)"]
+           if agg.get("whole_rise_solve_s", {}).get("median") is not None else [])
         + ([f"whole-body QP p99 per step, per case [ms]: wall {s(agg['controller_qp_ms_p99'])} (at <= {QP_TARGET_MS:g} "
             f"ms: {_fmt(agg['share_qp_p99_le_1_ms'], 100, '.0f')} %); CPU {s(agg['controller_qp_cpu_ms_p99'])}"]
            if agg.get("controller_qp_ms_p99", {}).get("median") is not None else []))
