@@ -335,7 +335,7 @@ def _simulate(plant, player: PlanPlayer, dt: float, out: Path, hold_s: float = 3
               stabiliser: ComStabiliser | None = None, *, controller: str, t0_s: float = 0.0,
               human_posture: HumanPosture | None = None,
               plan_torques: Callable[[float], np.ndarray | None] | None = None) -> tuple[list, dict]:
-    """Drive the plant with the player's commands (PD + inverse-dynamics feed-forward), pulled one per frame period
+    """Drive the plant with the player's commands (under its on-board ``controller``), pulled one per frame period
     with the robot's lag behind the plan (the COM feedback's error), then hold the last one. Returns (commands,
     figures). Writes ``simulation.npy``: t, true COM (3), planned COM (3), COP (3), pelvis z, pelvis x, planned
     pelvis x, largest joint tracking error [rad] and its joint index, chair force [N], COM of the measured state
