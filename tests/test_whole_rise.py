@@ -17,7 +17,8 @@ from sit2stand.io.topics import ROBOT_JOINT_COMMAND_TOPIC
 from sit2stand.retarget import offline
 from sit2stand.robot.model import PlantConfig, controller_model
 from sit2stand.retarget.robot import robot_model
-from sit2stand.retarget.whole_rise import RisePlan, WholeRise, WholeRiseConfig, WholeRiseError, WholeRiseProblem
+from sit2stand.retarget.whole_rise import (RisePlan, SolveEnd, WholeRise, WholeRiseConfig, WholeRiseError,
+                                           WholeRiseProblem)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -123,6 +124,42 @@ def test_the_problem_keeps_torques_in_their_limits_and_ends_at_the_ik_standing_p
     assert np.all(np.abs(result.tau) <= model.effortLimit[6:] + 1e-9)
     assert np.abs(pin.difference(model, result.q[-1], q[-1])[6:]).max() < 0.02
     assert result.knot_t_s[-1] == pytest.approx((n - 1) * 0.01)
+
+
+def test_a_solve_ends_once_its_solution_has_passed_its_checks_some_iterations_running():
+    """Three passes running, the cost falling under 1 % over them, end it (a pass broken by a fail counts again from
+    zero; a cost still falling faster goes on); without checks, a cost flat to 0.1 % over 5 iterations ends it."""
+    class Solver:
+        cost, isFeasible, th_stop = 10.0, True, 1e-6
+
+    def run(end: SolveEnd, costs: list[float]) -> list[bool]:
+        solver, ended = Solver(), []
+        for c in costs:
+            solver.cost = c
+            end(solver)
+            ended.append(solver.th_stop == np.inf)
+        return ended
+
+    verdicts = iter([True, False, True, True, True])
+    assert run(SolveEnd(5, 1e-3, None, lambda s: next(verdicts), 3, 1e-2), [10.0] * 5) == [False] * 4 + [True]
+    assert run(SolveEnd(5, 1e-3, None, lambda s: True, 3, 1e-2), [10.0, 9.0, 8.0, 7.9, 7.85]) == [False] * 5
+    assert run(SolveEnd(5, 1e-3), [10.0] * 6) == [False] * 5 + [True]
+
+
+def test_ending_at_the_checks_gives_a_solution_in_fewer_iterations():
+    """The short seated-then-standing plan: ended once its solution passed its checks (5 iterations running, the
+    cost flat to 1 %), against solved to the cost flat to 0.1 % or 100 iterations: both solutions, the first in less
+    than half the iterations."""
+    model, q_seated, _ = robot_model(robot="talos")
+    n = 40
+    q = np.repeat(q_seated[None], n, axis=0)
+    data = model.createData()
+    com = np.array([pin.centerOfMass(model, data, x) for x in q])
+    plan = RisePlan(q, com, np.arange(n) < n // 2, [[] for _ in range(n)], 0.01)
+    early = WholeRiseProblem(model, WholeRiseConfig()).solve(plan)
+    late = WholeRiseProblem(model, WholeRiseConfig(passed_iterations=0)).solve(plan)
+    assert early.feasible and late.feasible
+    assert early.iterations < 0.5 * late.iterations
 
 
 def test_a_plan_longer_than_the_optimisation_is_given_is_played_frame_by_frame_and_says_so(tmp_path):

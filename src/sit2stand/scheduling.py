@@ -1,8 +1,10 @@
-"""Linux scheduling classes for the graph's processes (``scheduling`` in a graph file, ``sit2stand.launch``) and the
-priorities that tests and benchmarks give the processes that stand for other machines."""
+"""Linux scheduling classes for the graph's processes (``scheduling`` in a graph file, ``sit2stand.launch``), the
+priorities that tests and benchmarks give the processes that stand for other machines, and the size of a process's
+OpenMP thread teams."""
 
 from __future__ import annotations
 
+import ctypes
 import os
 from dataclasses import dataclass
 
@@ -53,3 +55,15 @@ class Scheduling:
         if self.policy == "other":     # nice 0 asks for no change (a child inherits the launcher's niceness)
             return not self.nice or os.getpriority(os.PRIO_PROCESS, pid) == self.nice
         return os.sched_getparam(pid).sched_priority == self.priority
+
+
+def hold_openmp_threads(n: int) -> None:
+    """Hold the calling thread's OpenMP teams to ``n`` threads. Crocoddyl's library runs on OpenMP (libgomp), which
+    by default makes a team as large as the machine for its parallel work; beside another busy process on 2 cores
+    the teams' threads spin against each other: two solves at once took 310 s each, against 16 s alone and 15.5 s
+    each held to one thread. Crocoddyl's own parallel knots
+    (:attr:`sit2stand.retarget.whole_rise.WholeRiseConfig.threads`) name their team's size themselves."""
+    try:
+        ctypes.CDLL("libgomp.so.1").omp_set_num_threads(max(1, int(n)))
+    except (OSError, AttributeError):      # no GNU OpenMP runtime: nothing spins
+        pass

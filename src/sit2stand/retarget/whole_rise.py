@@ -24,7 +24,6 @@ Units SI; world frame REP-103 (x forward, y left, z up).
 
 from __future__ import annotations
 
-import ctypes
 import dataclasses
 import time
 from collections.abc import Callable
@@ -38,6 +37,7 @@ from ..errors import Sit2StandError
 from ..robot.model import SIDES
 from ..robot.plant import contact_joint_torques
 from ..robot.profile import profile_of
+from ..scheduling import hold_openmp_threads
 from .player import PlanPlayer
 
 FRICTION = 0.7
@@ -49,17 +49,6 @@ of pressure, a moment over a small force, swings with the last bits of the plan 
 2 cm inside its edge in two runs of the same rise, the plans 1e-14 apart)."""
 ROOT_JOINT = "root_joint"
 """Crocoddyl's floating-base actuation finds the free flyer by this name."""
-
-
-def hold_openmp_threads(n: int) -> None:
-    """Hold the calling thread's OpenMP teams to ``n`` threads. Crocoddyl's library runs on OpenMP (libgomp), which
-    by default makes a team as large as the machine for its parallel work; beside another busy process on 2 cores
-    the teams' threads spin against each other: two solves at once took 310 s each, against 16 s alone and 15.5 s
-    each held to one thread. Crocoddyl's own parallel knots (``threads``) name their team's size themselves."""
-    try:
-        ctypes.CDLL("libgomp.so.1").omp_set_num_threads(max(1, int(n)))
-    except (OSError, AttributeError):      # no GNU OpenMP runtime: nothing spins
-        pass
 
 
 def knot_frames(n: int, every: int) -> list[int]:
@@ -74,28 +63,38 @@ PROGRESS_EVERY = 10
 """Iterations between two progress lines of a solve."""
 
 
-class CostPlateau(crocoddyl.CallbackAbstract):
+class SolveEnd(crocoddyl.CallbackAbstract):
     """Ends a Crocoddyl solve once its rollout is feasible and its cost fell less than ``share`` over the last
-    ``iterations`` iterations. The solver calls its callbacks just before its own stopping test, which then passes
-    (its threshold raised). On the natural rise box-FDDP's gradient measure cycles between 5e-5 and 5e-2 once
-    the cost is flat to four digits (the step lengths between 1 and 1/512), never under its 1e-6: ~40 % of a
-    100-iteration solve changes the cost by under 0.3 %. ``progress``: told the cost every ``PROGRESS_EVERY``
-    iterations."""
+    ``iterations`` iterations, or sooner once its solution passed its checks (``passes``:
+    :meth:`WholeRiseProblem.passes`) over the last ``passed_iterations`` and its cost fell less than ``passed_share``
+    over them. The solver calls its callbacks just before its own stopping test, which then passes (its threshold
+    raised): box-FDDP's own gradient test rarely ends a solve (docs/method.md). ``progress``: told the cost every
+    ``PROGRESS_EVERY`` iterations."""
 
-    def __init__(self, iterations: int, share: float, progress: Progress | None = None) -> None:
+    def __init__(self, iterations: int, share: float, progress: Progress | None = None,
+                 passes: Callable[[object], bool] | None = None, passed_iterations: int = 0,
+                 passed_share: float = 0.0) -> None:
         super().__init__()
-        self.iterations, self.share, self.costs, self.progress = int(iterations), float(share), [], progress
+        self.iterations, self.share, self.progress, self.passes = int(iterations), float(share), progress, passes
+        self.passed_iterations, self.passed_share, self.passed, self.costs = int(passed_iterations), passed_share, 0, []
 
     def __call__(self, solver) -> None:
         self.costs.append(float(solver.cost) if solver.isFeasible else np.inf)
         if self.progress is not None and len(self.costs) % PROGRESS_EVERY == 0:
             self.progress(f"  iteration {len(self.costs)}: cost {solver.cost:.4g}"
                           f"{'' if solver.isFeasible else ', gaps still open'}")
-        if len(self.costs) <= self.iterations:
-            return
-        before, now = self.costs[-1 - self.iterations], self.costs[-1]
-        if np.isfinite(before) and before - now <= self.share * abs(before):
+        if self.passes is not None and self.passed_iterations > 0:
+            self.passed = self.passed + 1 if self.passes(solver) else 0
+        if self._flat(self.iterations, self.share) or (
+                self.passed >= self.passed_iterations > 0 and self._flat(self.passed_iterations, self.passed_share)):
             solver.th_stop = np.inf
+
+    def _flat(self, iterations: int, share: float) -> bool:
+        """Whether the cost fell less than ``share`` over the last ``iterations`` iterations, feasible throughout."""
+        if len(self.costs) <= iterations:
+            return False
+        before, now = self.costs[-1 - iterations], self.costs[-1]
+        return bool(np.isfinite(before) and before - now <= share * abs(before))
 
 
 class WholeRiseError(Sit2StandError, RuntimeError):
@@ -113,7 +112,9 @@ class WholeRiseConfig:
     regularisation: float = 1e-4         # box-FDDP's first regularisation (Crocoddyl's default 1e-9: its first
     #                                      full steps are rejected, step lengths 1/64-1/4 while the gaps close;
     #                                      natural 60 -> 28 iterations, elderly 47 -> 35, the real child 300 -> 163)
-    plateau_iterations: int = 5          # a solve ends once its rollout is feasible and its cost fell less than
+    passed_iterations: int = 5           # a solve ends once its solution has passed its checks this many
+    passed_cost_share: float = 1e-2      # iterations running, its cost falling less than this share over them
+    plateau_iterations: int = 5          # ... or once its rollout is feasible and its cost fell less than
     plateau_cost_share: float = 1e-3     # this share over this many iterations (box-FDDP's own gradient test
     #                                      rarely ends it: the cost flat to 4 digits, the step lengths cycling)
     com_weight: float = 1e4              # per knot, on the COM [m]
@@ -258,7 +259,7 @@ class WholeRiseProblem:
         """The rise at the human's timing (``first_scale`` x slower) when it has a solution there, else at the least
         slower scale that has one (see the module docstring); the last tried when none up to ``max_time_scale``
         (default and at most the config's; the first scale is always tried) has. ``progress``: told each try and,
-        during it, the cost (:class:`CostPlateau`)."""
+        during it, the cost (:class:`SolveEnd`)."""
         cfg, tries, spent, iters = self.cfg, [], 0.0, 0
         scale, knots = float(first_scale), self.knots(plan)
         last = min(cfg.max_time_scale, max_time_scale or np.inf)
@@ -316,15 +317,16 @@ class WholeRiseProblem:
         xs = [np.concatenate([plan.q[k], v[i]]) for i, k in enumerate(knots)]
         xs[0] = x0
         us = self._warm_torques(plan, knots, v, scale) if plan.a is not None else list(problem.quasiStatic(xs[:-1]))
-        solver = self._solver(problem, progress)
+        solver = self._solver(problem, progress, lambda s: self.passes(plan, s, knots))
         t0 = time.perf_counter()
         solver.solve(xs, us, self.cfg.iterations, False, self.cfg.regularisation)
         return solver, time.perf_counter() - t0
 
-    def _solver(self, problem, progress: Progress | None = None):
-        solver = crocoddyl.SolverBoxFDDP(problem)
+    def _solver(self, problem, progress: Progress | None = None, passes: Callable[[object], bool] | None = None):
+        cfg, solver = self.cfg, crocoddyl.SolverBoxFDDP(problem)
         solver.th_stop = 1e-6
-        solver.setCallbacks([CostPlateau(self.cfg.plateau_iterations, self.cfg.plateau_cost_share, progress)])
+        solver.setCallbacks([SolveEnd(cfg.plateau_iterations, cfg.plateau_cost_share, progress, passes,
+                                      cfg.passed_iterations, cfg.passed_cost_share)])
         return solver
 
     def _warm_torques(self, plan: RisePlan, knots: list[int], v: np.ndarray, scale: float) -> list[np.ndarray]:
@@ -402,17 +404,30 @@ class WholeRiseProblem:
                                     residual)
 
     # -- the outcome -------------------------------------------------------------------------------------------
+    def _com_errors(self, plan: RisePlan, solver, knots: list[int]) -> np.ndarray:
+        """Each knot's COM distance to the plan's [m]."""
+        nq = self.model.nq
+        com = np.array([pin.centerOfMass(self.model, self.data, x[:nq]) for x in solver.xs])
+        return np.linalg.norm(com - plan.com[knots], axis=1)
+
+    def _passed(self, solver, com_errors: np.ndarray, margins: float, violation: float) -> bool:
+        cfg = self.cfg
+        return bool(solver.ffeas <= 1e-5 and violation <= cfg.force_tolerance_n
+                    and margins >= 0.5 * cfg.cop_side_margin_m and float(com_errors.max()) <= cfg.com_tolerance_m)
+
+    def passes(self, plan: RisePlan, solver, knots: list[int]) -> bool:
+        """Whether the solver's current solution is one: no gaps, every knot's COM within ``com_tolerance_m`` of the
+        plan's, the contact forces in their cones within ``force_tolerance_n``, the soles' centres of pressure at
+        least half ``cop_side_margin_m`` inside them."""
+        return self._passed(solver, self._com_errors(plan, solver, knots), *self._contact_figures(solver))
+
     def _result(self, plan: RisePlan, solver, knots: list[int], scale: float) -> WholeRise:
-        nq, cfg = self.model.nq, self.cfg
-        xs, us = np.array(solver.xs), np.array(solver.us)
-        com = np.array([pin.centerOfMass(self.model, self.data, x[:nq]) for x in xs])
-        err = np.linalg.norm(com - plan.com[knots], axis=1)
+        nq = self.model.nq
+        xs, us, err = np.array(solver.xs), np.array(solver.us), self._com_errors(plan, solver, knots)
         margins, violation = self._contact_figures(solver)
-        feasible = (solver.ffeas <= 1e-5 and violation <= cfg.force_tolerance_n
-                    and margins >= 0.5 * cfg.cop_side_margin_m and float(err.max()) <= cfg.com_tolerance_m)
         return WholeRise(self._resampled(xs[:, :nq], knots, plan.q), us, (np.array(knots) - knots[0]) * plan.dt * scale,
-                         scale, bool(solver.isFeasible and
-                         solver.stop <= solver.th_stop), bool(feasible), solver.iter, 0.0, len(knots),
+                         scale, bool(solver.isFeasible and solver.stop <= solver.th_stop),
+                         self._passed(solver, err, margins, violation), solver.iter, 0.0, len(knots),
                          float(np.sqrt(np.mean(err ** 2))), float(err.max()),
                          float(np.mean(np.any(np.abs(us) >= 0.999 * self.limit, axis=1))), margins,
                          (knots[0], knots[-1]))
@@ -424,8 +439,7 @@ class WholeRiseProblem:
         margin, violation = np.inf, 0.0
         for d in solver.problem.runningDatas:
             for name, c in d.differential.multibody.contacts.contacts.todict().items():
-                f = c.f.linear
-                fz = float(f[2])
+                f, fz = c.f.linear, float(c.f.linear[2])
                 mu = self.cfg.seat_friction if name == "seat" else FRICTION
                 violation = max(violation, -fz, float(np.hypot(f[0], f[1])) - mu * max(fz, 0.0))
                 if name != "seat" and fz > self.cop_load_n:
