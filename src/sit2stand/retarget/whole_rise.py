@@ -106,12 +106,12 @@ class WholeRiseConfig:
     """The whole-rise problem's settings (weights are Crocoddyl's: cost = 0.5 w |r|^2)."""
 
     knot_period_s: float = 0.02          # a knot every this long at the human's timing, in whole frames [s]
-    threads: int = 1                     # Crocoddyl's threads for the knots (2: a solve 1.4x faster alone, but
-    #                                      they spin against another busy process on 2 cores)
-    iterations: int = 100                # box-FDDP iterations per time scale tried, at most
-    regularisation: float = 1e-4         # box-FDDP's first regularisation (Crocoddyl's default 1e-9: its first
-    #                                      full steps are rejected, step lengths 1/64-1/4 while the gaps close;
-    #                                      natural 60 -> 28 iterations, elderly 47 -> 35, the real child 300 -> 163)
+    threads: int = 1                     # Crocoddyl's threads for the knots (2: 1.4x faster alone, spinning)
+    iterations: int = 150                # box-FDDP iterations per time scale tried, at most (at 100, 4 of TALOS's
+    #                                      30 identified digital humans ended the try at 1.0 still converging, the
+    #                                      COM 3-4 cm off, and played at 1.05-1.065; at 150, at 1.000-1.006)
+    regularisation: float = 1e-4         # box-FDDP's first regularisation (at Crocoddyl's 1e-9 its first full steps
+    #                                      are rejected while the gaps close: natural 60 -> 28 iterations)
     passed_iterations: int = 5           # a solve ends once its solution has passed its checks this many
     passed_cost_share: float = 1e-2      # iterations running, its cost falling less than this share over them
     plateau_iterations: int = 5          # ... or once its rollout is feasible and its cost fell less than
