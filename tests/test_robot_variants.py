@@ -11,6 +11,8 @@ from pathlib import Path
 import pytest
 
 from sit2stand.cli import main as sit2stand
+from sit2stand.retarget.robot import robot_model
+from sit2stand.retarget.whole_rise import WholeRiseProblem
 from sit2stand.robot.check import check_robot
 from sit2stand.robot.identify import identify
 from sit2stand.robot.model import PlantConfig
@@ -69,7 +71,8 @@ def test_a_trunk_that_only_turns_leans_with_the_hips_and_stands_up(no_trunk_pitc
 
 
 def test_ankles_that_only_pitch_carry_the_foot_and_the_plan_is_made(no_ankle_roll, tmp_path):
-    """A leg without an ankle roll loads, sits and is planned for; simulated, it falls at the rise (a known gap,
+    """A leg without an ankle roll loads, sits and is planned for, the whole rise optimised at the human's timing
+    (its seated contacts redundant, their dynamics damped); simulated, it falls at the rise (a known gap,
     docs/robots.md "Fewer joints"), so only the plan is asserted here."""
     profile = load_profile(str(no_ankle_roll))
     assert "ankle_roll" not in profile.legs["left"] and profile.foot_joint("left") == "left_ankle_pitch_joint"
@@ -80,3 +83,10 @@ def test_ankles_that_only_pitch_carry_the_foot_and_the_plan_is_made(no_ankle_rol
     assert sit2stand(["retarget", bag, "--robot", str(no_ankle_roll), "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["robot_seat_off_frame"] is not None and summary["time_scale"] <= 1.1, summary
+    assert summary["whole_rise_tries"] == [[1.0, True]], summary
+
+
+@pytest.mark.parametrize("robot,redundant", [("talos", False), ("g1", False), ("icub", False), (None, True)])
+def test_seated_contacts_are_redundant_only_on_legs_without_an_ankle_roll(no_ankle_roll, robot, redundant):
+    model, q, _ = robot_model(None, None, robot=robot or str(no_ankle_roll))
+    assert WholeRiseProblem(model).redundant_contacts(q) is redundant

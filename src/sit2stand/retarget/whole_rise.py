@@ -39,6 +39,7 @@ from ..robot.plant import contact_joint_torques
 from ..robot.profile import profile_of
 from ..scheduling import hold_openmp_threads
 from .player import PlanPlayer
+from .solve_end import Progress, SolveEnd
 
 FRICTION = 0.7
 """The feet's and the seat's friction coefficient in the cones (rubber soles on the floor, cloth on a seat)."""
@@ -55,46 +56,6 @@ def knot_frames(n: int, every: int) -> list[int]:
     """The plan frames (of ``n``) the problem has a knot at: every ``every``-th, and the last."""
     knots = list(range(0, n, every))
     return knots if knots[-1] == n - 1 else [*knots, n - 1]
-
-
-Progress = Callable[[str], None]
-"""A progress callback: one line of text per call."""
-PROGRESS_EVERY = 10
-"""Iterations between two progress lines of a solve."""
-
-
-class SolveEnd(crocoddyl.CallbackAbstract):
-    """Ends a Crocoddyl solve once its rollout is feasible and its cost fell less than ``share`` over the last
-    ``iterations`` iterations, or sooner once its solution passed its checks (``passes``:
-    :meth:`WholeRiseProblem.passes`) over the last ``passed_iterations`` and its cost fell less than ``passed_share``
-    over them. The solver calls its callbacks just before its own stopping test, which then passes (its threshold
-    raised): box-FDDP's own gradient test rarely ends a solve (docs/method.md). ``progress``: told the cost every
-    ``PROGRESS_EVERY`` iterations."""
-
-    def __init__(self, iterations: int, share: float, progress: Progress | None = None,
-                 passes: Callable[[object], bool] | None = None, passed_iterations: int = 0,
-                 passed_share: float = 0.0) -> None:
-        super().__init__()
-        self.iterations, self.share, self.progress, self.passes = int(iterations), float(share), progress, passes
-        self.passed_iterations, self.passed_share, self.passed, self.costs = int(passed_iterations), passed_share, 0, []
-
-    def __call__(self, solver) -> None:
-        self.costs.append(float(solver.cost) if solver.isFeasible else np.inf)
-        if self.progress is not None and len(self.costs) % PROGRESS_EVERY == 0:
-            self.progress(f"  iteration {len(self.costs)}: cost {solver.cost:.4g}"
-                          f"{'' if solver.isFeasible else ', gaps still open'}")
-        if self.passes is not None and self.passed_iterations > 0:
-            self.passed = self.passed + 1 if self.passes(solver) else 0
-        if self._flat(self.iterations, self.share) or (
-                self.passed >= self.passed_iterations > 0 and self._flat(self.passed_iterations, self.passed_share)):
-            solver.th_stop = np.inf
-
-    def _flat(self, iterations: int, share: float) -> bool:
-        """Whether the cost fell less than ``share`` over the last ``iterations`` iterations, feasible throughout."""
-        if len(self.costs) <= iterations:
-            return False
-        before, now = self.costs[-1 - iterations], self.costs[-1]
-        return bool(np.isfinite(before) and before - now <= share * abs(before))
 
 
 class WholeRiseError(Sit2StandError, RuntimeError):
@@ -127,6 +88,12 @@ class WholeRiseConfig:
     torque_share: float = 1.0            # the torques' box: this share of the URDF limits (the rest: the robot's
     #                                      controller, which corrects what the model does not know)
     cone_weight: float = 10.0            # the contact cones' barriers
+    redundant_damping: float = 1e-4      # the contact dynamics' damping of J M^-1 J^T where the seated contacts are
+    #                                      redundant (:meth:`WholeRiseProblem.redundant_contacts`), else 0.
+    #                                      Undamped, G1 with fixed ankle rolls cost 1e10-1e11 on the shipped
+    #                                      natural rise, the seated cones broken, no solution; at 1e-6 a solution
+    #                                      from the nominal seated pose, none from the simulated robot's settled one;
+    #                                      at 1e-4 and 1e-3 from both (38-58 iterations)
     end_weight: float = 100.0            # the last knot's posture (and rest) over ``posture_weight``
     seat_friction: float = 0.1           # the seat's friction coefficient in its cone: the robot's controller
     #                                      estimates the seat's force as the weight the feet do not carry (vertical)
@@ -308,9 +275,10 @@ class WholeRiseProblem:
         v = self._velocities(plan, knots, scale)
         pin.framesForwardKinematics(self.model, self.data, plan.q[knots[0]])
         feet = [self.data.oMf[i].copy() for i in self.sole_ids]
-        running = [self._knot(plan, knots[i], v[i], feet, (knots[i + 1] - knots[i]) * plan.dt * scale)
+        damping = self.cfg.redundant_damping if self.redundant_contacts(plan.q[knots[0]]) else 0.0
+        running = [self._knot(plan, knots[i], v[i], feet, (knots[i + 1] - knots[i]) * plan.dt * scale, damping)
                    for i in range(len(knots) - 1)]
-        terminal = self._knot(plan, knots[-1], np.zeros(self.model.nv), feet, 0.0, end=True)
+        terminal = self._knot(plan, knots[-1], np.zeros(self.model.nv), feet, 0.0, damping, end=True)
         x0 = np.concatenate([plan.q[knots[0]], np.zeros(self.model.nv)])
         problem = cr.ShootingProblem(x0, running, terminal)
         problem.nthreads = self.cfg.threads
@@ -353,7 +321,20 @@ class WholeRiseProblem:
                 out[i] = pin.difference(self.model, plan.q[a], plan.q[b]) / ((b - a) * plan.dt * scale)
         return out
 
-    def _knot(self, plan: RisePlan, k: int, v: np.ndarray, feet: list[pin.SE3], period_s: float, end: bool = False):
+    def redundant_contacts(self, q: np.ndarray) -> bool:
+        """Whether the soles (6D) and the seat (3D) at pose ``q`` constrain the robot redundantly, their forces
+        then having a null space: their stacked Jacobian has a singular value under 1e-3 of its largest. Legs
+        without an ankle roll do: the seat and both soles then fix the pelvis's roll and sideways shift twice
+        (G1 with fixed ankle rolls, seated: 1.5e-5 of the largest; G1 0.045)."""
+        pin.computeJointJacobians(self.model, self.data, q)
+        pin.updateFramePlacements(self.model, self.data)
+        rows = [pin.getFrameJacobian(self.model, self.data, f, pin.LOCAL) for f in self.sole_ids]
+        rows.append(pin.getFrameJacobian(self.model, self.data, self.seat_id, pin.LOCAL_WORLD_ALIGNED)[:3])
+        J = np.vstack(rows)
+        return bool(np.linalg.matrix_rank(J, tol=1e-3 * np.linalg.norm(J, 2)) < len(J))
+
+    def _knot(self, plan: RisePlan, k: int, v: np.ndarray, feet: list[pin.SE3], period_s: float, damping: float,
+              end: bool = False):
         cr, cfg, state, nu = crocoddyl, self.cfg, self.state, self.nu
         contacts, costs = cr.ContactModelMultiple(state, nu), cr.CostModelSum(state, nu)
         for side, fid, placement in zip(SIDES, self.sole_ids, feet):
@@ -370,7 +351,7 @@ class WholeRiseProblem:
             costs.addCost("cone_seat", self._barrier(cr.ResidualModelContactFrictionCone(state, self.seat_id, cone, nu),
                                                      cone.lb, cone.ub), cfg.cone_weight)
         self._tracking_costs(costs, plan, k, v, end)
-        dam = cr.DifferentialActionModelContactFwdDynamics(state, self.actuation, contacts, costs, 0.0, True)
+        dam = cr.DifferentialActionModelContactFwdDynamics(state, self.actuation, contacts, costs, damping, True)
         dam.u_lb, dam.u_ub = -self.limit, self.limit
         return cr.IntegratedActionModelEuler(dam, period_s)
 
