@@ -88,7 +88,7 @@ class WholeRiseConfig:
     torque_share: float = 1.0            # the torques' box: this share of the URDF limits (the rest: the robot's
     #                                      controller, which corrects what the model does not know)
     cone_weight: float = 10.0            # the contact cones' barriers
-    redundant_damping: float = 1e-4      # the contact dynamics' damping of J M^-1 J^T where the seated contacts are
+    redundant_damping: float = 1e-4      # the contact dynamics' damping of J M^-1 J^T where the contacts are
     #                                      redundant (:meth:`WholeRiseProblem.redundant_contacts`), else 0.
     #                                      Undamped, G1 with fixed ankle rolls cost 1e10-1e11 on the shipped
     #                                      natural rise, the seated cones broken, no solution; at 1e-6 a solution
@@ -324,8 +324,9 @@ class WholeRiseProblem:
     def redundant_contacts(self, q: np.ndarray) -> bool:
         """Whether the soles (6D) and the seat (3D) at pose ``q`` constrain the robot redundantly, their forces
         then having a null space: their stacked Jacobian has a singular value under 1e-3 of its largest. Legs
-        without an ankle roll do: the seat and both soles then fix the pelvis's roll and sideways shift twice
-        (G1 with fixed ankle rolls, seated: 1.5e-5 of the largest; G1 0.045)."""
+        without an ankle roll do wherever the hips' roll axes align: each sole's roll then fixes its hip's, and
+        the two soles' sideways rows are one (G1 with fixed ankle rolls, seated: 1.5e-5 of the largest; G1
+        0.045)."""
         pin.computeJointJacobians(self.model, self.data, q)
         pin.updateFramePlacements(self.model, self.data)
         rows = [pin.getFrameJacobian(self.model, self.data, f, pin.LOCAL) for f in self.sole_ids]

@@ -9,7 +9,8 @@ x = (a, f): the generalised acceleration (nv) and the contact forces, 3D forces 
 the pelvis. Constraints:
 
 * the floating base's Newton-Euler rows:   M_b a + h_b = J_b^T f          (6; no actuator at the base)
-* both soles fixed (6D rigid contacts):    J_foot a + dJ_foot v = -kd_foot v_foot   (12)
+* both soles fixed (6D rigid contacts):    J_foot a + dJ_foot v = -kd_foot v_foot   (12; on legs without an ankle
+  roll only their independent combinations: these rows are dependent wherever the hips' roll axes align)
 * the seat point fixed while it is active, otherwise its force zero (3)
 * unilateral forces in linearised friction cones (friction coefficient ``friction``); the seat's normal force at
   most ``seat_force_max_n`` (ramped to zero before seat-off, as tsid removes a contact)
@@ -199,6 +200,8 @@ class WholeBodyQP:
         self._corner_map = corners, np.concatenate([np.broadcast_to(np.eye(3), (4, 3, 3)), -skew_rows(corners)],
                                                    axis=2)
         self._ws = self._workspace(n_pts)
+        profile = profile_of(model)
+        self.redundant_contacts = any("ankle_roll" not in profile.legs[side] for side in SIDES)
 
     def _workspace(self, n_pts: int) -> QpWorkspace:
         """The arrays each step fills, with what never changes in them: the friction rows, the equalities' senses,
@@ -311,6 +314,20 @@ class WholeBodyQP:
         self._multipliers = None
         return x, False
 
+    def _independent_contact_rows(self, rows: np.ndarray, lower: np.ndarray, upper: np.ndarray, end: int) -> None:
+        """The contact rows 6..``end`` (of x = (a, f): the acceleration part) replaced in place by their independent
+        combinations (U^T A for A = U S V^T) and the combinations along a singular value under 1e-3 of the largest
+        freed (bounds infinite, not equalities): legs without an ankle roll make the soles' rows dependent wherever
+        the hips' roll axes are aligned, and there a drift off their range asks an infinite acceleration."""
+        n, A = self.n, rows[6:end, :self.nv]
+        U, S, Vt = np.linalg.svd(A, full_matrices=False)
+        b = U.T @ lower[n + 6:n + end]
+        free = S < 1e-3 * S[0]
+        rows[6:end, :self.nv] = S[:, None] * Vt
+        lower[n + 6:n + end] = np.where(free, -INF, b)
+        upper[n + 6:n + end] = np.where(free, INF, b)
+        self._ws.sense[n + 6:n + end] = np.where(free, 0, DAQP_EQUALITY)
+
     def _joint_limits(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The joint accelerations that keep each joint inside its limits ``limit_horizon_s`` ahead (lower, upper),
         and the joints on (or reaching within that horizon) their lower and upper mechanical stops."""
@@ -347,6 +364,8 @@ class WholeBodyQP:
             rows[e - 3:e], lower[n + e - 3:n + e] = 0.0, 0.0
             rows[e - 3:e, -3:] = np.eye(3)
         upper[n:n + e] = lower[n:n + e]
+        if self.redundant_contacts:
+            self._independent_contact_rows(rows, lower, upper, 6 + 6 * len(self.soles) + 3 * seat_on)
         rows[e:e + nj, :nv] = M[6:]                                    # the joint torques
         np.multiply(JfT[6:], -FORCE_UNIT_N, out=rows[e:e + nj, nv:])
         lo, hi = lower[n + e:n + e + nj], upper[n + e:n + e + nj]
