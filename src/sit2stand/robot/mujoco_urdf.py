@@ -52,9 +52,14 @@ def point_masses_given_inertia(urdf: str) -> str:
     return re.sub(r'<link\s+name="([^"]+)"\s*>.*?</link>', fixed, urdf, flags=re.S)
 
 
+_MUJOCO_BLOCK = re.compile(r"<mujoco\b[^>]*/>|<mujoco\b[^>]*>.*?</mujoco>", flags=re.S)
+
+
 def urdf_for_mujoco(profile: RobotProfile) -> str:
     """The profile's URDF as sit2stand reads it (:meth:`RobotProfile.urdf_text`) with absolute mesh paths (COLLADA
-    ones converted: :mod:`~sit2stand.robot.meshes`) and the MuJoCo compiler options it needs."""
+    ones converted: :mod:`~sit2stand.robot.meshes`) and the MuJoCo compiler options it needs, in place of any
+    ``<mujoco>`` block of the file's own (unitree_ros's H1 carries one for its conversion to MJCF: a ``meshdir``
+    the absolute paths make moot, and MuJoCo refuses two)."""
     text = readable_mesh_files(mesh_uris_to_files(profile.urdf_text(), profile.urdf))
-    text = point_masses_given_inertia(text)
+    text = point_masses_given_inertia(_MUJOCO_BLOCK.sub("", text))
     return re.sub(r"(<robot\b[^>]*>)", r"\1" + MUJOCO_COMPILER, text, count=1)

@@ -24,15 +24,41 @@ def package_share(package: str) -> Path | None:
     return None
 
 
+def package_folder(package: str, near: Path | None = None) -> Path | None:
+    """The folder ``package://<package>/`` means: an installed one (:func:`package_share`); else one named so
+    among ``near``'s ancestors or their children (a description repository's layout: unitree_ros's
+    ``robots/h1_description/urdf/h1.urdf`` names ``package://h1_description/meshes/...``); else one under an entry of
+    ``ROS_PACKAGE_PATH`` or ``AMENT_PREFIX_PATH`` (``share/<package>``). None where none is."""
+    share = package_share(package)
+    if share is not None:
+        return share
+    bases = list(Path(near).resolve().parents) if near is not None else []
+    if near is not None:
+        bases.insert(0, Path(near).resolve())
+    for base in bases:
+        if base.name == package:
+            return base
+        if (base / package).is_dir():
+            return base / package
+    for var, sub in (("ROS_PACKAGE_PATH", ()), ("AMENT_PREFIX_PATH", ("share",))):
+        for entry in filter(None, os.environ.get(var, "").split(os.pathsep)):
+            d = Path(entry).joinpath(*sub, package)
+            if d.is_dir():
+                return d
+    return None
+
+
 def resolve_uri(uri: str, relative_to: Path | None = None) -> Path:
-    """A file path of a ``package://`` URI, a ``file://`` URI or a path (relative paths: to ``relative_to``)."""
+    """A file path of a ``package://`` URI (:func:`package_folder`, searched from ``relative_to`` too), a ``file://``
+    URI or a path (relative paths: to ``relative_to``)."""
     if uri.startswith("package://"):
         package, _, rest = uri[len("package://"):].partition("/")
-        share = package_share(package)
-        if share is None:
-            raise FileNotFoundError(f"{uri}: package {package!r} is not installed here (known: "
-                                    f"{', '.join(PACKAGE_SHARES)})")
-        return share / rest
+        folder = package_folder(package, relative_to)
+        if folder is None:
+            raise FileNotFoundError(f"{uri}: package {package!r} is neither installed here (known: "
+                                    f"{', '.join(PACKAGE_SHARES)}) nor a folder beside the file that names it, nor "
+                                    "in ROS_PACKAGE_PATH or AMENT_PREFIX_PATH")
+        return folder / rest
     if uri.startswith("file://"):
         return Path(uri[len("file://"):])
     p = Path(os.path.expanduser(uri))
@@ -76,12 +102,15 @@ def package_asset(uri: str) -> bytes | None:
 
 
 def mesh_uris_to_files(urdf_text: str, urdf_path: Path) -> str:
-    """The URDF with every mesh URI (``package://``, relative) an absolute file path of this machine."""
+    """The URDF with every mesh URI (``package://``, relative) an absolute file path of this machine. A mesh found
+    nowhere is a :class:`FileNotFoundError` naming the URDF and the URI."""
     def absolute(match: re.Match) -> str:
         uri = match.group(2)
         try:
             path = resolve_uri(uri, urdf_path.parent)
-        except FileNotFoundError:
-            return match.group(0)
+        except FileNotFoundError as e:
+            raise FileNotFoundError(f"{urdf_path}: mesh {e}") from None
+        if not path.is_file():
+            raise FileNotFoundError(f"{urdf_path}: mesh {uri}: no file {path}")
         return f'{match.group(1)}"{path}"'
     return re.sub(MESH_FILENAME + r'"([^"]+)"', absolute, urdf_text)
