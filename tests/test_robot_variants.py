@@ -8,16 +8,17 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
+import pinocchio as pin
 import pytest
 
 from sit2stand.cli import main as sit2stand
 from sit2stand.retarget.robot import robot_model
-from sit2stand.retarget.whole_rise import WholeRiseProblem
 from sit2stand.robot.check import check_robot
 from sit2stand.robot.identify import identify
-from sit2stand.robot.model import PlantConfig
+from sit2stand.robot.model import SIDES, PlantConfig
 from sit2stand.robot.postures import collect_postures
-from sit2stand.robot.profile import load_profile
+from sit2stand.robot.profile import load_profile, profile_of
 from sit2stand.robot.wbc import WholeBodyQP
 
 from test_profile import copied_profile
@@ -89,7 +90,15 @@ def test_ankles_that_only_pitch_carry_the_foot_and_stand_up(no_ankle_roll, tmp_p
 
 
 @pytest.mark.parametrize("robot,redundant", [("talos", False), ("g1", False), ("icub", False), (None, True)])
-def test_seated_contacts_are_redundant_only_on_legs_without_an_ankle_roll(no_ankle_roll, robot, redundant):
+def test_the_soles_contacts_are_redundant_only_on_legs_without_an_ankle_roll(no_ankle_roll, robot, redundant):
+    """Seated, the soles' and the seat's stacked contact Jacobian has a singular value near zero exactly then."""
     model, q, _ = robot_model(None, None, robot=robot or str(no_ankle_roll))
-    assert WholeRiseProblem(model).redundant_contacts(q) is redundant
+    assert profile_of(model).redundant_sole_contacts is redundant
     assert WholeBodyQP(model, model.getFrameId("seat")).redundant_contacts is redundant
+    data = model.createData()
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    J = np.vstack([pin.getFrameJacobian(model, data, model.getFrameId(f"sole_{s}"), pin.LOCAL) for s in SIDES]
+                  + [pin.getFrameJacobian(model, data, model.getFrameId("seat"), pin.LOCAL_WORLD_ALIGNED)[:3]])
+    s = np.linalg.svd(J, compute_uv=False)
+    assert bool(s[-1] < 1e-3 * s[0]) is redundant, s[-1] / s[0]

@@ -88,8 +88,8 @@ class WholeRiseConfig:
     torque_share: float = 1.0            # the torques' box: this share of the URDF limits (the rest: the robot's
     #                                      controller, which corrects what the model does not know)
     cone_weight: float = 10.0            # the contact cones' barriers
-    redundant_damping: float = 1e-4      # the contact dynamics' damping of J M^-1 J^T where the contacts are
-    #                                      redundant (:meth:`WholeRiseProblem.redundant_contacts`), else 0.
+    redundant_damping: float = 1e-4      # the contact dynamics' damping of J M^-1 J^T where the soles' contacts
+    #                                      are redundant (RobotProfile.redundant_sole_contacts), else 0.
     #                                      Undamped, G1 with fixed ankle rolls cost 1e10-1e11 on the shipped
     #                                      natural rise, the seated cones broken, no solution; at 1e-6 a solution
     #                                      from the nominal seated pose, none from the simulated robot's settled one;
@@ -275,7 +275,7 @@ class WholeRiseProblem:
         v = self._velocities(plan, knots, scale)
         pin.framesForwardKinematics(self.model, self.data, plan.q[knots[0]])
         feet = [self.data.oMf[i].copy() for i in self.sole_ids]
-        damping = self.cfg.redundant_damping if self.redundant_contacts(plan.q[knots[0]]) else 0.0
+        damping = self.cfg.redundant_damping if self.profile.redundant_sole_contacts else 0.0
         running = [self._knot(plan, knots[i], v[i], feet, (knots[i + 1] - knots[i]) * plan.dt * scale, damping)
                    for i in range(len(knots) - 1)]
         terminal = self._knot(plan, knots[-1], np.zeros(self.model.nv), feet, 0.0, damping, end=True)
@@ -320,19 +320,6 @@ class WholeRiseProblem:
             if b > a:
                 out[i] = pin.difference(self.model, plan.q[a], plan.q[b]) / ((b - a) * plan.dt * scale)
         return out
-
-    def redundant_contacts(self, q: np.ndarray) -> bool:
-        """Whether the soles (6D) and the seat (3D) at pose ``q`` constrain the robot redundantly, their forces
-        then having a null space: their stacked Jacobian has a singular value under 1e-3 of its largest. Legs
-        without an ankle roll do wherever the hips' roll axes align: each sole's roll then fixes its hip's, and
-        the two soles' sideways rows are one (G1 with fixed ankle rolls, seated: 1.5e-5 of the largest; G1
-        0.045)."""
-        pin.computeJointJacobians(self.model, self.data, q)
-        pin.updateFramePlacements(self.model, self.data)
-        rows = [pin.getFrameJacobian(self.model, self.data, f, pin.LOCAL) for f in self.sole_ids]
-        rows.append(pin.getFrameJacobian(self.model, self.data, self.seat_id, pin.LOCAL_WORLD_ALIGNED)[:3])
-        J = np.vstack(rows)
-        return bool(np.linalg.matrix_rank(J, tol=1e-3 * np.linalg.norm(J, 2)) < len(J))
 
     def _knot(self, plan: RisePlan, k: int, v: np.ndarray, feet: list[pin.SE3], period_s: float, damping: float,
               end: bool = False):

@@ -145,6 +145,15 @@ class RobotProfile:
         return self.legs[side].get("ankle_roll") or self.legs[side]["ankle_pitch"]
 
     @property
+    def redundant_sole_contacts(self) -> bool:
+        """Whether the soles' 6D contacts constrain the robot redundantly: legs without an ankle roll (Unitree H1's).
+        Wherever the hips' roll axes align (seated, standing straight) each sole's roll then fixes its hip's, and the
+        two soles' sideways rows are one: their forces have a null space, their rows are dependent (G1 with fixed
+        ankle rolls, seated: the soles' and seat's stacked Jacobian's smallest singular value 1.5e-5 of its largest;
+        G1's 0.045)."""
+        return any("ankle_roll" not in self.legs[side] for side in SIDES)
+
+    @property
     def trunk_pitch(self) -> str | None:
         """The trunk's pitch joint; None for a robot whose trunk only turns (G1's 23-DoF waist: the hips lean it)."""
         return self.trunk.get("pitch")

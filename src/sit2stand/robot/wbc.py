@@ -200,8 +200,7 @@ class WholeBodyQP:
         self._corner_map = corners, np.concatenate([np.broadcast_to(np.eye(3), (4, 3, 3)), -skew_rows(corners)],
                                                    axis=2)
         self._ws = self._workspace(n_pts)
-        profile = profile_of(model)
-        self.redundant_contacts = any("ankle_roll" not in profile.legs[side] for side in SIDES)
+        self.redundant_contacts = profile_of(model).redundant_sole_contacts
 
     def _workspace(self, n_pts: int) -> QpWorkspace:
         """The arrays each step fills, with what never changes in them: the friction rows, the equalities' senses,
