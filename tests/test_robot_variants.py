@@ -81,7 +81,7 @@ def test_ankles_that_only_pitch_carry_the_foot_and_stand_up(no_ankle_roll, tmp_p
     assert "left_ankle_roll_joint" not in profile.lateral_joints()
     assert check_robot(str(no_ankle_roll)).ok
     out = tmp_path / "rt"
-    bag = str(ROOT / "bags" / "elderly")
+    bag = str(ROOT / "bags" / "natural")
     assert sit2stand(["retarget", bag, "--robot", str(no_ankle_roll), "--simulate", "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["whole_rise_tries"] == [[1.0, True]], summary
