@@ -19,7 +19,7 @@ from sit2stand.robot.identify import identify
 from sit2stand.robot.model import SIDES, PlantConfig
 from sit2stand.robot.postures import collect_postures
 from sit2stand.robot.profile import load_profile, profile_of
-from sit2stand.robot.wbc import WholeBodyQP
+from sit2stand.robot.wbc import Reference, WholeBodyQP
 
 from test_profile import copied_profile
 
@@ -102,3 +102,18 @@ def test_the_soles_contacts_are_redundant_only_on_legs_without_an_ankle_roll(no_
                   + [pin.getFrameJacobian(model, data, model.getFrameId("seat"), pin.LOCAL_WORLD_ALIGNED)[:3]])
     s = np.linalg.svd(J, compute_uv=False)
     assert bool(s[-1] < 1e-3 * s[0]) is redundant, s[-1] / s[0]
+
+
+def test_the_whole_body_qp_solves_redundant_soles_with_the_seat_on_off_and_on_again(no_ankle_roll):
+    """The dynamics filter's QP (the seat a contact) on legs without an ankle roll, seated: solved with the seat
+    carrying, without it (the robot then tips, its COM behind its feet) and with it again, the same answer as the
+    first."""
+    model, q, _ = robot_model(None, None, robot=str(no_ankle_roll))
+    data, z = model.createData(), np.zeros(model.nv)
+    qp = WholeBodyQP(model, model.getFrameId("seat"))
+    ref = Reference(q, z, z, pin.centerOfMass(model, data, q).copy(), np.zeros(3), np.zeros(3))
+    on, off, again = (qp.solve(q, z, ref, seat_force_max_n=f) for f in (400.0, 0.0, 400.0))
+    assert on.solved and off.solved and again.solved
+    assert np.abs(on.a).max() < 1e-4 and np.linalg.norm(on.seat_force) > 1.0       # at rest on the seat
+    assert np.linalg.norm(off.seat_force) < 1e-9 and np.abs(off.a).max() > 0.1
+    assert np.allclose(again.a, on.a, atol=1e-9) and np.allclose(again.tau, on.tau, atol=1e-6)

@@ -325,7 +325,8 @@ class WholeBodyQP:
         rows[6:end, :self.nv] = S[:, None] * Vt
         lower[n + 6:n + end] = np.where(free, -INF, b)
         upper[n + 6:n + end] = np.where(free, INF, b)
-        self._ws.sense[n + 6:n + end] = np.where(free, 0, DAQP_EQUALITY)
+        self._ws.sense[n + 6:n + self.n_eq] = DAQP_EQUALITY      # the seat's rows too: freed while it was a contact
+        self._ws.sense[n + 6:n + end][free] = 0
 
     def _joint_limits(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The joint accelerations that keep each joint inside its limits ``limit_horizon_s`` ahead (lower, upper),
