@@ -32,10 +32,8 @@ def package_folder(package: str, near: Path | None = None) -> Path | None:
     share = package_share(package)
     if share is not None:
         return share
-    bases = list(Path(near).resolve().parents) if near is not None else []
-    if near is not None:
-        bases.insert(0, Path(near).resolve())
-    for base in bases:
+    here = Path(near).resolve() if near is not None else None
+    for base in [here, *here.parents] if here is not None else []:
         if base.name == package:
             return base
         if (base / package).is_dir():
