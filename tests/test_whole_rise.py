@@ -52,8 +52,9 @@ def test_with_identified_parameters_the_optimised_torques_are_the_plans_torque_c
     """The optimised torques are in their limits by construction. With CAD parameters the player checks them again
     (the contact wrench split by least squares: a margin for what the model does not know); with identified ones the
     optimisation's model is the robot's, and its torques are the check. A 1.1 s rise of a robot whose trunk was
-    identified 30 % heavier than CAD's: the same solution at the human's timing plays 1.01 checked by the
-    optimisation, 1.04 checked again by the player."""
+    identified 30 % heavier than CAD's: the same solution at the human's timing plays slower when the player checks it
+    again (1.003 against 1.009 on an AMD EPYC host, 1.01 against 1.04 on an earlier one: the solver's last digits,
+    and so the margin, differ between CPUs)."""
     assert natural[0]["whole_rise_torque_check"] == "player"                   # CAD parameters
     bag = tmp_path / "brisk"
     assert sit2stand(["synth-human", "--duration", "1.1", "--out", str(bag)]) == 0
@@ -68,7 +69,9 @@ def test_with_identified_parameters_the_optimised_torques_are_the_plans_torque_c
     checked = offline.run(bag, tmp_path / "checked", params=params, plan="whole")
     assert trusted["whole_rise_torque_check"] == "optimisation" and checked["whole_rise_torque_check"] == "player"
     assert trusted["whole_rise_tries"] == checked["whole_rise_tries"] == [[1.0, True]]
-    assert trusted["plan"] == "whole" and trusted["time_scale"] < 1.02 < checked["plan_ratio_whole"]
+    assert trusted["plan"] == "whole" and trusted["time_scale"] < 1.02
+    assert checked["plan_ratio_whole"] > trusted["time_scale"]
+    assert checked["time_scale_peak"] > trusted["time_scale_peak"] + 0.05     # the torque check stretches its frames
 
 
 def test_a_rise_too_fast_for_the_motors_is_slowed_by_the_least_step_that_has_a_solution(tmp_path, monkeypatch):
