@@ -19,7 +19,7 @@ from sit2stand.robot.conventions import floating_base_removed
 from sit2stand.robot.feet_sensing import below_sensor
 from sit2stand.robot.meshes import MeshError, collada_triangles, readable_mesh
 from sit2stand.robot.model import PlantConfig, controller_model
-from sit2stand.robot.mujoco_urdf import point_masses_given_inertia
+from sit2stand.robot.mujoco_urdf import inertias_mujoco_takes
 from sit2stand.robot.identify import identify
 from sit2stand.robot.plant import Plant
 from sit2stand.robot.postures import collect_postures
@@ -71,7 +71,7 @@ def test_a_sagittal_joint_not_turning_about_y_is_refused_by_field(tmp_path):
         load_profile(str(path))
 
 
-@pytest.mark.parametrize("robot", ["talos", "g1", "icub"])
+@pytest.mark.parametrize("robot", ["talos", "g1", "icub", "romeo"])
 def test_the_controllers_soles_are_where_the_plants_are(robot):
     """The sole and F/T frames hang on the foot link's frame in both models (iCub's is welded under its ankle; its
     MJCF site frames came in 5.5 cm off), and the weight the F/T sensing takes off is what hangs below the sensor."""
@@ -195,10 +195,10 @@ def test_inertias_mujoco_refuses_become_small_balls_and_no_other_changes():
     moving = '<joint name="j" type="revolute"><parent link="a"/><child link="b"/></joint>'
     urdf = "<robot>" + link.format("a", 0, 0) + link.format("b", 0, 0) + link.format("c", -1e-20, 0) + \
         link.format("d", 0, 1e-20) + moving + "</robot>"
-    fixed = point_masses_given_inertia(urdf)
+    fixed = inertias_mujoco_takes(urdf)
     assert link.format("a", 0, 0) in fixed                           # welded, all zero: MuJoCo takes it
     assert fixed.count('ixx="2e-05"') == 3                            # moved point mass, negative, products
     for robot in ("talos", "g1"):
         text = load_profile(robot).urdf_text()
-        assert point_masses_given_inertia(text) == text
+        assert inertias_mujoco_takes(text) == text
     assert controller_model(PlantConfig(robot="icub")).nq == 7 + 29
