@@ -104,6 +104,7 @@ def test_a_copied_profile_of_the_same_robot_loads_by_path(tmp_path):
     ({"legs.knee": None}, "legs", "no knee"),
     ({"seated_posture": {"*_knee_joint": 3.2}}, "seated_posture", "left_knee_joint at 3.2 rad is outside its limits"),
     ({"foot_link": "{side}_foot"}, "foot_link", "'left_foot' is not a link of the URDF"),
+    ({"foot_link": {"left": "left_ankle_roll_link"}}, "foot_link", "or one for each of left, right"),
     ({"trunk": {"bend": "waist_pitch_joint"}}, "trunk", "names the trunk's joints by role (pitch, yaw, roll)"),
     ({"colliding_links": ["*_shin_link"]}, "colliding_links", "'*_shin_link' matches nothing"),
     ({"sole.half_size_m": [0.09, 0.035]}, "sole.half_size_m", "expected 3 numbers"),
@@ -140,10 +141,10 @@ def test_robot_check_prints_the_sit_to_stand_figures(capsys):
 
 
 def test_no_robots_joint_or_link_is_named_in_the_code():
-    """Robot names live in profile files: no module under src/ spells a TALOS, G1 or iCub joint or link (iCub's
-    ``root_link`` is also the name of a profile field)."""
+    """Robot names live in profile files: no module under src/ spells a TALOS, G1, iCub or Romeo joint or link
+    (iCub's ``root_link`` is also the name of a profile field)."""
     names = set()
-    for robot in ("talos", "g1", "icub"):
+    for robot in ("talos", "g1", "icub", "romeo"):
         for parent, child in load_profile(robot).urdf_joints().values():
             names |= {parent, child}
         names |= set(load_profile(robot).urdf_joints())

@@ -53,7 +53,8 @@ DEFAULT_SEAT_POINT_X_M = -0.05
 """Where a seat supports the seated robot unless its profile says (``seat_point_x_m``): on the seat's surface, this
 far along the base's x from its origin (5 cm behind the hip joints: the ischial tuberosities' place on a human; on
 TALOS and G1 the lowest points of the pelvis and thighs). The whole-body controller and the plan take the seat's
-force there; a robot that sits on its thighs alone, ahead of its hips (iCub), says so."""
+force there; a robot that sits on its thighs alone, ahead of its hips (iCub), says so. A robot whose trunk only turns
+is held at its hips' axis instead (:func:`sit2stand.robot.model.hips_axis_in_base`)."""
 
 
 class ProfileError(Sit2StandError, ValueError):
@@ -349,15 +350,14 @@ def check_against_urdf(profile: RobotProfile) -> None:
     links = {link.get("name") for link in root.findall("link")}
     fail = lambda field_name, what: ProfileError(  # noqa: E731
         f"{profile.source}: field {field_name!r}: {what} (URDF {profile.urdf.name})")
+    roles = [(f"legs.{r}", j) for s in SIDES for r, j in profile.legs[s].items()] + \
+        [(f"trunk.{r}", j) for r, j in profile.trunk.items()]
+    for field_name, joint in roles:
+        if joint not in moving:
+            raise fail(field_name, f"{joint!r} is not a moving joint of the URDF")
     for side in SIDES:
-        for role, joint in profile.legs[side].items():
-            if joint not in moving:
-                raise fail(f"legs.{role}", f"{joint!r} is not a moving joint of the URDF")
         if profile.foot_links[side] not in links:
             raise fail("foot_link", f"{profile.foot_links[side]!r} is not a link of the URDF")
-    for role, joint in profile.trunk.items():
-        if joint not in moving:
-            raise fail(f"trunk.{role}", f"{joint!r} is not a moving joint of the URDF")
     if profile.root_link not in links:
         raise fail("root_link", f"{profile.root_link!r} is not a link of the URDF")
     for field_name, globs, names in (("upper_limbs", profile.upper_limbs, moving),
@@ -417,11 +417,21 @@ class _Fields:
 
     def names(self, name: str, default=...) -> tuple[str, ...]:
         value = self.get(name, default=default)
-        if isinstance(value, str):
-            value = [value]
+        value = [value] if isinstance(value, str) else value
         if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
             raise self.fail(name, f"expected a list of names, got {value!r}")
         return tuple(value)
+
+
+def _foot_links(f: _Fields, per_side) -> dict[str, str]:
+    """``foot_link``: a ``{side}`` template, or a link per side where the file spells its links' sides unlike its
+    joints' (Romeo: ``LAnkleRoll`` moves ``l_ankle``)."""
+    value = f.get("foot_link")
+    if isinstance(value, str) and value:
+        return per_side(value)
+    if not isinstance(value, dict) or set(value) != set(SIDES) or not all(isinstance(v, str) for v in value.values()):
+        raise f.fail("foot_link", f"a link name with {{side}}, or one for each of {', '.join(SIDES)}; got {value!r}")
+    return {s: value[s] for s in SIDES}
 
 
 def _parse(doc: dict, path: Path) -> RobotProfile:
@@ -460,7 +470,7 @@ def _parse(doc: dict, path: Path) -> RobotProfile:
         raise f.fail("sole.half_size_m", "half sizes must be positive [m]")
     profile = RobotProfile(
         name=str(f.get("name", str)), source=str(path), urdf=_resolve_urdf(f), root_link=str(f.get("root_link", str)),
-        legs=legs, foot_links=per_side(str(f.get("foot_link", str))),
+        legs=legs, foot_links=_foot_links(f, per_side),
         sole=Sole(half, f.number("sole.centre_x_m"), f.number("sole.below_foot_m")), trunk=trunk,
         upper_limbs=f.names("upper_limbs"), colliding_links=f.names("colliding_links"),
         seat_links=f.names("seat_links"), seated_posture={str(k): float(v) for k, v in seated.items()},
