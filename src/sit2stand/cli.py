@@ -23,9 +23,9 @@
     sit2stand serve-c3d FILE.c3d --protocol qtm [--port P] [--rate R] [--loop]   (a QTM stand-in for the bridge)
 
 PLANT is a plant YAML or a packaged plant's name (default, heavy_front, cad; G1's g1_default, g1_cad; iCub's
-icub_default). ROBOT (``--robot``) is a robot profile, packaged (talos, g1, icub) or a YAML file; with it a packaged
-plant's name means that robot's own (``default`` is ``g1_default`` for G1). Errors are printed as one line naming the
-file, topic or field, with exit code 2.
+icub_default; Romeo's romeo_default). ROBOT (``--robot``) is a robot profile, packaged (``sit2stand robot list``) or
+a YAML file; with it a packaged plant's name means that robot's own (``default`` is ``g1_default`` for G1).
+Errors are printed as one line naming the file, topic or field, with exit code 2.
 
 Each sub-command imports its stage when it runs: importing every stage (Pinocchio, MuJoCo, SciPy, rclpy) costs
 ~3 s, while ``--help`` and ``bag info`` need 0.2-0.7 s (measured on the 2-core development machine).

@@ -21,7 +21,7 @@ PLAN_CHOICES, DEFAULT_PLAN = ("whole", "frames"), "whole"
 """``retarget.offline.PLANS`` and ``DEFAULT_PLAN``, spelled here for the same reason (a test keeps them equal)."""
 
 
-ROBOT_HELP = "robot profile: a packaged one (talos, g1, icub) or a YAML file (default: the plant's; TALOS)"
+ROBOT_HELP = "robot profile: a packaged one (`sit2stand robot list`) or a YAML file (default: the plant's; TALOS)"
 """The ``--robot`` option's help; ``docs/robots.md`` says how to write a profile."""
 
 
@@ -276,7 +276,7 @@ def add_robot(sub) -> None:
     verbs = p.add_subparsers(dest="verb", required=True)
     check = verbs.add_parser("check", help="load a profile, build its robot, sit it on its chair, print its mass, "
                              "heights and the torque headroom of a sit-to-stand")
-    check.add_argument("robot", help="a packaged profile's name (talos, g1, icub) or a profile YAML file")
+    check.add_argument("robot", help="a packaged profile's name (`sit2stand robot list`) or a profile YAML file")
     check.add_argument("--plant", help="a plant of this robot (default: none of its unmodeled effects)")
     check.add_argument("--json", action="store_true", help="print the figures as JSON")
     check.set_defaults(func=_robot_check)

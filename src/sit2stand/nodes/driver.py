@@ -46,7 +46,8 @@ class Driver(Node):
     def __init__(self) -> None:
         super().__init__("driver")
         plant_file = declare(self, "plant", "", "plant YAML or packaged plant name") or DEFAULT_PLANT
-        robot = declare(self, "robot", "", "robot profile: packaged (talos, g1, icub) or a file (empty: the plant's)")
+        robot = declare(self, "robot", "", "robot profile: packaged (`sit2stand robot list`) or a file (empty: the "
+                                           "plant's)")
         params_file = declare(self, "controller_params", "", "identified parameters YAML (empty: CAD)")
         self.controller = declare(self, "controller", "inverse_dynamics",
                                   "on-board controller: inverse_dynamics (joint PD + feed-forward) | wbc (whole-body "

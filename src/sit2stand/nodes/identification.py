@@ -32,8 +32,8 @@ class IdentificationNode(Node):
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.params_pub = self.create_publisher(InertialParameters, ros_name(ROBOT_INERTIAL_PARAMETERS_TOPIC),
                                                 latched)
-        self.robot = declare(self, "robot", "", "robot profile: packaged (talos, g1, icub) or a file (empty: TALOS)") \
-            or None
+        self.robot = declare(self, "robot", "", "robot profile: packaged (`sit2stand robot list`) or a file "
+                                                "(empty: TALOS)") or None
         self.create_service(IdentifyCom, ros_name(IDENTIFY_COM_SERVICE), self._on_request)
         self.get_logger().info("ready: /robot/identify_com")
 

@@ -44,8 +44,8 @@ class RetargeterNode(Node):
     def __init__(self) -> None:
         super().__init__("retargeter")
         plant_file = declare(self, "plant", "", "plant YAML (seated posture, chair)") or "default"
-        robot = declare(self, "robot", "", "robot profile: a packaged name (talos, g1, icub) or a file (empty: the "
-                                           "plant's)") or None
+        robot = declare(self, "robot", "", "robot profile: a packaged name (`sit2stand robot list`) or a file "
+                                           "(empty: the plant's)") or None
         params_file = declare(self, "controller_params", "", "identified parameters YAML (empty: CAD)")
         self.wait_for_robot = declare(self, "wait_for_robot", True, "start from the robot's measured posture")
         self.map_out = declare(self, "marker_map", "", "write the marker calibration YAML here")

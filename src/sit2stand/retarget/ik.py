@@ -203,12 +203,13 @@ class ComIk:
         momentum_weight: weight of the angular momentum term (see the module docstring).
         stop_torque_share: a joint no sole hangs from stays on its stop while gravity presses it there with more
             than this share of its effort limit (None: not applied; see the module docstring).
+        hold_point_b: the point of the base that ``base_xz`` holds, in the base frame [m] (default its origin).
     """
 
     def __init__(self, model: pin.Model, sole_frames: list[int], velocity_limit: float | np.ndarray = 5.0,
                  dt: float = 0.01, posture_weight: float | np.ndarray = 1e-3, damping: float = 1e-6,
                  momentum_weight: float = 0.0, stop_torque_share: float | None = None,
-                 lift_torque_share: float | None = None) -> None:
+                 lift_torque_share: float | None = None, hold_point_b: np.ndarray | None = None) -> None:
         self.model = model
         self.data = model.createData()
         self.soles = list(sole_frames)
@@ -220,6 +221,7 @@ class ComIk:
         self._diagonal = self.mu + damping
         self.box = JointBox.of(model, velocity_limit, dt)
         self._qp = WarmQp()
+        self.hold_point_b = np.zeros(3) if hold_point_b is None else np.asarray(hold_point_b, float)
         self.points = PointJacobians(model)
         self._native = native.StepTerms.of(model, self.data, self._diagonal, self.mu, self.soles,
                                            self.points.point_set(self.soles), FREE)     # None: the NumPy paths
@@ -244,8 +246,8 @@ class ComIk:
         """Solve one frame from ``q0``. ``markers``: a :class:`MarkerTargets`, or (frame id, target position [m],
         weight) triples.
         ``q_prev``: the previous frame's configuration; the joint speed limits bound the motion from it (none for
-        the first frame). ``base_xz``: hold the floating base's world x and z at these values [m] (e.g. the hips on
-        a seat): two more equality rows, or, with ``base_weight``, a soft task of that weight. ``base_pitch_min``
+        the first frame). ``base_xz``: hold the base's ``hold_point_b`` at this world x and z [m] (the hips on a
+        seat): two more equality rows, or, with ``base_weight``, a soft task of that weight. ``base_pitch_min``
         [rad]: the base may not pitch back beyond this (a pelvis on a seat cannot roll back about its hips).
         ``base_z_min`` [m]: the base's world z stays at or above this (hips that have left a seat stay off it).
         ``joint_targets``: (tangent index, angle [rad], weight [1/rad^2]) soft tasks on single joints (the human's
@@ -367,14 +369,13 @@ class ComIk:
             A[6 * k:6 * k + 6] = pin.getFrameJacobian(self.model, self.data, fid, pin.LOCAL)
 
     def _base_rows(self, q: np.ndarray, f: _Frame, qp, n: int) -> None:
-        """A held base x, z: rows n - 2 and n - 1 of ``qp``'s equalities after the feet's, or, with
-        ``base_weight``, a soft task in its H and g."""
+        """A held base point's x, z (``hold_point_b``): rows n - 2 and n - 1 of ``qp``'s equalities after the
+        feet's, or, with ``base_weight``, a soft task in its H and g (the point's world velocity: R (v - p x w))."""
         if f.base_xz is None:
             return
-        n_soles = 6 * len(self.soles)      # base linear velocity is in the base frame: world rows are R[[0, 2]]
-        rb = np.zeros((2, self.nv))
-        rb[:, :3] = self.data.oMi[1].rotation[[0, 2]]
-        eb = (np.asarray(f.base_xz, float) - q[:3])[[0, 2]]
+        n_soles, R, rb = 6 * len(self.soles), self.data.oMi[1].rotation, np.zeros((2, self.nv))
+        rb[:, :3], rb[:, 3:6] = R[[0, 2]], -(R @ pin.skew(self.hold_point_b))[[0, 2]]
+        eb = (np.asarray(f.base_xz, float) - q[:3] - R @ self.hold_point_b)[[0, 2]]
         if n > n_soles:
             qp.A[n_soles:n], qp.b[n_soles:n] = rb, eb
         else:
@@ -413,8 +414,7 @@ class ComIk:
         motor cannot lift the joint off it), and the trunk's lift bound. Gravity's pass leaves the data's
         placements at q."""
         gravity = pin.computeGeneralizedGravity(self.model, self.data, q)
-        tau = gravity[self.stop_dofs]
-        j = self.stop_dofs - 6
+        tau, j = gravity[self.stop_dofs], self.stop_dofs - 6
         on_hi = (q[7:][j] >= self.box.q_hi[j] - STOP_TOLERANCE_RAD) & (tau < -self.stop_torque_nm)
         on_lo = (q[7:][j] <= self.box.q_lo[j] + STOP_TOLERANCE_RAD) & (tau > self.stop_torque_nm)
         lo[self.stop_dofs[on_hi]] = np.maximum(lo[self.stop_dofs[on_hi]], 0.0)

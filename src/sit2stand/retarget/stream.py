@@ -16,14 +16,15 @@
    * human ankle and forward -> the robot's ankle and forward, one to one.
 
    Before the robot's seat-off (both: the human has left the seat, by the chair plate or the pelvis rising, and the
-   robot's target has reached its seat-off knot) the hips stay on the seat (pelvis x and z held: hard) and only the
-   COM's x is constrained: with the hips on the seat COM height and COM x are one degree of freedom. After it, COM x and
-   y are hard; y ramps to the midline between the feet over ``y_ramp_s``. The COM height is left to the markers,
-   above one floor: the pelvis rises ``seat_clearance_m`` clear of its seated height over ``seat_clearance_s`` and
-   stays at least that high (hard) until the human sits back down: the markers alone can keep the hips at the
-   seat's height, or dip them into it, after the plan has the robot on its feet, and the robot's hips then bounce on
-   the seat. 2 cm because over the seat's front edge a thigh rises only about a quarter as much as the pelvis (it
-   turns about the knee). Measured in docs/results.md.
+   robot's target has reached its seat-off knot) the hips stay on the seat (x and z held, hard: the pelvis's origin,
+   or the hips' axis where the trunk only turns: :func:`~sit2stand.robot.model.held_on_seat_b`) and only the COM's x
+   is constrained: with the hips on the seat COM height and COM x are one degree of freedom. After it, COM x and y
+   are hard; y ramps to the midline between the feet over ``y_ramp_s``. The COM height is left to the markers, above
+   one floor: the pelvis rises ``seat_clearance_m`` clear of its seated height over ``seat_clearance_s`` and stays at
+   least that high (hard) until the human sits back down: the markers alone can keep the hips at the seat's height,
+   or dip them into it, after the plan has the robot on its feet, and the robot's hips then bounce on the seat. 2 cm
+   because over the seat's front edge a thigh rises only about a quarter as much as the pelvis (it turns about the
+   knee). Measured in docs/results.md.
 3. **IK** (:class:`sit2stand.retarget.ik.ComIk`): markers soft (weights by body part; their targets the human's
    scaled by leg length, vertically by the robot's rise to its stance over the human's), COM and feet hard, joint
    and speed limits; after seat-off both knees pulled toward the human's as it stands; warm-started from the
@@ -43,7 +44,7 @@ import pinocchio as pin
 
 from ..errors import InputError
 from ..io.frame_rate import MIN_RATE_HZ
-from ..robot.model import (SIDES)
+from ..robot.model import SIDES, held_on_seat_b
 from ..robot.profile import profile_of
 from ..human.marker_sets import choose_marker_set
 from .calibration import MarkerMap, calibrate_markers, left_leg_points, marker_roles, posed_like
@@ -153,16 +154,15 @@ class Retargeter:
         self.human: HumanSeated | None = None
         self.watch: HumanWatch | None = None
         self.seat_off: RobotSeatOff | None = None
-        self.q = robot.q_seated.copy()
-        self.seated = True
+        self.q, self.seated = robot.q_seated.copy(), True
         self.sat_down = False           # the human sat back down after standing: the plan is on the seat again
         pin.centerOfMass(self.model, self.data, self.q)
         self.com_seated = self.data.com[0].copy()
-        self.base_seated = self.q[:3].copy()
+        self.hold_point_b = held_on_seat_b(self.model)       # the base's point held on the seat [m]
+        self.base_seated = self._held_point(self.q)
         self.seat_z_m = float(self.q[2])       # the plan's pelvis height seated on the chair [m]
         self._com_x_floor: float | None = None  # seated again after a sit-down: the COM target goes no further back
-        R = pin.Quaternion(self.q[3:7]).toRotationMatrix()
-        self.pitch_seated = float(np.arctan2(R[0, 2], R[2, 2]))
+        self.pitch_seated = float(np.arctan2(*pin.Quaternion(self.q[3:7]).toRotationMatrix()[[0, 2], 2]))
         self.held_to_seated = np.zeros(self.model.nq, bool)     # arms, head, lateral joints: posture pulled to seated
         self.knees: list = []
 
@@ -257,7 +257,8 @@ class Retargeter:
         self.ik = ComIk(self.model, self.robot.sole_frames, self.cfg.velocity_limit_rad_s, posture_weight=mu,
                         damping=self.cfg.damping, momentum_weight=self.cfg.momentum_weight,
                         stop_torque_share=self.cfg.stop_torque_share,
-                        lift_torque_share=self.cfg.lift_torque_share, dt=frame_period_s)
+                        lift_torque_share=self.cfg.lift_torque_share, dt=frame_period_s,
+                        hold_point_b=self.hold_point_b)
 
     def _rise_scale(self, pelvis: np.ndarray, knee: np.ndarray, ankle: np.ndarray, human_leg: float,
                     scale: float) -> float:
@@ -299,11 +300,9 @@ class Retargeter:
         x0, x1 = self.human.com_x_m, float(human_com_m[0])
         duration = max(MIN_LEAD_IN_S, (x1 - x0) / LEAD_IN_COM_SPEED_MPS)
         n = int(round(duration / dt))
-        gap = self._targets_from_here(positions_m)
-        frames = []
+        gap, frames = self._targets_from_here(positions_m), []
         for k in range(n):
-            u = k / n
-            ease = smoothstep(u)       # Hermite: from rest at x0 to x1, arriving with the human's COM velocity
+            u, ease = k / n, smoothstep(k / n)   # Hermite: from rest at x0 to x1, arriving with the human's COM speed
             x = x0 + (x1 - x0) * ease + human_com_vx_mps * duration * (u**3 - u**2)
             com = np.array([x, human_com_m[1], human_com_m[2]])
             frames.append(self.step(t0_s - (n - k) * dt, positions_m, valid, com, None, marker_weight=ease,
@@ -348,21 +347,19 @@ class Retargeter:
         if self.seated and self.watch.seat_off and target[0] >= self.com_map.seat_off_x_m - 1e-3:
             self._leave_seat(t_s, pelvis_now)
         mid_y = float(np.mean([X.translation[1] for X in robot.sole_targets]))
-        if self.seated:
-            axes = (0,)
-        else:
-            axes = (0, 1)
+        axes = (0,) if self.seated else (0, 1)
+        if not self.seated:
             y0 = self.seat_off.com_y_m
             target[1] = y0 + self._since_seat_off(t_s, cfg.y_ramp_s) * (mid_y - y0)
         markers, knees, flexion = self._marker_tasks(positions_m, ok, pelvis_now, marker_weight, marker_shift_m)
-        # hips on the seat: pelvis x and z held (hard); after seat-off the hold fades out as a soft task, so that
+        # hips on the seat: x and z held (hard); after seat-off the hold fades out as a soft task, so that
         # the pose does not jump to where the human's pelvis already is
         hold, weight, z_min = self.base_seated, None, None
         if not self.seated:
             fade = (t_s - self.seat_off.t_s) / max(cfg.hip_release_s, 1e-9)
             weight = 1e4 * (1.0 - min(1.0, fade)) ** 2 if fade < 1.0 else None
             lift = 0.0 if self.sat_down else self.seat_clearance(t_s)
-            z_min = None if self.sat_down else self.base_seated[2] + lift
+            z_min = None if self.sat_down else self.seat_z_m + lift
             hold = self.base_seated + [0.0, 0.0, lift] if weight is not None else None
         q_ref = np.where(self.held_to_seated, robot.q_seated, self.q)
         res = self.ik.solve(self.q, markers, target, robot.sole_targets, q_ref=q_ref, com_axes=axes,
@@ -393,8 +390,7 @@ class Retargeter:
         """The robot's seat-off: its COM's lateral target ramps from where it is; the human's pelvis has already
         moved (the robot leaves the seat later): that displacement is taken out of the marker targets and given
         back as the human's pelvis rises, so the robot's pelvis does not lunge."""
-        self.seated = False
-        self._com_x_floor = None
+        self.seated, self._com_x_floor = False, None
         pin.centerOfMass(self.model, self.data, self.q)
         mk = self.markers
         self.seat_off = RobotSeatOff(t_s, float(self.data.com[0][1]), mk.scale * (pelvis_now - mk.human_pelvis0_m),
@@ -438,6 +434,10 @@ class Retargeter:
         (``seat_clearance_m`` along a smoothstep over ``seat_clearance_s``)."""
         return self.cfg.seat_clearance_m * self._since_seat_off(t_s, self.cfg.seat_clearance_s)
 
+    def _held_point(self, q: np.ndarray) -> np.ndarray:
+        """The world position [m] of the base's ``hold_point_b`` at ``q``."""
+        return q[:3] + pin.Quaternion(q[3:7]).toRotationMatrix() @ self.hold_point_b
+
     def _since_seat_off(self, t_s: float, duration_s: float) -> float:
         """A 0 -> 1 smoothstep over ``duration_s`` [s] from the robot's seat-off."""
         return smoothstep((t_s - self.seat_off.t_s) / max(duration_s, 1e-9))
@@ -450,7 +450,7 @@ class Retargeter:
         # the sit-down loaded the chair (with a plate): its unloading is the seat-off
         self.watch.seat_off, self.watch.chair_loaded, self.watch.rise_peak_m = False, True, 0.0
         self.seat_off = None
-        self.base_seated = np.array([self.q[0], self.q[1], self.seat_z_m])    # where it is, on the seat
+        self.base_seated = self._held_point(np.r_[self.q[:2], self.seat_z_m, self.q[3:]])  # where it is, seated
         R = pin.Quaternion(self.q[3:7]).toRotationMatrix()
         self.pitch_seated = min(self.pitch_seated, float(np.arctan2(R[0, 2], R[2, 2])))
 

@@ -444,9 +444,32 @@ def _place_foot_frames(model: pin.Model, profile: RobotProfile, side: str) -> No
 
 def add_seat_frame(model, seat_top_z_m: float, base_z_m: float) -> int:
     """Add the frame ``seat`` on the pelvis where a seat of top height ``seat_top_z_m`` supports it when the base is
-    at height ``base_z_m`` (upright), ``seat_point_x_m`` along the base's x (the robot profile's); returns its id."""
-    return model.addFrame(pin.Frame("seat", 1, pin.SE3(np.eye(3), np.array(
-        [profile_of(model).seat_point_x_m, 0.0, seat_top_z_m - base_z_m])), pin.FrameType.OP_FRAME))
+    at height ``base_z_m`` (upright), ``seat_point_x_m`` along the base's x (the robot profile's); returns its id.
+    A robot whose trunk only turns leans with its pelvis, about its hips: the seat holds the hips' axis (see
+    :func:`hips_axis_in_base`)."""
+    point = hips_axis_in_base(model) if profile_of(model).trunk_pitch is None else \
+        np.array([profile_of(model).seat_point_x_m, 0.0, seat_top_z_m - base_z_m])
+    return model.addFrame(pin.Frame("seat", 1, pin.SE3(np.eye(3), point), pin.FrameType.OP_FRAME))
+
+
+def held_on_seat_b(model) -> np.ndarray:
+    """The point of the base [m, base frame] a seated plan holds still: its origin, or the seat frame's (the hips'
+    axis: :func:`hips_axis_in_base`) on a robot whose trunk only turns."""
+    return model.frames[model.getFrameId("seat")].placement.translation.copy() \
+        if profile_of(model).trunk_pitch is None else np.zeros(3)
+
+
+def hips_axis_in_base(model) -> np.ndarray:
+    """The midpoint of the hip pitch joints in the base frame (x, 0, z) [m]: where a robot whose trunk only turns
+    (Romeo, Unitree H1, G1's 23-DoF waist) is held on its seat. Its thighs rest on the seat, so while it leans its
+    pelvis forward (the trunk's lean, by the hips), the hips' axis stays where it is; held at the base's origin
+    instead (Romeo's is 20 cm above its hips) the lean pushed the hips back until the knees met their stops, the
+    plan's COM never reached the seat-off and the robot fell back; held at a point on the seat's surface, the
+    whole-body controller's seat contact fought the lean (the simulated COM 6 cm short at seat-off)."""
+    data = model.createData()
+    pin.forwardKinematics(model, data, pin.neutral(model))      # the base at the origin, upright
+    hips = [data.oMi[model.getJointId(profile_of(model).leg(side, "hip_pitch"))].translation for side in SIDES]
+    return np.mean(hips, axis=0) * [1.0, 0.0, 1.0]
 
 
 def actuated_joint_names(model) -> list[str]:
