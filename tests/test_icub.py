@@ -77,6 +77,7 @@ def test_the_controllers_soles_are_where_the_plants_are(robot):
     MJCF site frames came in 5.5 cm off), and the weight the F/T sensing takes off is what hangs below the sensor."""
     plant = Plant(PlantConfig(robot=robot))
     plant.settle(0.5)
+    mujoco.mj_kinematics(plant.model, plant.data)     # the sites where qpos puts them (a step leaves them 1 ms back)
     model, data = plant.ctrl, plant.ctrl.createData()
     pin.framesForwardKinematics(model, data, plant.pin_configuration(plant.data.qpos))
     for side in ("left", "right"):

@@ -425,7 +425,7 @@ class _Fields:
 
 def _foot_links(f: _Fields, per_side) -> dict[str, str]:
     """``foot_link``: a ``{side}`` template, or a link per side where the file spells its links' sides unlike its
-    joints' (Romeo: ``LAnkleRoll`` moves ``l_ankle``)."""
+    joints' (Romeo's ankle joints start with ``L``, its ankle links with ``l_``)."""
     value = f.get("foot_link")
     if isinstance(value, str) and value:
         return per_side(value)
