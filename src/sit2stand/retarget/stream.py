@@ -160,7 +160,7 @@ class Retargeter:
         self.com_seated = self.data.com[0].copy()
         self.hold_point_b = held_on_seat_b(self.model)       # the base's point held on the seat [m]
         self.base_seated = self._held_point(self.q)
-        self.seat_z_m = float(self.q[2])       # the plan's pelvis height seated on the chair [m]
+        self.seat_z_m, self.held_z_seated_m = float(self.q[2]), float(self.base_seated[2])   # base, held point [m]
         self._com_x_floor: float | None = None  # seated again after a sit-down: the COM target goes no further back
         self.pitch_seated = float(np.arctan2(*pin.Quaternion(self.q[3:7]).toRotationMatrix()[[0, 2], 2]))
         self.held_to_seated = np.zeros(self.model.nq, bool)     # arms, head, lateral joints: posture pulled to seated
@@ -450,7 +450,7 @@ class Retargeter:
         # the sit-down loaded the chair (with a plate): its unloading is the seat-off
         self.watch.seat_off, self.watch.chair_loaded, self.watch.rise_peak_m = False, True, 0.0
         self.seat_off = None
-        self.base_seated = self._held_point(np.r_[self.q[:2], self.seat_z_m, self.q[3:]])  # where it is, seated
+        self.base_seated = np.r_[self._held_point(self.q)[:2], self.held_z_seated_m]   # where it is, on the seat
         R = pin.Quaternion(self.q[3:7]).toRotationMatrix()
         self.pitch_seated = min(self.pitch_seated, float(np.arctan2(R[0, 2], R[2, 2])))
 
