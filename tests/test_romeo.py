@@ -65,7 +65,7 @@ def lean(romeo, point: np.ndarray, forward_m: float):
 def test_the_pelvis_leans_about_the_held_hips_where_about_its_origin_it_cannot(romeo):
     """Seated, the COM 2-6 cm forward (the lean before seat-off), no markers: held at its hips' axis the pelvis
     pitches forward about it (0.38 rad at 6 cm), the axis where it was; held at the base's origin, 20 cm higher, the
-    lean swings the hips back into the knees' stops and not even 2 cm of it has a solution."""
+    lean swings the hips back and not even 2 cm of it has a solution."""
     model, q0 = romeo[:2]
     for forward_m in (0.02, 0.04, 0.06):
         r, moved = lean(romeo, held_on_seat_b(model), forward_m)

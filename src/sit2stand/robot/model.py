@@ -463,8 +463,8 @@ def hips_axis_in_base(model) -> np.ndarray:
     """The midpoint of the hip pitch joints in the base frame (x, 0, z) [m]: where a robot whose trunk only turns
     (Romeo, Unitree H1, G1's 23-DoF waist) is held on its seat. Its thighs rest on the seat, so while it leans its
     pelvis forward (the trunk's lean, by the hips), the hips' axis stays where it is; held at the base's origin
-    instead (Romeo's is 20 cm above its hips) the lean pushed the hips back until the knees met their stops, the
-    plan's COM never reached the seat-off and the robot fell back; held at a point on the seat's surface, the
+    instead (Romeo's is 20 cm above its hips) the lean swings the hips back and off the seat: not 2 cm of it had a
+    solution, and the robot fell back; held at a point on the seat's surface, the
     whole-body controller's seat contact fought the lean (the simulated COM 6 cm short at seat-off)."""
     data = model.createData()
     pin.forwardKinematics(model, data, pin.neutral(model))      # the base at the origin, upright
