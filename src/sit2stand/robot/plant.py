@@ -442,7 +442,7 @@ def contact_joint_torques(model, data, q: np.ndarray, taus: np.ndarray, seated: 
     pin.computeJointJacobians(model, data, q)
     pin.updateFramePlacements(model, data)
     J = np.vstack([pin.getFrameJacobian(model, data, f, pin.LOCAL_WORLD_ALIGNED) for f in frames])
-    if seated:   # the seat pushes up under the buttocks (a frame on the pelvis at the seat surface)
+    if seated:   # the seat pushes up under the buttocks (the seat frame: model.add_seat_frame)
         J = np.vstack([J, pin.getFrameJacobian(model, data, model.getFrameId("seat"), pin.LOCAL_WORLD_ALIGNED)[:3]])
     taus = np.atleast_2d(taus)
     lam = np.linalg.lstsq(J[:, :6].T, taus[:, :6].T, rcond=None)[0]

@@ -165,7 +165,7 @@ class WholeBodyQP:
 
     Args:
         model: the robot model with the parameters the controller knows (identified or CAD; never the plant's truth).
-        seat_frame: id of a frame on the pelvis at the seat surface (None: no seat).
+        seat_frame: id of the pelvis frame the seat carries (:func:`~sit2stand.robot.model.add_seat_frame`; None: none).
         gains: tasks' gains and weights.
         seat_contact: the seat point is a contact of the QP, its force three unknowns (the plan's dynamics filter);
             False: the seat acts only as a known force (the robot's controller: its force comes from the feet's
