@@ -75,6 +75,24 @@ def test_the_pelvis_leans_about_the_held_hips_where_about_its_origin_it_cannot(r
     assert not r.feasible and r.com_error_m > 0.01
 
 
+def test_off_the_seat_the_floor_is_under_the_hips_axis_not_the_base_origin(romeo):
+    """Leaned 6 cm on the seat, the pelvis pitched about its hips lowers the base's origin by over a centimetre. Off
+    the seat, the floor (the held point's seated height plus the clearance, here 5 mm) lifts the hips' axis, the
+    origin with it by as much: with the floor on the origin, the plan's first frame off the seat jumped 1.1-1.5 cm,
+    and on Romeo's second rise of a cycles trial found no solution and fell back."""
+    model, q0, soles, targets = romeo
+    point = held_on_seat_b(model)
+    held = lambda q: q[:3] + pin.Quaternion(q[3:7]).toRotationMatrix() @ point     # noqa: E731
+    leaned, _ = lean(romeo, point, 0.06)
+    assert leaned.feasible and leaned.q[2] < q0[2] - 0.01
+    com = pin.centerOfMass(model, model.createData(), leaned.q)
+    off = ComIk(model, soles, hold_point_b=point, dt=0.01).solve(
+        leaned.q, [], com, targets, com_axes=(0, 1), q_prev=leaned.q, max_iterations=60, tol=1e-10,
+        base_xz=held(leaned.q), base_weight=1e4, base_z_min=held(q0)[2] + 0.005)
+    assert off.feasible and held(off.q)[2] >= held(q0)[2] + 0.005 - 1e-6
+    assert off.q[2] - leaned.q[2] == pytest.approx(0.005, abs=0.001)
+
+
 def test_inertias_that_break_the_triangle_inequality_are_balanced_for_mujoco_alone():
     profile = load_profile("romeo")
     text = profile.urdf_text()

@@ -178,7 +178,7 @@ class _Frame:
     base_xz: np.ndarray | None
     base_weight: float | None
     base_pitch_min: float | None
-    base_z_min: float | None = None              # the base's lowest world z [m] (hips off the seat)
+    base_z_min: float | None = None              # the held point's lowest world z [m] (hips off the seat)
     lift_speed_prev: np.ndarray | None = None    # the trunk joints' speeds into the previous frame [rad/s]
     joint_targets: list[tuple[int, float, float]] = field(default_factory=list)   # (tangent index, rad, 1/rad^2)
     q_lo: np.ndarray | None = None    # the joints' box over this frame's steps: their limits, and the speed limits
@@ -249,7 +249,7 @@ class ComIk:
         the first frame). ``base_xz``: hold the base's ``hold_point_b`` at this world x and z [m] (the hips on a
         seat): two more equality rows, or, with ``base_weight``, a soft task of that weight. ``base_pitch_min``
         [rad]: the base may not pitch back beyond this (a pelvis on a seat cannot roll back about its hips).
-        ``base_z_min`` [m]: the base's world z stays at or above this (hips that have left a seat stay off it).
+        ``base_z_min`` [m]: the world z of ``hold_point_b`` stays at or above this (hips that left a seat stay off it).
         ``joint_targets``: (tangent index, angle [rad], weight [1/rad^2]) soft tasks on single joints (the human's
         knee flexion)."""
         t0 = time.perf_counter()
@@ -383,12 +383,12 @@ class ComIk:
             qp.g -= f.base_weight * rb.T @ eb
 
     def _base_height_row(self, q: np.ndarray, f: _Frame, qp) -> None:
-        """The inequality C dq >= d of ``qp`` (in place) keeping the base's world z at or above ``base_z_min`` (its
-        problem has no row without it): the base's linear velocity is in its own frame, so the world z row is
-        R[2]."""
+        """The inequality C dq >= d of ``qp`` (in place) keeping the world z of ``hold_point_b`` (not the base's origin,
+        which a pelvis pitched about its hips lowers) above ``base_z_min``; its world velocity is R (v - p x w)."""
         if f.base_z_min is not None:
-            qp.C[0, :3] = self.data.oMi[1].rotation[2]
-            qp.d[0] = f.base_z_min - q[2]
+            R = self.data.oMi[1].rotation
+            qp.C[0, :3], qp.C[0, 3:6] = R[2], -(R @ pin.skew(self.hold_point_b))[2]
+            qp.d[0] = f.base_z_min - (q[2] + R[2] @ self.hold_point_b)
 
     def _bounds(self, q: np.ndarray, f: _Frame, lo: np.ndarray, hi: np.ndarray) -> None:
         """Step bounds (in place) from the joint limits, the speed limits from the previous frame and the frame's

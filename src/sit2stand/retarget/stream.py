@@ -65,10 +65,10 @@ RISE_SCALE_RANGE = (0.8, 1.5)
 """The markers' vertical scale stays within these multiples of the leg-length scale (see ``Retargeter._rise_scale``).
 """
 REARM_ABOVE_SEAT_M = 0.01
-"""After a sit-down, a plan whose pelvis is back within this of its seated height is seated again, its hips held on
-the seat and its COM target no further back than there: the next rise plays as the first (a trial of several
-sit-stand-sit cycles). Left to follow the human's COM back with the hips held, TALOS tipped backward; seated again
-only once the human's COM stopped, G1 sank off its seat."""
+"""After a sit-down, a plan whose held point (``held_on_seat_b``) is back within this [m] of its seated height is
+seated again, its hips held on the seat and its COM target no further back than there: the next rise plays as the
+first (a trial of several sit-stand-sit cycles). Left to follow the human's COM back with the hips held, TALOS tipped
+backward; seated again only once the human's COM stopped, G1 sank off its seat."""
 KNEE_RELEASE_DROP_M = 0.05
 """Once the human's pelvis is this far below its highest, the human is sitting back down: the knee task lets go and
 the markers' vertical scale returns to the leg-length one as the pelvis comes down (at the rise's scale all the
@@ -160,7 +160,7 @@ class Retargeter:
         self.com_seated = self.data.com[0].copy()
         self.hold_point_b = held_on_seat_b(self.model)       # the base's point held on the seat [m]
         self.base_seated = self._held_point(self.q)
-        self.seat_z_m, self.held_z_seated_m = float(self.q[2]), float(self.base_seated[2])   # base, held point [m]
+        self.held_z_seated_m = float(self.base_seated[2])   # the held point's seated height [m]
         self._com_x_floor: float | None = None  # seated again after a sit-down: the COM target goes no further back
         self.pitch_seated = float(np.arctan2(*pin.Quaternion(self.q[3:7]).toRotationMatrix()[[0, 2], 2]))
         self.held_to_seated = np.zeros(self.model.nq, bool)     # arms, head, lateral joints: posture pulled to seated
@@ -339,7 +339,7 @@ class Retargeter:
         self.watch.pelvis_last_m = pelvis_now
         if not self.seated and not self.sat_down:
             self.sat_down = self._human_touched_down(pelvis_now, chair_force_n)
-        elif self.sat_down and self.q[2] < self.seat_z_m + REARM_ABOVE_SEAT_M:
+        elif self.sat_down and self._held_point(self.q)[2] < self.held_z_seated_m + REARM_ABOVE_SEAT_M:
             self._seated_again()
             self._com_x_floor = float(target[0])
         if self._com_x_floor is not None:        # seated again: the COM stays where the hips landed, or ahead
@@ -359,7 +359,7 @@ class Retargeter:
             fade = (t_s - self.seat_off.t_s) / max(cfg.hip_release_s, 1e-9)
             weight = 1e4 * (1.0 - min(1.0, fade)) ** 2 if fade < 1.0 else None
             lift = 0.0 if self.sat_down else self.seat_clearance(t_s)
-            z_min = None if self.sat_down else self.seat_z_m + lift
+            z_min = None if self.sat_down else self.held_z_seated_m + lift
             hold = self.base_seated + [0.0, 0.0, lift] if weight is not None else None
         q_ref = np.where(self.held_to_seated, robot.q_seated, self.q)
         res = self.ik.solve(self.q, markers, target, robot.sole_targets, q_ref=q_ref, com_axes=axes,
