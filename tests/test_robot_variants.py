@@ -13,7 +13,7 @@ import pinocchio as pin
 import pytest
 
 from sit2stand.cli import main as sit2stand
-from sit2stand.retarget.robot import robot_model
+from sit2stand.retarget.robot import robot_model, robot_setup
 from sit2stand.robot.check import check_robot
 from sit2stand.robot.identify import identify
 from sit2stand.robot.model import SIDES, PlantConfig
@@ -87,6 +87,26 @@ def test_ankles_that_only_pitch_carry_the_foot_and_stand_up(no_ankle_roll, tmp_p
     assert summary["whole_rise_tries"] == [[1.0, True]], summary
     assert summary["stood_up"] and summary["standing_knees_match"], summary
     assert summary["time_scale"] <= 1.1 and summary["final_pelvis_height_ratio"] > 0.95, summary
+
+
+@pytest.mark.parametrize("robot", ["talos", None])
+def test_feet_without_an_ankle_roll_are_targeted_as_far_apart_as_straight_legs_put_them(no_ankle_roll, robot):
+    """A measured seated start with the hips yawed 0.6 mrad apart (as H1 settles on its chair) puts the feet 0.2 mm
+    wider than the hips; straight, legs without an ankle roll cannot: their soles are targeted with the lateral
+    joints as the profile seats them (the IK found no standing frame otherwise). Legs with one keep the feet as
+    measured."""
+    prebuilt = robot_model(None, None, robot=robot or str(no_ankle_roll))
+    model, q0 = prebuilt[:2]
+    q = q0.copy()
+    for side, sign in zip(SIDES, (1.0, -1.0)):
+        q[model.joints[model.getJointId(profile_of(model).leg(side, "hip_yaw"))].idx_q] += sign * 6e-4
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    measured = [data.oMf[model.getFrameId(f"sole_{s}")].translation[1] for s in SIDES]
+    nominal = [T.translation[1] for T in robot_setup(prebuilt=prebuilt).sole_targets]
+    targets = [T.translation[1] for T in robot_setup(q_start=q, prebuilt=prebuilt).sole_targets]
+    assert abs((measured[0] - measured[1]) - (nominal[0] - nominal[1])) > 1e-4
+    assert targets == pytest.approx(nominal if robot is None else measured, abs=1e-9)
 
 
 @pytest.mark.parametrize("robot,redundant", [("talos", False), ("g1", False), ("icub", False), (None, True)])

@@ -69,8 +69,8 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
     measured sitting posture; default: the plant file's nominal one. ``start_joint_names``: the joint of each of
     ``q_start[7:]`` when they come in another order (e.g. a JointState's)."""
 
-    model, q, label = prebuilt if prebuilt is not None else robot_model(plant_yaml, params_yaml, robot=robot)
-    q = q.copy()
+    model, prebuilt_q, label = prebuilt if prebuilt is not None else robot_model(plant_yaml, params_yaml, robot=robot)
+    q = prebuilt_q.copy()
     if q_start is not None:
         if np.shape(q_start) != q.shape or not np.all(np.isfinite(q_start)):
             raise InputError(f"start configuration: {np.shape(q_start)} values (finite), expected {q.shape}")
@@ -82,11 +82,12 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
                 raise InputError(f"start configuration: no position for {', '.join(missing[:5])}")
             q[7:] = [by_name[n] for n in model.names[2:]]
     data = model.createData()
-    pin.framesForwardKinematics(model, data, q)
-    soles = [model.getFrameId(f"sole_{s}") for s in SIDES]
-    targets = [data.oMf[f].copy() for f in soles]
-    corners = sole_corners_world(model, data)[:, :2]
     profile = profile_of(model)
+    soles = [model.getFrameId(f"sole_{s}") for s in SIDES]
+    pin.framesForwardKinematics(model, data, _lateral_as_nominal(model, q, prebuilt_q, profile))
+    targets = [data.oMf[f].copy() for f in soles]
+    pin.framesForwardKinematics(model, data, q)
+    corners = sole_corners_world(model, data)[:, :2]
     hip, knee, ankle = (data.oMi[model.getJointId(joint)].translation
                         for joint in (profile.leg("left", "hip_pitch"), profile.leg("left", "knee"),
                                       profile.foot_joint("left")))
@@ -95,3 +96,19 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
                       float(corners[:, 0].min()), float(corners[:, 0].max()), ankle_floor,
                       float(np.linalg.norm(knee - hip) + np.linalg.norm(ankle - knee)),
                       float(ankle[2] - ankle_floor[2]), label)
+
+
+def _lateral_as_nominal(model: pin.Model, q: np.ndarray, q_nominal: np.ndarray, profile) -> np.ndarray:
+    """``q`` for the soles' targets: as measured, but for legs without an ankle roll
+    (:attr:`~sit2stand.robot.profile.RobotProfile.redundant_sole_contacts`) with the lateral joints at the profile's
+    seated values. Straight, such legs put their flat soles exactly as far apart as their hips: a hip yaw of 0.6 mrad,
+    as H1 settles on its chair, put its seated feet 0.24 mm wider, and the IK had no solution for any frame once the
+    knees straightened (191 of the natural rise's 391)."""
+    if not profile.redundant_sole_contacts:
+        return q
+    out = q.copy()
+    for name in profile.lateral_joints():
+        if model.existJointName(name):
+            i = model.joints[model.getJointId(name)].idx_q
+            out[i] = q_nominal[i]
+    return out
