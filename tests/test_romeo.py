@@ -16,8 +16,8 @@ import pytest
 
 from sit2stand.cli import main as sit2stand
 from sit2stand.retarget.ik import ComIk
-from sit2stand.retarget.robot import robot_model
-from sit2stand.robot.model import SIDES, held_on_seat_b, hips_axis_in_base
+from sit2stand.retarget.robot import robot_model, robot_setup
+from sit2stand.robot.model import SIDES, held_on_seat_b, hips_axis_in_base, sole_corners_world
 from sit2stand.robot.mujoco_urdf import inertias_mujoco_takes
 from sit2stand.robot.profile import load_profile
 
@@ -91,6 +91,23 @@ def test_off_the_seat_the_floor_is_under_the_hips_axis_not_the_base_origin(romeo
         base_xz=held(leaned.q), base_weight=1e4, base_z_min=held(q0)[2] + 0.005)
     assert off.feasible and held(off.q)[2] >= held(q0)[2] + 0.005 - 1e-6
     assert off.q[2] - leaned.q[2] == pytest.approx(0.005, abs=0.001)
+
+
+@pytest.mark.parametrize("robot,clipped", [("romeo", True), ("talos", False)])
+def test_the_support_ends_where_the_ankles_can_hold_the_centre_of_pressure(robot, clipped):
+    """Under half its weight, Romeo's 25.8 N m ankle pitch motors hold the centre of pressure at most 13 cm ahead of
+    the ankles, its soles reach 14.8: the support (the COM map's toes, the ZMP's polygon) ends at the 13. TALOS's
+    160 N m reach past its soles, which bound it."""
+    setup = robot_setup(prebuilt=robot_model(robot=robot))
+    model, data = setup.model, setup.model.createData()
+    pin.framesForwardKinematics(model, data, setup.q_seated)
+    toes = float(sole_corners_world(model, data)[:, 0].max())
+    ankle = model.getJointId(load_profile(robot).leg("left", "ankle_pitch"))
+    arm = model.effortLimit[model.joints[ankle].idx_v] / (pin.computeTotalMass(model) * 9.81 / 2)
+    reach = float(data.oMi[ankle].translation[0] + arm)
+    assert (reach < toes - 0.01) is clipped
+    assert setup.toe_x_m == pytest.approx(min(toes, reach), abs=1e-6)
+    assert float(np.max(setup.support_xy[:, 0])) == pytest.approx(setup.toe_x_m, abs=1e-6)
 
 
 def test_inertias_that_break_the_triangle_inequality_are_balanced_for_mujoco_alone():
