@@ -127,6 +127,7 @@ def _ankles_reach_x(model: pin.Model, data: pin.Data, profile) -> tuple[float, f
     for side in SIDES:
         joint = model.getJointId(profile.leg(side, "ankle_pitch"))
         x = float(data.oMi[joint].translation[0])
-        arm = float(model.effortLimit[model.joints[joint].idx_v]) / load_n
+        limit = float(model.effortLimit[model.joints[joint].idx_v])
+        arm = limit / load_n if 0.0 < limit < np.inf else np.inf      # a file without the limit: the soles bound it
         reach.append((x - arm, x + arm))
     return max(r[0] for r in reach), min(r[1] for r in reach)
