@@ -102,11 +102,14 @@ def test_the_support_ends_where_the_ankles_can_hold_the_centre_of_pressure(robot
     model, data = setup.model, setup.model.createData()
     pin.framesForwardKinematics(model, data, setup.q_seated)
     toes = float(sole_corners_world(model, data)[:, 0].max())
-    ankle = model.getJointId(load_profile(robot).leg("left", "ankle_pitch"))
-    arm = model.effortLimit[model.joints[ankle].idx_v] / (pin.computeTotalMass(model) * 9.81 / 2)
-    reach = float(data.oMi[ankle].translation[0] + arm)
+    heels = float(sole_corners_world(model, data)[:, 0].min())
+    ankles = [model.getJointId(load_profile(robot).leg(side, "ankle_pitch")) for side in SIDES]
+    arm = model.effortLimit[model.joints[ankles[0]].idx_v] / (pin.computeTotalMass(model) * 9.81 / 2)
+    x = [float(data.oMi[a].translation[0]) for a in ankles]
+    reach = float(min(x) + arm)
     assert (reach < toes - 0.01) is clipped
     assert setup.toe_x_m == pytest.approx(min(toes, reach), abs=1e-6)
+    assert setup.heel_x_m == pytest.approx(max(heels, max(x) - arm), abs=1e-6)
     assert float(np.max(setup.support_xy[:, 0])) == pytest.approx(setup.toe_x_m, abs=1e-6)
 
 

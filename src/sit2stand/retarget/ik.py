@@ -316,7 +316,7 @@ class ComIk:
         gs = g - 1e4 * Jc.T @ e_com
         dq = self._qp.solve(Hs, gs, A_feet, b_feet, lo, hi, C, d)
         if dq is None:     # not even the feet: everything soft; the box and the floor are always feasible (0 is
-            #                inside the joints' box, and the floor's row has only the unbounded base translation)
+            #                inside the joints' box, and the floor's row has the unbounded base translation)
             Hs += 1e6 * A_feet.T @ A_feet
             gs -= 1e6 * A_feet.T @ b_feet
             dq = self._qp.solve(Hs, gs, np.zeros((0, self.nv)), np.zeros(0), lo, hi, C, d)

@@ -33,7 +33,7 @@ class RobotSetup:
     sole_frames: list[int]
     sole_targets: list[pin.SE3]
     support_xy: np.ndarray               # support polygon of both soles (counter-clockwise), within the ankles' reach
-    heel_x_m: float                      # its extent forward [m] (:func:`_ankles_reach_x`)
+    heel_x_m: float                      # the support's rear and front world x [m] (:func:`_ankles_reach_x`)
     toe_x_m: float
     ankle_left: np.ndarray               # left ankle projected on the floor [m]
     leg_length_m: float                  # hip joint -> knee -> ankle
@@ -89,7 +89,8 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
     targets = [data.oMf[f].copy() for f in soles]
     pin.framesForwardKinematics(model, data, q)
     corners = sole_corners_world(model, data)[:, :2]
-    corners[:, 0] = np.clip(corners[:, 0], *_ankles_reach_x(model, data, profile))
+    for side, (lo, hi) in zip(range(len(SIDES)), _ankles_reach_x(model, data, profile)):    # left's four, right's
+        corners[4 * side:4 * side + 4, 0] = np.clip(corners[4 * side:4 * side + 4, 0], lo, hi)
     hip, knee, ankle = (data.oMi[model.getJointId(joint)].translation
                         for joint in (profile.leg("left", "hip_pitch"), profile.leg("left", "knee"),
                                       profile.foot_joint("left")))
@@ -102,10 +103,10 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
 
 def _lateral_as_nominal(model: pin.Model, q: np.ndarray, q_nominal: np.ndarray, profile) -> np.ndarray:
     """``q`` for the soles' targets: as measured, but for legs without an ankle roll
-    (:attr:`~sit2stand.robot.profile.RobotProfile.redundant_sole_contacts`) with the lateral joints at the profile's
-    seated values. Straight, such legs put their flat soles exactly as far apart as their hips: a hip yaw of 0.6 mrad,
-    as H1 settles on its chair, put its seated feet 0.24 mm wider, and the IK had no solution for any frame once the
-    knees straightened (191 of the natural rise's 391)."""
+    (:attr:`~sit2stand.robot.profile.RobotProfile.redundant_sole_contacts`) with the lateral joints at the nominal
+    seated pose's (``q_nominal``: the plant file's, or the profile's). Straight, such legs put their flat soles
+    exactly as far apart as their hips: a hip yaw of 0.6 mrad, as H1 settles on its chair, put its seated feet 0.24 mm
+    wider, and the IK had no solution for any frame once the knees straightened (191 of the natural rise's 391)."""
     if not profile.redundant_sole_contacts:
         return q
     out = q.copy()
@@ -116,18 +117,18 @@ def _lateral_as_nominal(model: pin.Model, q: np.ndarray, q_nominal: np.ndarray, 
     return out
 
 
-def _ankles_reach_x(model: pin.Model, data: pin.Data, profile) -> tuple[float, float]:
-    """The forward extent [m] (world x, at the placements in ``data``) within which both ankles' pitch motors can hold
-    the centre of pressure with half the robot's weight on each foot: an ankle's x -+ its torque limit over that
-    load. Where it is shorter than the soles (H1's 40 N m ankles reach 13.7 cm ahead of them, its soles 18 cm; Romeo's
-    13 of 14.8), the COM map's seat-off and its cap ahead come from it: held at its toes' 18 cm, H1 fell back on the
-    natural rise."""
+def _ankles_reach_x(model: pin.Model, data: pin.Data, profile) -> list[tuple[float, float]]:
+    """Per side (:data:`SIDES`), the forward extent [m] (world x, at the placements in ``data``) within which the
+    ankle's pitch motor can hold the centre of pressure with half the robot's weight on the foot: the ankle's x -+ its
+    torque limit (the model's: :func:`~sit2stand.robot.model.controller_model` gives a joint whose file has none
+    100 N m, as the plant) over that load. Where it is shorter than the sole (H1's 40 N m ankles reach 13.7 cm ahead
+    of them, its soles 18 cm; Romeo's 13 of 14.8), the COM map's seat-off and its cap ahead come from it: held at its
+    toes' 18 cm, H1 fell back on the natural rise."""
     load_n = float(pin.computeTotalMass(model)) * G / 2.0
     reach = []
     for side in SIDES:
         joint = model.getJointId(profile.leg(side, "ankle_pitch"))
         x = float(data.oMi[joint].translation[0])
-        limit = float(model.effortLimit[model.joints[joint].idx_v])
-        arm = limit / load_n if 0.0 < limit < np.inf else np.inf      # a file without the limit: the soles bound it
+        arm = float(model.effortLimit[model.joints[joint].idx_v]) / load_n
         reach.append((x - arm, x + arm))
-    return max(r[0] for r in reach), min(r[1] for r in reach)
+    return reach

@@ -430,7 +430,7 @@ class Retargeter:
                 for j in self.knees]
 
     def seat_clearance(self, t_s: float) -> float:
-        """How far above its seated height the pelvis must be at ``t_s`` [s] after the robot's seat-off [m]
+        """How far above its seated height the held point must be at ``t_s`` [s] after the robot's seat-off [m]
         (``seat_clearance_m`` along a smoothstep over ``seat_clearance_s``)."""
         return self.cfg.seat_clearance_m * self._since_seat_off(t_s, self.cfg.seat_clearance_s)
 
@@ -443,7 +443,7 @@ class Retargeter:
         return smoothstep((t_s - self.seat_off.t_s) / max(duration_s, 1e-9))
 
     def _seated_again(self) -> None:
-        """After a sit-down, the plan's pelvis back within ``REARM_ABOVE_SEAT_M`` of the seat: the next rise starts
+        """After a sit-down, the plan's held point back within ``REARM_ABOVE_SEAT_M`` of the seat: the next rise starts
         as the first (hips held on the seat where they are, the human's seat-off awaited, then the robot's), so a
         trial of several cycles plays each one."""
         self.seated, self.sat_down = True, False
