@@ -28,6 +28,9 @@ def test_each_frame_is_timed_from_its_own_capture_time_found_by_its_stamp(tmp_pa
     assert latencies_ms(tmp_path / "probe.json", "/mocap/markers", origin, rate) == pytest.approx([1.0] * 5)
     assert latencies_ms(tmp_path / "probe.json", "/human/com", origin, rate) == pytest.approx([4.0, 5.0, 6.0, 8.0])
     assert p50_p99(np.array([1.0, 2.0, 3.0])) == "p50 2.00 ms p99 2.98 ms (n=3)"
+    (tmp_path / "none.json").write_text(json.dumps({"/mocap/markers": [], "/human/com": record["/human/com"]}))
+    with pytest.raises(ValueError, match="no /mocap/markers message reached the probe"):
+        latencies_ms(tmp_path / "none.json", "/human/com", origin, rate)
 
 
 def test_the_benchmark_counts_the_runs_that_met_each_target():

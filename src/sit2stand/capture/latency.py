@@ -38,6 +38,8 @@ def latencies_ms(probe_json: Path, topic: str, origin_ns: int, rate_hz: float,
     """Arrival time minus capture time [ms] of each message of ``topic`` in a probe's record: the frame index from
     the stamp's distance to the first ``first_topic`` message's, the capture time from serve-c3d's origin."""
     record = json.loads(Path(probe_json).read_text())
+    if not record.get(first_topic):
+        raise ValueError(f"no {first_topic} message reached the probe")
     rows = np.array(record[topic], np.int64).reshape(-1, 2)
     stamps, arrived = rows[:, 0], rows[:, 1]
     k = np.round((stamps - record[first_topic][0][0]) * rate_hz * 1e-9).astype(np.int64)

@@ -5,7 +5,10 @@ writes them as JSON (``{topic: [[stamp_ns, received_ns], ...]}``) at SIGINT or S
 
     python -m sit2stand.nodes.latency_probe OUT.json /mocap/markers /human/com /robot/retarget/ik
 
-It prints ``PROBE_READY`` once subscribed. :mod:`sit2stand.capture.latency` turns the record into latencies.
+It prints ``PROBE_READY`` once every topic has a publisher it has discovered (at most ``DISCOVERY_WAIT_S``): a
+stream of 0.9 s (the real child trial) started right after the subscriptions were made was over before the probe's
+DDS had matched the bridge, and no marker reached it. :mod:`sit2stand.capture.latency` turns the record into
+latencies.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from __future__ import annotations
 import json
 import signal
 import sys
+import time
 
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -23,6 +27,8 @@ from ..capture.latency import PROBE_READY
 from ..io.topics import HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_RETARGET_IK_TOPIC
 
 TYPES = {MARKERS_TOPIC: MocapFrame, HUMAN_COM_TOPIC: CenterOfMass, ROBOT_RETARGET_IK_TOPIC: JointState}
+DISCOVERY_WAIT_S = 20.0
+"""How long the probe waits for its topics' publishers before it says it is ready anyway [s]."""
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -46,6 +52,9 @@ def main(argv: list[str] | None = None) -> int:
     stop = []
     signal.signal(signal.SIGINT, lambda *_: stop.append(1))
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
+    deadline = time.monotonic() + DISCOVERY_WAIT_S
+    while not stop and time.monotonic() < deadline and not all(node.count_publishers(t) for t in topics):
+        rclpy.spin_once(node, timeout_sec=0.05)
     print(PROBE_READY, flush=True)
     while not stop:
         rclpy.spin_once(node, timeout_sec=0.05)
