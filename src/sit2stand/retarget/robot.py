@@ -89,7 +89,7 @@ def robot_setup(plant_yaml: str | Path | None = None, params_yaml: str | Path | 
     targets = [data.oMf[f].copy() for f in soles]
     pin.framesForwardKinematics(model, data, q)
     corners = sole_corners_world(model, data)[:, :2]
-    for side, (lo, hi) in zip(range(len(SIDES)), _ankles_reach_x(model, data, profile)):    # left's four, right's
+    for side, (lo, hi) in enumerate(_ankles_reach_x(model, data, profile)):     # the corners: left's four, right's
         corners[4 * side:4 * side + 4, 0] = np.clip(corners[4 * side:4 * side + 4, 0], lo, hi)
     hip, knee, ankle = (data.oMi[model.getJointId(joint)].translation
                         for joint in (profile.leg("left", "hip_pitch"), profile.leg("left", "knee"),
