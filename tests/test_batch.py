@@ -23,6 +23,14 @@ from sit2stand.errors import InputError
 RAY = str(Path(sys.executable).parent / "ray")
 
 
+def test_a_robot_given_as_a_profile_file_keys_its_cases_by_the_files_name(tmp_path):
+    """A case's key names its folder: a profile's path would make that folder a tree of the path's directories."""
+    grid = tmp_path / "grid.yaml"
+    grid.write_text("height_m: 1.7\nmass_kg: 65\n")
+    setting = Setting(robot=str(tmp_path / "robots" / "h1.yaml"), plant="cad")
+    assert [j.key for j in standup_jobs(grid_cases(grid, seed=3, setting=setting))] == ["00_natural_h1_cad"]
+
+
 def test_a_grid_runs_in_process_each_case_a_row_and_a_failing_case_is_recorded_not_fatal(tmp_path):
     grid = tmp_path / "grid.yaml"
     grid.write_text("height_m: 1.7\nmass_kg: 65\nrobot: [g1, no_such_robot]\n")

@@ -36,6 +36,7 @@ from ..human.synth import SynthConfig, synthesize
 from ..retarget import offline
 from ..robot.model import DEFAULT_ROBOT
 from ..robot.plant import DEFAULT_CONTROLLER
+from ..robot.profile import PROFILE_SUFFIXES
 from .engine import Job
 
 STYLES = ("natural", "elderly", "fast")
@@ -135,6 +136,14 @@ class Setting:
     params: str | None = None
     plan: str = offline.DEFAULT_PLAN
 
+    @property
+    def label(self) -> str:
+        """The robot and plant in a case's key and folder name: a profile file by its name, not its path (whose
+        slashes made the folder a tree of the path's directories)."""
+        robot = Path(self.robot)
+        name = robot.stem if robot.suffix in PROFILE_SUFFIXES else self.robot
+        return f"{name}_{self.plant}"
+
 
 def run_standup(arg: tuple[Case, Setting], workdir: Path) -> dict:
     """One case (a :class:`Job`'s ``run``): synthesise, bag, retarget and simulate; its figures. Its retarget
@@ -144,7 +153,7 @@ def run_standup(arg: tuple[Case, Setting], workdir: Path) -> dict:
         demo, synth_seed = synthesise(case)
     except ValueError as err:
         return {"stood_up": False, "stage": "synthesis", "synthesis_error": str(err)}
-    out = Path(workdir) / f"{case.name}_{setting.robot}_{setting.plant}"
+    out = Path(workdir) / f"{case.name}_{setting.label}"
     shutil.rmtree(out, ignore_errors=True)        # a try before this one's (its bag is never overwritten)
     with tempfile.TemporaryDirectory(prefix="sit2stand-batch-") as tmp:
         write_demonstration_bag(demo, Path(tmp) / case.name)
@@ -156,7 +165,7 @@ def run_standup(arg: tuple[Case, Setting], workdir: Path) -> dict:
 
 def standup_jobs(cases: list[tuple[Case, Setting]]) -> list[Job]:
     """The batch's jobs: one per (case, setting); the row shows the body, the style, the robot and the plant."""
-    return [Job("standup", f"{c.name}_{s.robot}_{s.plant}", {**dataclasses.asdict(c), **dataclasses.asdict(s)},
+    return [Job("standup", f"{c.name}_{s.label}", {**dataclasses.asdict(c), **dataclasses.asdict(s)},
                 run_standup, (c, s)) for c, s in cases]
 
 
