@@ -48,6 +48,20 @@ class Scheduling:
             return False
         return True
 
+    def try_apply_to_process(self) -> bool:
+        """:meth:`try_apply` on every thread of this process: Linux schedules threads, and a class set on one
+        (``sched_setscheduler``'s pid is a thread id) leaves those already started, the middleware's receive threads
+        among them, as they were; whether it was permitted on all."""
+        permitted = True
+        for tid in os.listdir("/proc/self/task"):
+            try:
+                self.apply(int(tid))
+            except ProcessLookupError:      # the thread ended meanwhile
+                continue
+            except OSError:
+                permitted = False
+        return permitted
+
     def holds_for(self, pid: int) -> bool:
         """Whether process ``pid`` runs under this class."""
         if os.sched_getscheduler(pid) != POLICIES[self.policy]:

@@ -213,7 +213,7 @@ class HumanComNode(Node):
         """Real time once the live calibration (a pause of 1-2 s that at real-time priority would starve the
         robot's loop on a small computer) is over: the estimator's frames then wait for no time-shared process."""
         wanted, self.fifo_after_calibration = Scheduling("fifo", self.fifo_after_calibration), 0
-        if wanted.try_apply():
+        if wanted.try_apply_to_process():
             self.get_logger().info(f"calibrated; now at {scheduling_text()}")
         else:
             self.get_logger().warning(f"calibrated; staying at {scheduling_text()}: {wanted} not permitted")
