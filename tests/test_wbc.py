@@ -16,7 +16,7 @@ from sit2stand.retarget.feasibility import support_margin, support_polygon
 from sit2stand.retarget.offline import run
 from sit2stand.robot.model import PlantConfig, add_seat_frame, controller_model
 from sit2stand.robot.plant import CONTROLLERS, DEFAULT_CONTROLLER, Plant
-from sit2stand.robot.torque_control import ANCHOR_BLEND_S, STANDING_SETTLE_S, WholeBodyController
+from sit2stand.robot.torque_control import ANCHOR_BLEND_S, STANDING_SETTLE_S, ComOffsetObserver, WholeBodyController
 from sit2stand.robot.model import sole_corners_local
 from sit2stand.robot.profile import load_profile
 from sit2stand.robot.wbc import Reference, WbcGains, WholeBodyQP, feet_anchored_reference
@@ -275,3 +275,44 @@ def test_the_plans_torques_pull_the_qps_where_the_contacts_leave_it_a_choice(pla
     ref.tau = None
     np.testing.assert_allclose(WholeBodyQP(model, plant.onboard.seat_frame).solve(q, np.zeros(model.nv), ref).tau,
                                plain.tau, atol=1e-9)
+
+
+def test_the_models_zero_moment_point_at_rest_is_under_its_com_and_moves_with_the_momentums_change(plant):
+    """At rest, and moving at a constant momentum, the model's zero-moment point is under its COM; a COM
+    accelerating forward moves it back by height / g times the acceleration."""
+    model, q = plant.ctrl, _standing(plant)
+    com = pin.centerOfMass(model, model.createData(), q)
+    obs = ComOffsetObserver(model, period_s=0.002)
+    assert obs.model_zmp(q, np.zeros(model.nv)) is None                       # no change to see yet
+    assert obs.model_zmp(q, np.zeros(model.nv)) == pytest.approx(com[:2], abs=1e-9)
+    v = np.zeros(model.nv)
+    v[0] = 0.1                                                                  # the base sliding forward [m/s]
+    obs.model_zmp(q, v)
+    assert obs.model_zmp(q, v) == pytest.approx(com[:2], abs=1e-9)
+    v[0] += 0.5 * 0.002                                                         # 0.5 m/s^2 for one period
+    zmp = obs.model_zmp(q, v)
+    assert zmp[0] == pytest.approx(com[0] - com[2] * 0.5 / G, abs=2e-4) and zmp[1] == pytest.approx(com[1], abs=1e-6)
+
+
+def test_the_com_offset_is_the_measured_centre_of_pressure_off_the_models_once_the_robot_stands(plant):
+    """A robot at rest whose feet measure their centre of pressure 2 cm behind and 0.5 cm left of its model's COM:
+    after the first period the offset moves toward that by period / time constant, converges on it within a second,
+    is held while the feet do not carry the weight, and is bounded."""
+    model, q = plant.ctrl, _standing(plant)
+    com = pin.centerOfMass(model, model.createData(), q)
+    obs, rest = ComOffsetObserver(model, period_s=0.002, time_constant_s=0.1), np.zeros(model.nv)
+    measured = com + np.array([-0.02, 0.005, 0.0])
+    obs.update(q, rest, measured, on_feet=True)                      # the first state: nothing to compare
+    assert np.all(obs.offset_m == 0.0)
+    obs.update(q, rest, measured, on_feet=True)
+    assert obs.offset_m == pytest.approx([-0.02 * 0.02, 0.005 * 0.02], rel=1e-6)
+    for _ in range(500):
+        obs.update(q, rest, measured, on_feet=True)
+    assert obs.offset_m == pytest.approx([-0.02, 0.005], abs=1e-5)
+    for _ in range(100):
+        obs.update(q, rest, com + np.array([0.03, 0.0, 0.0]), on_feet=False)     # seated: held
+        obs.update(q, rest, None, on_feet=True)                                 # unloaded: held
+    assert obs.offset_m == pytest.approx([-0.02, 0.005], abs=1e-5)
+    for _ in range(1000):
+        obs.update(q, rest, com + np.array([-0.2, 0.0, 0.0]), on_feet=True)
+    assert obs.offset_m[0] == pytest.approx(-obs.max_offset_m)

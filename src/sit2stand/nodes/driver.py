@@ -233,10 +233,15 @@ class Driver(Node):
               f"{self._qp_text()}", flush=True)
 
     def _qp_figures(self) -> dict[str, str]:
-        """The whole-body controller's QP figures (its latest steps) as status text, when it has run."""
+        """The whole-body controller's QP figures (its latest steps) and its estimate of the true COM's offset from
+        its model's, as status text, when it has run."""
         f = self.plant.wbc.qp_figures() if self.plant.wbc is not None else {}
+        if not f:
+            return {}
+        offset = self.plant.wbc.com_offset.offset_m
         return {"qp_steps": str(f["qp_steps"]), "qp_p50_ms": f"{f['qp_ms_p50']:.2f}",
-                "qp_p99_ms": f"{f['qp_ms_p99']:.2f}", "qp_cpu_p99_ms": f"{f['qp_cpu_ms_p99']:.2f}"} if f else {}
+                "qp_p99_ms": f"{f['qp_ms_p99']:.2f}", "qp_cpu_p99_ms": f"{f['qp_cpu_ms_p99']:.2f}",
+                "com_offset_x_m": f"{offset[0]:.4f}", "com_offset_y_m": f"{offset[1]:.4f}"}
 
     def _qp_text(self) -> str:
         f = self._qp_figures()

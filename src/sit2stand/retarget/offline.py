@@ -448,6 +448,10 @@ def _torques(plant, demand: np.ndarray) -> dict:
 
 
 def _qp_times(plant) -> dict:
-    """The torque controller's QP figures (``WholeBodyController.qp_figures``), prefixed ``controller_``, when it
-    ran."""
-    return {} if plant.wbc is None else {f"controller_{k}": v for k, v in plant.wbc.qp_figures().items()}
+    """The torque controller's QP figures (``WholeBodyController.qp_figures``) and its estimate of the true COM's
+    offset from its model's at the end (x, y [m]: :class:`~sit2stand.robot.torque_control.ComOffsetObserver`),
+    prefixed ``controller_``, when it ran."""
+    if plant.wbc is None:
+        return {}
+    return {**{f"controller_{k}": v for k, v in plant.wbc.qp_figures().items()},
+            "controller_com_offset_m": plant.wbc.com_offset.offset_m.tolist()}

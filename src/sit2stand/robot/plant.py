@@ -196,6 +196,7 @@ class Plant:
         self.joints = JointMap.of(self.model)
         self.faults = JointFaults.of(cfg.unmodeled, self.joints.names, cfg.timestep_s)
         self.rng = np.random.default_rng(cfg.seed)
+        self.controller_rng = np.random.default_rng([cfg.seed, 1])   # the torque controller's own sensor reads
         self._tau_queue: deque[tuple[np.ndarray, np.ndarray]] = deque()    # the actuators' delay line
         self.onboard = OnBoardModel.of(cfg, controller_params, self.seat_height_m, float(self.q_seated[2]))
         self.feet = FeetSensing.of(self.model, self.onboard.model, cfg)
@@ -312,13 +313,22 @@ class Plant:
             mujoco.mju_rotVecQuat(v[:3], s.qvel[:3], world_to_base)
             q_t, qd_t = self.ref.at(float(s.time))
             feet_fz = self.feet.vertical_force(self.data)
-            seat = 0.0
+            seat, cop = 0.0, None
             if feedforward_seated(s.qpos[2], ob.seated_base_z_m, feet_fz, ob.mass_kg):
                 seat = max(0.0, ob.mass_kg * G - feet_fz)
+            else:            # off the seat: the feet's centre of pressure tells the COM's (a seat's share is unknown)
+                cop = self._measured_cop()
             ff.tau, ff.age = self._within_effort(self.wbc.torques(q, v, q_t, qd_t, self.ref.qdd, seat,
-                                                                       self.ref.tau)), 0
+                                                                  self.ref.tau, cop)), 0
         ff.age += 1
         return self.data.qpos.take(self.qadr), ff.tau
+
+    def _measured_cop(self) -> np.ndarray | None:
+        """The feet's centre of pressure [m] (world) as the controller reads it from the ankle sensors (their noise,
+        bias and mounting included); None while they carry little."""
+        d = self.data
+        readings = self.feet.readings(d, self.controller_rng.standard_normal(6 * len(SIDES)))
+        return self.feet.combined_cop(d, self.feet.ground_reactions(d, readings), DEFAULT_COP_THRESHOLD_N)
 
     def _within_effort(self, tau: np.ndarray) -> np.ndarray:
         """``tau`` [N m] clipped to the actuators' effort limits (once per controller update, not per step)."""
