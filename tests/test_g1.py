@@ -2,6 +2,7 @@
 stand-up from a shipped demonstration, with nothing but ``--robot g1``."""
 
 import json
+import re
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -44,7 +45,8 @@ def test_g1_stands_up_from_the_natural_demonstration_near_the_humans_timing(tmp_
     out = tmp_path / "rt"
     code = sit2stand(["retarget", str(ROOT / "bags" / "natural"), "--robot", "g1", "--simulate", "--out", str(out)])
     summary = json.loads((out / "summary.json").read_text())
-    assert code == 0 and "stood up" in capsys.readouterr().out, summary
+    said = capsys.readouterr().out
+    assert code == 0 and "stood up" in said, summary
     assert summary["robot"] == "g1" and summary["stood_up"] and summary["fall"] is None
     # the rise optimised by default; on G1 the per-frame plan plays shorter (measured 1.018 against 1.049)
     assert summary["whole_rise_feasible"] and summary["plan"] == "frames", summary
@@ -57,6 +59,7 @@ def test_g1_stands_up_from_the_natural_demonstration_near_the_humans_timing(tmp_
     hidden = end[1:3] - end[16:18]
     assert hidden[0] < -0.01 and summary["controller_com_offset_m"] == pytest.approx(hidden, abs=1e-3), summary
     assert np.linalg.norm(end[1:3] - end[4:6]) < 0.005, end
+    assert re.search(r"the robot's feet put its COM 1\.\d cm behind its model's", said), said[-400:]
     # standing, not squatting: knees within 15 degrees of the human's at the end (measured 13.6 against 12.0)
     assert summary["standing_knees_match"] and summary["final_pelvis_height_ratio"] > 0.9, summary
     # and its pelvis upright within 15 degrees (measured 9.5 forward; a robot leaning back reads negative)

@@ -53,6 +53,7 @@ def _retarget(args: argparse.Namespace) -> int:
         else:
             print("stood up and sat back down" if ok else f"stood up, did not sit back down: "
                   f"{summary['fall'] or 'pelvis not on the seat'}")
+        _say_com_offset(summary)
         cycles = summary.get("cycles") or []
         if len(cycles) > 1:         # a trial of several sit-stand-sit cycles: each one counts
             stood, sat = sum(c["stood"] for c in cycles), sum(c["sat"] for c in cycles)
@@ -60,6 +61,24 @@ def _retarget(args: argparse.Namespace) -> int:
             ok = ok and stood == sat == len(cycles)
         return 0 if ok else 1
     return 0
+
+
+COM_OFFSET_TOLD_M = 0.01
+"""The whole-body controller's COM offset estimate (``controller_com_offset_m``) from which ``retarget`` tells the
+user that the controller's model misses mass [m]."""
+
+
+def _say_com_offset(summary: dict) -> None:
+    """Tell where the controller's feet put the robot's COM against its model's, when that is far enough off that the
+    model misses mass worth identifying."""
+    offset = summary.get("controller_com_offset_m")
+    if offset is None or max(abs(offset[0]), abs(offset[1])) < COM_OFFSET_TOLD_M:
+        return
+    x, y = (100 * c for c in offset[:2])
+    where = [f"{abs(x):.1f} cm {'behind' if x < 0 else 'ahead of'}"] if abs(x) >= 0.5 else []
+    where += [f"{abs(y):.1f} cm {'right of' if y < 0 else 'left of'}"] if abs(y) >= 0.5 else []
+    print(f"the robot's feet put its COM {' and '.join(where)} its model's, which the controller made up for: the "
+          f"model misses mass (identify it: `sit2stand collect-postures`, `sit2stand identify`, `retarget --params`)")
 
 
 def _drive(args: argparse.Namespace) -> int:
