@@ -74,8 +74,11 @@ class ComOffsetObserver:
         """The offset (x, y) [m] at the measured state (q, v) (Pinocchio order), the feet's centre of pressure measured
         over the last period at ``measured_cop`` (world [m]; None: unloaded); ``on_feet``: the feet have carried the
         whole weight long enough."""
+        if not on_feet or measured_cop is None:
+            self.momentum = None            # the momentum's change is taken again from the next state on
+            return self.offset_m
         zmp = self.model_zmp(q, v)
-        if on_feet and measured_cop is not None and zmp is not None:
+        if zmp is not None:
             gain = min(1.0, self.period_s / self.time_constant_s)
             self.offset_m += gain * (measured_cop[:2] - zmp - self.offset_m)
             np.clip(self.offset_m, -self.max_offset_m, self.max_offset_m, out=self.offset_m)
