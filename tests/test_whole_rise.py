@@ -1,6 +1,7 @@
 """sit2stand.retarget.whole_rise: the rise optimised as one problem (Crocoddyl: contacts, cones, torque limits), at
 the human's timing unless it has no solution there."""
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -180,6 +181,23 @@ def test_knots_are_spaced_in_time_whatever_the_capture_rate():
 
 def test_the_cli_offers_the_plans_the_planner_has():
     assert CLI_PLANS == offline.PLANS and CLI_DEFAULT_PLAN == offline.DEFAULT_PLAN
+
+
+def test_the_knots_solved_on_two_threads_give_the_same_rise(natural, tmp_path, capsys):
+    """``retarget --oc-threads 2``: Crocoddyl's knots computed two at a time find the same solution (1.35x faster on
+    two idle cores: docs/method.md); the sums' order moves the last digits, and with them the solve's end by an
+    iteration or so."""
+    one, _ = natural
+    bag = str(ROOT / "bags" / "natural")
+    assert sit2stand(["retarget", bag, "--oc-threads", "2", "--out", str(tmp_path / "rt")]) == 0
+    two = json.loads((tmp_path / "rt" / "summary.json").read_text())
+    assert two["whole_rise_tries"] == one["whole_rise_tries"] == [[1.0, True]]
+    assert abs(two["whole_rise_iterations"] - one["whole_rise_iterations"]) <= 5, (two, one)
+    assert two["whole_rise_com_error_rms_m"] == pytest.approx(one["whole_rise_com_error_rms_m"], abs=5e-4)
+    assert two["plan_ratio_whole"] == pytest.approx(one["plan_ratio_whole"], abs=0.01)
+    with pytest.raises(SystemExit):
+        sit2stand(["retarget", bag, "--oc-threads", "0", "--out", str(tmp_path / "no")])
+    assert "argument --oc-threads: 0: at least 1" in capsys.readouterr().err
 
 
 def test_bad_plans_and_models_are_refused(tmp_path):
