@@ -12,9 +12,9 @@ import numpy as np
 
 
 def timing_figure(trial, com_h, frames, cmds, sim: np.ndarray, png: Path, summary: dict) -> None:
-    """The forward COM at the human's timing: the human's (lab), the COM map's target, the plan's and the simulated
-    robot's (world), each command at the human time it plays; and the local time scale. The simulation pulls one
-    command per row, so row i is the robot when command i was sent."""
+    """The forward COM at the human's timing: the human's (lab), the COM map's target, the plan's, the simulated
+    robot's and its controller model's (world), each command at the human time it plays; and the local time scale.
+    The simulation pulls one command per row, so row i is the robot when command i was sent."""
     matplotlib.use("Agg")
     t0 = trial.marker_t_s[0]
     t_frames = np.array([f.t_s for f in frames]) - t0
@@ -25,6 +25,8 @@ def timing_figure(trial, com_h, frames, cmds, sim: np.ndarray, png: Path, summar
     ax[0].plot(t_frames, [f.com_target[0] for f in frames], label="human COM mapped onto the robot (target)")
     ax[0].plot(t_cmd, [c.com[0] for c in cmds], "--", label="plan COM")
     ax[0].plot(t_cmd[:n], sim[:n, 1], label="robot COM (simulated)")
+    ax[0].plot(t_cmd[:n], sim[:n, 16], ":", color="0.3", lw=1,
+               label="robot COM in its controller's model (off by the offset its feet measure)")
     ax[0].set_ylabel("forward [m]")
     ax[0].legend(fontsize=8)
     ax[0].set_title(f"{Path(summary['bag']).name}: at the human's timing; the robot took {summary['time_scale']:.2f}x "
