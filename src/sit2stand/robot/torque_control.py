@@ -44,8 +44,8 @@ class ComOffsetObserver:
     On the seat the feet's centre of pressure says nothing of the COM (the seat's share is unknown: with mass the
     model misses, the feet of a robot leaning forward on its seat carry more than the model's weight while the seat
     still carries some), nor until the feet have carried the whole weight for ``STANDING_SETTLE_S``; the offset is
-    then held. It is
-    bounded by ``max_offset_m`` per axis: a model further off than that needs identifying, not steering."""
+    then held. It is bounded by ``max_offset_m`` per axis: a model further off than that needs identifying, not
+    steering."""
 
     def __init__(self, model: pin.Model, period_s: float, time_constant_s: float = 0.15,
                  max_offset_m: float = 0.05) -> None:
