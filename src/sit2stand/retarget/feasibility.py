@@ -10,6 +10,8 @@ accelerations / s^2) whose ZMP keeps ``margin_m`` inside the feet wherever the f
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pinocchio as pin
 from scipy.spatial import ConvexHull
@@ -66,33 +68,55 @@ def support_margin(points_xy: np.ndarray, polygon_xy: np.ndarray) -> np.ndarray:
     return (pts @ inward.T - offsets).min(axis=1)
 
 
-def edge_normals(polygon_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit inward normals (V, 2) of a convex polygon's edges (vertices in order, either way round) and each edge's
-    offset n . vertex: a point p is inside edge k by n_k . p - offset_k."""
-    poly = np.asarray(polygon_xy, float)
+@functools.lru_cache(maxsize=64)
+def _edge_normals(vertices: bytes, count: int) -> tuple[np.ndarray, np.ndarray]:
+    poly = np.frombuffer(vertices, float).reshape(count, 2)
     nxt = np.concatenate([poly[1:], poly[:1]])
     edges = nxt - poly
     area2 = float(np.sum(poly[:, 0] * nxt[:, 1] - nxt[:, 0] * poly[:, 1]))
     inward = np.sign(area2) * np.stack([-edges[:, 1], edges[:, 0]], axis=1)
     inward /= np.sqrt((inward ** 2).sum(axis=1))[:, None]
-    return inward, (inward * poly).sum(axis=1)
+    offsets = (inward * poly).sum(axis=1)
+    inward.flags.writeable = offsets.flags.writeable = False      # shared between callers
+    return inward, offsets
+
+
+def edge_normals(polygon_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit inward normals (V, 2) of a convex polygon's edges (vertices in order, either way round) and each edge's
+    offset n . vertex: a point p is inside edge k by n_k . p - offset_k. Read-only arrays, kept per polygon: the
+    live player asks for the same feet's three times a frame."""
+    poly = np.ascontiguousarray(polygon_xy, float)
+    return _edge_normals(poly.tobytes(), len(poly))
 
 
 def frame_time_scales(com_m: np.ndarray, com_acc: np.ndarray, dl_nm: np.ndarray, mass_kg: float,
                       polygon_xy: np.ndarray, margin_m: float, max_factor: float = 4.0,
                       resolution: float = 0.02) -> np.ndarray:
     """Per frame, the smallest time-scale factor s (on a grid of ``resolution`` in [1, ``max_factor``]) whose ZMP
-    (:func:`zmp_at_scale`) keeps ``margin_m`` inside ``polygon_xy``; ``max_factor`` where none does. Slowing down moves
-    a frame's ZMP toward its COM, and the margin is concave inside a convex polygon, so every larger s keeps the
-    margin too (when the COM itself has it): a plan needs the largest of its frames' factors."""
+    (:func:`zmp_at_scale`) keeps ``margin_m`` inside ``polygon_xy``; ``max_factor`` where none does (a NaN frame too).
+
+    Solved, not searched: with k = 1/s^2, an edge's margin times the vertical force m (g + k a_z) is linear in k,
+    A + k C >= 0, so each edge keeps the margin on a half-line of k and the polygon on their intersection
+    [k_lo, k_hi] (k_hi also short of the k where the feet stop pushing); s is the first grid point at or past
+    1/sqrt(k_hi) if its k is still >= k_lo. Slowing down moves a
+    frame's ZMP toward its COM: when the COM has the margin, every larger s keeps it too, and a plan needs the
+    largest of its frames' factors."""
     c, a, dl = (np.atleast_2d(np.asarray(x, float)) for x in (com_m, com_acc, dl_nm))
+    inward, offsets = edge_normals(polygon_xy)
+    A = (c[:, :2] @ inward.T - (offsets + margin_m)) * (mass_kg * G)                    # (N, E): k = 0
+    moment = np.stack([c[:, 2] * mass_kg * a[:, 0] + dl[:, 1], c[:, 2] * mass_kg * a[:, 1] - dl[:, 0]], axis=1)
+    C = A * (a[:, 2:3] / G) - moment @ inward.T
+    bound = -A / np.where(C == 0.0, 1.0, C)
+    k_hi = np.where(C < 0, bound, np.where((C == 0) & (A < 0), -np.inf, np.inf)).min(axis=1)
+    falling = a[:, 2] < 0                   # and the feet push: g + k a_z > 0
+    k_hi = np.where(falling, np.minimum(k_hi, G / np.where(falling, -a[:, 2], 1.0) * (1.0 - 1e-12)), k_hi)
+    k_lo = np.where(C > 0, bound, -np.inf).max(axis=1)
     scales = np.arange(1.0, max_factor + 1e-9, resolution)
-    n, k = len(c), len(scales)
-    inv2 = np.repeat(1.0 / scales**2, n)[:, None]                   # grid-major: (k * n, 1)
-    z = zmp_at_scale(np.tile(c, (k, 1)), np.tile(a, (k, 1)) * inv2, np.tile(dl, (k, 1)) * inv2, mass_kg, 1.0)
-    ok = (support_margin(z[:, :2], polygon_xy) >= margin_m).reshape(k, n)
-    first = np.argmax(ok, axis=0)
-    return np.where(ok.any(axis=0), scales[first], max_factor)
+    steps = np.ceil((np.sqrt(1.0 / np.clip(k_hi, 1e-300, 1.0)) - 1.0) / resolution - 1e-9)
+    inside = steps < len(scales)
+    s = scales[np.where(inside, steps, 0).astype(int)]
+    ok = inside & (k_hi > 0) & (1.0 / s**2 >= k_lo) & np.isfinite(A).all(axis=1) & np.isfinite(C).all(axis=1)
+    return np.where(ok, s, max_factor)
 
 
 def retime_factor(model: pin.Model, qs: np.ndarray, dt: float, polygon_xy: np.ndarray, on_feet: np.ndarray,
