@@ -455,5 +455,6 @@ def contact_joint_torques(model, data, q: np.ndarray, taus: np.ndarray, seated: 
     if seated:   # the seat pushes up under the buttocks (the seat frame: model.add_seat_frame)
         J = np.vstack([J, pin.getFrameJacobian(model, data, model.getFrameId("seat"), pin.LOCAL_WORLD_ALIGNED)[:3]])
     taus = np.atleast_2d(taus)
-    lam = np.linalg.lstsq(J[:, :6].T, taus[:, :6].T, rcond=None)[0]
+    base = J[:, :6]        # full column rank (each sole's own 6 x 6 block is): the least-norm forces in closed form
+    lam = base @ np.linalg.solve(base.T @ base, taus[:, :6].T)
     return taus[:, 6:] - (J[:, 6:].T @ lam).T
