@@ -3,7 +3,7 @@ messages, and read back in rclpy; the robot state's JointState and stamped geome
 
 import numpy as np
 import pytest
-from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
+from geometry_msgs.msg import Point, PointStamped, PoseStamped, WrenchStamped
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -11,8 +11,8 @@ from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, MocapFrame
 
 from sit2stand.io.messages import force_plate_sample, mocap_frame
 from sit2stand.io.stream_messages import (CenterOfMassEncoder, JointStateEncoder, JointStateReader,
-                                          JointTrajectoryEncoder, MocapFrameEncoder, PlateSampleEncoder,
-                                          StampedNumbersEncoder, pose_from_cdr)
+                                          JointTrajectoryEncoder, MocapFrameEncoder, MocapFrameReader,
+                                          PlateSampleEncoder, StampedNumbersEncoder, pose_from_cdr)
 from sit2stand.io.topics import LAB_FRAME, MOCAP_TYPE, PLATE_TYPE
 from sit2stand.io.typestore import typestore
 
@@ -116,6 +116,28 @@ def test_joint_states_and_poses_are_read_from_their_bytes():
         pose.pose.position.x, pose.pose.orientation.z, pose.pose.orientation.w = 1.5, 0.6, 0.8
         t_ns, numbers = pose_from_cdr(serialize_message(pose))
         assert t_ns == 7_000_000_008 and numbers.tolist() == [1.5, 0, 0, 0, 0, 0.6, 0.8]
+
+
+def test_mocap_frames_are_read_from_their_bytes_as_rclpy_builds_them():
+    """The estimator's and the retargeter's reading of a marker frame: stamp, names, positions (NaN where invalid)
+    and validity as rclpy's message has them, whichever frame id, name lengths (each shifts the alignment) and count
+    (names read again when they change); a frame whose arrays disagree with its names is refused."""
+    rng = np.random.default_rng(3)
+    reader = MocapFrameReader()
+    for names, frame in [(["LASI", "RASI", "T10"], "lab"), (["LASI", "RASI", "T10"], "lab"), (["a", "bcdefgh"], ""),
+                         ([], "lab_frame"), (["x", "yy", "zzz", "wwww", "v"], "l"), (["LASI", "RASI", "T10"], "lab")]:
+        msg = MocapFrame(marker_names=names, valid=[bool(v) for v in rng.random(len(names)) > 0.3],
+                         residuals_m=[0.001] * len(names))
+        msg.header.frame_id, msg.header.stamp.sec, msg.header.stamp.nanosec = frame, 1_700_000_123, 456_789_012
+        msg.positions = [Point(x=x, y=y, z=z) for x, y, z in rng.normal(size=(len(names), 3))]
+        t_ns, got_names, pos, valid = reader.read(serialize_message(msg))
+        assert t_ns == 1_700_000_123_456_789_012 and got_names == names and valid.tolist() == list(msg.valid)
+        want = np.array([[p.x, p.y, p.z] for p in msg.positions]).reshape(-1, 3)
+        want[~valid] = np.nan
+        np.testing.assert_array_equal(pos, want)
+    msg.valid = msg.valid[:-1]
+    with pytest.raises(ValueError, match="3 marker names, 3 positions and 2 validity flags"):
+        reader.read(serialize_message(msg))
 
 
 @pytest.mark.parametrize(("source", "frame"), [("robot_plan", "world"), ("skeleton_fit", "lab"), ("", "")])

@@ -22,7 +22,6 @@ from ..human.description import SkeletonFrames, human_urdf
 from ..human.mass_scaling import MassScaling
 from ..human.skeleton import HumanModel
 from ..io.marker_message import marker_array_cdr
-from ..io.messages import stamp_ns
 from ..io.stream_messages import CenterOfMassEncoder, JointStateEncoder, StampedNumbersEncoder
 from ..io.tf_message import TfEncoder
 from ..io.topics import (HUMAN_COM_TOPIC, HUMAN_DESCRIPTION_TOPIC, HUMAN_JOINTS_TOPIC, HUMAN_MARKERS_TOPIC,
@@ -32,20 +31,20 @@ from .markers import human_marker_shapes
 from .qos import LATCHED_QOS, PUBLISH_DEPTH, TF_QOS
 
 
-def header_of(stamp, frame_id: str) -> Header:
-    """A header of its own (never shared between messages)."""
-    return Header(stamp=Time(sec=stamp.sec, nanosec=stamp.nanosec), frame_id=frame_id)
-
-
 def ns_of(t_s: float) -> int:
     """``t_s`` [s] in integer nanoseconds."""
     return int(round(t_s * 1e9))
 
 
+def time_of_ns(t_ns: int) -> Time:
+    """builtin_interfaces/Time of ``t_ns`` [ns]."""
+    sec, nsec = divmod(int(t_ns), 1_000_000_000)
+    return Time(sec=sec, nanosec=nsec)
+
+
 def stamp_of(t_s: float) -> Time:
     """builtin_interfaces/Time of ``t_s`` [s]."""
-    sec, nsec = divmod(ns_of(t_s), 1_000_000_000)
-    return Time(sec=sec, nanosec=nsec)
+    return time_of_ns(ns_of(t_s))
 
 
 class HumanOutputs:
@@ -82,7 +81,7 @@ class HumanOutputs:
         """The skeleton's joints, laid out once (a calibration rescales lengths only)."""
         self.joint_encoder = JointStateEncoder(names, HUMAN_ROOT_FRAME, ("position",))
 
-    def com(self, header, out: StreamOutput) -> None:
+    def com(self, t_ns: int, out: StreamOutput) -> None:
         """The COM of the frame (the last valid one while the fit fails), with its quality and the latest delayed
         frame's COP error (~half a window back), as bytes: ~10 us against ~100 us as an rclpy message."""
         com = out.com_m if np.all(np.isfinite(out.com_m)) else self.last_com
@@ -90,21 +89,20 @@ class HumanOutputs:
         if com is not None and out.valid:
             self.last_com, velocity, acceleration = com, out.com_vel, out.com_acc
         self.pubs["com"].publish(self.com_encoder.encode(
-            stamp_ns(header), (0.0, 0.0, 0.0) if com is None else com, velocity, acceleration, bool(out.valid),
+            t_ns, (0.0, 0.0, 0.0) if com is None else com, velocity, acceleration, bool(out.valid),
             float(out.marker_rms_m), self.last_cop_error, int(out.n_markers)))
 
-    def rest(self, header, out: StreamOutput) -> None:
+    def rest(self, t_ns: int, out: StreamOutput) -> None:
         """Joint angles (of the chain below the pelvis), the pelvis pose in lab, both COPs of the delayed frame."""
         if out.model_cop_m is not None and out.measured_cop_m is not None:
             self.last_cop_error = float(np.linalg.norm(out.model_cop_m[:2] - out.measured_cop_m[:2]))
-        t_ns = stamp_ns(header)
         self.pubs["joints"].publish(self.joint_encoder.encode(t_ns, out.q[7:]))
         self.pubs["pelvis"].publish(self.lab_pose.encode(t_ns, out.q[:7]))     # Pinocchio's x y z, qx qy qz qw
         for name, cop in (("model_cop", out.model_cop_m), ("measured_cop", out.measured_cop_m)):
             if cop is not None and out.delayed_t_s is not None:       # on the floor: z 0
                 self.pubs[name].publish(self.lab_point.encode(ns_of(out.delayed_t_s), [cop[0], cop[1], 0.0]))
 
-    def viz(self, header, human: HumanModel, markers_m: np.ndarray, out: StreamOutput) -> None:
+    def viz(self, t_ns: int, human: HumanModel, markers_m: np.ndarray, out: StreamOutput) -> None:
         """The skeleton's /tf and the human's markers every ``viz_every`` frames (~50 us together); the skeleton's
         URDF whenever it is built or rebuilt (new lengths)."""
         if human is not self.described:
@@ -116,16 +114,18 @@ class HumanOutputs:
         if not self.viz_every or (self.frames_seen - 1) % self.viz_every:
             return
         if np.all(np.isfinite(out.q)):
-            self.pubs["tf"].publish(self.tf_encoder.encode(stamp_ns(header), *self.frames.transforms(out.q)))
+            self.pubs["tf"].publish(self.tf_encoder.encode(t_ns, *self.frames.transforms(out.q)))
         cop_stamp = stamp_of(out.delayed_t_s) if out.delayed_t_s is not None else None
-        self.pubs["viz"].publish(marker_array_cdr(human_marker_shapes(header.stamp, markers_m, self.last_com, cop_stamp,
-                                                                      out.measured_cop_m, out.model_cop_m)))
+        shapes = human_marker_shapes(time_of_ns(t_ns), markers_m, self.last_com, cop_stamp, out.measured_cop_m,
+                                     out.model_cop_m)
+        self.pubs["viz"].publish(marker_array_cdr(shapes))
 
-    def scaling(self, stamp, sc: MassScaling) -> None:
+    def scaling(self, t_ns: int, sc: MassScaling) -> None:
         names = [f"{g}.mass" for g in sc.masses] + ["torso.com_shift_x", "torso.com_shift_y"]
         values = list(sc.masses.values()) + [float(sc.torso_com_shift_m[0]), float(sc.torso_com_shift_m[1])]
-        self.pubs["scaling"].publish(InertialParameters(header=header_of(stamp, LAB_FRAME), model="human_scaling",
-                                                        names=names, values=[float(v) for v in values],
+        header = Header(stamp=time_of_ns(t_ns), frame_id=LAB_FRAME)
+        self.pubs["scaling"].publish(InertialParameters(header=header, model="human_scaling", names=names,
+                                                        values=[float(v) for v in values],
                                                         std_devs=[float("nan")] * len(values)))
 
     def stats(self, figures: dict[str, str]) -> None:

@@ -9,6 +9,7 @@ Topics and parameters: ``docs/nodes.md`` (retargeter).
 
 from __future__ import annotations
 
+import struct
 import sys
 import time
 
@@ -21,6 +22,7 @@ from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, MocapFrame
 
 from ..human.marker_sets import load_marker_set, load_packaged_marker_sets
 from ..io.messages import plate_sample_from_cdr, stamp_ns
+from ..io.stream_messages import MocapFrameReader
 from ..io.topics import (CHAIR_PLATE_TOPIC, HUMAN_COM_TOPIC, MARKERS_TOPIC, ROBOT_BASE_POSE_TOPIC,
                          ROBOT_JOINT_STATES_TOPIC, ros_name)
 from ..retarget.pacing import (READY_LINE, LiveRetargeting, MarkerFrame, summary_line)
@@ -93,7 +95,8 @@ class RetargeterNode(Node):
 
     def _subscribe(self) -> None:
         deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
-        self.create_subscription(MocapFrame, ros_name(MARKERS_TOPIC), self._on_markers, deep)
+        self.marker_reader = MocapFrameReader()     # raw: the arrays straight from the CDR bytes
+        self.create_subscription(MocapFrame, ros_name(MARKERS_TOPIC), self._on_markers, deep, raw=True)
         # /human/com is subscribed with its publishers' durability once they appear (transient local from the
         # estimator: a late match still gets every estimate; volatile from a replayed bag)
         self._com_discovery = steady_timer(self, 0.1, self._discover_com)
@@ -149,13 +152,15 @@ class RetargeterNode(Node):
                            msg.valid)
         self._process()
 
-    def _on_markers(self, msg: MocapFrame) -> None:
-        pos = np.array([[p.x, p.y, p.z] for p in msg.positions], float).reshape(-1, 3)
-        t_s = stamp_ns(msg.header) * 1e-9
-        if (wrong_rate := self.rate_check.add(t_s)) is not None:
+    def _on_markers(self, data: bytes) -> None:
+        received = time.perf_counter()
+        try:
+            t_ns, names, pos, valid = self.marker_reader.read(data)
+        except (ValueError, struct.error) as err:
+            raise NodeError(f"{MARKERS_TOPIC}: a frame that cannot be read ({err})") from None
+        if (wrong_rate := self.rate_check.add(t_ns * 1e-9)) is not None:
             raise NodeError(wrong_rate)
-        self.live.add_frame(MarkerFrame(t_s, list(msg.marker_names), pos, np.asarray(msg.valid, bool),
-                                        time.perf_counter(), msg.header))
+        self.live.add_frame(MarkerFrame(t_ns * 1e-9, names, pos, valid, received, t_ns))
         self._process()
 
     # -- processing --------------------------------------------------------------------------------------------
@@ -165,7 +170,7 @@ class RetargeterNode(Node):
             if self.live.retargeter is None and not self._start(frame, com):
                 return
             q = self.live.step(frame, com)
-            self.out.ik_pose(stamp_ns(frame.header), q)     # after the command: for the record, not on the path
+            self.out.ik_pose(frame.stamp_ns, q)     # after the command: for the record, not on the path
 
     def _start(self, frame: MarkerFrame, com: np.ndarray) -> bool:
         """Calibrate on the first ready frame, over the robot's measured posture (False: wait for it)."""

@@ -208,7 +208,7 @@ class MarkerFrame:
     positions_m: np.ndarray
     valid: np.ndarray
     received_s: float
-    header: object = None          # the message header, handed back with the frame's IK pose
+    stamp_ns: int = 0              # the message's stamp [ns], handed back with the frame's IK pose
 
 
 @dataclass
