@@ -98,9 +98,8 @@ def frame_time_scales(com_m: np.ndarray, com_acc: np.ndarray, dl_nm: np.ndarray,
     Solved, not searched: with k = 1/s^2, an edge's margin times the vertical force m (g + k a_z) is linear in k,
     A + k C >= 0, so each edge keeps the margin on a half-line of k and the polygon on their intersection
     [k_lo, k_hi] (k_hi also short of the k where the feet stop pushing); s is the first grid point at or past
-    1/sqrt(k_hi) if its k is still >= k_lo. Slowing down moves a
-    frame's ZMP toward its COM: when the COM has the margin, every larger s keeps it too, and a plan needs the
-    largest of its frames' factors."""
+    1/sqrt(k_hi) if its k is still >= k_lo. Slowing down moves a frame's ZMP toward its COM: when the COM has the
+    margin, every larger s keeps it too, and a plan needs the largest of its frames' factors."""
     c, a, dl = (np.atleast_2d(np.asarray(x, float)) for x in (com_m, com_acc, dl_nm))
     inward, offsets = edge_normals(polygon_xy)
     A = (c[:, :2] @ inward.T - (offsets + margin_m)) * (mass_kg * G)                    # (N, E): k = 0
