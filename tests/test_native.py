@@ -1,17 +1,24 @@
 """sit2stand.native: the compiled kernels give the NumPy and Pinocchio answers they replace, the QP kernel gives
 the general solver's answers or none, and the IK is the same with or without them."""
 
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import pytest
 
 from sit2stand import native
+from sit2stand.human.marker_ik import MarkerIK
+from sit2stand.human.offline import read_trial
+from sit2stand.human.skeleton import Subject, build_human
 from sit2stand.kinematics import PointJacobians
 from sit2stand.optim import QpProblem, WarmQp
 from sit2stand.retarget.ik import ComIk, MarkerTargets
 from sit2stand.retarget.robot import robot_setup
 
 from test_optim import proxsuite_answer, random_qp
+
+DEMO = Path(__file__).resolve().parents[1] / "bags"
 
 pytestmark = pytest.mark.skipif(native.kernels() is None, reason="no C compiler: the kernels are not built")
 
@@ -200,3 +207,22 @@ def test_no_compiler_or_disabled_means_no_kernels_and_a_damaged_cache_is_built_a
                 assert native.kernels() is None
     finally:
         native.kernels.cache_clear()
+
+
+def test_the_skeleton_fit_is_the_same_with_or_without_the_kernels():
+    """The human skeleton fitted to a shipped demonstration's frames, markers occluded at random: the same poses
+    and residuals, to round-off, whichever path computes the markers' terms."""
+    trial = read_trial(DEMO / "natural")
+    human = build_human(Subject(trial.height_m, trial.mass_kg, trial.sex))
+    fits = [MarkerIK(human, trial.marker_names) for _ in range(2)]
+    fits[1]._terms = None
+    assert fits[0]._terms is not None
+    rng, fitted = np.random.default_rng(4), 0
+    for k in range(0, len(trial.marker_t_s), 10):
+        valid = trial.valid[k] & (rng.random(len(trial.marker_names)) > 0.1)
+        a, b = (ik.fit(trial.positions[k], valid) for ik in fits)
+        assert a.ok == b.ok and a.iterations == b.iterations and np.abs(a.q - b.q).max() < 1e-9
+        if a.ok:       # a pelvis marker occluded leaves the frame unfitted, on both paths
+            fitted += 1
+            assert abs(a.rms_m - b.rms_m) < 1e-12
+    assert fitted >= 20

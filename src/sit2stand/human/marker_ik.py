@@ -18,6 +18,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.linalg import lapack
 
+from .. import native
 from ..errors import Sit2StandError
 from ..kinematics import PointJacobians
 from .marker_sets import MIN_MARKERS, MarkerSetError, load_marker_set
@@ -113,6 +114,9 @@ class MarkerIK:
         self._q_prev: np.ndarray | None = None
         self.points = PointJacobians(self.model)
         self._point_set = self.points.point_set(self.frames)
+        nv = self.model.nv           # the markers' terms in C where the kernels are built (None: the NumPy path)
+        self._terms = native.MarkerTerms.of(self.data, np.zeros(nv))
+        self._H, self._g = np.empty((nv, nv)), np.empty(nv)
 
     def pelvis_defined(self, ok: np.ndarray) -> bool:
         """True if the valid markers ``ok`` (in :attr:`used_names` order) define the pelvis (the set's rule)."""
@@ -148,22 +152,20 @@ class MarkerIK:
                       ) -> tuple[np.ndarray, np.ndarray, float, int]:
         """Damped Gauss-Newton from q on the markers ``ok`` (the others' rows weigh 0) and the posture prior: the
         last iterate, the best one, its cost and the iterations run."""
-        model, data, nv = self.model, self.data, self.model.nv
+        model, nv = self.model, self.model.nv
         w_post = self.posture_weight
-        rows = np.repeat(ok, 3).astype(float)
-        target = np.where(ok[:, None], pos, 0.0).ravel()
+        target = np.where(ok[:, None], pos, 0.0)
+        markers = self._marker_terms(ok, target)
         damping = MIN_DAMPING
         best_q, best_cost, JtJ, grad = q, np.inf, np.eye(nv), np.zeros(nv)
         it = 0
         for it in range(1, max_iter + 1):  # noqa: B007 (the count is reported after the loop)
-            pin.computeJointJacobians(model, data, q)
-            P, Jm = self.points(data, self._point_set, rows)
-            r = (P.ravel() - target) * rows
+            pin.computeJointJacobians(model, self.data, q)
+            marker_cost, JtJ_q, Jtr_q = markers()
             e_post = self._posture_error(q)
-            cost = r @ r + w_post * (e_post @ e_post)
+            cost = marker_cost + w_post * (e_post @ e_post)
             if cost <= best_cost:     # downhill (or the start): keep it, and the damping back to its floor
-                J = Jm.reshape(-1, nv)
-                best_q, best_cost, JtJ, grad = q, cost, J.T @ J, J.T @ r + w_post * e_post
+                best_q, best_cost, JtJ, grad = q, cost, JtJ_q.copy(), Jtr_q + w_post * e_post
                 damping = max(damping / 10, MIN_DAMPING)
             else:                     # uphill: back to the best pose, a shorter step
                 damping *= 10
@@ -175,6 +177,28 @@ class MarkerIK:
             if np.abs(dq).max() < tol:
                 break
         return q, best_q, best_cost, it
+
+    def _marker_terms(self, ok: np.ndarray, target: np.ndarray):
+        """For the markers ``ok`` (the others weigh 0) and their ``target`` positions (M, 3) [m]: a function that,
+        after ``computeJointJacobians``, gives their cost sum |p - t|^2 [m^2], J'J and J'(p - t)."""
+        terms = self._terms
+        if terms is not None:
+            weights = ok.astype(float)
+            terms.load(self._point_set, weights, target)
+
+            def compiled() -> tuple[float, np.ndarray, np.ndarray]:
+                terms(self._H, self._g)
+                d = terms.positions - target
+                return float(weights @ np.einsum("ij,ij->i", d, d)), self._H, self._g
+            return compiled
+        rows, flat = np.repeat(ok, 3).astype(float), target.ravel()
+
+        def numpy_terms() -> tuple[float, np.ndarray, np.ndarray]:
+            P, Jm = self.points(self.data, self._point_set, rows)
+            r = (P.ravel() - flat) * rows
+            J = Jm.reshape(-1, self.model.nv)
+            return float(r @ r), J.T @ J, J.T @ r
+        return numpy_terms
 
     def fit(self, positions_m: np.ndarray, valid: np.ndarray, q0: np.ndarray | None = None,
             max_iter: int = 12, tol: float = 1e-5) -> FrameFit:

@@ -192,6 +192,11 @@ class MarkerTerms:
         self._lib.marker_terms(self.nv, layout.size, *self._strides, self._block.pointer,
                                layout.kernel_block.pointer, self._outputs(H, g))
 
+    @property
+    def positions(self) -> np.ndarray:
+        """The loaded markers' world positions (M, 3) [m] from the last call (a view, overwritten by the next)."""
+        return self._P[:self._layout.size]
+
 
 class SoleRows:
     """The feet's equality rows (``sole_rows`` of the kernels): per sole frame, its LOCAL frame Jacobian (6, nv)
