@@ -19,6 +19,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sit2stand_msgs.msg import ForcePlateSample, MocapFrame
 from sit2stand_msgs.msg import Subject as SubjectMsg
 
+from .. import native
 from ..human.calibration import StreamCalibration
 from ..human.com import WINDOW_S
 from ..human.com_feed import SUBJECT_WAIT_FRAMES, FrameCosts, PlateInbox, SubjectWait, shed
@@ -70,6 +71,7 @@ class HumanComNode(Node):
                            "human-calibrate); empty: calibrate on the first frames")
         self.shed_behind_s = declare(self, "shed_behind_s", 0.0, "a frame this far behind the clock [s] gets its "
                                      "COM only: no COPs, scaling rows nor /tf (0: never)")
+        native.kernels()     # the skeleton fit's compiled kernels now (built on a machine's first run: ~1.8 s)
         self.calibration = None
         if cal_file:
             try:

@@ -20,6 +20,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from sit2stand_msgs.msg import CenterOfMass, ForcePlateSample, MocapFrame
 
+from .. import native
 from ..human.marker_sets import load_marker_set, load_packaged_marker_sets
 from ..io.messages import plate_sample_from_cdr, stamp_ns
 from ..io.stream_messages import MocapFrameReader
@@ -69,6 +70,7 @@ class RetargeterNode(Node):
         except (ValueError, OSError) as err:
             raise NodeError(f"retargeter: plant {plant_file}, controller_params "
                             f"{params_file or '(CAD)'}: {err}") from None
+        native.kernels()     # the IK's compiled kernels now too (built on a machine's first run: ~1.8 s)
         # the marker sets now too: read at the first frame, they held it and the 10 after it up by ~0.1 s
         try:
             load_packaged_marker_sets()
