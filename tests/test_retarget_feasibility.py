@@ -66,7 +66,7 @@ def test_each_frames_time_scale_is_the_first_grid_point_whose_zmp_keeps_the_marg
     other way round, for three margins and caps."""
     rng = np.random.default_rng(5)
     polygons = [np.array([[0.15, 0.2], [-0.08, 0.2], [-0.08, -0.2], [0.15, -0.2]]),
-                np.array([[-0.1, 0.1], [-0.12, 0.0], [-0.1, -0.12], [0.12, -0.1], [0.1, 0.1]])]
+                np.array([[0.1, 0.1], [0.12, -0.1], [-0.1, -0.12], [-0.12, 0.0], [-0.1, 0.1]])]      # clockwise
     n = 20_000
     com = np.c_[rng.normal(0.0, 0.08, (n, 2)), rng.uniform(0.5, 1.0, n)]
     acc, dl = rng.normal(0.0, 3.0, (n, 3)), rng.normal(0.0, 8.0, (n, 3))
