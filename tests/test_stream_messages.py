@@ -121,7 +121,7 @@ def test_joint_states_and_poses_are_read_from_their_bytes():
 def test_mocap_frames_are_read_from_their_bytes_as_rclpy_builds_them():
     """The estimator's and the retargeter's reading of a marker frame: stamp, names, positions (NaN where invalid)
     and validity as rclpy's message has them, whichever frame id, name lengths (each shifts the alignment) and count
-    (names read again when they change); a frame whose arrays disagree with its names is refused."""
+    (names read again when they change); a frame cut short, or whose arrays disagree with its names, is refused."""
     rng = np.random.default_rng(3)
     reader = MocapFrameReader()
     for names, frame in [(["LASI", "RASI", "T10"], "lab"), (["LASI", "RASI", "T10"], "lab"), (["a", "bcdefgh"], ""),
@@ -138,6 +138,8 @@ def test_mocap_frames_are_read_from_their_bytes_as_rclpy_builds_them():
     msg.valid = msg.valid[:-1]
     with pytest.raises(ValueError, match="3 marker names, 3 positions and 2 validity flags"):
         reader.read(serialize_message(msg))
+    with pytest.raises(ValueError, match="cut short"):
+        MocapFrameReader().read(serialize_message(msg)[:30])
 
 
 @pytest.mark.parametrize(("source", "frame"), [("robot_plan", "world"), ("skeleton_fit", "lab"), ("", "")])

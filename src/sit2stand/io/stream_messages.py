@@ -272,8 +272,14 @@ class MocapFrameReader:
         """Stamp [ns], marker names, positions (M, 3) [m] (NaN where invalid) and validity (M,) of a frame.
 
         Raises:
-            ValueError: the frame's arrays do not have one entry per marker name.
+            ValueError: the frame is cut short, or its arrays do not have one entry per marker name.
         """
+        try:
+            return self._read(data)
+        except struct.error as err:
+            raise ValueError(f"MocapFrame cut short ({len(data)} bytes): {err}") from None
+
+    def _read(self, data: bytes) -> tuple[int, list[str], np.ndarray, np.ndarray]:
         t_ns, end = stamp_and_frame_end(data)
         n_at = end + (-(end - 4) % 4)
         if data[n_at:self._names_end] != self._names_bytes or not self._names_bytes:

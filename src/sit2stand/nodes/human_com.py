@@ -11,7 +11,6 @@ Topics and parameters: ``docs/nodes.md`` (human_com).
 from __future__ import annotations
 
 import dataclasses
-import struct
 import time
 
 from rclpy.node import Node
@@ -179,7 +178,7 @@ class HumanComNode(Node):
         t0, c0 = time.perf_counter(), time.thread_time()
         try:
             t_ns, names, pos, valid = self.marker_reader.read(data)
-        except (ValueError, struct.error) as err:
+        except ValueError as err:
             self._fail(f"{MARKERS_TOPIC}: a frame that cannot be read ({err})")
             return
         if self.estimator is None and not self._start(list(names)):

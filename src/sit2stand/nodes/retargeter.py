@@ -9,7 +9,6 @@ Topics and parameters: ``docs/nodes.md`` (retargeter).
 
 from __future__ import annotations
 
-import struct
 import sys
 import time
 
@@ -158,7 +157,7 @@ class RetargeterNode(Node):
         received = time.perf_counter()
         try:
             t_ns, names, pos, valid = self.marker_reader.read(data)
-        except (ValueError, struct.error) as err:
+        except ValueError as err:
             raise NodeError(f"{MARKERS_TOPIC}: a frame that cannot be read ({err})") from None
         if (wrong_rate := self.rate_check.add(t_ns * 1e-9)) is not None:
             raise NodeError(wrong_rate)
