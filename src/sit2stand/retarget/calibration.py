@@ -128,28 +128,30 @@ class MarkerMap:
         return out
 
 
-def _bones(model: pin.Model, data: pin.Data) -> list[tuple[int, np.ndarray, np.ndarray]]:
-    """(joint id, start, end) world segments standing for each link: from its joint to each child joint, and from
-    its joint through its COM to twice the COM offset (the link's extent; the only bone of a leaf such as the head
-    or the foot)."""
+def _bones(model: pin.Model, data: pin.Data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The world segments standing for each link: from its joint to each child joint, and from its joint through its
+    COM to twice the COM offset (the link's extent; the only bone of a leaf such as the head or the foot). Returns
+    each bone's joint id (B,), start and end (B, 3) [m], in the model's joint order."""
     children: dict[int, list[int]] = {}
     for j in range(2, model.njoints):
         children.setdefault(model.parents[j], []).append(j)
-    bones = []
+    joint, start, end = [], [], []
     for j in range(1, model.njoints):
         a = data.oMi[j].translation
-        for c in children.get(j, []):
-            bones.append((j, a, data.oMi[c].translation))
-        bones.append((j, a, data.oMi[j].act(2.0 * model.inertias[j].lever)))
-    return bones
+        ends = [data.oMi[c].translation for c in children.get(j, [])]
+        for b in ends + [data.oMi[j].act(2.0 * model.inertias[j].lever)]:
+            joint.append(j)
+            start.append(a)
+            end.append(b)
+    return np.array(joint, int), np.array(start), np.array(end)
 
 
-def _depth(model: pin.Model, j: int) -> int:
-    d = 0
-    while j > 0:
-        j = model.parents[j]
-        d += 1
-    return d
+def _joint_depths(model: pin.Model) -> np.ndarray:
+    """Each joint's number of joints from the universe (njoints,)."""
+    depth = np.zeros(model.njoints, int)
+    for j in range(1, model.njoints):
+        depth[j] = depth[model.parents[j]] + 1
+    return depth
 
 
 def left_leg_points(roles: MarkerRoles, names: list[str], positions_m: np.ndarray, valid: np.ndarray,
@@ -199,12 +201,13 @@ def map_frame(t_s: np.ndarray, positions_m: np.ndarray, valid: np.ndarray, seate
 
 
 def _point_segment_distances(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distances [m] from point ``p`` (3,) to the segments from ``a`` to ``b`` (N, 3)."""
+    """Distances [m] from points ``p`` (K, 3) to the segments from ``a`` to ``b`` (N, 3): (K, N)."""
     ab = b - a
     length2 = np.einsum("ij,ij->i", ab, ab)
-    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.where(length2 < 1e-12, 1.0, length2), 0.0, 1.0)
-    t[length2 < 1e-12] = 0.0
-    return np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
+    point = length2 < 1e-12
+    t = np.clip(np.einsum("kij,ij->ki", p[:, None, :] - a, ab) / np.where(point, 1.0, length2), 0.0, 1.0)
+    t[:, point] = 0.0
+    return np.linalg.norm(p[:, None, :] - (a + t[..., None] * ab), axis=2)
 
 
 def marker_group(name: str) -> str:
@@ -280,31 +283,27 @@ def calibrate_markers(model: pin.Model, q_robot: np.ndarray, names: list[str], p
     roles = roles or marker_roles()
     human_pelvis, _ = pelvis_centre(roles, names, positions_m, valid)
     scale = robot_thigh_m / human_thigh_m
-    robot_pelvis = data.oMi[1].translation
-    bones = _bones(model, data)
-    joint = np.array([b[0] for b in bones])
-    start, end = np.array([b[1] for b in bones]), np.array([b[2] for b in bones])
-    link = np.array([model.names[b[0]] for b in bones])
-    depth = np.array([_depth(model, b[0]) for b in bones])
+    joint, start, end = _bones(model, data)
+    link = np.array(list(model.names))[joint]
     sided = {side: np.char.find(link, side) >= 0 for side in ("left", "right")}
-    links, offsets = {}, {}
-    for i, name in enumerate(names):
-        if not valid[i] or not np.all(np.isfinite(positions_m[i])):
-            continue
-        p = robot_pelvis + scale * (positions_m[i] - human_pelvis)
+    shown = [i for i, name in enumerate(names) if valid[i] and np.all(np.isfinite(positions_m[i]))]
+    sites = data.oMi[1].translation + scale * (positions_m[shown] - human_pelvis)     # pelvis on pelvis [m]
+    # nearest bone; within 5 mm, the more distal link (a heel marker belongs to the foot, not the shank's end);
+    # the first in the model's order among equals
+    rank = np.round(_point_segment_distances(sites, start, end) / 0.005) * model.njoints - _joint_depths(model)[joint]
+    links, offsets, allowed_of = {}, {}, {}
+    for k, i in enumerate(shown):
+        name = names[i]
         side = roles.sides.get(name)
-        candidates = np.ones(len(bones), bool) if side is None else \
-            ~(sided["left"] | sided["right"]) | sided[side]
+        candidates = np.ones(len(joint), bool) if side is None else ~(sided["left"] | sided["right"]) | sided[side]
         if allowed_links is not None:
-            allowed = candidates & np.isin(link, list(allowed_links(model, name, roles)))
-            candidates = allowed if allowed.any() else candidates
-        # nearest bone; within 5 mm, the more distal link (a heel marker belongs to the foot, not the shank's end);
-        # the first in the model's order among equals
-        index = np.flatnonzero(candidates)
-        near = np.round(_point_segment_distances(p, start[index], end[index]) / 0.005)
-        j = int(joint[index[np.lexsort((-depth[index], near))[0]]])
+            allowed = tuple(allowed_links(model, name, roles))
+            if allowed not in allowed_of:
+                allowed_of[allowed] = np.isin(link, list(allowed))
+            candidates = candidates & allowed_of[allowed] if (candidates & allowed_of[allowed]).any() else candidates
+        j = int(joint[np.argmin(np.where(candidates, rank[k], np.inf))])
         links[name] = model.names[j]
-        offsets[name] = data.oMi[j].actInv(p)
+        offsets[name] = data.oMi[j].actInv(sites[k])
     return MarkerMap(links, offsets, scale)
 
 
