@@ -84,6 +84,7 @@ class PointJacobians:
         self._frames: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}
         self._layouts: dict[tuple[int, ...] | bytes, PointSet] = {}
         self._weighted: tuple | None = None     # (set, row weights, masks weighted by them) of the last call
+        self._joint_masks: np.ndarray | None = None     # (njoints, nv): see _joint_mask
 
     def support_mask(self, frame_id: int) -> np.ndarray:
         """(nv,) 1 on the velocity coordinates that move this frame, 0 elsewhere."""
@@ -126,13 +127,17 @@ class PointJacobians:
         return layout
 
     def _joint_mask(self, joint: int) -> np.ndarray:
-        """(nv,) 1 on the velocity coordinates that move ``joint``'s frame."""
-        model = self.model
-        mask = np.zeros(self.nv)
-        for j in model.supports[joint]:
-            if j > 0:
-                mask[model.joints[j].idx_v:model.joints[j].idx_v + model.joints[j].nv] = 1.0
-        return mask
+        """(nv,) 1 on the velocity coordinates that move ``joint``'s frame (read-only)."""
+        if self._joint_masks is None:       # all joints' at once, each from its parent's
+            model = self.model
+            masks = np.zeros((model.njoints, self.nv))
+            for j in range(1, model.njoints):
+                jt = model.joints[j]
+                masks[j] = masks[model.parents[j]]
+                masks[j, jt.idx_v:jt.idx_v + jt.nv] = 1.0
+            masks.flags.writeable = False
+            self._joint_masks = masks
+        return self._joint_masks[joint]
 
     def placements(self, data: pin.Data, layout: PointSet) -> np.ndarray:
         """The homogeneous world placements (len(joints), 4, 4) of the set's parent joints (after
