@@ -13,9 +13,9 @@ from sit2stand.human.anthropometry import (DE_LEVA, anthropometric_set, ankle_he
 from sit2stand.human.calibration import StreamCalibration, calibrate_lengths
 from sit2stand.human.com import estimate_com
 from sit2stand.human.com_stream import StreamingComEstimator
-from sit2stand.human.mass_scaling import (LENGTH_FACTOR_BOUNDS, MASS_GROUPS, SEGMENTS, ScalingRows, fit_mass_scaling,
-                                          group_of, lengths_at_bounds, prior_scaling, reweigh_by_residual,
-                                          scaling_at_bounds, solve_mass_scaling)
+from sit2stand.human.mass_scaling import (LENGTH_FACTOR_BOUNDS, MASS_GROUPS, SEGMENTS, FrameRows, RowPool, ScalingRows,
+                                          assemble_rows, fit_mass_scaling, group_of, lengths_at_bounds, prior_scaling,
+                                          reweigh_by_residual, scaling_at_bounds, solve_mass_scaling)
 from sit2stand.human.skeleton import PLUG_IN_GAIT, Subject, build_human
 from sit2stand.io.c3d import read_c3d
 
@@ -183,6 +183,30 @@ def test_rows_that_miss_smoothly_count_at_their_worth_against_the_prior():
     departure = {name: max(abs(f - 1) for f in s.factors().values()) for name, s in (("nominal", nominal),
                                                                                       ("refit", refit))}
     assert refit.noise_passes == 3 and departure["refit"] < departure["nominal"] / 2, departure
+
+
+def test_each_frame_gives_its_static_or_its_dynamic_rows_in_the_frames_order():
+    """Quiet frames with a COP give their three quasi-static rows (channels 6-8), the others their six dynamic rows
+    (0-5), each frame's in turn; the same from a list of frames and from the growing pool the live estimator keeps
+    (past its first 64 frames)."""
+    rng, n_theta = np.random.default_rng(2), len(MASS_GROUPS) + 2
+    acc = rng.uniform(0.0, 1.0, 150)
+    frames = [FrameRows(float(a), (rng.normal(size=(6, n_theta)), rng.normal(size=6)),
+                        None if k % 5 == 0 else (rng.normal(size=(3, n_theta)), rng.normal(size=3)))
+              for k, a in enumerate(acc)]
+    limit = max(0.15, float(np.quantile(acc, 0.4)))
+    static = [r.static is not None and r.acc <= limit for r in frames]
+    A = np.vstack([r.static[0] if s else r.dynamic[0] for r, s in zip(frames, static)])
+    b = np.concatenate([r.static[1] if s else r.dynamic[1] for r, s in zip(frames, static)])
+    channel = np.concatenate([np.arange(6, 9) if s else np.arange(6) for s in static])
+    weights = np.concatenate([[1 / 5.0, 1 / 2.0, 1 / 2.0] if s else [1 / 5.0] * 3 + [1 / 2.0] * 3 for s in static])
+    assert 20 < sum(static) < 130
+    for rows in (assemble_rows(frames), assemble_rows(RowPool.of(frames))):
+        np.testing.assert_array_equal(rows.A, A)
+        np.testing.assert_array_equal(rows.b, b)
+        np.testing.assert_array_equal(rows.channel, channel)
+        np.testing.assert_array_equal(rows.weights, weights)
+    assert assemble_rows([]).A.shape == (0, n_theta)
 
 
 def test_a_length_factor_at_its_bound_is_named():

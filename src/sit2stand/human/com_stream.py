@@ -20,7 +20,7 @@ from ..vectors import cross
 from .calibration import CALIBRATION_MIN_MARKERS, StreamCalibration, calibrate_stream
 from .com import WINDOW_S
 from .marker_ik import MIN_MARKERS, MarkerIK, check_marker_units
-from .mass_scaling import (FactorAtBound, FrameRows, MassScaling, apply_scaling, assemble_rows, frame_rows,
+from .mass_scaling import (FactorAtBound, FrameRows, MassScaling, RowPool, apply_scaling, assemble_rows, frame_rows,
                            fit_mass_scaling, lengths_at_bounds, scaling_at_bounds)
 from .skeleton import Subject, build_human
 from .support import SupportRule
@@ -217,7 +217,7 @@ class ScalingRows:
     min_rows: int
     first: int
     defer: bool = False
-    frames: list[FrameRows] = field(default_factory=list)
+    frames: RowPool = field(default_factory=RowPool)
     skipped_unfitted: int = 0      # supported frames kept out: held poses in their window
     pending: bool = False
 
@@ -226,7 +226,7 @@ class ScalingRows:
 
     def add(self, rows: FrameRows) -> bool:
         """Add a frame's rows; whether to solve now (False also when the solve is deferred: ``pending``)."""
-        self.frames.append(rows)
+        self.frames.add(rows)
         n = len(self.frames)
         if n < self.min_rows or not (n == self.first or n % self.every == 0):
             return False

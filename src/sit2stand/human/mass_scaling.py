@@ -223,28 +223,68 @@ class ScalingRows:
     channel: np.ndarray
 
 
-def assemble_rows(rows: list[FrameRows], quasi_static_acc: float = 0.15, quiet_fraction: float = 0.4,
+class RowPool:
+    """Frames' rows (:class:`FrameRows`) in arrays that grow by doubling: :func:`assemble_rows` then stacks them
+    without a Python step per frame (a live re-solve over 500 frames comes after a frame's COM, before the next)."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        n_theta = len(MASS_GROUPS) + 2
+        self.acc = np.zeros(0)                           # |a_com| [m/s^2]
+        self.has_static = np.zeros(0, bool)
+        self.dynamic_A, self.dynamic_b = np.zeros((0, 6, n_theta)), np.zeros((0, 6))
+        self.static_A, self.static_b = np.zeros((0, 3, n_theta)), np.zeros((0, 3))     # 0 where none
+
+    def __len__(self) -> int:
+        return self.n
+
+    @classmethod
+    def of(cls, rows: list[FrameRows]) -> RowPool:
+        pool = cls()
+        for r in rows:
+            pool.add(r)
+        return pool
+
+    def add(self, rows: FrameRows) -> None:
+        if self.n == len(self.acc):
+            for name in ("acc", "has_static", "dynamic_A", "dynamic_b", "static_A", "static_b"):
+                old = getattr(self, name)
+                grown = np.zeros((max(64, 2 * len(old)), *old.shape[1:]), old.dtype)
+                grown[:self.n] = old[:self.n]
+                setattr(self, name, grown)
+        k, self.n = self.n, self.n + 1
+        self.acc[k] = rows.acc
+        self.dynamic_A[k], self.dynamic_b[k] = rows.dynamic
+        self.has_static[k] = rows.static is not None
+        if rows.static is not None:
+            self.static_A[k], self.static_b[k] = rows.static
+
+
+def assemble_rows(rows: list[FrameRows] | RowPool, quasi_static_acc: float = 0.15, quiet_fraction: float = 0.4,
                   force_sd_n: float = 5.0, moment_sd_nm: float = 2.0) -> ScalingRows:
-    """Stack frames' equations with weights. Quasi-static frames use the static alternative: |a_com| below
-    ``quasi_static_acc``, or among the quietest ``quiet_fraction`` of all the frames given (a short recording may
-    never be quite still)."""
-    accs = np.array([r.acc for r in rows])
-    limit = max(quasi_static_acc, float(np.quantile(accs, quiet_fraction))) if len(accs) else quasi_static_acc
-    A_rows, b_rows, w_rows, c_rows = [], [], [], []
-    for r in rows:
-        if r.acc <= limit and r.static is not None:
-            A_rows.append(r.static[0])
-            b_rows.append(r.static[1])
-            w_rows.append(np.array([1 / force_sd_n, 1 / moment_sd_nm, 1 / moment_sd_nm]))
-            c_rows.append(np.arange(6, 9))
-        else:
-            A_rows.append(r.dynamic[0])
-            b_rows.append(r.dynamic[1])
-            w_rows.append(np.array([1 / force_sd_n] * 3 + [1 / moment_sd_nm] * 3))
-            c_rows.append(np.arange(6))
-    if not A_rows:
-        return ScalingRows(np.zeros((0, len(MASS_GROUPS) + 2)), np.zeros(0), np.zeros(0), np.zeros(0, int))
-    return ScalingRows(np.vstack(A_rows), np.concatenate(b_rows), np.concatenate(w_rows), np.concatenate(c_rows))
+    """Stack frames' equations with weights, each frame's rows in the frames' order. Quasi-static frames use the
+    static alternative: |a_com| below ``quasi_static_acc``, or among the quietest ``quiet_fraction`` of all the
+    frames given (a short recording may never be quite still)."""
+    pool = rows if isinstance(rows, RowPool) else RowPool.of(rows)
+    n, n_theta = pool.n, len(MASS_GROUPS) + 2
+    if not n:
+        return ScalingRows(np.zeros((0, n_theta)), np.zeros(0), np.zeros(0), np.zeros(0, int))
+    accs = pool.acc[:n]
+    limit = max(quasi_static_acc, float(np.quantile(accs, quiet_fraction)))
+    static = (accs <= limit) & pool.has_static[:n]
+    # all frames' six dynamic rows, then all frames' three static ones: each frame takes its own from there
+    A_all = np.concatenate([pool.dynamic_A[:n].reshape(-1, n_theta), pool.static_A[:n].reshape(-1, n_theta)])
+    b_all = np.concatenate([pool.dynamic_b[:n].ravel(), pool.static_b[:n].ravel()])
+    count = np.where(static, 3, 6)
+    first = np.where(static, 6 * n + 3 * np.arange(n), 6 * np.arange(n))
+    end = np.cumsum(count)
+    within = np.arange(end[-1]) - np.repeat(end - count, count)      # each row's place among its frame's rows
+    take = np.repeat(first, count) + within
+    dynamic_weights = np.array([1 / force_sd_n] * 3 + [1 / moment_sd_nm] * 3)
+    static_weights = np.array([1 / force_sd_n, 1 / moment_sd_nm, 1 / moment_sd_nm])
+    frame_static = np.repeat(static, count)
+    weights = np.where(frame_static, static_weights[np.minimum(within, 2)], dynamic_weights[within])
+    return ScalingRows(A_all[take], b_all[take], weights, np.where(frame_static, 6 + within, within))
 
 
 def reweigh_by_residual(rows: ScalingRows, theta: np.ndarray) -> np.ndarray:
