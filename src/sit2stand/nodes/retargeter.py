@@ -29,6 +29,7 @@ from ..retarget.pacing import (READY_LINE, LiveRetargeting, MarkerFrame, summary
 from ..retarget.player import (Command)
 from ..retarget.robot import robot_model, robot_setup
 from ..retarget.robot_state import RobotStateInbox
+from ..retarget.warm_up import warm_up
 from ..robot.plant import CONTROLLERS
 from ..robot.profile import profile_of
 from .retarget_outputs import RetargetOutputs
@@ -77,6 +78,7 @@ class RetargeterNode(Node):
                 load_marker_set(cfg.marker_set)
         except ValueError as err:
             raise NodeError(f"retargeter: marker_set: {err}") from None
+        self._warm_up(cfg)
         self._com_found = self._ready = False
         self.robot_state = RobotStateInbox(bool(self.get_parameter("use_sim_time").value))
         self._subscribe()
@@ -93,6 +95,17 @@ class RetargeterNode(Node):
         steady_timer(self, 2.0, self._report)
         self.get_logger().info(f"retargeter: plant {plant_file}, COM parameters "
                                f"{params_file or 'CAD'}; waiting for {MARKERS_TOPIC} and {HUMAN_COM_TOPIC}")
+
+    def _warm_up(self, cfg) -> None:
+        """A dry run of the first frame's work (:mod:`sit2stand.retarget.warm_up`), before anything is subscribed."""
+        try:
+            dry = warm_up(cfg, self.robot_model)
+        except ValueError as err:       # the synthetic human only: the capture's own frames may still fit
+            self.get_logger().warning(f"retargeter: no dry run of the first frame ({err}); the first frames will "
+                                      "wait for its first calls")
+            return
+        self.get_logger().info(f"dry run of the first frame's calibration and {dry.frames} steps on a synthetic "
+                               f"human: {dry.seconds * 1e3:.0f} ms")
 
     def _subscribe(self) -> None:
         deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
