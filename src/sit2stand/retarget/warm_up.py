@@ -16,14 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..human.synth import SynthConfig, synthesize
+from ..human.synth import synthesize, warm_up_config
 from .pacing import LiveConfig, LiveRetargeting, MarkerFrame
 from .robot import robot_setup
-
-WARM_UP_HUMAN = SynthConfig(vary_subject=False, marker_noise_m=0.0, occlusion_gaps=0, marker_rate_hz=100.0,
-                            plate_rate_hz=100.0, sit_before_s=0.1, duration_s=0.8, stand_after_s=0.0)
-"""The synthetic demonstration the dry run retargets: a short natural rise without noise or gaps (~40 ms to make)."""
-
 
 @dataclass
 class DryRun:
@@ -43,7 +38,7 @@ def warm_up(cfg: LiveConfig, prebuilt) -> DryRun:
         InputError: the synthetic human cannot be retargeted to this robot (its calibration's own errors).
     """
     began = time.perf_counter()
-    demo = synthesize(WARM_UP_HUMAN)
+    demo = synthesize(warm_up_config())
     robot = robot_setup(prebuilt=prebuilt)
     period_s = 1.0 / cfg.rate_hz
     clock, commands = {"now_s": 0.0}, []
