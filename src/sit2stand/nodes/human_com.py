@@ -26,7 +26,6 @@ from ..human.com_stream import RESCALE_EVERY_S, StreamingComEstimator
 from ..human.marker_ik import MarkerUnitsError, TooFewMarkers
 from ..human.marker_sets import MarkerSetError, choose_marker_set
 from ..human.skeleton import Subject
-from ..human.warm_up import warm_up
 from ..io.messages import plate_sample_from_cdr, reorder_markers
 from ..io.stream_messages import MocapFrameReader
 from ..scheduling import Scheduling
@@ -97,8 +96,7 @@ class HumanComNode(Node):
         if self.calibration is not None and self.subject is not None:
             # the skeleton now, for the calibration's markers (each frame is put in their order), not on the first
             # frame: ~0.1 s there held up the stream's first 25 frames on 2 cores
-            if self._start(list(self.calibration.marker_placements_m)):
-                self._warm_up()
+            self._start(list(self.calibration.marker_placements_m))
         steady_timer(self, 0.5, self._discover_plates)
         steady_timer(self, 2.0, self._report)
         self._discover_plates()
@@ -157,17 +155,6 @@ class HumanComNode(Node):
         self.get_logger().info(f"marker set {markers.name}: {len(markers.covered(names))} of the stream's "
                                f"{len(names)} markers")
         return True
-
-    def _warm_up(self) -> None:
-        """A dry run of the stream's first frames and first mass re-solve (:mod:`sit2stand.human.warm_up`)."""
-        try:
-            took_s = warm_up(self.subject, self.names, **self.settings, calibration=self.calibration)
-        except ValueError as err:       # the synthetic human only: the capture's own frames may still fit
-            self.get_logger().warning(f"human_com: no dry run of the first frames ({err}); they will wait for "
-                                      "their first calls")
-            return
-        self.get_logger().info(f"dry run of the first frames and a mass re-solve on a synthetic human: "
-                               f"{took_s * 1e3:.0f} ms")
 
     def _check_stream(self, names: list[str]) -> None:
         """The first frame's marker names against the estimator's (made before the stream from a calibration)."""
