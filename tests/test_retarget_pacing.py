@@ -143,7 +143,7 @@ class _OnePlanCommand:
     def __init__(self, command):
         self.command, self.lags = command, []
 
-    def pull(self, lag_m=0.0, periods=1.0):
+    def pull(self, lag_m=0.0, periods=1.0, coming=0):
         self.lags.append(lag_m)
         return self.command
 

@@ -114,6 +114,18 @@ def _played(robot, frames, **options):
     return cmds, player
 
 
+def test_a_command_pulled_before_its_frames_pose_is_pushed_is_the_one_pushing_first_gives(retargeted):
+    """As the node streams (retarget_sequence), a frame's command is pulled before the frame's pose is pushed
+    (pull(coming=1)): the plan frame that pose completes lies past the look-ahead window, so every command is the
+    one of pushing first, from the same tick on."""
+    robot, _, frames, pulled_first, _ = retargeted
+    pushed_first, _ = _played(robot, frames)
+    assert len(pulled_first) == len(pushed_first)
+    for a, b in zip(pulled_first, pushed_first):
+        assert a.t_plan_s == pytest.approx(b.t_plan_s, abs=1e-12) and a.time_scale == pytest.approx(b.time_scale)
+        np.testing.assert_allclose(np.r_[a.q, a.v, a.a], np.r_[b.q, b.v, b.a], rtol=0, atol=1e-9)
+
+
 def test_the_uniform_player_retimes_until_the_zmp_keeps_its_margin(retargeted):
     robot, rt, frames, _, _ = retargeted
     cmds, player = _played(robot, frames, retiming="uniform", max_time_scale_rate=1.5)

@@ -183,8 +183,8 @@ class RetargeterNode(Node):
             frame, com = ready
             if self.live.retargeter is None and not self._start(frame, com):
                 return
-            q = self.live.step(frame, com)
-            self.out.ik_pose(frame.stamp_ns, q)     # after the command: for the record, not on the path
+            # the IK pose after the command: for the record, not on the path
+            self.live.step(frame, com, lambda q, stamp_ns=frame.stamp_ns: self.out.ik_pose(stamp_ns, q))
 
     def _start(self, frame: MarkerFrame, com: np.ndarray) -> bool:
         """Calibrate on the first ready frame, over the robot's measured posture (False: wait for it)."""

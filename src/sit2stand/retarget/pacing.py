@@ -357,35 +357,40 @@ class LiveRetargeting:
             self.progress.skipped += 1
         return None
 
-    def step(self, frame: MarkerFrame, com_m: np.ndarray) -> np.ndarray:
-        """Retarget the ready ``frame`` (popped from the queue), push its pose to the player, send a command if one
-        is due; returns the frame's IK pose."""
+    def step(self, frame: MarkerFrame, com_m: np.ndarray,
+             after_command: Callable[[np.ndarray], None] | None = None) -> np.ndarray:
+        """Retarget the ready ``frame`` (popped from the queue), send a command if one is due, then push the frame's
+        pose to the player (:meth:`PlanPlayer.pull`'s ``coming``: the same commands, sent before the plan's
+        smoothing and dynamics of the pose, ~0.3 ms); returns the frame's IK pose, handed to ``after_command``
+        before the push too."""
         self.frames.popleft()
         ready = time.perf_counter()         # marker and COM both here: the retargeter's own latency starts
         pos, valid = reorder_markers(frame.names, frame.positions_m, frame.valid, self.names)
         result = self.retargeter.step(frame.t_s, pos, valid, com_m, self.chair.at(frame.t_s))
         self.latency.ik.append(result.ik.seconds)
         self.progress.infeasible += not result.ik.feasible
-        self.player.push(result.q, not result.seated)
         now = self.robot_clock()
         if self.pacer.due(now):
-            sent = self.pull_and_send(now)
+            sent = self.pull_and_send(now, coming=1)
             if sent is not None:
                 self.pacer.sent(now)
                 self.latency.command(frame.received_s, ready, sent)
+        if after_command is not None:
+            after_command(result.q)
+        self.player.push(result.q, not result.seated)
         self.progress.processed += 1
         self.progress.last_frame_s = time.monotonic()
         self.progress.last_frame_robot_s = self.robot_clock()
         return result.q
 
-    def pull_and_send(self, robot_now_s: float) -> float | None:
+    def pull_and_send(self, robot_now_s: float, coming: int = 0) -> float | None:
         """Send the plan's next command (corrected by the COM feedback), if it has one, for the robot's time
-        ``robot_now_s``; returns when it went (wall time)."""
+        ``robot_now_s`` (``coming``: :meth:`PlanPlayer.pull`'s); returns when it went (wall time)."""
         sent = self.sent
         periods = 1.0 if sent.last_s is None else float(np.clip(
             (robot_now_s - sent.last_s) / self.pacer.period_s, 0.0, MAX_CATCH_UP_PERIODS))
         # a robot that trails its plan slows it (the player)
-        cmd = self.player.pull(lag_m=sent.lag_m, periods=periods)
+        cmd = self.player.pull(lag_m=sent.lag_m, periods=periods, coming=coming)
         if cmd is None:
             return None
         sent.last_s = robot_now_s

@@ -310,18 +310,23 @@ class PlanPlayer:
         ks = [k for k in frames if k < len(self.plan.s_req)]
         return max((self.plan.s_req[k] for k in ks), default=1.0)
 
-    def ready(self) -> bool:
-        known = len(self.plan.v)
-        return self.finished or known >= self.lookahead + 2
+    def ready(self, coming: int = 0) -> bool:
+        """Whether the look-ahead has filled (``coming``: see :meth:`pull`)."""
+        return self.finished or len(self.plan.v) + coming >= self.lookahead + 2
 
-    def pull(self, lag_m: float = 0.0, periods: float = 1.0) -> Command | None:
+    def pull(self, lag_m: float = 0.0, periods: float = 1.0, coming: int = 0) -> Command | None:
         """The next command; ``lag_m``: how far the robot's measured COM trails the plan's [m] (0: unknown), which
         slows the local plan once the robot is off the chair (``LAG_DEADBAND_M``, ``LAG_GAIN_PER_M``);
         ``periods``: the robot's time since the last command, in periods ``dt`` (live, a command can come late: the
-        plan is where the robot's clock says, not one frame on)."""
+        plan is where the robot's clock says, not one frame on).
+
+        ``coming``: poses the caller pushes right after this pull, counted as known for the look-ahead's fill and
+        the buffer (not played). A live caller sends a frame's command first and pushes the frame's pose after it:
+        the frame that pose completes lies past the look-ahead window, so the commands are those of pushing first
+        while the robot is fed in time; a starved stream plays from one frame less."""
         cfg, plan = self.cfg, self.plan
         known = len(plan.v)
-        if known < 1 or (not self.started and not self.ready()):
+        if known < 1 or (not self.started and not self.ready(coming)):
             return None
         self.started = True
         if cfg.fixed_time_scale is None and self.dynamics is not None:
@@ -334,7 +339,7 @@ class PlanPlayer:
             wait = 1.0 + LAG_GAIN_PER_M * max(0.0, lag_m - LAG_DEADBAND_M) if off_chair else 1.0
             # live, poses can arrive late (an estimator catching up): with less than the look-ahead known, slow
             # down in proportion, as a streaming player's buffer does, rather than run dry and hold
-            buffered = known - 1 - self.u
+            buffered = known + coming - 1 - self.u
             if not self.finished and buffered < self.lookahead:
                 wait = max(wait, min(cfg.max_time_scale, self.lookahead / max(buffered, 1.0)))
             self.time_scale_goal = min(cfg.max_time_scale, max(

@@ -482,8 +482,8 @@ def retarget_sequence(retargeter: Retargeter, player: PlanPlayer, t_s: np.ndarra
 
     def play(f: RetargetFrame) -> None:
         frames.append(f)
+        c = player.pull(coming=1) if pull else None     # the command first, then the pose (as the node does)
         player.push(f.q, not f.seated)
-        c = player.pull() if pull else None
         if c is not None:
             cmds.append(c)
 
