@@ -8,6 +8,7 @@ import pytest
 from sit2stand.human.calibration import StreamCalibration, calibrate_lengths, calibrate_stream, static_frames
 from sit2stand.human.com import estimate_com
 from sit2stand.human.com_stream import StreamingComEstimator
+from sit2stand.human.mass_scaling import NOISE_PASSES, assemble_rows, fit_mass_scaling
 from sit2stand.human.marker_ik import MarkerIK, MarkerUnitsError, TooFewMarkers
 from sit2stand.human.marker_sets import load_marker_set
 from sit2stand.human.offline import read_trial
@@ -206,6 +207,34 @@ def test_a_deferred_rescale_gives_the_same_stream():
             solves += deferred.rescale() is not None
     assert solves >= 1
     assert np.allclose(np.array(a), np.array(b), atol=1e-12, equal_nan=True)
+
+
+def test_a_re_solve_in_pieces_ends_in_the_whole_ones_scaling_and_switches_the_model_at_its_last():
+    """The node runs a due mass re-solve a piece after each frame (rescale_in_steps): a solve per piece, then the
+    switch of the COM model; the scaling is the one of solving the same rows whole, and the frames in between keep
+    the previous model."""
+    demo = synthesize(SynthConfig(style="natural", seed=3))
+    est = StreamingComEstimator(Subject(1.75, demo.human.total_mass), demo.marker_names, defer_rescale=True)
+    pieces, solved = None, []
+    for i, t in enumerate(demo.marker_t_s):
+        sl = slice(i * 10, (i + 1) * 10)
+        for p in demo.plates:
+            est.add_plate_samples(p.name, demo.t_s[sl], p.force_n[sl], p.moment_origin_nm[sl])
+        est.update(t, demo.markers_m[i], demo.marker_valid[i])
+        if est.rows.pending:
+            est.rows.pending = False
+            whole = fit_mass_scaling(est.human, assemble_rows(est.rows.frames), est.subject.mass_kg)
+            pieces, model, count = est.rescale_in_steps(), est.scaled_model, 0
+        if pieces is not None:
+            piece, count = next(pieces), count + 1
+            if piece is None:
+                assert est.scaled_model is model, "the model switches with the last piece only"
+            else:
+                assert count == NOISE_PASSES + 2 and est.scaled_model is not model and piece is est.scaling
+                np.testing.assert_allclose(piece.theta, whole.theta, rtol=1e-9, atol=1e-9)
+                solved.append(count)
+                pieces = None
+    assert len(solved) >= 2
 
 
 def stream(demo, gap=slice(0, 0), rescale_every_s=0.5):

@@ -8,6 +8,7 @@ COP-matched mass scaling (:mod:`sit2stand.human.mass_scaling`), re-solved every 
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,7 +22,7 @@ from .calibration import CALIBRATION_MIN_MARKERS, StreamCalibration, calibrate_s
 from .com import WINDOW_S
 from .marker_ik import MIN_MARKERS, MarkerIK, check_marker_units
 from .mass_scaling import (FactorAtBound, FrameRows, MassScaling, RowPool, apply_scaling, assemble_rows, frame_rows,
-                           fit_mass_scaling, lengths_at_bounds, scaling_at_bounds)
+                           fit_mass_scaling_steps, lengths_at_bounds, scaling_at_bounds)
 from .skeleton import Subject, build_human
 from .support import SupportRule
 
@@ -441,13 +442,24 @@ class StreamingComEstimator:
             out.rescaled = True
 
     def rescale(self) -> MassScaling | None:
-        """Solve the scaling from all rows so far and switch the COM model to it."""
+        """Solve the scaling from all rows so far and switch the COM model to it (None: too few rows)."""
+        steps = list(self.rescale_in_steps())
+        return steps[-1] if steps else None
+
+    def rescale_in_steps(self) -> Iterator[MassScaling | None]:
+        """:meth:`rescale` a solve at a time (~0.3-0.8 ms each offline), for a live caller to run one piece after
+        each frame's COM: whole, the re-solve held up the next frames (at 200 Hz, 2-6 frames 6-18 ms late in the
+        live graph). Yields None after each piece but the last, which switches the COM model and yields its
+        scaling; yields nothing when there are too few rows. The rows are those when it starts."""
         if len(self.rows) < self.rows.min_rows:
-            return None
-        self.scaling = fit_mass_scaling(self.human, assemble_rows(self.rows.frames), self.subject.mass_kg)
+            return
+        for fit in fit_mass_scaling_steps(self.human, assemble_rows(self.rows.frames), self.subject.mass_kg):
+            scaling = fit
+            yield None
+        self.scaling = scaling
         self.scaled_model = apply_scaling(self.human, self.scaling)
         self.scaled_data = self.scaled_model.createData()
-        return self.scaling
+        yield self.scaling
 
     @property
     def at_bounds(self) -> list[FactorAtBound]:

@@ -10,6 +10,7 @@ moment is matching the COP. Units SI, lab frame REP-103.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -349,13 +350,20 @@ def fit_mass_scaling(human: HumanModel, rows: ScalingRows, body_mass_kg: float, 
                      ) -> MassScaling:
     """:func:`solve_mass_scaling` on the nominal weights, then ``noise_passes`` times on the weights of the previous
     fit's residual (:func:`reweigh_by_residual`): the data count as much as they are worth against the prior."""
+    *_, scaling = fit_mass_scaling_steps(human, rows, body_mass_kg, noise_passes)
+    return scaling
+
+
+def fit_mass_scaling_steps(human: HumanModel, rows: ScalingRows, body_mass_kg: float,
+                           noise_passes: int = NOISE_PASSES) -> Iterator[MassScaling]:
+    """:func:`fit_mass_scaling` one solve at a time: yields each pass's fit; the last is the answer."""
     scaling = solve_mass_scaling(human, rows.A, rows.b, body_mass_kg, weights=rows.weights)
+    yield scaling
     for k in range(noise_passes):
         weights = reweigh_by_residual(rows, scaling.theta)
         scaling = solve_mass_scaling(human, rows.A, rows.b, body_mass_kg, weights=weights)
         scaling.noise_passes = k + 1
-    return scaling
-
+        yield scaling
 
 
 def prior_scaling(human: HumanModel) -> MassScaling:

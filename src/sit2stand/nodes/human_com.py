@@ -88,6 +88,7 @@ class HumanComNode(Node):
         self.plates = PlateInbox()
         self.estimator: StreamingComEstimator | None = None
         self.costs = FrameCosts()
+        self.rescaling, self.rescale_s = None, 0.0     # a mass re-solve under way (a piece per frame), its time [s]
         self.finished = False
         self.exit_code = 0
         self.drain = IdleDrain(lambda: len(self.costs.wall_s))   # after a signal, finish the frames received
@@ -216,9 +217,19 @@ class HumanComNode(Node):
             self._enter_real_time()
         if self.estimator.rows.pending:     # after the frame is out: the re-solve does not delay its COM
             self.estimator.rows.pending = False
-            t0 = time.perf_counter()
-            if self.estimator.rescale() is not None:
-                self._publish_scaling(t_ns, time.perf_counter() - t0)
+            self.rescaling, self.rescale_s = self.estimator.rescale_in_steps(), 0.0
+        if self.rescaling is not None:
+            self._rescale_piece(t_ns)
+
+    def _rescale_piece(self, t_ns: int) -> None:
+        """One piece of a due mass re-solve, a piece after each frame: whole, it held up the next frames."""
+        t0 = time.perf_counter()
+        piece = next(self.rescaling, False)
+        self.rescale_s += time.perf_counter() - t0
+        if piece is not None:       # the scaling (published), or False: too few rows
+            self.rescaling = None
+            if piece is not False:
+                self._publish_scaling(t_ns, self.rescale_s)
 
     def _enter_real_time(self) -> None:
         """Real time once the live calibration (a pause of 1-2 s that at real-time priority would starve the
