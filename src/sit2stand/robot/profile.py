@@ -117,7 +117,6 @@ class RobotProfile:
     _efforts: dict[str, float] = field(default_factory=dict, repr=False)   # moving joint -> URDF effort [N m]
     conventions: Conventions = field(default_factory=Conventions)   # how its URDF was brought to REP-103
     _urdf_text: str | None = field(default=None, repr=False)
-    _marker_joints: dict[tuple, tuple[str, ...]] = field(default_factory=dict, repr=False)   # marker_joints' answers
 
     def urdf_text(self) -> str:
         """The URDF as sit2stand reads it: no floating base, its base frame and sagittal joints brought to the
@@ -182,12 +181,6 @@ class RobotProfile:
 
     def marker_joints(self, group: str, side: str | None, joint_names: list[str]) -> tuple[str, ...]:
         """The joints (of ``joint_names``, a model's) whose links a marker of ``group`` on ``side`` may sit on."""
-        key = (group, side, tuple(joint_names))
-        if key not in self._marker_joints:
-            self._marker_joints[key] = self._match_marker_joints(group, side, joint_names)
-        return self._marker_joints[key]
-
-    def _match_marker_joints(self, group: str, side: str | None, joint_names: list[str]) -> tuple[str, ...]:
         out: list[str] = []
         for pattern in self.marker_links.get(group, ()):
             pattern = pattern.replace("{root}", joint_names[0])
