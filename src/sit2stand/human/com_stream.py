@@ -448,9 +448,9 @@ class StreamingComEstimator:
 
     def rescale_in_steps(self) -> Iterator[MassScaling | None]:
         """:meth:`rescale` a solve at a time (~0.3-0.8 ms each offline), for a live caller to run one piece after
-        each frame's COM: whole, the re-solve held up the next frames (at 200 Hz, 2-6 frames 6-18 ms late in the
-        live graph). Yields None after each piece but the last, which switches the COM model and yields its
-        scaling; yields nothing when there are too few rows. The rows are those when it starts."""
+        each frame's COM: whole, the re-solve held up the frame after it (at 100 Hz in the live graph up to 2.6 ms
+        late, in pieces up to 0.8). Yields None after each piece but the last, which switches the COM model and
+        yields its scaling; yields nothing when there are too few rows. The rows are those when it starts."""
         if len(self.rows) < self.rows.min_rows:
             return
         for fit in fit_mass_scaling_steps(self.human, assemble_rows(self.rows.frames), self.subject.mass_kg):

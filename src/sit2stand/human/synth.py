@@ -82,13 +82,6 @@ class SynthConfig:
                              f"and divide the plate rate {self.plate_rate_hz:g} Hz (e.g. 50, 100, 125, 200, 250, 500)")
 
 
-def warm_up_config(**subject) -> SynthConfig:
-    """The short rise the retargeter node's dry run is made on (:mod:`sit2stand.retarget.warm_up`): 0.9 s at
-    100 Hz without noise or gaps, ~40 ms to make; ``subject``: its ``height_m``, ``mass_kg``, ``sex``."""
-    return SynthConfig(vary_subject=False, marker_noise_m=0.0, occlusion_gaps=0, marker_rate_hz=100.0,
-                       plate_rate_hz=100.0, sit_before_s=0.1, duration_s=0.8, stand_after_s=0.0, **subject)
-
-
 @dataclass
 class Demonstration:
     """A synthesised trial. Times [s] from the trial start; dynamics at the plate rate, markers at the marker rate."""

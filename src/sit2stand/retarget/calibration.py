@@ -308,7 +308,8 @@ def calibrate_markers(model: pin.Model, q_robot: np.ndarray, names: list[str], p
             allowed = tuple(allowed_links(model, name, roles))
             if allowed not in allowed_of:
                 allowed_of[allowed] = np.isin(link, list(allowed))
-            candidates = candidates & allowed_of[allowed] if (candidates & allowed_of[allowed]).any() else candidates
+            both = candidates & allowed_of[allowed]
+            candidates = both if both.any() else candidates
         j = int(joint[np.argmin(np.where(candidates, rank[k], np.inf))])
         links[name] = model.names[j]
         offsets[name] = data.oMi[j].actInv(sites[k])
