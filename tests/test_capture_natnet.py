@@ -1,7 +1,9 @@
 """The NatNet encoder and ``serve-c3d --protocol natnet``, checked against OptiTrack's protocol as the ``natnet``
 client package reads it: its own parsers, its own client (through the bridge's NatNetStream), and the bridge node."""
 
+import functools
 import socket
+import struct
 import threading
 import time
 
@@ -86,6 +88,38 @@ def test_frames_read_back_through_natnet_with_every_field(version):
     assert got.force_plates == () and got.devices == ()
 
 
+def _frame_with_every_list() -> bytes:
+    """A 4.1 frame whose lists after the marker sets are not empty: an unlabelled marker, a rigid body (id, position,
+    rotation, error, flags), the frame's labelled markers."""
+    sized = functools.partial(nn._sized, (4, 1, 0, 0))
+    pos = np.array([[0.5, 1.25, -0.75], [1.0, 2.0, 3.0]], "<f4")
+    sets = b"child\0" + struct.pack("<I", 2) + pos.tobytes() + b"chair\0" + struct.pack("<I", 1) + pos[1].tobytes()
+    lists = [sized(1, struct.pack("<3f", 9.0, 8.0, 7.0)),
+             sized(1, struct.pack("<I3f4ffH", 3, 1, 2, 3, 0, 0, 0, 1, 0.001, 1)), sized(0, b""), sized(0, b""),
+             sized(1, struct.pack("<I3ffHf", 65537, 0.5, 1.25, -0.75, 0.014, 6, 0.4)), sized(0, b""), sized(0, b"")]
+    body = struct.pack("<I", 7) + sized(2, sets) + b"".join(lists) + struct.pack("<IId3QH", 1, 2, 12.345, 0, 0, 0, 0)
+    return nn.message(nn.Message.FRAMEOFDATA, body)
+
+
+@pytest.mark.parametrize("packet", [nn.frame_of_data(_frame()), _frame_with_every_list()])
+def test_the_quick_reader_gives_natnets_markers_and_timestamp_stepping_over_the_other_lists(packet):
+    _, full, _ = _read(packet, DataFrame)
+    quick = nn.read_marker_frame(packet[4:], (4, 1, 0, 0))
+    assert quick.frame_number == full.prefix.frame_number and quick.timestamp_s == full.suffix.timestamp
+    assert list(quick.marker_sets) == [m.model_name for m in full.marker_sets]
+    for m in full.marker_sets:
+        assert np.array_equal(quick.marker_sets[m.model_name], np.array(m.marker_pos_list, float))
+
+
+def test_the_quick_reader_leaves_older_protocols_and_broken_frames_to_natnet():
+    for version in ((3, 0, 0, 0), (4, 0, 0, 0)):
+        assert nn.read_marker_frame(nn.frame_of_data(_frame(), version)[4:], version) is None
+    body = nn.frame_of_data(_frame())[4:]
+    assert nn.read_marker_frame(body[:-30], (4, 1, 0, 0)) is None, "cut short"
+    wrong_size = body[:8] + struct.pack("<I", 3) + body[12:]
+    assert nn.read_marker_frame(wrong_size, (4, 1, 0, 0)) is None, "a marker set list whose size is not its sets'"
+
+
 def test_requests_and_limits():
     assert nn.request(nn.Message.CONNECT) == b"\x00\x00\x05\x00Ping\x00", "what natnet sends"
     assert nn.parse_request(nn.request(nn.Message.REQUEST, "FrameRate")) == (nn.Message.REQUEST, "FrameRate")
@@ -124,6 +158,9 @@ def test_the_stream_names_markers_per_set_skips_motives_all_set_and_drops_frames
     assert info.labels == ["chair:SEAT", "child:A", "child:B", "child:C"]
     assert f.frame_number == 42 and f.timestamp_us == 410000
     assert np.allclose(f.markers_mm, [[500, 1250, -750], [500, 1250, -750], [0, 0, 0], [1000, 2000, 3000]])
+    stream._on_markers(nn.read_marker_frame(nn.frame_of_data(_frame())[4:], nn.PROTOCOL_VERSION))
+    assert got[1][0].frame_number == 42 and got[1][0].timestamp_us == 410000
+    assert np.array_equal(got[1][0].markers_mm, f.markers_mm), "the quick reader's frame is natnet's"
 
 
 def _collect(port: int, **kw):

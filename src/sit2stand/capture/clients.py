@@ -4,7 +4,8 @@
 ``connect`` (the ``Version`` handshake), ``GetParameters 3D Force`` (labels, plates), ``StreamFrames AllFrames
 3DRes Force`` over TCP, or over UDP (``transport="udp"``: the library asks over TCP; the datagrams are read here and
 decoded by the library's own :class:`qtm_rt.QRTPacket`). Each frame goes to ``on_frame`` in that thread.
-:class:`NatNetStream` does the same for OptiTrack Motive through ``natnet`` (markers only).
+:class:`NatNetStream` does the same for OptiTrack Motive through ``natnet`` (markers only); from protocol 4.1 on its
+frames' markers are read by :func:`~.natnet_protocol.read_marker_frame`, not by ``natnet``'s parse of the whole frame.
 
 Failures are reported through ``on_status`` as one line naming the protocol, host, port and the reason (refused,
 timed out, version refused, no labels); the loop then waits (:class:`~.convert.ReconnectPolicy`) and tries again.
@@ -27,6 +28,7 @@ from qtm_rt.packet import QRTPacket, QRTPacketType, RTheader
 
 from ..errors import Sit2StandError
 from .convert import ReconnectPolicy
+from .natnet_protocol import MarkerFrame, Message, read_marker_frame
 from .qtm_protocol import (PROTOCOL_VERSION, DataFrame, PlateChunk, PlateInfo, parse_frequency, parse_labels,
                            parse_plates)
 
@@ -205,6 +207,25 @@ class QtmStream:
             sock.close()
 
 
+class MarkerFrameClient(NatNetClient):
+    """``natnet``'s client whose frames of data go to ``on_markers`` as :class:`MarkerFrame` where
+    :func:`read_marker_frame` reads them (protocol 4.1 on), through ``natnet``'s own parse and events otherwise."""
+
+    def __init__(self, on_markers: Callable[[MarkerFrame], None], **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.on_markers = on_markers
+
+    def _NatNetClient__process_message(self, buffer) -> None:
+        # natnet 0.3.0's (name-mangled) dispatch of a received packet, which parses a frame of data in full
+        data, version = buffer.data, self.protocol_version
+        if version is not None and len(data) > 4 and int.from_bytes(data[:2], "little") == Message.FRAMEOFDATA:
+            frame = read_marker_frame(data[4:], tuple(version.components))
+            if frame is not None:
+                self.on_markers(frame)
+                return
+        NatNetClient._NatNetClient__process_message(self, buffer)
+
+
 class NatNetStream:
     """OptiTrack NatNet through ``natnet`` (markers only: the marker sets' markers, named from Motive's marker-set
     descriptions; NatNet's force plates carry raw channels without plate geometry and are not published).
@@ -251,16 +272,20 @@ class NatNetStream:
         self._described.set()
 
     def _on_frame(self, frame) -> None:
+        """A frame as ``natnet`` parsed it (a protocol before 4.1)."""
+        self._on_markers(MarkerFrame(frame.prefix.frame_number, {ms.model_name: np.array(ms.marker_pos_list, float)
+                                                                 for ms in frame.marker_sets}, frame.suffix.timestamp))
+
+    def _on_markers(self, frame: MarkerFrame) -> None:
         self._last_frame_s = time.monotonic()
         if not self._described.is_set():
             return
-        by_name = {ms.model_name: ms.marker_pos_list for ms in frame.marker_sets}
         parts = []
         for name, count in self._sets:
-            pos = np.array(by_name.get(name, ()), float).reshape(-1, 3)
+            pos = frame.marker_sets.get(name, np.zeros((0, 3))).reshape(-1, 3)
             parts.append(pos if len(pos) == count else np.full((count, 3), np.nan))
         mm = np.vstack(parts) * 1e3 if parts else np.zeros((0, 3))
-        self.on_frame(DataFrame(int(round(frame.suffix.timestamp * 1e6)), frame.prefix.frame_number, mm), self.info)
+        self.on_frame(DataFrame(int(round(frame.timestamp_s * 1e6)), frame.frame_number, mm), self.info)
 
     def start(self) -> None:
         self._thread.start()
@@ -292,8 +317,9 @@ class NatNetStream:
 
     def _connect(self) -> NatNetClient:
         try:
-            client = NatNetClient(server_ip_address=self.host, local_ip_address=self._local_ip(),
-                                  command_port=self.port, data_port=self.port + 1, use_multicast=self.multicast)
+            client = MarkerFrameClient(self._on_markers, server_ip_address=self.host,
+                                       local_ip_address=self._local_ip(), command_port=self.port,
+                                       data_port=self.port + 1, use_multicast=self.multicast)
             client.on_data_description_received_event.handlers.append(self._on_descriptions)
             client.on_data_frame_received_event.handlers.append(self._on_frame)
             self.client = client

@@ -1,4 +1,5 @@
-"""OptiTrack NatNet, the server's side: the packets ``serve-c3d --protocol natnet`` sends, as ``natnet`` reads them.
+"""OptiTrack NatNet, the server's side: the packets ``serve-c3d --protocol natnet`` sends, as ``natnet`` reads them;
+and the bridge's quick reader of a frame's markers (:func:`read_marker_frame`).
 
 Written as the inverse of the parsers of the PyPI package ``natnet`` (0.3.0; the bridge's client library):
 ``ServerInfo``, ``DataDescriptions`` and ``DataFrame`` ``.read_from_buffer``. Every message is a 4-byte header
@@ -49,6 +50,9 @@ HEADER = struct.Struct("<HH")
 MARKER_SIZE_M = 0.014                   # the labelled markers' diameter [m]
 STAMP_HZ = 1_000_000_000                # the frame stamps' clock: ns
 MAX_BODY = 0xFFFF                       # the header's uint16 size
+SIZED_FROM = (4, 1, 0, 0)               # the protocol whose lists carry their size in bytes
+LISTS_AFTER_MARKER_SETS = 7             # 4.1: unlabelled, rigid bodies, skeletons, assets, labelled, plates, devices
+_COUNT_SIZE = struct.Struct("<II")
 
 Z_UP = np.eye(3)
 Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -192,6 +196,43 @@ def frame_of_data(frame: NatNetFrame, version: tuple[int, ...] = PROTOCOL_VERSIO
     body += empty * 2                                     # force plates, devices
     body += struct.pack("<IId3QH", frame.timecode, frame.timecode_sub, frame.timestamp_s, *frame.stamps, frame.flags)
     return message(Message.FRAMEOFDATA, body)
+
+
+@dataclass(frozen=True)
+class MarkerFrame:
+    """What the bridge takes from a NAT_FRAMEOFDATA: its frame number, each marker set's positions (M, 3) [m] by the
+    set's name, and the frame's timestamp [s]."""
+
+    frame_number: int
+    marker_sets: dict[str, np.ndarray]
+    timestamp_s: float
+
+
+def read_marker_frame(body: bytes, version: tuple[int, ...]) -> MarkerFrame | None:
+    """The marker sets and timestamp of a NAT_FRAMEOFDATA ``body`` (after its 4-byte header), in ``version``'s layout.
+    From 4.1 on every list carries its size in bytes: only the marker sets are read and the other lists are stepped
+    over (~10 us, against ~270 us for ``natnet``'s parse of every list into Python objects, on the capture -> joint
+    command path). None before 4.1, or where the sizes do not fit the body: the caller then parses it in full."""
+    if tuple(version)[:4] < SIZED_FROM:
+        return None
+    data = bytes(body)
+    try:
+        (frame_number,), (count, size) = struct.unpack_from("<I", data), _COUNT_SIZE.unpack_from(data, 4)
+        at, end, sets = 12, 12 + size, {}
+        for _ in range(count):
+            nul = data.index(b"\0", at, end)
+            (n,) = struct.unpack_from("<I", data, nul + 1)
+            pos = np.frombuffer(data, "<f4", 3 * n, nul + 5).reshape(n, 3)
+            sets[data[at:nul].decode()] = pos.astype(float)
+            at = nul + 5 + 12 * n
+        if at != end:
+            return None
+        for _ in range(LISTS_AFTER_MARKER_SETS):
+            at += _COUNT_SIZE.size + _COUNT_SIZE.unpack_from(data, at)[1]
+        (timestamp_s,) = struct.unpack_from("<d", data, at + 8)        # after the timecode and its subframe
+    except (struct.error, ValueError, UnicodeDecodeError):
+        return None
+    return MarkerFrame(frame_number, sets, timestamp_s)
 
 
 def capture_frame(frame: DataFrame, names: list[str], set_name: str, axes: np.ndarray = Y_UP, model_id: int = 1,
