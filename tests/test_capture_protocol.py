@@ -10,6 +10,7 @@ import pytest
 import qtm_rt
 from qtm_rt.packet import QRTComponentType, QRTPacket
 
+from sit2stand.capture.clients import frame_from_qtm_packet
 from sit2stand.capture.qtm_protocol import (MISSING, Component, DataFrame, PacketType, PlateChunk, PlateInfo,
                                             ProtocolError, data_packet, decode_data, packet, parameters_xml,
                                             parse_frequency, parse_labels, parse_plates, parse_stream_frames,
@@ -63,6 +64,20 @@ def test_data_packets_read_back_through_qtm_rt_with_labels_residuals_and_every_f
     assert np.array_equal(back.markers_mm, frame.markers_mm, equal_nan=True)
     assert np.array_equal(back.plates[0].samples, frame.plates[0].samples) and back.plates[0].first_sample == 840
     assert np.isnan(MISSING)
+
+
+def test_the_bridge_reads_a_packet_as_qtm_rt_does():
+    frame = _frame()
+    p = QRTPacket(data_packet(frame, [Component.THREE_D_RES, Component.FORCE, Component.THREE_D_NO_LABELS])[8:])
+    got = frame_from_qtm_packet(p)
+    assert (got.timestamp_us, got.frame_number) == (p.timestamp, p.framenumber)
+    rows = np.array([tuple(m) for m in p.get_3d_markers_residual()[1]], float)
+    assert np.array_equal(got.markers_mm, rows[:, :3], equal_nan=True)
+    assert np.array_equal(got.residuals_mm, rows[:, 3], equal_nan=True)
+    ((plate, samples),) = p.get_force()[1]
+    (chunk,) = got.plates
+    assert (chunk.plate_id, chunk.first_sample) == (plate.id, plate.force_number)
+    assert np.array_equal(chunk.samples, np.array([tuple(s) for s in samples], float))
 
 
 def test_parameters_carry_labels_plate_corners_and_the_frequency():
