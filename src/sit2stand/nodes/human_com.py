@@ -191,10 +191,6 @@ class HumanComNode(Node):
         if (wrong_rate := self.rate_check.add(t_s)) is not None:
             self._fail(wrong_rate)
             return
-        self.plates.flush(self.estimator)
-        for name in self.estimator.drop_silent_plates():
-            self.get_logger().warning(f"no samples on {FORCE_PLATE_PREFIX}{name} while other plates stream: going on "
-                                      f"without it{' (seat-off from the kinematics)' if name == 'chair' else ''}")
         try:
             out = self.estimator.update(t_s, pos, valid, defer_delayed=True)
         except MarkerUnitsError as err:
@@ -202,7 +198,11 @@ class HumanComNode(Node):
             self.exit_code, self.finished = 2, True
             return
         self.costs.skipped += not out.valid
-        self.out.com(t_ns, out)        # first: the retargeter waits for it
+        self.out.com(t_ns, out)        # first: the retargeter waits for it; the fit and the COM use no plate
+        self.plates.flush(self.estimator)
+        for name in self.estimator.drop_silent_plates():
+            self.get_logger().warning(f"no samples on {FORCE_PLATE_PREFIX}{name} while other plates stream: going on "
+                                      f"without it{' (seat-off from the kinematics)' if name == 'chair' else ''}")
         shedding = shed(self.shed_behind_s, self.get_clock().now().nanoseconds * 1e-9, t_s)
         if shedding:
             self.costs.shed += 1                    # catching up: the COM only, as the stream needs it
