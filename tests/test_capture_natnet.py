@@ -115,6 +115,7 @@ def test_the_quick_reader_leaves_older_protocols_and_broken_frames_to_natnet():
     for version in ((3, 0, 0, 0), (4, 0, 0, 0)):
         assert nn.read_marker_frame(nn.frame_of_data(_frame(), version)[4:], version) is None
     body = nn.frame_of_data(_frame())[4:]
+    assert nn.read_marker_frame(body, (4, 1)).frame_number == 42, "a version natnet truncated to (4, 1)"
     assert nn.read_marker_frame(body[:-30], (4, 1, 0, 0)) is None, "cut short"
     wrong_size = body[:8] + struct.pack("<I", 3) + body[12:]
     assert nn.read_marker_frame(wrong_size, (4, 1, 0, 0)) is None, "a marker set list whose size is not its sets'"

@@ -213,7 +213,7 @@ def read_marker_frame(body: bytes, version: tuple[int, ...]) -> MarkerFrame | No
     From 4.1 on every list carries its size in bytes: only the marker sets are read and the other lists are stepped
     over (~10 us, against ~270 us for ``natnet``'s parse of every list into Python objects, on the capture -> joint
     command path). None before 4.1, or where the sizes do not fit the body: the caller then parses it in full."""
-    if tuple(version)[:4] < SIZED_FROM:
+    if (tuple(version) + (0, 0, 0))[:4] < SIZED_FROM:       # natnet truncates a version it switched to: (4, 1)
         return None
     data = bytes(body)
     try:
