@@ -238,14 +238,15 @@ def robot_links(model: pin.Model, marker: str, roles: MarkerRoles | None = None)
     else:
         side, group = roles.sides.get(marker), roles.group(marker) or "arm"
     profile, joints = profile_of(model), tuple(model.names[1:])
-    known = _MARKER_JOINTS.get(key := (id(profile), group, side, joints))
-    if known is None or known[0] is not profile:        # the profile held: its id is not another's
-        known = _MARKER_JOINTS[key] = (profile, profile.marker_joints(group, side, list(joints)))
-    return known[1]
+    key = (id(profile), group, side, joints)
+    if key not in _MARKER_JOINTS:          # the entry keeps its profile alive: no other profile takes its id
+        _MARKER_JOINTS[key] = (profile, profile.marker_joints(group, side, list(joints)))
+    return _MARKER_JOINTS[key][1]
 
 
 _MARKER_JOINTS: dict[tuple, tuple] = {}
-"""robot_links' answers per profile, marker group and side, and model joints: its globs cost ~50 us a marker."""
+"""robot_links' answers (with their profile) per profile, marker group and side, and model joints: its globs cost
+~50 us a marker."""
 
 
 def posed_like(model: pin.Model, q_seated: np.ndarray, flexion_deg: dict[str, float]) -> np.ndarray:
