@@ -5,6 +5,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from sit2stand.robot.actuation import reference_at
 from sit2stand.robot.model import PlantConfig, PlantConfigError, build_spec, controller_model
 from sit2stand.robot.plant import Plant
 from sit2stand.robot.postures import standing_qpos
@@ -69,6 +70,23 @@ def test_standing_robot_measures_its_cop_where_its_true_com_is():
     assert np.abs(s.tau).max() < plant.joints.effort.max()
 
 
+def test_the_joint_servo_follows_the_command_along_its_velocity_and_acceleration():
+    plant = Plant(PlantConfig.load(DEFAULT))
+    plant.step(200)
+    rng = np.random.default_rng(3)
+    q, qd, qdd = (plant.q_ref + 0.01 * rng.standard_normal(plant.n), rng.standard_normal(plant.n),
+                  rng.standard_normal(plant.n))
+    for steps in (7, 100):                  # within the reference's extrapolation, then past it (held at its end)
+        plant.command(q, qd, qdd)
+        plant.step(steps)
+        # the servo's target of the last step (taken at its start): the reference there, less the encoders' offset,
+        # plus kd/kp times the reference's velocity
+        q_t, qd_t = reference_at(q, qd, qdd, plant.t_s - plant.cfg.timestep_s - plant.ref.t_s)
+        jm = plant.joints
+        assert np.allclose(plant.data.ctrl[jm.pd_ids], q_t - plant.faults.q_offset + jm.kd / jm.kp * qd_t,
+                           rtol=0, atol=1e-12)
+
+
 def test_robot_stays_seated_on_the_chair():
     plant = Plant(PlantConfig.load(DEFAULT))
     plant.step(3000)                                               # settle onto the seat
@@ -94,6 +112,15 @@ def test_feet_sensing_is_consistent_with_itself_and_with_a_turned_sensor():
     cop = feet.combined_cop(data, ground, 1.0)
     assert cop == pytest.approx([-moment[1] / ground[:, 2].sum(), moment[0] / ground[:, 2].sum(), 0.0], abs=1e-12)
     assert feet.combined_cop(data, ground * 0.0, 1.0) is None
+    # each foot in world axes (numpy's products): its weight W and the leg's wrench balance the ground's, the moment
+    # about the sole being arm x ground force + lever x W - the leg's torque
+    R = data.site_xmat[feet.ft_sites].reshape(-1, 3, 3)
+    f_leg, t_leg, lever = (np.einsum("kij,kj->ki", R, v) for v in
+                           (*feet.readings(data, np.zeros(12)).reshape(2, 2, 3).transpose(1, 0, 2), feet.lever_m))
+    arm = data.site_xpos[feet.ft_sites] - soles
+    assert np.allclose(ground[:, :3], feet.weight_n - f_leg, rtol=0, atol=1e-9)
+    assert np.allclose(ground[:, 3:], np.cross(arm, ground[:, :3]) + np.cross(lever, feet.weight_n) - t_leg,
+                       rtol=0, atol=1e-9)
     # a sensor mounted turned 0.1 rad about z reads the same wrench turned back
     cfg.unmodeled.ft_rotation_rad["left"] = (0.0, 0.0, 0.1)
     turned = Plant(cfg).feet                                  # the same sensors, one mounted turned

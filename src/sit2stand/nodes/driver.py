@@ -198,8 +198,12 @@ class Driver(Node):
         return self.clock.ros_ns(self.plant.t_s)
 
     def _now_ns(self) -> int:
+        """The ROS time [ns] of the simulated state now; unpaced on wall time, the system clock's time (what the ROS
+        clock reads without ``use_sim_time``, at a tenth of its call's cost: this stamps 500 states a second)."""
         ns = self._sim_ros_ns()
-        return self.get_clock().now().nanoseconds if ns is None else ns
+        if ns is not None:
+            return ns
+        return self.get_clock().now().nanoseconds if self.sim_time else time.time_ns()
 
     def _now_stamp(self):
         sec, nsec = divmod(self._now_ns(), 1_000_000_000)

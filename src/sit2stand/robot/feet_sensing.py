@@ -5,7 +5,7 @@ A sensor reads the wrench of the leg on the foot below it in its own axes, turne
 ``ft_rotation_rad``), plus a bias and noise. From the readings the ground reaction on each foot follows as a
 controller computes it: the foot below the sensor (the controller model's mass and COM, not the plant's) is static,
 so ground + leg + the foot's weight balance. Everything is stacked in ``SIDES`` order: one product per step for
-both feet, few array operations (this runs for every published state, 500 times a second).
+both feet, the few products after it in floats (this runs for every published state, 500 times a second).
 
 Units SI; world frame REP-103 (x forward, y left, z up).
 """
@@ -20,7 +20,6 @@ import pinocchio as pin
 
 from ..dynamics import G
 from ..errors import InputError
-from ..vectors import cross
 from .model import SIDES, PlantConfig, compiled_robot
 
 
@@ -51,6 +50,7 @@ class FeetSensing:
     reading: np.ndarray      # (2, 3, 3) raw rows @ reading: what the sensor reads (its mounting's turn, transposed)
     bias: np.ndarray         # (2, 6) [N, N m]
     weight_n: np.ndarray     # (2, 3) the controller model's foot below the sensor, as the force that holds it up
+    weight_z_n: tuple[float, ...]   # (2,) its z: the force is vertical
     lever_m: np.ndarray      # (2, 3) its COM in the sensor's frame
     noise_sd: np.ndarray     # (12,) each foot's force and torque noise [N, N m]
 
@@ -77,7 +77,7 @@ class FeetSensing:
             # what the sensor reads, from the wrench in its modelled axes: the transpose of its mounting's turn
             np.array([pin.exp3(np.asarray(um.ft_rotation_rad.get(s, np.zeros(3)), float)) for s in SIDES]),
             np.array([both + np.asarray(um.ft_bias.get(s, np.zeros(6)), float) for s in SIDES]),
-            np.outer([mass * G for mass, _ in feet], (0.0, 0.0, 1.0)),
+            np.outer([mass * G for mass, _ in feet], (0.0, 0.0, 1.0)), tuple(mass * G for mass, _ in feet),
             np.array([lever for _, lever in feet]),
             np.tile([cfg.ft_force_noise_n] * 3 + [cfg.ft_torque_noise_nm] * 3, len(SIDES)))
 
@@ -95,18 +95,24 @@ class FeetSensing:
 
     def ground_reactions(self, data: mujoco.MjData, readings: np.ndarray) -> np.ndarray:
         """(2, 6) the ground reaction on each foot (world axes): force [N], and torque about the sole point [N m],
-        from the readings (2, 6)."""
-        xpos = data.site_xpos.take(self.sites, axis=0)           # the sensors' sites, then the soles'
-        # what the legs exert on the foot subtrees, and the feet's COMs from the sensors, in world axes
-        vectors = np.concatenate((readings.reshape(len(SIDES), 2, 3), self.lever_m[:, None]), axis=1)
+        from the readings (2, 6). The static foot balances: ground + leg + its weight W = (0, 0, w) at its COM,
+        so the force is W - f_leg and the moment about the sole arm x (W - f_leg) + lever x W - t_leg, with arm the
+        sensor from the sole and lever the foot's COM from the sensor (world axes). Past the one rotation into world
+        axes the two feet's few products run in floats: as arrays of two rows they cost twice as long."""
         R = data.site_xmat.take(self.ft_sites, axis=0).reshape(-1, 3, 3)
-        f_parent, t_parent, lever = (vectors @ R.transpose(0, 2, 1)).transpose(1, 0, 2)
-        out = np.empty((len(SIDES), 6))
-        np.subtract(self.weight_n, f_parent, out=out[:, :3])
-        # moments about the sole: ground + leg + the weight at the foot's COM (arm + lever) balance the static foot
-        arm = xpos[:len(SIDES)] - xpos[len(SIDES):]
-        np.subtract(cross(arm + lever, self.weight_n), t_parent + cross(arm, f_parent), out=out[:, 3:])
-        return out
+        # what the leg exerts on the foot (force, torque) and the foot's COM lever, from sensor to world axes
+        rows = np.concatenate((readings.reshape(len(SIDES), 2, 3), self.lever_m[:, None]), axis=1) @ \
+            R.transpose(0, 2, 1)
+        xpos = data.site_xpos.take(self.sites, axis=0).tolist()          # the sensors' sites, then the soles'
+        out = []
+        for k, ((fx, fy, fz), (tx, ty, tz), (lx, ly, _)) in enumerate(rows.tolist()):
+            w = self.weight_z_n[k]
+            gx, gy, gz = -fx, -fy, w - fz
+            (sx, sy, sz), (px, py, pz) = xpos[k], xpos[len(SIDES) + k]
+            ax, ay, az = sx - px, sy - py, sz - pz
+            out.append((gx, gy, gz, ay * gz - az * gy + w * ly - tx, az * gx - ax * gz - w * lx - ty,
+                        ax * gy - ay * gx - tz))
+        return np.array(out)
 
     def vertical_force(self, data: mujoco.MjData) -> float:
         """The feet's summed vertical ground reaction [N] (the z of :meth:`ground_reactions`, without the rest, the
