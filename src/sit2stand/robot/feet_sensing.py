@@ -49,8 +49,8 @@ class FeetSensing:
     sites: np.ndarray        # (4,) the sensors' sites, then the soles'
     reading: np.ndarray      # (2, 3, 3) raw rows @ reading: what the sensor reads (its mounting's turn, transposed)
     bias: np.ndarray         # (2, 6) [N, N m]
-    weight_n: np.ndarray     # (2, 3) the controller model's foot below the sensor, as the force that holds it up
-    weight_z_n: tuple[float, ...]   # (2,) its z: the force is vertical
+    weight_n: tuple[float, ...]   # (2,) the controller model's foot below the sensor: its weight, the vertical
+    #                               force that holds it up [N]
     lever_m: np.ndarray      # (2, 3) its COM in the sensor's frame
     noise_sd: np.ndarray     # (12,) each foot's force and torque noise [N, N m]
 
@@ -77,7 +77,7 @@ class FeetSensing:
             # what the sensor reads, from the wrench in its modelled axes: the transpose of its mounting's turn
             np.array([pin.exp3(np.asarray(um.ft_rotation_rad.get(s, np.zeros(3)), float)) for s in SIDES]),
             np.array([both + np.asarray(um.ft_bias.get(s, np.zeros(6)), float) for s in SIDES]),
-            np.outer([mass * G for mass, _ in feet], (0.0, 0.0, 1.0)), tuple(mass * G for mass, _ in feet),
+            tuple(mass * G for mass, _ in feet),
             np.array([lever for _, lever in feet]),
             np.tile([cfg.ft_force_noise_n] * 3 + [cfg.ft_torque_noise_nm] * 3, len(SIDES)))
 
@@ -106,7 +106,7 @@ class FeetSensing:
         xpos = data.site_xpos.take(self.sites, axis=0).tolist()          # the sensors' sites, then the soles'
         out = []
         for k, ((fx, fy, fz), (tx, ty, tz), (lx, ly, _)) in enumerate(rows.tolist()):
-            w = self.weight_z_n[k]
+            w = self.weight_n[k]
             gx, gy, gz = -fx, -fy, w - fz
             (sx, sy, sz), (px, py, pz) = xpos[k], xpos[len(SIDES) + k]
             ax, ay, az = sx - px, sy - py, sz - pz
@@ -119,7 +119,7 @@ class FeetSensing:
         sensor errors aside): each foot's weight less the world z of what its sensor reads (row-major: the z row is
         xmat[6:9])."""
         z_rows = data.site_xmat.take(self.ft_sites, axis=0)[:, 6:9]
-        return float(self.weight_n[:, 2].sum() - np.vdot(z_rows, data.sensordata.take(self.adr[:, :3])))
+        return float(sum(self.weight_n) - np.vdot(z_rows, data.sensordata.take(self.adr[:, :3])))
 
     def combined_cop(self, data: mujoco.MjData, ground: np.ndarray, threshold_n: float) -> np.ndarray | None:
         """The centre of pressure of both feet on the floor (3,) [m] from their ground reactions (2, 6) (moments about
