@@ -5,7 +5,7 @@ offset, gear play, actuator delay) and the joint controller's reference (:class:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -92,6 +92,7 @@ class JointReference:
     qdd: np.ndarray
     t_s: float = 0.0
     tau: np.ndarray | None = None    # the joint torques the plan asks [N m], when it has them (torque control)
+    _servo: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def holding(cls, q: np.ndarray, t_s: float) -> JointReference:
@@ -102,10 +103,26 @@ class JointReference:
         EXTRAPOLATE_MAX_S after its command."""
         return reference_at(self.q, self.qd, self.qdd, t_s - self.t_s)
 
+    def servo_target(self, t_s: float, q_offset: np.ndarray, kd_over_kp: np.ndarray) -> np.ndarray:
+        """The position servo's target [rad] at ``t_s``: the reference there (:meth:`at`) less the encoders'
+        ``q_offset``, plus ``kd_over_kp`` times its velocity (the servo's damping then acts on the velocity error).
+        A polynomial in the age whose three terms are taken at the first call (the plant's offset and gains do not
+        change; a command makes a new reference): this runs at every physics step."""
+        if self._servo is None:
+            self._servo = (self.q - q_offset + kd_over_kp * self.qd, self.qd + kd_over_kp * self.qdd, 0.5 * self.qdd)
+        age = _extrapolation_age(t_s - self.t_s)
+        base, linear, quadratic = self._servo
+        return base + age * (linear + age * quadratic)
+
+
+def _extrapolation_age(age_s: float) -> float:
+    """How far [s] a reference ``age_s`` after its command is followed along its velocity: 0 to EXTRAPOLATE_MAX_S."""
+    return min(max(age_s, 0.0), EXTRAPOLATE_MAX_S)
+
 
 def reference_at(q_ref: np.ndarray, qd_ref: np.ndarray, qdd_ref: np.ndarray,
                  age_s: float) -> tuple[np.ndarray, np.ndarray]:
     """The joint controller's reference [rad, rad/s] ``age_s`` after its command: followed along the command's own
     velocity and acceleration, for at most EXTRAPOLATE_MAX_S."""
-    age = min(max(age_s, 0.0), EXTRAPOLATE_MAX_S)
+    age = _extrapolation_age(age_s)
     return q_ref + age * qd_ref + 0.5 * age * age * qdd_ref, qd_ref + age * qdd_ref

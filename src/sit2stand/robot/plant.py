@@ -31,7 +31,7 @@ from ..dynamics import G
 from ..errors import InputError
 from ..forceplate import DEFAULT_COP_THRESHOLD_N
 from ..vectors import xyzw_from_wxyz
-from .actuation import EXTRAPOLATE_MAX_S, JointFaults, JointMap, JointReference
+from .actuation import JointFaults, JointMap, JointReference
 from .feet_sensing import FeetSensing
 from .torque_control import WholeBodyController
 from .model import (SEAT_CLEARANCE_BELOW_M, SIDES, PlantConfig, PlantConfigError, add_chair, add_seat_frame, build_spec,
@@ -203,8 +203,7 @@ class Plant:
         self.ff = FeedForward(max(1, int(round(1.0 / (cfg.feedforward_rate_hz * cfg.timestep_s)))),
                               max(1, int(round(1.0 / (WBC_RATE_HZ * cfg.timestep_s)))), np.zeros(self.n))
         self.wbc: WholeBodyController | None = None
-        self._servo_for: JointReference | None = None       # the reference _servo_terms are of
-        self._servo_terms: tuple[np.ndarray, np.ndarray, np.ndarray] = ()
+        self._kd_over_kp = self.joints.kd / self.joints.kp
         self.reset()
         self.status_text = "ok"
 
@@ -354,7 +353,10 @@ class Plant:
                     ff.tau, ff.age = self._within_effort(self._feedforward()), 0
                 ff.age += 1
                 # PD (implicit, in the servo actuator) + feed-forward (motor); the joint clamps their sum
-                ctrl_pd, ctrl_ff = self._servo_target(self.data.time), ff.tau
+                # between commands the joint controller follows the reference's own velocity and acceleration
+                # (as a real one interpolates a trajectory point): a reference held still until the next message
+                # would make the torques jump at every update
+                ctrl_pd, ctrl_ff = self.ref.servo_target(self.data.time, faults.q_offset, self._kd_over_kp), ff.tau
             if faults.delay_steps:
                 self._tau_queue.append((ctrl_pd, ctrl_ff))
                 if len(self._tau_queue) > faults.delay_steps:
@@ -367,23 +369,6 @@ class Plant:
             self.data.ctrl[jm.ff_ids] = ctrl_ff
             mujoco.mj_step(self.model, self.data)
         self._check_fall()
-
-    def _servo_target(self, t_s: float) -> np.ndarray:
-        """The position servo's target [rad] at plant time ``t_s``: the reference followed along its own velocity
-        and acceleration (:func:`~sit2stand.robot.actuation.reference_at`: a real joint controller interpolates a
-        trajectory point; a reference held still until the next message would make the torques jump at every
-        update), less the encoders' offset, plus kd/kp times the reference's velocity (the servo's damping then acts
-        on the velocity error). Its three terms are taken once per reference: a command replaces the reference,
-        never changes it, and this runs at every physics step."""
-        ref = self.ref
-        if self._servo_for is not ref:
-            kd_kp = self.joints.kd / self.joints.kp
-            self._servo_terms = (ref.q - self.faults.q_offset + kd_kp * ref.qd, ref.qd + kd_kp * ref.qdd,
-                                 0.5 * ref.qdd)
-            self._servo_for = ref
-        age = min(max(t_s - ref.t_s, 0.0), EXTRAPOLATE_MAX_S)
-        base, linear, quadratic = self._servo_terms
-        return base + age * (linear + age * quadratic)
 
     def _dead_zone(self, ctrl_pd: np.ndarray, ctrl_ff: np.ndarray) -> np.ndarray:
         """The servo target that makes the joint PD + feed-forward pass through a gear with play: the motor (massless,
