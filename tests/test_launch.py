@@ -5,6 +5,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import textwrap
 import time
 from pathlib import Path
@@ -76,6 +77,7 @@ def test_substitutions_and_parameters(tmp_path):
     inline = yaml.safe_load(open(node.command[node.command.index("--params-file", 7) + 1]))
     assert inline == {"/**": {"ros__parameters": {"output": "/tmp/o", "rate": 2.5}}}  # typed substitution
     assert node.env["X"] == os.environ["HOME"]
+    graph.discard()
 
 
 @pytest.mark.parametrize("nodes, overrides, message", [
@@ -91,10 +93,24 @@ def test_substitutions_and_parameters(tmp_path):
     ([{"name": "a", "executable": "recorder", "scheduling": {"nice": 40}}], {}, "scheduling.nice"),
     ([{"name": "a", "executable": "recorder", "scheduling": {"priority": "high"}}], {}, "integers"),
 ])
-def test_bad_graphs_name_the_problem(tmp_path, nodes, overrides, message):
+def test_bad_graphs_name_the_problem(tmp_path, nodes, overrides, message, monkeypatch):
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
     with pytest.raises(LaunchError, match=message) as err:
         load_graph(graph_file(tmp_path, nodes), overrides)
     assert "graph.yaml" in str(err.value)
+    assert not any(temp.iterdir())           # the inline parameters' folder goes with the failed load
+
+
+def test_a_loaded_graph_discards_its_inline_parameters(tmp_path, monkeypatch):
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    graph = load_graph(graph_file(tmp_path, [{"name": "n", "executable": "recorder", "parameters": [{"a": 1}]}]))
+    assert graph.tmpdir.parent == temp and any(graph.tmpdir.iterdir())
+    graph.discard()
+    assert not any(temp.iterdir())
 
 
 def test_overrides_syntax():

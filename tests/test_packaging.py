@@ -165,6 +165,7 @@ def test_packaged_graphs_name_their_parameter_files_and_plant():
         for node in graph.nodes:
             files = [node.command[i + 1] for i, a in enumerate(node.command) if a == "--params-file"]
             assert all(Path(f).is_file() for f in files)
+        graph.discard()
 
 
 @pytest.mark.timeout(180)

@@ -132,7 +132,22 @@ class NodeSpec:
 class Graph:
     name: str
     nodes: list[NodeSpec]
-    tmpdir: Path | None = None
+    tmpdir: Path | None = None          # the inline parameters' files (made at the first); removed by :meth:`discard`
+
+    def inline_parameters_file(self, node: str, index: int, parameters: dict) -> Path:
+        """A ROS parameters file holding ``parameters``, node ``node``'s ``index``-th entry, in the graph's temp
+        folder."""
+        if self.tmpdir is None:
+            self.tmpdir = Path(tempfile.mkdtemp(prefix="sit2stand-launch-"))
+        file = self.tmpdir / f"{node}_{index}.yaml"
+        file.write_text(yaml.safe_dump({"/**": {"ros__parameters": parameters}}))
+        return file
+
+    def discard(self) -> None:
+        """Remove the inline parameters' temp folder (the launcher does, once the graph has stopped; a graph
+        loaded and never run should too)."""
+        if self.tmpdir is not None:
+            shutil.rmtree(self.tmpdir, ignore_errors=True)
 
 
 def _substitute(value, variables: dict[str, str], graph_dir: Path, where: str):
@@ -187,19 +202,23 @@ def load_graph(path: str | Path, overrides: dict[str, str] | None = None, namesp
     if unknown:
         raise LaunchError(f"{path}: unknown argument(s) {', '.join(sorted(unknown))}; "
                           f"it takes {', '.join(sorted(doc.get('arguments') or {})) or 'none'}")
-    tmpdir = Path(tempfile.mkdtemp(prefix="sit2stand-launch-"))
-    nodes, names = [], set()
-    for i, raw in enumerate(doc["nodes"]):
-        where = f"{path}: nodes[{i}]"
-        if not isinstance(raw, dict) or "name" not in raw:
-            raise LaunchError(f"{where}: each node needs a 'name'")
-        spec = _substitute(raw, variables, graph_dir, where)
-        name = str(spec["name"])
-        if name in names:
-            raise LaunchError(f"{where}: duplicate node name {name!r}")
-        names.add(name)
-        nodes.append(_node_spec(spec, name, where, graph_dir, tmpdir, _namespace(namespace)))
-    return Graph(str(doc.get("name", path.stem)), nodes, tmpdir)
+    graph = Graph(str(doc.get("name", path.stem)), [])
+    names = set()
+    try:
+        for i, raw in enumerate(doc["nodes"]):
+            where = f"{path}: nodes[{i}]"
+            if not isinstance(raw, dict) or "name" not in raw:
+                raise LaunchError(f"{where}: each node needs a 'name'")
+            spec = _substitute(raw, variables, graph_dir, where)
+            name = str(spec["name"])
+            if name in names:
+                raise LaunchError(f"{where}: duplicate node name {name!r}")
+            names.add(name)
+            graph.nodes.append(_node_spec(spec, name, where, graph_dir, graph, _namespace(namespace)))
+    except BaseException:
+        graph.discard()
+        raise
+    return graph
 
 
 def select_nodes(graph: Graph, only: list[str] | None = None, host: str | None = None) -> Graph:
@@ -235,7 +254,7 @@ def _namespace(namespace: str) -> str:
     return ns
 
 
-def _node_spec(spec: dict, name: str, where: str, graph_dir: Path, tmpdir: Path, namespace: str = "") -> NodeSpec:
+def _node_spec(spec: dict, name: str, where: str, graph_dir: Path, graph: Graph, namespace: str = "") -> NodeSpec:
     exe = spec.get("executable")
     if exe is None:
         raise LaunchError(f"{where} ({name}): needs 'executable'")
@@ -260,9 +279,7 @@ def _node_spec(spec: dict, name: str, where: str, graph_dir: Path, tmpdir: Path,
                 file = packaged
             command += ["--params-file", str(file)]
         elif isinstance(entry, dict):
-            file = tmpdir / f"{name}_{j}.yaml"
-            file.write_text(yaml.safe_dump({"/**": {"ros__parameters": entry}}))
-            command += ["--params-file", str(file)]
+            command += ["--params-file", str(graph.inline_parameters_file(name, j, entry))]
         else:
             raise LaunchError(f"{where} ({name}): parameters[{j}] must be a file name or a map")
     for src, dst in (spec.get("remappings") or {}).items():
@@ -394,8 +411,7 @@ class Launcher:
                 signal.signal(s, handler)
             for reader in self._readers.values():
                 reader.join(timeout=2.0)
-            if self.graph.tmpdir is not None:
-                shutil.rmtree(self.graph.tmpdir, ignore_errors=True)
+            self.graph.discard()
         if failed:
             self._emit("launch", "the job failed: " + ", ".join(
                 f"{n} exited with code {self.procs[n].returncode}" for n in dict.fromkeys(failed)))

@@ -36,11 +36,15 @@ def _bag_recover(args: argparse.Namespace) -> int:
 
 
 def _launch(args: argparse.Namespace) -> int:
-    from ..launch import Launcher, load_graph, parse_overrides, select_nodes
+    from ..launch import LaunchError, Launcher, load_graph, parse_overrides, select_nodes
 
     graph = load_graph(args.graph, parse_overrides(args.overrides), namespace=args.namespace)
     if args.only or args.host:           # one machine's share of a graph spread over several
-        graph = select_nodes(graph, [n for n in (args.only or "").split(",") if n] or None, args.host)
+        try:
+            graph = select_nodes(graph, [n for n in (args.only or "").split(",") if n] or None, args.host)
+        except LaunchError:
+            graph.discard()
+            raise
     return Launcher(graph, grace_s=args.grace).run(timeout_s=args.timeout)
 
 
