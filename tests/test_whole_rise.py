@@ -1,6 +1,7 @@
 """sit2stand.retarget.whole_rise: the rise optimised as one problem (Crocoddyl: contacts, cones, torque limits), at
 the human's timing unless it has no solution there."""
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -78,7 +79,8 @@ def test_with_identified_parameters_the_optimised_torques_are_the_plans_torque_c
 def test_a_rise_too_fast_for_the_motors_is_slowed_by_the_least_step_that_has_a_solution(tmp_path, monkeypatch):
     """A 0.8 s rise (the natural style's 1.6 s, twice as fast) has no solution at the human's timing on TALOS: each
     try is a ``scale_step`` slower, and the first with a solution is the result. ``sit2stand retarget`` stops trying
-    at the per-frame plan's played ratio (1.15 here): an optimised plan found slower would not be played."""
+    at the per-frame plan's played ratio (1.15 here): an optimised plan found slower would not be played; the try at
+    1.0, its COM within ``com_relaxed_tolerance_m`` of the plan's, is then the result."""
     bag = tmp_path / "fast"
     assert sit2stand(["synth-human", "--duration", "0.8", "--out", str(bag)]) == 0
     config, lines, seen = WholeRiseConfig(scale_step=0.25, max_time_scale=2.0), [], {}
@@ -89,7 +91,8 @@ def test_a_rise_too_fast_for_the_motors_is_slowed_by_the_least_step_that_has_a_s
         return optimised_player(model, frames, player, **kw)
     monkeypatch.setattr(offline, "optimised_player", remember)
     summary = offline.run(bag, tmp_path / "rt", plan="whole", whole_rise=config, progress=lines.append)
-    assert summary["whole_rise_tries"] == [[1.0, False]] and summary["plan"] == "frames"
+    assert summary["whole_rise_tries"] == [[1.0, False]]
+    assert summary["whole_rise_com_relaxed"] and summary["whole_rise_time_scale"] == 1.0
     assert 1.0 < summary["plan_ratio_frames"] < 1.25
     # the same problem with no such bound: 1.25 has a solution
     lines.clear()
@@ -163,6 +166,20 @@ def test_ending_at_the_checks_gives_a_solution_in_fewer_iterations():
     late = WholeRiseProblem(model, WholeRiseConfig(passed_iterations=0)).solve(plan)
     assert early.feasible and late.feasible
     assert early.iterations < 0.5 * late.iterations
+
+
+def test_where_no_try_keeps_the_plans_com_the_first_within_the_relaxed_tolerance_is_the_result():
+    """No try has a solution within ``com_tolerance_m`` (0 here): the first whose COM stays within
+    ``com_relaxed_tolerance_m`` and passes the other checks is the result, and says so; with none, none is."""
+    model, plan = short_plan()
+    strict = WholeRiseConfig(com_tolerance_m=0.0, scale_step=0.5, max_time_scale=1.5)
+    result = WholeRiseProblem(model, strict).solve(plan)
+    assert result.tries == [(1.0, False), (1.5, False)]
+    assert result.feasible and result.com_relaxed and result.time_scale == 1.0 and len(result.tau) == 20
+    assert result.summary()["whole_rise_com_relaxed"] is True
+    assert result.com_error_max_m <= strict.com_relaxed_tolerance_m
+    none = WholeRiseProblem(model, dataclasses.replace(strict, com_relaxed_tolerance_m=0.0)).solve(plan, 1.0, None, 1.0)
+    assert none.tries == [(1.0, False)] and not none.feasible and not none.com_relaxed
 
 
 def test_a_plan_longer_than_the_optimisation_is_given_is_played_frame_by_frame_and_says_so(tmp_path):
