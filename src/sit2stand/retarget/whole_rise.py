@@ -16,8 +16,9 @@ is warm-started from the plan player's smoothed poses and velocities, with conta
 The rise is played at the human's timing when the solution is one: dynamically consistent, the contact forces inside
 their cones, every loaded sole's centre of pressure at least half ``cop_side_margin_m`` inside it, the COM within
 ``com_tolerance_m`` of the plan's. Otherwise the problem is solved again a little slower (``time_scale`` up by
-``scale_step``, the knots' period with it) until one is, and the factor is reported. :func:`optimised_player` then
-plays whichever of the optimised and the per-frame plan the player's own checks play shorter.
+``scale_step``, the knots' period with it) until one is, and the factor is reported; where none is, the first try
+whose COM stays within ``com_relaxed_tolerance_m`` is taken. :func:`optimised_player` then plays whichever of the
+optimised and the per-frame plan the player's own checks play shorter.
 
 Units SI; world frame REP-103 (x forward, y left, z up).
 """
