@@ -121,7 +121,7 @@ FIGURES = ("stood_up", "fall", "time_scale", "time_scale_peak", "duration_ratio"
            "controller_qp_cpu_ms_p99", "final_knee_flexion_deg_robot", "final_knee_flexion_deg_human",
            "final_pelvis_height_ratio", "final_pelvis_pitch_deg", "standing_knees_match", "posture_rms_deg",
            "marker_rms_mm", "plan", "plan_ratio_whole", "plan_ratio_frames", "whole_rise_time_scale",
-           "whole_rise_solve_s")
+           "whole_rise_solve_s", "whole_rise_com_relaxed")
 """What a stand-up case reports, from the retarget run's summary (see ``sit2stand retarget``)."""
 
 
