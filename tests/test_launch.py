@@ -92,6 +92,7 @@ def test_substitutions_and_parameters(tmp_path):
     ([{"name": "a", "executable": "recorder", "scheduling": {"policy": "fifo"}}], {}, "scheduling.priority"),
     ([{"name": "a", "executable": "recorder", "scheduling": {"nice": 40}}], {}, "scheduling.nice"),
     ([{"name": "a", "executable": "recorder", "scheduling": {"priority": "high"}}], {}, "integers"),
+    ([{"name": "a", "executable": "recorder", "parameters": [{"x": 1}], "on_exit": "explode"}], {}, "on_exit"),
 ])
 def test_bad_graphs_name_the_problem(tmp_path, nodes, overrides, message, monkeypatch):
     temp = tmp_path / "temp"

@@ -148,6 +148,7 @@ class Graph:
         loaded and never run should too)."""
         if self.tmpdir is not None:
             shutil.rmtree(self.tmpdir, ignore_errors=True)
+            self.tmpdir = None
 
 
 def _substitute(value, variables: dict[str, str], graph_dir: Path, where: str):

@@ -17,8 +17,8 @@ The rise is played at the human's timing when the solution is one: dynamically c
 their cones, every loaded sole's centre of pressure at least half ``cop_side_margin_m`` inside it, the COM within
 ``com_tolerance_m`` of the plan's. Otherwise the problem is solved again a little slower (``time_scale`` up by
 ``scale_step``, the knots' period with it) until one is, and the factor is reported; where none is, the first try
-whose COM stays within ``com_relaxed_tolerance_m`` is taken. :func:`optimised_player` then plays whichever of the
-optimised and the per-frame plan the player's own checks play shorter.
+whose COM stays within ``com_relaxed_tolerance_m`` and passes the other checks is taken. :func:`optimised_player`
+then plays whichever of the optimised and the per-frame plan the player's own checks play shorter.
 
 Units SI; world frame REP-103 (x forward, y left, z up).
 """
@@ -139,7 +139,7 @@ class WholeRise:
     cop_margin_min_m: float        # the smallest centre-of-pressure margin inside a sole on the feet
     span: tuple[int, int] = (0, 0)  # the first and last plan frames optimised (:meth:`WholeRiseProblem.moving`)
     com_relaxed: bool = False      # a solution only within ``com_relaxed_tolerance_m`` (see solve)
-    tries: list[tuple[float, bool]] = dataclasses.field(default_factory=list)   # (time scale, feasible)
+    tries: list[tuple[float, bool]] = dataclasses.field(default_factory=list)  # (time scale, within com_tolerance_m)
 
     def torque_at(self, t_plan_s: float, frame_period_s: float) -> np.ndarray | None:
         """The joint torques [N m] the optimisation asks at the plan's human time ``t_plan_s`` [s from its first
