@@ -191,6 +191,62 @@ def test_warm_qp_falls_back_to_daqp_where_the_kernel_gives_up():
     assert solver._native.solve_problem(qp) is not None, "seeded from DAQP's answer, one iteration finishes it"
 
 
+def _with_held_constraints_unbounded(problem, x, tol=1e-9):
+    """The problem with the bounds and rows that hold at ``x`` made infinite (what a joint reaching its
+    mechanical stop does to the whole-body QP's torque rows), and the indices of those bounds and rows."""
+    H, g, A, b, lo, hi, C, d = (np.array(a, float) for a in problem)
+    at_lo, at_hi = np.abs(x - lo) < tol, np.abs(x - hi) < tol
+    rows = np.abs(C @ x - d) < tol
+    lo[at_lo], hi[at_hi], d[rows] = -np.inf, np.inf, -np.inf
+    return (H, g, A, b, lo, hi, C, d), at_lo | at_hi, rows
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_start_holding_a_bound_or_row_made_infinite_is_solved_not_nan(seed):
+    """The next problem frees what the last working set held: the kernel drops those from its start and answers
+    as proxsuite (no NaN from a variable held at an infinite bound), and a general solver's multipliers at infinite
+    bounds seed nothing."""
+    rng = np.random.default_rng(seed)
+    problem = random_qp(rng, rows=6)
+    solver = native.ActiveSetQp(native.kernels())
+    p = filled(*problem)
+    x = solver.solve_problem(p)
+    if x is None:                                  # seeded from the general answer
+        solver.remember(p, np.where(np.abs(proxsuite_answer(*problem) - problem[4]) < 1e-9, -1.0, 0.0).tolist()
+                        + [0.0] * (len(problem[3]) + len(problem[7])))
+        x = solver.solve_problem(p)
+    freed, held_bounds, held_rows = _with_held_constraints_unbounded(problem, x[0])
+    assert held_bounds.any() or held_rows.any()
+    p = filled(*freed, into=p)
+    answer = solver.solve_problem(p)
+    if answer is not None:
+        assert np.isfinite(answer[0]).all()
+        assert np.abs(answer[0] - proxsuite_answer(*(np.nan_to_num(a, posinf=1e20, neginf=-1e20) for a in freed)
+                                                   )).max() < 1e-6
+    lam = np.ones(len(p.g) + len(p.b) + len(p.d))
+    lam[:len(p.g)][held_bounds] = -1.0
+    solver.remember(p, lam)
+    state = p.kernel
+    assert not np.any(state.bound[np.isinf(p.lo)] < 0) and not np.any(state.bound[np.isinf(p.hi)] > 0)
+    assert not np.any(state.row[np.isinf(p.d)])
+
+
+def test_warm_qp_answers_a_problem_whose_last_active_set_became_infinite():
+    """WarmQp's DAQP path (the kernel disabled) on a problem that frees what the last answer held: DAQP's warm
+    start from an active set with an infinite bound answers NaN, so it is solved again from the equalities."""
+    rng = np.random.default_rng(7)
+    problem = random_qp(rng, rows=6)
+    solver = WarmQp()
+    solver._native = None
+    x = solver.solve(*problem)
+    freed, held_bounds, held_rows = _with_held_constraints_unbounded(problem, x)
+    assert held_bounds.any() or held_rows.any()
+    again = solver.solve(*freed)
+    assert again is not None and np.isfinite(again).all()
+    assert np.abs(again - proxsuite_answer(*(np.nan_to_num(a, posinf=1e20, neginf=-1e20) for a in freed))
+                  ).max() < 1e-6
+
+
 def test_no_compiler_or_disabled_means_no_kernels_and_a_damaged_cache_is_built_again(monkeypatch, tmp_path):
     monkeypatch.setenv("SIT2STAND_CACHE", str(tmp_path))
     try:

@@ -140,6 +140,7 @@ class WarmQp:
         self._models: dict[tuple[int, int, int], daqp.Model] = {}     # one DAQP workspace per shape
         self._sense: dict[tuple[int, int, int], np.ndarray] = {}
         self._last: tuple | None = None     # the last solved problem, its x and multipliers
+        self.daqp_solves = 0                # the problems the compiled active set gave up on (or all: no compiler)
         lib = native.kernels()
         self._native = None if lib is None else native.ActiveSetQp(lib)
 
@@ -167,6 +168,7 @@ class WarmQp:
             if solved is not None:
                 self._last = (p, *solved)
                 return solved[0]
+        self.daqp_solves += 1
         return self._daqp(p)
 
     def _daqp(self, p: QpProblem) -> np.ndarray | None:
@@ -191,10 +193,12 @@ class WarmQp:
         else:       # DAQP's update reads past an empty row block: none given then
             model.update(H=H, f=g, A=rows if len(rows) else None, bupper=upper, blower=lower)
             x, _, flag, info = model.solve()
-            if flag != 1:                                  # from the equalities alone
+            # from the equalities alone; also where the last active set held a bound that is infinite now (a
+            # joint on its stop), from which DAQP's warm start answers NaN
+            if flag != 1 or not np.isfinite(x).all():
                 model.update(sense=self._sense[key])
                 x, _, flag, info = model.solve()
-        if flag != 1:
+        if flag != 1 or not np.isfinite(x).all():
             model.update(sense=self._sense[key])           # the next problem starts clean
             self._last = None
             return None

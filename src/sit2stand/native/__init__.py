@@ -323,11 +323,15 @@ class ActiveSetQp:
 
     def remember(self, p, lam: np.ndarray) -> None:
         """Start the problem's next solve from another solver's answer: the bounds and rows with a nonzero
-        multiplier held (DAQP's sign: negative at a lower bound)."""
+        multiplier held (DAQP's sign: negative at a lower bound), but for an infinite bound or row bound (an
+        inactive constraint's multiplier is not always zero in DAQP's answer, and a variable held at an infinite
+        bound would make the next answer NaN)."""
         n, me, _ = p.shape
         state = _KernelState.of(p)
-        state.bound[:] = np.sign(lam[:n])
-        state.row[:] = lam[n + me:] != 0.0
+        lam = np.nan_to_num(lam, nan=0.0)
+        at_lo, at_hi = (lam[:n] < 0) & np.isfinite(p.lo), (lam[:n] > 0) & np.isfinite(p.hi)
+        state.bound[:] = at_hi.astype(np.int32) - at_lo
+        state.row[:] = (lam[n + me:] != 0.0) & np.isfinite(p.d)
 
 
 class _KernelState:

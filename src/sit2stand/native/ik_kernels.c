@@ -221,6 +221,12 @@ CLONED int box_qp(int n, int me, int mi, int max_iter, double tol, void *const *
     double *e = work;
     double *mu = e + mmax;
     double *inner = mu + mmax;
+    for (int i = 0; i < n; ++i)        /* a start's bound or row that is infinite now (a joint on its stop) */
+        if ((bound[i] < 0 && !isfinite(lo[i])) || (bound[i] > 0 && !isfinite(hi[i])))
+            bound[i] = 0;
+    for (int j = 0; j < mi; ++j)
+        if (row[j] && !isfinite(d[j]))
+            row[j] = 0;
     for (int it = 1; it <= max_iter; ++it) {
         int ne = me;
         memcpy(E, A, sizeof(double) * me * n);
