@@ -122,7 +122,7 @@ class WholeBodyController:
         ms, cpu = np.array(self.qp_times_s) * 1e3, np.array(self.qp_cpu_times_s) * 1e3
         return {"qp_ms_p50": float(np.percentile(ms, 50)), "qp_ms_p99": float(np.percentile(ms, 99)),
                 "qp_cpu_ms_p50": float(np.percentile(cpu, 50)), "qp_cpu_ms_p99": float(np.percentile(cpu, 99)),
-                "qp_steps": len(ms), "qp_cold_solves": self.qp.cold_solves}
+                "qp_steps": len(ms), "qp_fallback_solves": self.qp.fallback_solves}
 
     def anchor(self, q: np.ndarray) -> None:
         """Take the left sole's pose in the measured configuration ``q``, as measured and flattened onto the floor;

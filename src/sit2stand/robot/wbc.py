@@ -1,29 +1,31 @@
 """Whole-body inverse dynamics as one QP per control step: the robot's torque-controlled on-board controller.
 
 The formulation of task-space inverse dynamics (TSID; Del Prete et al., "Implementing torque control with high-rate,
-low-latency loops", and the `tsid` library's TALOS examples), written on Pinocchio and DAQP (Arnström et al., "A dual
-active-set solver for embedded quadratic programming using recursive LDL' updates", IEEE TAC 2022): a dual active-set
-solver, as tsid's eiquadprog is, warm-started each step from the last step's multipliers (its active set). Unknowns:
-x = (a, f): the generalised acceleration (nv) and the contact forces, 3D forces at the four corners of each sole
-(shrunk by ``cop_margin_m``, so the feet's centre of pressure stays that far inside them) and at one seat point under
-the pelvis. Constraints:
+low-latency loops", and the `tsid` library's TALOS examples), written on Pinocchio and solved by
+:class:`sit2stand.optim.WarmQp`: a compiled primal-dual active set started from the last step's working set, with
+DAQP (Arnström et al., "A dual active-set solver for embedded quadratic programming using recursive LDL' updates",
+IEEE TAC 2022) where it gives up. Unknowns: x = (a, lambda): the generalised acceleration (nv) and the contact
+forces, 3D forces at the four corners of each sole (shrunk by ``cop_margin_m``, so the feet's centre of pressure
+stays that far inside them) and at one seat point under the pelvis, each a nonnegative combination lambda of its
+friction pyramid's four edges (:func:`friction_generators`). Constraints:
 
 * the floating base's Newton-Euler rows:   M_b a + h_b = J_b^T f          (6; no actuator at the base)
 * both soles fixed (6D rigid contacts):    J_foot a + dJ_foot v = -kd_foot v_foot   (12; on legs without an ankle
   roll only their independent combinations: these rows are dependent wherever the hips' roll axes align)
 * the seat point fixed while it is active, otherwise its force zero (3)
-* unilateral forces in linearised friction cones (friction coefficient ``friction``); the seat's normal force at
-  most ``seat_force_max_n`` (ramped to zero before seat-off, as tsid removes a contact)
+* unilateral forces in linearised friction cones (friction coefficient ``friction``): lambda >= 0; the seat's
+  normal force at most ``seat_force_max_n`` (ramped to zero before seat-off, as tsid removes a contact)
 * joint torques tau = M_j a + h_j - J_j^T f inside the URDF effort limits.
 
 Cost (weighted least squares): COM acceleration toward a_com* = a_ref + kp (c_ref - c) + kd (v_ref - v); every
 tangent coordinate (base orientation and joints; the base's translation is left to the COM) toward
 a* = a_ref + kp (q_ref - q) + kd (v_ref - v) (the base orientation weighed less while the seat carries weight:
 the seat holds the pelvis too); the seat's force (the feet carry what they can); all forces (a small
-regularisation); where the reference has torques (an optimised plan's), the joint torques toward them, which settles
-how the contacts share the load where the tasks leave a choice (tsid's force reference). The same QP is the plan's
-dynamics filter (:mod:`sit2stand.retarget.dynamic`: integrated on the model itself) and the simulated robot's
-controller (:class:`sit2stand.robot.plant.Plant`, ``controller="wbc"``).
+regularisation, and a hundredth of it on lambda itself, which splits a force among its edges); where the reference
+has torques (an optimised plan's), the joint torques toward them, which settles how the contacts share the load where
+the tasks leave a choice (tsid's force reference). The same QP is the plan's dynamics filter
+(:mod:`sit2stand.retarget.dynamic`: integrated on the model itself) and the simulated robot's controller
+(:class:`sit2stand.robot.plant.Plant`, ``controller="wbc"``).
 
 Units SI; world frame REP-103 (x forward, y left, z up); forces in world axes.
 """
@@ -37,6 +39,7 @@ import daqp
 import numpy as np
 import pinocchio as pin
 
+from ..optim import QpProblem, WarmQp
 from ..vectors import skew_rows
 from .model import SIDES, sole_corners_local
 from .profile import profile_of
@@ -45,8 +48,14 @@ INF = np.inf         # no bound
 FORCE_UNIT_N = 100.0
 """The QP's forces are in this unit: accelerations (~1-10 m/s^2) and forces (~100-1000 N) then weigh alike, a
 well-scaled problem for the solver."""
-DAQP_EQUALITY = 5
-"""DAQP's ``sense`` of an equality row."""
+GENERATORS = 4
+"""Unknowns per contact point: its friction pyramid's edges."""
+GENERATOR_WEIGHT_SHARE = 0.01
+"""Each edge's coefficient weighs this share of the force regularisation besides. A point's four edges span three
+force directions: this makes their split unique (the QP's Hessian positive definite) and moves the forces by at most
+that share of the regularisation's own small say. Unknowns that are the pyramid's edges, not (f_x, f_y, f_z) under
+four friction rows, keep an unloaded corner from degenerate rows (its f_z at zero and its friction rows active at
+once), where an active-set step is singular: the compiled solver then solves 999 of 1000 of a stand-up's steps."""
 CONTACT_DEPENDENT_SV_RATIO = 1e-2
 """On legs without an ankle roll, the soles' contact rows' combinations along a singular value under this share of
 the largest are left free (their forces then act through the others). Near the aligned hips' singularity such a
@@ -122,17 +131,18 @@ class WbcResult:
     qp_cpu_s: float                # this thread's CPU time for the same [s] (apart from a shared host's steal)
 
 
-def friction_rows(n_points: int, mu: float) -> np.ndarray:
-    """(4 n, 3 n) rows C with C f <= 0 for n 3D forces inside inscribed friction pyramids (world z normal)."""
-    mu_in = mu / np.sqrt(2.0)
-    block = np.array([[1, 0, -mu_in], [-1, 0, -mu_in], [0, 1, -mu_in], [0, -1, -mu_in]], float)
-    return np.kron(np.eye(n_points), block)
+def friction_generators(mu: float) -> np.ndarray:
+    """(3, 4): the edges of the friction pyramid |f_x|, |f_y| <= mu / sqrt(2) f_z inscribed in the cone of
+    coefficient ``mu`` (world z normal), each of unit f_z: a force lies in the pyramid exactly when it is a
+    nonnegative combination of them."""
+    m = mu / np.sqrt(2.0)
+    return np.array([[m, m, 1.0], [m, -m, 1.0], [-m, m, 1.0], [-m, -m, 1.0]]).T
 
 
 @dataclass
 class PostureCost:
     """The QP cost's constant part: the posture weights per tangent coordinate (the base's translation left to the
-    COM task) and the diagonal Hessian they make with the forces' regularisation, standing and seated."""
+    COM task) and the Hessian they make with the forces' regularisation, standing and seated."""
 
     weights: np.ndarray
     weights_seated: np.ndarray
@@ -140,15 +150,18 @@ class PostureCost:
     H0_seated: np.ndarray
 
     @staticmethod
-    def of(g: WbcGains, nv: int, force_weights: np.ndarray) -> PostureCost:
-        """For ``nv`` tangent coordinates and the forces' weights per unknown (in ``FORCE_UNIT_N``)."""
+    def of(g: WbcGains, nv: int, force_hessian: np.ndarray) -> PostureCost:
+        """For ``nv`` tangent coordinates and the forces' regularisation over the edges' coefficients."""
         weights = np.full(nv, g.posture_weight)
         weights[:3] = 0.0                 # base translation: the COM task's
         weights[3:6] = g.base_orientation_weight
         seated = weights.copy()
         seated[3:6] = g.base_orientation_weight_seated
-        return PostureCost(weights, seated, np.diag(np.concatenate([weights, force_weights])),
-                           np.diag(np.concatenate([seated, force_weights])))
+        H0 = [np.zeros((nv + len(force_hessian),) * 2) for _ in range(2)]
+        for H, w in zip(H0, (weights, seated)):
+            H[:nv, :nv] = np.diag(w)
+            H[nv:, nv:] = force_hessian
+        return PostureCost(weights, seated, *H0)
 
     def at(self, seated: bool) -> tuple[np.ndarray, np.ndarray]:
         """(weights, H0) while the seat carries weight or not."""
@@ -157,18 +170,14 @@ class PostureCost:
 
 @dataclass
 class QpWorkspace:
-    """The arrays a step fills in place: the force Jacobian, the contact rows and right-hand side, the corners'
-    positions, the COM Jacobian, DAQP's constraint rows, bounds (of x, then of the rows) and senses."""
+    """The arrays a step fills in place: the points' force Jacobian, the contact rows and right-hand side, the
+    corners' positions, the COM Jacobian."""
 
-    Jf: np.ndarray          # (n_f, nv)
+    Jf: np.ndarray          # (3 points, nv): each contact point's linear Jacobian, world axes
     A_c: np.ndarray         # (n_eq - 6, nv)
     b_c: np.ndarray         # (n_eq - 6,)
     corners: np.ndarray     # (8, 3) [m]
     jcom: np.ndarray        # (3, nv)
-    rows: np.ndarray        # equalities (base, soles, seat), torques, friction
-    lower: np.ndarray
-    upper: np.ndarray
-    sense: np.ndarray
 
 
 class WholeBodyQP:
@@ -178,9 +187,9 @@ class WholeBodyQP:
         model: the robot model with the parameters the controller knows (identified or CAD; never the plant's truth).
         seat_frame: id of the pelvis frame the seat carries (:func:`~sit2stand.robot.model.add_seat_frame`; None: none).
         gains: tasks' gains and weights.
-        seat_contact: the seat point is a contact of the QP, its force three unknowns (the plan's dynamics filter);
+        seat_contact: the seat point is a contact of the QP, its force unknowns (the plan's dynamics filter);
             False: the seat acts only as a known force (the robot's controller: its force comes from the feet's
-            sensors), and the QP has three unknowns and three equalities fewer (10 % of its solve).
+            sensors), and the QP has its unknowns and three equalities fewer.
     """
 
     def __init__(self, model: pin.Model, seat_frame: int | None, gains: WbcGains | None = None,
@@ -191,42 +200,31 @@ class WholeBodyQP:
         self.seat = seat_frame
         self.seat_contact = seat_contact and seat_frame is not None
         self.nv = nv = model.nv
-        n_pts = 4 * len(self.soles) + self.seat_contact
-        self.n = nv + 3 * n_pts
-        self.n_eq = 6 + 6 * len(self.soles) + 3 * self.seat_contact
+        self.n_points = 4 * len(self.soles) + self.seat_contact
+        self.n = nv + GENERATORS * self.n_points
+        self.n_eq = 6 + 6 * len(self.soles) + 3 * self.seat_contact     # with the seat's rows
         self.tau_max = model.effortLimit[6:].copy()
         self._q_limits = model.lowerPositionLimit[7:].copy(), model.upperPositionLimit[7:].copy()
         self.mass = float(pin.computeTotalMass(model))
-        self._multipliers: np.ndarray | None = None     # the last solve's: its active set starts the next
-        self.cold_solves = 0
+        self._qp = WarmQp()
+        # a point's force [N] from its edges' coefficients: FORCE_UNIT_N * force_map @ lambda
+        self.force_map = np.kron(np.eye(self.n_points), friction_generators(self.g.friction))
         # the cost's constant part: posture weights and force regularisation (in FORCE_UNIT_N), the seat's normal
         # force more (the feet carry what they can)
-        fw = np.full(self.n_f, self.g.force_weight)
+        fw = np.full(3 * self.n_points, self.g.force_weight)
         if self.seat_contact:
             fw[-1] += self.g.seat_force_weight
-        self._posture = PostureCost.of(self.g, nv, fw * FORCE_UNIT_N**2)
+        force_hessian = FORCE_UNIT_N**2 * (self.force_map.T * fw) @ self.force_map
+        force_hessian += np.diag(np.full(self.n_f, GENERATOR_WEIGHT_SHARE * self.g.force_weight * FORCE_UNIT_N**2))
+        self._posture = PostureCost.of(self.g, nv, force_hessian)
         # the corners in their sole's frame, and a corner's velocity in its sole's axes from the sole's 6D one
         # (LOCAL: v, omega): v + omega x r = K_i (v, omega), K_i = [I, -[r_i]x]; constant, the corners fixed on it
         corners = sole_corners_local(profile_of(model), self.g.cop_margin_m)
         self._corner_map = corners, np.concatenate([np.broadcast_to(np.eye(3), (4, 3, 3)), -skew_rows(corners)],
                                                    axis=2)
-        self._ws = self._workspace(n_pts)
+        self._ws = QpWorkspace(np.zeros((3 * self.n_points, nv)), np.zeros((self.n_eq - 6, nv)),
+                               np.zeros(self.n_eq - 6), np.zeros((4 * len(self.soles), 3)), np.zeros((3, nv)))
         self.redundant_contacts = profile_of(model).redundant_sole_contacts
-
-    def _workspace(self, n_pts: int) -> QpWorkspace:
-        """The arrays each step fills, with what never changes in them: the friction rows, the equalities' senses,
-        the friction rows' upper bound (C f <= 0), the unilateral normal forces' lower bound."""
-        nv, nj, n, n_eq = self.nv, self.nj, self.n, self.n_eq
-        m = n_eq + nj + 4 * n_pts
-        rows = np.zeros((m, n))
-        rows[n_eq + nj:, nv:] = friction_rows(n_pts, self.g.friction)
-        sense = np.zeros(n + m, np.int32)
-        sense[n:n + n_eq] = DAQP_EQUALITY
-        lower, upper = np.full(n + m, -INF), np.full(n + m, INF)
-        upper[n + n_eq + nj:] = 0.0
-        lower[nv + 2:n:3] = 0.0
-        return QpWorkspace(np.zeros((self.n_f, nv)), np.zeros((n_eq - 6, nv)), np.zeros(n_eq - 6),
-                           np.zeros((4 * len(self.soles), 3)), np.zeros((3, nv)), rows, lower, upper, sense)
 
     @property
     def nj(self) -> int:
@@ -235,8 +233,13 @@ class WholeBodyQP:
 
     @property
     def n_f(self) -> int:
-        """Force unknowns: 3 per contact point."""
+        """Force unknowns: the edges' coefficients, ``GENERATORS`` per contact point."""
         return self.n - self.nv
+
+    @property
+    def fallback_solves(self) -> int:
+        """The steps the compiled active set gave up on and DAQP solved (all of them without a C compiler)."""
+        return self._qp.daqp_solves
 
     # -- matrices ---------------------------------------------------------------------------------------------
     def _kinematics(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -254,9 +257,9 @@ class WholeBodyQP:
         return M, h
 
     def _contacts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Force Jacobian Jf (n_f, nv) (the corner and seat points' linear Jacobians in world axes, stacked), the
-        contact rows (A_c, b_c) of the soles and the seat (A_c a = b_c), and the corners' positions (8, 3): arrays
-        the QP owns, filled in place."""
+        """Force Jacobian Jf (3 points, nv) (the corner and seat points' linear Jacobians in world axes, stacked),
+        the contact rows (A_c, b_c) of the soles and the seat (A_c a = b_c), and the corners' positions (8, 3):
+        arrays the QP owns, filled in place."""
         model, data = self.model, self.data
         ws = self._ws
         Jf, A_c, b_c, corners = ws.Jf, ws.A_c, ws.b_c, ws.corners
@@ -283,12 +286,13 @@ class WholeBodyQP:
         """(3, nv): the seat point's linear Jacobian in world axes."""
         return pin.getFrameJacobian(self.model, self.data, self.seat, pin.LOCAL_WORLD_ALIGNED)[:3]
 
-    def _cost(self, q: np.ndarray, v: np.ndarray, ref: Reference, seated: bool) -> tuple[np.ndarray, np.ndarray]:
-        """H, g of the weighted tasks over x = (a, f); ``seated``: the seat carries weight."""
+    def _cost(self, q: np.ndarray, v: np.ndarray, ref: Reference, seated: bool, H: np.ndarray, c: np.ndarray
+              ) -> None:
+        """H, c (filled in place) of the weighted tasks over x = (a, lambda); ``seated``: the seat carries weight."""
         g, nv = self.g, self.nv
         weights, H0 = self._posture.at(seated)
-        H = H0.copy()                          # posture weights, force regularisation
-        c = np.zeros(self.n)
+        H[:] = H0                              # posture weights, force regularisation
+        c[:] = 0.0
         # posture (base orientation and joints): a = a*
         a_post = ref.a + g.posture_kp * pin.difference(self.model, q, ref.q) + g.posture_kd * (ref.v - v)
         c[:nv] -= weights * a_post
@@ -298,47 +302,22 @@ class WholeBodyQP:
         J = self._ws.jcom
         H[:nv, :nv] += (g.com_weight * J).T @ J
         c[:nv] -= g.com_weight * J.T @ (a_com - drift)
-        return H, c
 
-    def _torque_task(self, H: np.ndarray, c: np.ndarray, T: np.ndarray, offset: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray]:
-        """H, c with ``torque_weight`` |(T x + offset) / limit|^2 added: T x + h_j is the joint torques, offset
-        h_j - the plan's torques."""
+    def _torque_task(self, H: np.ndarray, c: np.ndarray, T: np.ndarray, offset: np.ndarray) -> None:
+        """``torque_weight`` |(T x + offset) / limit|^2 added to H, c in place: T x + h_j is the joint torques,
+        offset h_j - the plan's torques."""
         WT = (self.g.torque_weight / self.tau_max**2)[:, None] * T
-        return H + T.T @ WT, c + WT.T @ offset
+        H += T.T @ WT
+        c += WT.T @ offset
 
-    def _solve_qp(self, H, c, rows, upper, lower) -> tuple[np.ndarray, bool]:
-        """x minimising 0.5 x'Hx + c'x with lower <= (x, rows x) <= upper (DAQP's form: the bounds of x first; the
-        equality rows' bounds equal), and whether it was solved. Warm-started from the last step's multipliers (the
-        active set changes little from one step to the next); a warm start that fails is solved again from an empty
-        active set (counted in ``cold_solves``)."""
-        for start in (self._multipliers, None):
-            if start is None and self._multipliers is not None:
-                self.cold_solves += 1
-            x, _, flag, info = daqp.solve(H, c, rows, upper, lower, self._ws.sense, dual_start=start)
-            if flag == 1:
-                self._multipliers = info["lam"]
-                return x, True
-            if start is None:
-                break
-        self._multipliers = None
-        return x, False
-
-    def _independent_contact_rows(self, rows: np.ndarray, lower: np.ndarray, upper: np.ndarray, end: int) -> None:
-        """The contact rows 6..``end`` (of x = (a, f): the acceleration part) replaced in place by their independent
-        combinations (U^T A for A = U S V^T) and the combinations along a singular value under
-        ``CONTACT_DEPENDENT_SV_RATIO`` of the largest freed (bounds infinite, not equalities): legs without an ankle
-        roll make the soles' rows dependent wherever the hips' roll axes are aligned, and there a drift off their
-        range asks an infinite acceleration."""
-        n, A = self.n, rows[6:end, :self.nv]
+    def _independent_contact_rows(self, A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The contact rows A a = b replaced by their independent combinations (U^T A for A = U S V^T), less those
+        along a singular value under ``CONTACT_DEPENDENT_SV_RATIO`` of the largest (left free): legs without an
+        ankle roll make the soles' rows dependent wherever the hips' roll axes are aligned, and there a drift off
+        their range asks an infinite acceleration."""
         U, S, Vt = np.linalg.svd(A, full_matrices=False)
-        b = U.T @ lower[n + 6:n + end]
-        free = S < CONTACT_DEPENDENT_SV_RATIO * S[0]
-        rows[6:end, :self.nv] = S[:, None] * Vt
-        lower[n + 6:n + end] = np.where(free, -INF, b)
-        upper[n + 6:n + end] = np.where(free, INF, b)
-        self._ws.sense[n + 6:n + self.n_eq] = DAQP_EQUALITY      # the seat's rows too: freed while it was a contact
-        self._ws.sense[n + 6:n + end][free] = 0
+        held = S >= CONTACT_DEPENDENT_SV_RATIO * S[0]
+        return (S[:, None] * Vt)[held], (U.T @ b)[held]
 
     def _joint_limits(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The joint accelerations that keep each joint inside its limits ``limit_horizon_s`` ahead (lower, upper),
@@ -351,6 +330,51 @@ class WholeBodyQP:
         return a_lo, np.maximum(a_hi, a_lo), q_ahead <= q_lo + eps, q_ahead >= q_hi - eps
 
     # -- solve ------------------------------------------------------------------------------------------------
+    def _problem(self, q: np.ndarray, v: np.ndarray, M: np.ndarray, h: np.ndarray, Jg: np.ndarray,
+                 seat_force_max_n: float) -> QpProblem:
+        """The step's QP (see the module docstring) but its cost: equalities A x = b (the base's Newton-Euler rows,
+        then the contacts'), inequality rows C x >= d (the joint torques above their lower limits, below their
+        upper ones, the seat's normal force under its cap), and the bounds of x. ``Jg`` (n_f, nv): each edge
+        coefficient's Jacobian, whose transpose maps it to generalised forces."""
+        nv, nj, ws = self.nv, self.nj, self._ws
+        seat_on = self.seat_contact and seat_force_max_n > 0
+        rows = 6 * len(self.soles) + 3 * seat_on
+        A_c, b_c = ws.A_c[:rows], ws.b_c[:rows]
+        if self.redundant_contacts:
+            A_c, b_c = self._independent_contact_rows(A_c, b_c)
+        p = self._qp.problem(self.n, 6 + len(b_c), 2 * nj + self.seat_contact)
+        p.A[:6, :nv] = M[:6]                                            # the base's Newton-Euler rows
+        np.multiply(Jg[:, :6].T, -FORCE_UNIT_N, out=p.A[:6, nv:])
+        np.negative(h[:6], out=p.b[:6])
+        p.A[6:, :nv], p.A[6:, nv:], p.b[6:] = A_c, 0.0, b_c                # the contacts
+        T = p.C[:nj]                                                     # the joint torques, less h_j
+        T[:, :nv] = M[6:]
+        np.multiply(Jg[:, 6:].T, -FORCE_UNIT_N, out=T[:, nv:])
+        np.negative(T, out=p.C[nj:2 * nj])
+        p.lo[6:nv], p.hi[6:nv], at_lo, at_hi = self._joint_limits(q, v)
+        np.subtract(-self.tau_max, h[6:], out=p.d[:nj])
+        np.subtract(h[6:], self.tau_max, out=p.d[nj:2 * nj])
+        p.d[:nj][at_hi] = -INF                 # the stop at the upper limit pushes down: any demand below
+        p.d[nj:2 * nj][at_lo] = -INF
+        p.lo[:6], p.hi[:6], p.lo[nv:], p.hi[nv:] = -INF, INF, 0.0, INF
+        if self.seat_contact:                  # the seat's normal force: the sum of its edges' coefficients
+            p.C[-1], p.C[-1, -GENERATORS:] = 0.0, -1.0
+            p.d[-1] = -seat_force_max_n / FORCE_UNIT_N if seat_on else -INF
+            if not seat_on:
+                p.hi[-GENERATORS:] = 0.0
+        return p
+
+    def _solve_qp(self, p: QpProblem) -> tuple[np.ndarray, bool]:
+        """x minimising the problem, and whether it was solved; where it has no solution, DAQP's last iterate."""
+        x = self._qp.solve_problem(p)
+        if x is not None:
+            return x, True
+        upper = np.concatenate((p.hi, p.b, np.full(len(p.d), INF)))
+        lower = np.concatenate((p.lo, p.b, p.d))
+        sense = np.zeros(len(upper), np.int32)
+        sense[self.n:self.n + len(p.b)] = 5            # DAQP: an equality
+        return daqp.solve(p.H, p.g, p.rows(), upper, lower, sense)[0], False
+
     def solve(self, q: np.ndarray, v: np.ndarray, ref: Reference, seat_force_max_n: float = 0.0,
               seat_force_known_n: np.ndarray | None = None) -> WbcResult:
         """One QP at the state (q, v) for ``ref``; the seat point is a contact while ``seat_force_max_n`` > 0.
@@ -359,40 +383,17 @@ class WholeBodyQP:
         t0, cpu0 = time.perf_counter(), time.thread_time()
         nv, nj = self.nv, self.nj
         M, h = self._kinematics(q, v)
-        Jf, A_c, b_c, corners = self._contacts()
+        Jf, _, _, corners = self._contacts()
         if seat_force_known_n is not None and self.seat is not None:
             h = h - self._seat_jacobian().T @ np.asarray(seat_force_known_n, float)
+        Jg = self.force_map.T @ Jf
+        p = self._problem(q, v, M, h, Jg, seat_force_max_n)
         seat_on = self.seat_contact and seat_force_max_n > 0
-        H, c = self._cost(q, v, ref, seat_on or seat_force_known_n is not None)
-        e, n = self.n_eq, self.n
-        rows, JfT = self._ws.rows, Jf.T
-        rows[:6, :nv] = M[:6]                                          # the base's Newton-Euler rows
-        np.multiply(JfT[:6], -FORCE_UNIT_N, out=rows[:6, nv:])
-        rows[6:e, :nv], rows[6:e, nv:] = A_c, 0.0                        # the contacts
-        lower, upper = self._ws.lower, self._ws.upper
-        np.negative(h[:6], out=lower[n:n + 6])
-        lower[n + 6:n + e] = b_c
-        if self.seat_contact and not seat_on:    # the seat's rows say its force is zero (zero rows are degenerate)
-            rows[e - 3:e], lower[n + e - 3:n + e] = 0.0, 0.0
-            rows[e - 3:e, -3:] = np.eye(3)
-        upper[n:n + e] = lower[n:n + e]
-        if self.redundant_contacts:
-            self._independent_contact_rows(rows, lower, upper, 6 + 6 * len(self.soles) + 3 * seat_on)
-        rows[e:e + nj, :nv] = M[6:]                                    # the joint torques
-        np.multiply(JfT[6:], -FORCE_UNIT_N, out=rows[e:e + nj, nv:])
-        lo, hi = lower[n + e:n + e + nj], upper[n + e:n + e + nj]
-        np.subtract(-self.tau_max, h[6:], out=lo)
-        np.subtract(self.tau_max, h[6:], out=hi)
-        lower[6:nv], upper[6:nv], at_lo, at_hi = self._joint_limits(q, v)
-        lo[at_hi] = -INF                       # the stop at the upper limit pushes down: any demand below
-        hi[at_lo] = INF
+        self._cost(q, v, ref, seat_on or seat_force_known_n is not None, p.H, p.g)
         if ref.tau is not None and self.g.torque_weight > 0:           # toward the plan's torques
-            H, c = self._torque_task(H, c, rows[e:e + nj], h[6:] - ref.tau)
-        if self.seat_contact:                                         # the seat's force: (x, y, z)
-            lower[n - 3:n] = (-INF, -INF, 0.0) if seat_on else 0.0
-            upper[n - 3:n] = (INF, INF, seat_force_max_n / FORCE_UNIT_N) if seat_on else 0.0
-        x, solved = self._solve_qp(H, c, rows, upper, lower)
-        a, f = x[:nv], x[nv:] * FORCE_UNIT_N
+            self._torque_task(p.H, p.g, p.C[:nj], h[6:] - ref.tau)
+        x, solved = self._solve_qp(p)
+        a, f = x[:nv], FORCE_UNIT_N * (self.force_map @ x[nv:])
         tau = M[6:] @ a + h[6:] - Jf[:, 6:].T @ f
         np.minimum(np.maximum(tau, -self.tau_max, out=tau), self.tau_max, out=tau)    # the stops take the rest
         n_feet = 3 * len(corners)
