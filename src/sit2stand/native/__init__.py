@@ -323,15 +323,13 @@ class ActiveSetQp:
 
     def remember(self, p, lam: np.ndarray) -> None:
         """Start the problem's next solve from another solver's answer: the bounds and rows with a nonzero
-        multiplier held (DAQP's sign: negative at a lower bound), but for an infinite bound or row bound (an
-        inactive constraint's multiplier is not always zero in DAQP's answer, and a variable held at an infinite
-        bound would make the next answer NaN)."""
+        multiplier held (DAQP's sign: negative at a lower bound; a NaN holds nothing). The kernel drops what is
+        held at an infinite bound when it starts."""
         n, me, _ = p.shape
         state = _KernelState.of(p)
         lam = np.nan_to_num(lam, nan=0.0)
-        at_lo, at_hi = (lam[:n] < 0) & np.isfinite(p.lo), (lam[:n] > 0) & np.isfinite(p.hi)
-        state.bound[:] = at_hi.astype(np.int32) - at_lo
-        state.row[:] = (lam[n + me:] != 0.0) & np.isfinite(p.d)
+        state.bound[:] = np.sign(lam[:n])
+        state.row[:] = lam[n + me:] != 0.0
 
 
 class _KernelState:

@@ -12,7 +12,7 @@ friction pyramid's four edges (:func:`friction_generators`). Constraints:
 * the floating base's Newton-Euler rows:   M_b a + h_b = J_b^T f          (6; no actuator at the base)
 * both soles fixed (6D rigid contacts):    J_foot a + dJ_foot v = -kd_foot v_foot   (12; on legs without an ankle
   roll only their independent combinations: these rows are dependent wherever the hips' roll axes align)
-* the seat point fixed while it is active, otherwise its force zero (3)
+* the seat point fixed while it is active (3), otherwise its force zero (its coefficients bounded at zero)
 * unilateral forces in linearised friction cones (friction coefficient ``friction``): lambda >= 0; the seat's
   normal force at most ``seat_force_max_n`` (ramped to zero before seat-off, as tsid removes a contact)
 * joint torques tau = M_j a + h_j - J_j^T f inside the URDF effort limits.
@@ -55,7 +55,8 @@ GENERATOR_WEIGHT_SHARE = 0.01
 force directions: this makes their split unique (the QP's Hessian positive definite) and moves the forces by at most
 that share of the regularisation's own small say. Unknowns that are the pyramid's edges, not (f_x, f_y, f_z) under
 four friction rows, keep an unloaded corner from degenerate rows (its f_z at zero and its friction rows active at
-once), where an active-set step is singular: the compiled solver then solves 999 of 1000 of a stand-up's steps."""
+once), where an active-set step is singular: the compiled solver then solves 98-99.8 % of a stand-up's steps, not
+92 %."""
 CONTACT_DEPENDENT_SV_RATIO = 1e-2
 """On legs without an ankle roll, the soles' contact rows' combinations along a singular value under this share of
 the largest are left free (their forces then act through the others). Near the aligned hips' singularity such a
