@@ -88,6 +88,23 @@ def test_standing_holds_with_cop_under_com(plant):
     assert res.cop[:2] == pytest.approx(res.com[:2], abs=2e-3)        # static: COP under the COM
 
 
+def test_a_step_without_a_solution_says_so_and_its_torques_are_finite_and_within_the_limits(plant):
+    """Leg joints whose limits each ask a different acceleration cannot keep both soles fixed: the QP has no
+    solution, the step says so, and its torques are still numbers inside the limits (a NaN would end the
+    simulation)."""
+    model = plant.ctrl
+    q = _standing(plant)
+    qp = WholeBodyQP(model, plant.onboard.seat_frame)
+    legs = [model.joints[model.getJointId(f"leg_{s}_{k}_joint")].idx_q - 7 for s in ("left", "right")
+            for k in range(1, 7)]
+    lo, hi = (a.copy() for a in qp._q_limits)
+    lo[legs] = hi[legs] = q[7:][legs] + np.linspace(0.05, 0.3, len(legs))     # past the joints, each its own way
+    qp._q_limits = lo, hi
+    res = qp.solve(q, np.zeros(model.nv), _at_rest(model, q))
+    assert not res.solved
+    assert np.isfinite(res.tau).all() and np.all(np.abs(res.tau) <= qp.tau_max + 1e-9)
+
+
 def test_torque_limits_bind(plant):
     """A reference asking for a fast knee bend while standing: the knees' torques stay at their limits."""
     model = plant.ctrl

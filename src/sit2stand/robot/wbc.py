@@ -366,7 +366,8 @@ class WholeBodyQP:
         return p
 
     def _solve_qp(self, p: QpProblem) -> tuple[np.ndarray, bool]:
-        """x minimising the problem, and whether it was solved; where it has no solution, DAQP's last iterate."""
+        """x minimising the problem, and whether it was solved; where it has no solution, DAQP's last iterate (zero
+        where that is not finite: a NaN torque would end the simulation)."""
         x = self._qp.solve_problem(p)
         if x is not None:
             return x, True
@@ -374,7 +375,8 @@ class WholeBodyQP:
         lower = np.concatenate((p.lo, p.b, p.d))
         sense = np.zeros(len(upper), np.int32)
         sense[self.n:self.n + len(p.b)] = 5            # DAQP: an equality
-        return daqp.solve(p.H, p.g, p.rows(), upper, lower, sense)[0], False
+        x = daqp.solve(p.H, p.g, p.rows(), upper, lower, sense)[0]
+        return (x if np.isfinite(x).all() else np.zeros(self.n)), False
 
     def solve(self, q: np.ndarray, v: np.ndarray, ref: Reference, seat_force_max_n: float = 0.0,
               seat_force_known_n: np.ndarray | None = None) -> WbcResult:
