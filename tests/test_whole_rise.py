@@ -3,6 +3,9 @@ the human's timing unless it has no solution there."""
 
 import dataclasses
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -208,6 +211,7 @@ def test_the_knots_solved_on_two_threads_give_the_same_rise(natural, tmp_path, c
     bag = str(ROOT / "bags" / "natural")
     assert sit2stand(["retarget", bag, "--oc-threads", "2", "--out", str(tmp_path / "rt")]) == 0
     two = json.loads((tmp_path / "rt" / "summary.json").read_text())
+    assert (two["whole_rise_threads"], one["whole_rise_threads"]) == (2, 1)
     assert two["whole_rise_tries"] == one["whole_rise_tries"] == [[1.0, True]]
     assert abs(two["whole_rise_iterations"] - one["whole_rise_iterations"]) <= 5, (two, one)
     assert two["whole_rise_com_error_rms_m"] == pytest.approx(one["whole_rise_com_error_rms_m"], abs=5e-4)
@@ -215,6 +219,26 @@ def test_the_knots_solved_on_two_threads_give_the_same_rise(natural, tmp_path, c
     with pytest.raises(SystemExit):
         sit2stand(["retarget", bag, "--oc-threads", "0", "--out", str(tmp_path / "no")])
     assert "argument --oc-threads: 0: at least 1" in capsys.readouterr().err
+
+
+def test_retarget_gives_the_optimisation_the_cores_it_may_use_unless_told(monkeypatch):
+    """A lone ``retarget`` optimises on every usable core (a batch gives each case one thread)."""
+    seen = []
+    monkeypatch.setattr(offline, "run", lambda *a, whole_rise=None, **k: seen.append(whole_rise.threads) or {})
+    for extra in ([], ["--oc-threads", "3"]):
+        assert sit2stand(["retarget", str(ROOT / "bags" / "natural"), "--out", "unused", *extra]) == 0
+    assert seen == [len(os.sched_getaffinity(0)), 3]
+    assert WholeRiseConfig().threads == 1
+
+
+def test_the_package_asks_openmp_threads_to_sleep_when_idle_unless_the_environment_says_otherwise():
+    """Spinning OpenMP threads slowed two solves side by side by 40 % (``scheduling.OPENMP_WAIT_POLICY``); the runtime
+    reads the policy once, when Pinocchio loads it, so importing the package sets it first."""
+    code = "import os, sit2stand, pinocchio; print(os.environ['OMP_WAIT_POLICY'])"
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    asked = [subprocess.run([sys.executable, "-c", code], env=e, capture_output=True, text=True, check=True).stdout
+             for e in (env, {**env, "OMP_WAIT_POLICY": "ACTIVE"})]
+    assert asked == ["PASSIVE\n", "ACTIVE\n"]
 
 
 def test_bad_plans_and_models_are_refused(tmp_path):

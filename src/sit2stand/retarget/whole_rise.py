@@ -68,7 +68,8 @@ class WholeRiseConfig:
     """The whole-rise problem's settings (weights are Crocoddyl's: cost = 0.5 w |r|^2)."""
 
     knot_period_s: float = 0.02          # a knot every this long at the human's timing, in whole frames [s]
-    threads: int = 1                     # Crocoddyl's threads for the knots (2: 1.4x faster alone, spinning)
+    threads: int = 1                     # Crocoddyl's threads for the knots (a batch's case: 1; `retarget`: the
+    #                                      usable cores, on 2 idle cores 1.3x faster)
     iterations: int = 150                # box-FDDP iterations per time scale tried, at most (at 100, 4 of TALOS's
     #                                      30 identified digital humans ended the try at 1.0 still converging, the
     #                                      COM 3-4 cm off, and played at 1.05-1.065; at 150, at 1.000-1.006)
@@ -140,6 +141,7 @@ class WholeRise:
     span: tuple[int, int] = (0, 0)  # the first and last plan frames optimised (:meth:`WholeRiseProblem.moving`)
     com_relaxed: bool = False      # a solution only within ``com_relaxed_tolerance_m`` (see solve)
     tries: list[tuple[float, bool]] = dataclasses.field(default_factory=list)  # (time scale, within com_tolerance_m)
+    threads: int = 1               # the solves' threads (WholeRiseConfig.threads)
 
     def torque_at(self, t_plan_s: float, frame_period_s: float) -> np.ndarray | None:
         """The joint torques [N m] the optimisation asks at the plan's human time ``t_plan_s`` [s from its first
@@ -155,7 +157,7 @@ class WholeRise:
         """The figures for ``summary.json`` (``whole_rise_*``)."""
         return {"whole_rise_time_scale": self.time_scale, "whole_rise_feasible": self.feasible,
                 "whole_rise_converged": self.converged, "whole_rise_iterations": self.iterations,
-                "whole_rise_solve_s": self.solve_s, "whole_rise_knots": self.knots,
+                "whole_rise_solve_s": self.solve_s, "whole_rise_threads": self.threads, "whole_rise_knots": self.knots,
                 "whole_rise_com_error_rms_m": self.com_error_rms_m, "whole_rise_com_error_max_m": self.com_error_max_m,
                 "whole_rise_torque_saturated_share": self.torque_saturated_share,
                 "whole_rise_cop_margin_min_m": self.cop_margin_min_m, "whole_rise_span_frames": list(self.span),
@@ -257,7 +259,7 @@ class WholeRiseProblem:
                         progress(f"  taken: the solution at {relaxed.time_scale:.2f}, its COM within "
                                  f"{cfg.com_relaxed_tolerance_m * 100:.0f} cm of the plan's")
                     result = dataclasses.replace(relaxed, feasible=True)
-                return dataclasses.replace(result, iterations=iters, solve_s=spent, tries=tries)
+                return dataclasses.replace(result, iterations=iters, solve_s=spent, tries=tries, threads=cfg.threads)
             del solver           # its problem's data (~8 MB a knot) before the next try's
             scale = round(scale + cfg.scale_step, 6)
 
