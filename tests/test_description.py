@@ -58,7 +58,8 @@ def test_the_description_is_talos_urdf_with_its_mesh_uris():
 
 
 def test_bad_variants_and_mesh_kinds_are_named():
-    with pytest.raises(ProfileError, match="'talos_nope': no such robot profile file.*packaged: g1, icub, romeo"):
+    with pytest.raises(ProfileError,
+                       match="'talos_nope': no such robot profile file.*packaged: alexander, g1, icub, romeo"):
         robot_description("talos_nope")
     with pytest.raises(DescriptionError, match="meshes 'http'"):
         robot_description(meshes="http")

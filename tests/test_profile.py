@@ -144,7 +144,7 @@ def test_no_robots_joint_or_link_is_named_in_the_code():
     """Robot names live in profile files: no module under src/ spells a TALOS, G1, iCub or Romeo joint or link
     (iCub's ``root_link`` is also the name of a profile field)."""
     names = set()
-    for robot in ("talos", "g1", "icub", "romeo"):
+    for robot in ("talos", "g1", "icub", "romeo", "alexander"):
         for parent, child in load_profile(robot).urdf_joints().values():
             names |= {parent, child}
         names |= set(load_profile(robot).urdf_joints())

@@ -228,16 +228,20 @@ def marker_group(name: str) -> str:
     return "arm"
 
 
-def robot_links(model: pin.Model, marker: str, roles: MarkerRoles | None = None) -> tuple[str, ...]:
+def robot_links(model: pin.Model, marker: str, roles: MarkerRoles | None = None) -> tuple[str, ...] | None:
     """The robot links (Pinocchio joint names) a marker may be fixed to: those its robot profile gives for the
-    marker's body part and side (``marker_links``; ``roles``: of its marker set; None: Plug-in-Gait's names).
-    Nearest-link matching alone puts a seated human's hip markers on the robot's hanging arms."""
+    marker's body part and side (``marker_links``; ``roles``: of its marker set; None: Plug-in-Gait's names); None
+    where the profile gives that body part no joints at all (a robot without arms: IHMC Alexander's legs). Nearest-link
+    matching alone puts a seated human's hip markers on the robot's hanging arms, and an armless robot's wrists on its
+    thighs."""
     if roles is None:
         side = "left" if marker.startswith("L") else "right" if marker.startswith("R") else None
         group = marker_group(marker)
     else:
         side, group = roles.sides.get(marker), roles.group(marker) or "arm"
     profile, joints = profile_of(model), tuple(model.names[1:])
+    if not profile.marker_links.get(group):
+        return None
     key = (id(profile), group, side, joints)
     if key not in _MARKER_JOINTS:          # the entry keeps its profile alive: no other profile takes its id
         _MARKER_JOINTS[key] = (profile, profile.marker_joints(group, side, list(joints)))
@@ -282,7 +286,8 @@ def calibrate_markers(model: pin.Model, q_robot: np.ndarray, names: list[str], p
                       valid: np.ndarray, human_thigh_m: float, robot_thigh_m: float,
                       allowed_links=robot_links, roles: MarkerRoles | None = None) -> MarkerMap:
     """Fix each valid human marker of one seated frame to the nearest robot link (see the module docstring)
-    among ``allowed_links(model, marker, roles)`` (None: any link). ``roles``: the marker set's (None: Plug-in-Gait).
+    among ``allowed_links(model, marker, roles)`` (``allowed_links`` None: any link; its answer None: the robot has no
+    such body part, and the marker stays off the robot). ``roles``: the marker set's (None: Plug-in-Gait).
 
     Raises:
         ValueError: the pelvis markers seen in the frame do not define the pelvis (3 of LASI RASI LPSI RPSI).
@@ -306,7 +311,10 @@ def calibrate_markers(model: pin.Model, q_robot: np.ndarray, names: list[str], p
         side = roles.sides.get(name)
         candidates = np.ones(len(joint), bool) if side is None else ~(sided["left"] | sided["right"]) | sided[side]
         if allowed_links is not None:
-            allowed = tuple(allowed_links(model, name, roles))
+            allowed = allowed_links(model, name, roles)
+            if allowed is None:
+                continue
+            allowed = tuple(allowed)
             if allowed not in allowed_of:
                 allowed_of[allowed] = np.isin(link, list(allowed))
             both = candidates & allowed_of[allowed]

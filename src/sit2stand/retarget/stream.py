@@ -57,6 +57,10 @@ SEATED_COM_BEHIND_ANKLE_THIGHS = 0.6
 """Where a seated human's COM is along x: this many thigh lengths behind the ankle (0.60 on both shipped digital
 humans: the hips on the seat, the shanks near vertical). The COM map's seated knot when a recording starts after the
 human has left the seat."""
+SEAT_OFF_AHEAD_OF_SEATED_M = 0.01
+"""A robot that sits with its COM already past its seat-off point (legs heavy against a light or missing upper body:
+IHMC Alexander's lower body sits with its COM 3 cm ahead of its ankles) leaves the seat once its COM is this much
+further forward [m]: the COM map stays monotone."""
 LEAD_IN_COM_SPEED_MPS = 0.2
 """Mean forward COM speed [m/s] of the lead-in that a recording starting mid-rise gets (the shipped natural rise
 moves its COM 0.26 m in ~1.3 s)."""
@@ -226,8 +230,9 @@ class Retargeter:
         r = [self.com_seated[0] - rx, self.robot.heel_x_m + self.cfg.seat_off_fraction * foot - rx, 0.0]
         # a seat-off knot ahead of the ankle (an ankle near the heel: iCub's is 3 cm from it, and 30 % of its foot
         # 1.7 cm ahead of it) is held until the human's COM passes its ankle: the map stays monotone
+        r[1] = max(r[1], r[0] + SEAT_OFF_AHEAD_OF_SEATED_M)
         r[2] = max(r[2], r[1])
-        if not (h[0] < h[1] < h[2]) or not r[0] < r[1]:
+        if not h[0] < h[1] < h[2]:
             raise InputError(f"calibration frame: the human's seated COM ({seated_com_x:.3f} m), heel "
                              f"({heel[0]:.3f} m) and ankle ({ax:.3f} m) are not in that order along x")
         weights = np.array([0.0 if n not in frames else self.cfg.weights.get(roles.group(n), 0.0) for n in names])
