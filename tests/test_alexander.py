@@ -14,7 +14,7 @@ import pytest
 from sit2stand.cli import main as sit2stand
 from sit2stand.human.offline import read_trial
 from sit2stand.retarget.robot import robot_model, robot_setup
-from sit2stand.retarget.stream import SEAT_OFF_AHEAD_OF_SEATED_M, Retargeter, RetargetConfig
+from sit2stand.retarget.stream import Retargeter, RetargetConfig
 from sit2stand.robot.profile import load_profile
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -28,9 +28,9 @@ def test_alexander_has_no_upper_limbs_and_thirteen_joints():
 
 
 def test_a_robot_seated_with_its_com_past_its_seat_off_point_leaves_the_seat_a_little_further_forward():
-    """The COM map's seat-off knot lies ``SEAT_OFF_AHEAD_OF_SEATED_M`` ahead of the robot's seated COM when the usual
-    one (30 % along its feet) is behind it, and the ankle knot no further back: the map stays monotone, where it
-    refused the robot before."""
+    """The COM map's seat-off knot lies ``RetargetConfig.seat_off_ahead_m`` ahead of the robot's seated COM when the
+    usual one (30 % along its feet) is behind it, and the ankle knot no further back: the map stays monotone, where
+    it refused the robot before. The human's arm markers stay off the armless robot."""
     robot = robot_setup(robot="alexander")
     trial = read_trial(ROOT / "bags" / "natural")
     t, com = trial.truth
@@ -42,7 +42,7 @@ def test_a_robot_seated_with_its_com_past_its_seat_off_point_leaves_the_seat_a_l
     assert seated > 0.03 > usual
     r = rt.com_map.knots_r
     assert r[0] == pytest.approx(seated, abs=1e-9)
-    assert r[1] == pytest.approx(seated + SEAT_OFF_AHEAD_OF_SEATED_M) and r[2] == r[1]
+    assert r[1] == pytest.approx(seated + rt.cfg.seat_off_ahead_m) and r[2] == r[1]
     xs = rt.com_map.human_ankle_x_m + np.linspace(rt.com_map.knots_h[0], 0.1, 200) / rt.com_map.scale
     assert np.all(np.diff(rt.com_target_x(xs)) >= -1e-12)
     arm = {"LSHO", "RSHO", "LELB", "RELB", "LWRA", "LWRB", "RWRA", "RWRB", "LFIN", "RFIN"}   # no link to go on

@@ -57,17 +57,12 @@ SEATED_COM_BEHIND_ANKLE_THIGHS = 0.6
 """Where a seated human's COM is along x: this many thigh lengths behind the ankle (0.60 on both shipped digital
 humans: the hips on the seat, the shanks near vertical). The COM map's seated knot when a recording starts after the
 human has left the seat."""
-SEAT_OFF_AHEAD_OF_SEATED_M = 0.01
-"""A robot that sits with its COM already past its seat-off point (legs heavy against a light or missing upper body:
-IHMC Alexander's lower body sits with its COM 3 cm ahead of its ankles) leaves the seat once its COM is this much
-further forward [m]: the COM map stays monotone."""
 LEAD_IN_COM_SPEED_MPS = 0.2
 """Mean forward COM speed [m/s] of the lead-in that a recording starting mid-rise gets (the shipped natural rise
 moves its COM 0.26 m in ~1.3 s)."""
 MIN_LEAD_IN_S = 0.5
 RISE_SCALE_RANGE = (0.8, 1.5)
-"""The markers' vertical scale stays within these multiples of the leg-length scale (see ``Retargeter._rise_scale``).
-"""
+"""The markers' vertical scale stays within these multiples of the leg-length scale (``Retargeter._rise_scale``)."""
 REARM_ABOVE_SEAT_M = 0.01
 """After a sit-down, a plan whose held point (``held_on_seat_b``) is back within this [m] of its seated height is
 seated again, its hips held on the seat and its COM target no further back than there: the next rise plays as the
@@ -100,6 +95,7 @@ class RetargetConfig:
     lateral_weight: float = 0.1           # torso yaw, hip yaw and roll, ankle roll: pull toward the seated posture
     #                                       (a sit-to-stand is sagittal; twists would trade marker errors)
     seat_off_fraction: float = 0.3        # robot COM this far along its foot (heel -> toe) before its hips leave
+    seat_off_ahead_m: float = 0.01        # ... and this far ahead of its seated COM (docs/method.md, COM mapping)
     toe_margin_m: float = 0.10            # the COM target stays this far behind the robot's toes (2.5 cm ahead of
     #                                       the ankle, where the shipped rises end): a child's COM is 8 cm ahead of
     #                                       its ankles, 12.5 cm scaled to TALOS; at 8 cm the live robot fell 1 in 3
@@ -224,13 +220,12 @@ class Retargeter:
         # the body's proportions, and a lead-in (see :meth:`lead_in`) takes the robot from its seat to this frame
         # a recording that starts mid-rise has no seated pelvis to scale the rise from: leg lengths alone
         rise = self._rise_scale(pelvis, knee, ankle, human_leg, scale) if started_seated else scale
-        seated_com_x = float(human_com_m[0]) if started_seated else \
-            float(ax - SEATED_COM_BEHIND_ANKLE_THIGHS * thigh)
+        seated_com_x = float(human_com_m[0] if started_seated else ax - SEATED_COM_BEHIND_ANKLE_THIGHS * thigh)
         h = [scale * (seated_com_x - ax), scale * (heel[0] - ax), 0.0]
         r = [self.com_seated[0] - rx, self.robot.heel_x_m + self.cfg.seat_off_fraction * foot - rx, 0.0]
-        # a seat-off knot ahead of the ankle (an ankle near the heel: iCub's is 3 cm from it, and 30 % of its foot
-        # 1.7 cm ahead of it) is held until the human's COM passes its ankle: the map stays monotone
-        r[1] = max(r[1], r[0] + SEAT_OFF_AHEAD_OF_SEATED_M)
+        # a knot behind the one before moves up to it (iCub's seat-off knot, 30 % along its short feet, is 1.7 cm
+        # ahead of its ankle; Alexander sits past its seat-off point): the map stays monotone
+        r[1] = max(r[1], r[0] + self.cfg.seat_off_ahead_m)
         r[2] = max(r[2], r[1])
         if not h[0] < h[1] < h[2]:
             raise InputError(f"calibration frame: the human's seated COM ({seated_com_x:.3f} m), heel "
