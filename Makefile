@@ -17,12 +17,14 @@ demo: setup       ## the main job on the shipped demonstrations, TALOS then G1 (
 	@$(PY) -m sit2stand.demo --out runs/demo
 	@$(PY) -m sit2stand.demo --robot g1 --out runs/demo_g1
 
-figures: setup     ## the docs' pictures: Rerun's own viewer (headless) mid-rise on the demo's stand-ups, TALOS and G1, and on iCub's offline one (runs `make demo` first if runs/demo is missing; needs Vulkan: Debian's mesa-vulkan-drivers)
+figures: setup     ## the docs' pictures: Rerun's own viewer (headless) mid-rise on the demo's stand-ups, TALOS and G1, and on iCub's and Alexander's offline ones (runs `make demo` first if runs/demo is missing; needs Vulkan: Debian's mesa-vulkan-drivers)
 	@test -d runs/demo/natural/standup || $(MAKE) demo
 	@$(PY) -m sit2stand.cli view runs/demo/natural --screenshot docs/figures/view_talos.png
 	@$(PY) -m sit2stand.cli view runs/demo_g1/natural --screenshot docs/figures/view_g1.png
 	@rm -rf runs/icub_natural && $(PY) -m sit2stand.cli retarget bags/natural --robot icub --simulate --out runs/icub_natural > /dev/null
 	@$(PY) -m sit2stand.cli view runs/icub_natural --screenshot docs/figures/view_icub.png
+	@rm -rf runs/alexander_natural && $(PY) -m sit2stand.cli retarget bags/natural --robot alexander --simulate --out runs/alexander_natural > /dev/null
+	@$(PY) -m sit2stand.cli view runs/alexander_natural --screenshot docs/figures/view_alexander.png
 
 test: setup lint  ## lint, then the whole test suite: unit tests (2 workers, a file per worker), then the graph and cluster tests alone
 	@$(PY) -m pytest -q -n 2 --dist loadfile --durations=8 -m "not graph and not cluster" tests
