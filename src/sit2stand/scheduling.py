@@ -1,6 +1,6 @@
 """Linux scheduling classes for the graph's processes (``scheduling`` in a graph file, ``sit2stand.launch``), the
-priorities that tests and benchmarks give the processes that stand for other machines, and the size of a process's
-OpenMP thread teams."""
+priorities that tests and benchmarks give the processes that stand for other machines, and a process's cores and
+OpenMP thread teams (their size, and how their idle threads wait)."""
 
 from __future__ import annotations
 
